@@ -1,0 +1,101 @@
+"""SimDrive: the Drive contract over :mod:`plant_sim` (runs far faster than real time)."""
+
+from __future__ import annotations
+
+import logging
+
+from hil import __version__
+from hil.drives.base import (
+    Drive,
+    DriveInfo,
+    DriveState,
+    DriveStatus,
+    Excitation,
+    Limits,
+    Mode,
+    check_limits,
+)
+from hil.errors import DriveStateError
+from hil.recording import Recording
+from plant_sim.model import Plant, trace_to_recording
+from plant_sim.params import PlantParams
+
+log = logging.getLogger(__name__)
+
+
+class SimDrive(Drive):
+    """A simulated drive with its plant. Deterministic given ``seed``."""
+
+    def __init__(
+        self,
+        plant: PlantParams,
+        *,
+        limits: Limits,
+        fs_hz: float,
+        seed: int,
+        serial: str = "SIM-0001",
+        has_torque_sensor: bool = True,
+    ) -> None:
+        self._plant_params = plant
+        self._plant = Plant(plant, fs_hz=fs_hz, seed=seed)
+        self._state = DriveState.DISABLED
+        self._info = DriveInfo(
+            vendor="gimbal-hil",
+            model="plant_sim",
+            firmware_version=__version__,
+            serial=serial,
+            rated_torque_nm=min(plant.torque_limit_nm, limits.torque_nm),
+            limits=limits,
+            modes=(Mode.TORQUE, Mode.VELOCITY, Mode.POSITION),
+            max_sample_rate_hz=fs_hz,
+            has_torque_sensor=has_torque_sensor,
+            transport="in-process",
+        )
+
+    @property
+    def info(self) -> DriveInfo:
+        return self._info
+
+    @property
+    def plant(self) -> Plant:
+        return self._plant
+
+    def enable(self) -> None:
+        self._plant.hold()
+        self._state = DriveState.ENABLED
+
+    def disable(self) -> None:
+        self._state = DriveState.DISABLED
+
+    def quick_stop(self) -> None:
+        if self._state is DriveState.ENABLED:
+            self._state = DriveState.QUICK_STOPPED
+
+    def status(self) -> DriveStatus:
+        return DriveStatus(
+            state=self._state,
+            position_rad=self._plant.position_rad,
+            velocity_rad_s=self._plant.velocity_rad_s,
+        )
+
+    def run(self, excitation: Excitation) -> Recording:
+        if self._state is not DriveState.ENABLED:
+            raise DriveStateError(f"cannot run '{excitation.name}': drive is {self._state.value}")
+        if excitation.fs_hz != self._plant.fs_hz:
+            raise DriveStateError(
+                f"excitation '{excitation.name}' is sampled at {excitation.fs_hz} Hz, "
+                f"the simulated drive runs at {self._plant.fs_hz} Hz"
+            )
+        check_limits(excitation, self._info.limits, start_position_rad=self._plant.position_rad)
+        log.info("sim: running %s (%.2f s)", excitation.name, excitation.duration_s)
+        trace = self._plant.run(excitation.mode, excitation.command)
+        metadata = {
+            "drive": "plant_sim",
+            "excitation": excitation.name,
+            "control_mode": excitation.mode.value,
+            "serial": self._info.serial,
+            **excitation.metadata,
+        }
+        return trace_to_recording(
+            trace, mode=excitation.mode, command=excitation.command, metadata=metadata
+        )

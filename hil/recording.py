@@ -1,0 +1,333 @@
+"""The Recording type and its CSV reader/writer (``shared/recording-format.md``, v1).
+
+A recording is one sampled log of one axis. Columns keep their file names, which carry
+their SI unit (``torque_nm``, ``position_rad``...). Rotary and linear axes share the type:
+``position``/``velocity``/``effort`` return the axis' own columns.
+"""
+
+from __future__ import annotations
+
+import gzip
+import hashlib
+import logging
+from collections.abc import Iterable, Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Literal
+
+import numpy as np
+from numpy.typing import NDArray
+
+from hil.errors import RecordingError
+
+log = logging.getLogger(__name__)
+
+FloatArray = NDArray[np.float64]
+AxisKind = Literal["rotary", "linear"]
+
+ROTARY_REQUIRED = ("time_s", "position_rad", "velocity_rad_s", "torque_nm")
+LINEAR_REQUIRED = ("time_s", "position_m", "velocity_m_s", "force_n")
+ROTARY_OPTIONAL = (
+    "velocity_cmd_rad_s",
+    "position_cmd_rad",
+    "current_a",
+    "elevation_rad",
+    "load_torque_nm",
+)
+LINEAR_OPTIONAL = ("velocity_cmd_m_s", "position_cmd_m", "current_a")
+MIN_SAMPLES = 100
+GAP_FACTOR = 5.0
+SATURATION_FRACTION = 0.01
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class Recording:
+    """One axis log. ``columns`` maps file column names (with units) to float arrays."""
+
+    columns: Mapping[str, FloatArray]
+    metadata: Mapping[str, str] = field(default_factory=dict)
+    source: str = "<memory>"
+    warnings: tuple[str, ...] = ()
+
+    def __post_init__(self) -> None:
+        names = set(self.columns)
+        kind = _axis_kind(names, self.source)
+        required = ROTARY_REQUIRED if kind == "rotary" else LINEAR_REQUIRED
+        lengths = {len(self.columns[name]) for name in names}
+        if len(lengths) != 1:
+            raise RecordingError("columns have different lengths", source=self.source)
+        for name in required:
+            if name not in names:
+                raise RecordingError("missing required column", source=self.source, column=name)
+
+    # -- axis-independent access -------------------------------------------------------
+    @property
+    def axis_kind(self) -> AxisKind:
+        return _axis_kind(set(self.columns), self.source)
+
+    @property
+    def time_s(self) -> FloatArray:
+        return self.columns["time_s"]
+
+    @property
+    def position(self) -> FloatArray:
+        """Position in rad (rotary) or m (linear)."""
+        return self.columns["position_rad" if self.axis_kind == "rotary" else "position_m"]
+
+    @property
+    def velocity(self) -> FloatArray:
+        """Velocity in rad/s (rotary) or m/s (linear), as the drive reports it."""
+        return self.columns["velocity_rad_s" if self.axis_kind == "rotary" else "velocity_m_s"]
+
+    @property
+    def effort(self) -> FloatArray:
+        """Torque in N·m (rotary) or force in N (linear)."""
+        return self.columns["torque_nm" if self.axis_kind == "rotary" else "force_n"]
+
+    @property
+    def velocity_cmd(self) -> FloatArray | None:
+        name = "velocity_cmd_rad_s" if self.axis_kind == "rotary" else "velocity_cmd_m_s"
+        return self.columns.get(name)
+
+    @property
+    def units(self) -> dict[str, str]:
+        """Unit labels for position, velocity, effort of this axis kind."""
+        if self.axis_kind == "rotary":
+            return {"position": "rad", "velocity": "rad/s", "effort": "N·m"}
+        return {"position": "m", "velocity": "m/s", "effort": "N"}
+
+    def __len__(self) -> int:
+        return len(self.time_s)
+
+    @property
+    def duration_s(self) -> float:
+        return float(self.time_s[-1] - self.time_s[0])
+
+    @property
+    def sample_rate_hz(self) -> float:
+        """Median sample rate; sampling need not be uniform."""
+        return float(1.0 / np.median(np.diff(self.time_s)))
+
+    def slice(self, start: int, stop: int) -> Recording:
+        """Samples ``start:stop`` as a new recording (metadata kept)."""
+        return Recording(
+            columns={k: v[start:stop] for k, v in self.columns.items()},
+            metadata=self.metadata,
+            source=f"{self.source}[{start}:{stop}]",
+            warnings=self.warnings,
+        )
+
+
+def _axis_kind(names: set[str], source: str) -> AxisKind:
+    rotary = {"position_rad", "velocity_rad_s", "torque_nm"} & names
+    linear = {"position_m", "velocity_m_s", "force_n"} & names
+    if rotary and linear:
+        raise RecordingError(
+            f"mixes rotary columns {sorted(rotary)} with linear columns {sorted(linear)}",
+            source=source,
+        )
+    return "linear" if linear else "rotary"
+
+
+# -- reading ------------------------------------------------------------------------------
+def read_recording(path: str | Path) -> Recording:
+    """Read a recording, refusing bad input with file, line and column named.
+
+    Raises
+    ------
+    RecordingError
+        Missing required column, duplicate column, non-numeric or non-finite value, time
+        not strictly increasing, fewer than 100 samples, unreadable file.
+    """
+    path = Path(path)
+    source = str(path)
+    try:
+        raw = path.read_bytes()
+        if path.suffix == ".gz":
+            raw = gzip.decompress(raw)
+        text = raw.decode("utf-8")
+    except (OSError, EOFError, gzip.BadGzipFile) as exc:
+        raise RecordingError(f"cannot read file: {exc}", source=source) from exc
+    except UnicodeDecodeError as exc:
+        raise RecordingError("file is not UTF-8 text", source=source) from exc
+    return parse_recording(text.splitlines(), source=source)
+
+
+def parse_recording(lines: list[str], *, source: str) -> Recording:
+    """Parse the lines of a recording file (see :func:`read_recording`)."""
+    metadata: dict[str, str] = {}
+    header_index = None
+    for index, line in enumerate(lines):
+        stripped = line.strip()
+        if not stripped:
+            continue
+        if stripped.startswith("#"):
+            key, sep, value = stripped.lstrip("#").partition(":")
+            if sep:
+                metadata[key.strip()] = value.strip()
+            continue
+        header_index = index
+        break
+    if header_index is None:
+        raise RecordingError("no header row", source=source)
+
+    header = [name.strip() for name in lines[header_index].split(",")]
+    seen: set[str] = set()
+    for name in header:
+        if name in seen:
+            raise RecordingError("duplicate column name", source=source, column=name)
+        seen.add(name)
+    kind = _axis_kind(seen, source)
+    required = ROTARY_REQUIRED if kind == "rotary" else LINEAR_REQUIRED
+    for name in required:
+        if name not in seen:
+            raise RecordingError("missing required column", source=source, column=name)
+
+    first_data_line = header_index + 2  # 1-based line number of the first data row
+    rows = [line.split(",") for line in lines[header_index + 1 :] if line.strip()]
+    data_line_numbers = [
+        number
+        for number, line in enumerate(lines[header_index + 1 :], start=first_data_line)
+        if line.strip()
+    ]
+    for row, number in zip(rows, data_line_numbers, strict=True):
+        if len(row) != len(header):
+            raise RecordingError(
+                f"has {len(row)} fields, the header has {len(header)}", source=source, line=number
+            )
+    if len(rows) < MIN_SAMPLES:
+        raise RecordingError(
+            f"has {len(rows)} samples, at least {MIN_SAMPLES} are needed", source=source
+        )
+
+    table = np.array(rows, dtype=str)
+    known = set(required) | set(ROTARY_OPTIONAL if kind == "rotary" else LINEAR_OPTIONAL)
+    columns: dict[str, FloatArray] = {}
+    for position, name in enumerate(header):
+        values = _to_float(table[:, position], name, data_line_numbers, source, strict=name in known)
+        if values is not None:
+            columns[name] = values
+
+    time_s = columns["time_s"]
+    steps = np.diff(time_s)
+    bad = np.flatnonzero(steps <= 0)
+    if bad.size:
+        raise RecordingError(
+            "time is not strictly increasing",
+            source=source,
+            line=data_line_numbers[int(bad[0]) + 1],
+            column="time_s",
+        )
+    recording = Recording(columns=columns, metadata=metadata, source=source)
+    warnings = tuple(check_recording(recording))
+    for message in warnings:
+        log.warning("%s: %s", source, message)
+    return Recording(columns=columns, metadata=metadata, source=source, warnings=warnings)
+
+
+def _to_float(
+    text: NDArray[np.str_], name: str, line_numbers: list[int], source: str, *, strict: bool
+) -> FloatArray | None:
+    """Column to floats; a known column must be numeric and finite, an unknown one is skipped."""
+    try:
+        values = text.astype(np.float64)
+    except ValueError as exc:
+        if not strict:
+            return None
+        for index, cell in enumerate(text):
+            try:
+                float(cell)
+            except ValueError:
+                raise RecordingError(
+                    f"non-numeric value {cell.strip()!r}",
+                    source=source,
+                    line=line_numbers[index],
+                    column=name,
+                ) from exc
+        raise  # pragma: no cover - astype failed but every cell parsed
+    finite = np.isfinite(values)
+    if not finite.all():
+        if not strict:
+            return None
+        index = int(np.flatnonzero(~finite)[0])
+        raise RecordingError(
+            f"non-finite value {text[index].strip()!r}",
+            source=source,
+            line=line_numbers[index],
+            column=name,
+        )
+    return values
+
+
+def check_recording(recording: Recording) -> list[str]:
+    """Warnings the format asks for: gaps, saturation, a position that never changes."""
+    messages: list[str] = []
+    steps = np.diff(recording.time_s)
+    period = float(np.median(steps))
+    gaps = np.flatnonzero(steps > GAP_FACTOR * period)
+    if gaps.size:
+        messages.append(
+            f"{gaps.size} gap(s) longer than {GAP_FACTOR:g} sample periods "
+            f"(first at t = {recording.time_s[gaps[0]]:.6g} s, "
+            f"longest {steps[gaps].max():.6g} s)"
+        )
+    fraction, clip = saturation_fraction(recording.effort)
+    if fraction > SATURATION_FRACTION:
+        messages.append(
+            f"effort sits at its clip value {clip:.6g} for {100 * fraction:.1f} % of samples "
+            "(saturation)"
+        )
+    if np.ptp(recording.position) == 0.0:
+        messages.append("position never changes")
+    return messages
+
+
+def saturation_fraction(effort: FloatArray) -> tuple[float, float]:
+    """Fraction of samples at the extreme value of ``effort`` (either sign) and that value."""
+    best_fraction, best_clip = 0.0, 0.0
+    for clip in (float(np.max(effort)), float(np.min(effort))):
+        if clip == 0.0:
+            continue
+        fraction = float(np.mean(effort == clip))
+        if fraction > best_fraction:
+            best_fraction, best_clip = fraction, clip
+    return best_fraction, best_clip
+
+
+def saturated_mask(effort: FloatArray) -> NDArray[np.bool_]:
+    """Samples at a clip value that is held for more than 1 % of the samples."""
+    mask = np.zeros(effort.shape, dtype=bool)
+    for clip in (float(np.max(effort)), float(np.min(effort))):
+        at_clip = effort == clip
+        if clip != 0.0 and at_clip.mean() > SATURATION_FRACTION:
+            mask |= at_clip
+    return mask
+
+
+# -- writing ------------------------------------------------------------------------------
+def write_recording(recording: Recording, path: str | Path) -> str:
+    """Write ``recording`` as CSV (gzip when the name ends in ``.gz``); return its SHA-256."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    names = _ordered(recording.columns)
+    lines = [f"# {key}: {value}" for key, value in recording.metadata.items()]
+    lines.append(",".join(names))
+    table = np.column_stack([recording.columns[name] for name in names])
+    lines.extend(",".join(f"{value:.9g}" for value in row) for row in table)
+    payload = ("\n".join(lines) + "\n").encode("utf-8")
+    if path.suffix == ".gz":
+        payload = gzip.compress(payload, compresslevel=6, mtime=0)
+    path.write_bytes(payload)
+    return hashlib.sha256(payload).hexdigest()
+
+
+def _ordered(columns: Iterable[str]) -> list[str]:
+    names = list(columns)
+    order = ROTARY_REQUIRED + LINEAR_REQUIRED[1:] + ROTARY_OPTIONAL + LINEAR_OPTIONAL
+    known = [name for name in order if name in names]
+    return known + [name for name in names if name not in known]
+
+
+def sha256_file(path: str | Path) -> str:
+    """SHA-256 of a file's bytes (for the certificate's raw-data hashes)."""
+    return hashlib.sha256(Path(path).read_bytes()).hexdigest()

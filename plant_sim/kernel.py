@@ -1,0 +1,205 @@
+"""The compiled inner loop: drive loops at the control rate, mechanics at ``substeps`` per period.
+
+Everything here is plain float arrays so numba compiles it once (cached on disk). The
+Python side (:mod:`plant_sim.model`) packs parameters, draws noise and owns the state.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+# parameter vector layout
+(
+    P_J_MOTOR,
+    P_J_LOAD,
+    P_K_SHAFT,
+    P_C_SHAFT,
+    P_B_POS,
+    P_B_NEG,
+    P_TC_POS,
+    P_TC_NEG,
+    P_TS,
+    P_VS,
+    P_OFFSET,
+    P_MGE,
+    P_GRAV_PHASE,
+    P_K_CABLE,
+    P_CABLE_ZERO,
+    P_HYST_NM,
+    P_HYST_ANGLE,
+    P_TAU_I,
+    P_T_MAX,
+    P_COUNTS,
+    P_VEL_FILTER_HZ,
+    P_KP_VEL,
+    P_KI_VEL,
+    P_KP_POS,
+    P_KT,
+    N_PARAMS,
+) = range(26)
+
+# state vector layout
+(
+    S_THETA_M,
+    S_OMEGA_M,
+    S_THETA_L,
+    S_OMEGA_L,
+    S_TORQUE_ACT,
+    S_VEL_EST,
+    S_INTEGRATOR,
+    S_POS_MEAS_PREV,
+    S_HYST,
+    N_STATE,
+) = range(10)
+
+MODE_TORQUE, MODE_VELOCITY, MODE_POSITION = 0, 1, 2
+
+
+@njit(cache=True, fastmath=True)
+def _quantise(theta: float, counts: float) -> float:
+    if counts <= 0.0:
+        return theta
+    step = 2.0 * math.pi / counts
+    return math.floor(theta / step) * step
+
+
+@njit(cache=True, fastmath=True)
+def _periodic(theta: float, table: np.ndarray) -> float:
+    """Linear interpolation in a table of one revolution (empty table: 0)."""
+    size = table.shape[0] - 1  # last entry repeats the first
+    if size <= 0:
+        return 0.0
+    x = theta * (size / (2.0 * math.pi))
+    x -= math.floor(x / size) * size
+    i = int(x)
+    if i >= size:
+        i = size - 1
+    frac = x - i
+    return table[i] + frac * (table[i + 1] - table[i])
+
+
+@njit(cache=True, fastmath=True)
+def run_kernel(  # noqa: PLR0913, PLR0915
+    params: np.ndarray,
+    cogging: np.ndarray,
+    kt_ripple: np.ndarray,
+    state: np.ndarray,
+    mode: int,
+    command: np.ndarray,
+    torque_noise: np.ndarray,
+    dt_s: float,
+    substeps: int,
+    out_position: np.ndarray,
+    out_velocity: np.ndarray,
+    out_torque: np.ndarray,
+    out_current: np.ndarray,
+    out_torque_actual: np.ndarray,
+) -> None:
+    """Advance ``len(command)`` control periods. Outputs are sampled at each period start."""
+    j_m = params[P_J_MOTOR]
+    j_l = params[P_J_LOAD]
+    two_mass = j_l > 0.0
+    k_s = params[P_K_SHAFT]
+    c_s = params[P_C_SHAFT]
+    t_max = params[P_T_MAX]
+    kt = params[P_KT]
+    counts = params[P_COUNTS]
+    h = dt_s / substeps
+    tau_i = params[P_TAU_I]
+    lag_gain = 1.0 if tau_i <= 0.0 else 1.0 - math.exp(-h / tau_i)
+    fc = params[P_VEL_FILTER_HZ]
+    filter_gain = 1.0 if fc <= 0.0 else 1.0 - math.exp(-2.0 * math.pi * fc * dt_s)
+    hyst_nm = params[P_HYST_NM]
+    hyst_rate = hyst_nm / params[P_HYST_ANGLE]
+    ts = max(params[P_TS], params[P_TC_POS], params[P_TC_NEG])
+    inv_vs = 1.0 / params[P_VS]
+    inv_j_m = 1.0 / j_m
+    mge = params[P_MGE]
+    grav_phase = params[P_GRAV_PHASE]
+
+    theta_m = state[S_THETA_M]
+    omega_m = state[S_OMEGA_M]
+    theta_l = state[S_THETA_L]
+    omega_l = state[S_OMEGA_L]
+    torque_act = state[S_TORQUE_ACT]
+    vel_est = state[S_VEL_EST]
+    integrator = state[S_INTEGRATOR]
+    pos_prev = state[S_POS_MEAS_PREV]
+    hyst = state[S_HYST]
+
+    for k in range(command.shape[0]):
+        # --- sensing and the drive's loops, once per control period ---
+        pos_meas = _quantise(theta_m, counts)
+        vel_est += filter_gain * ((pos_meas - pos_prev) / dt_s - vel_est)
+        pos_prev = pos_meas
+        if mode == MODE_TORQUE:
+            torque_cmd = command[k]
+        else:
+            if mode == MODE_VELOCITY:
+                vel_ref = command[k]
+            else:
+                vel_ref = params[P_KP_POS] * (command[k] - pos_meas)
+            error = vel_ref - vel_est
+            integrator += params[P_KI_VEL] * error * dt_s
+            integrator = min(max(integrator, -t_max), t_max)  # anti-windup clamp
+            torque_cmd = params[P_KP_VEL] * error + integrator
+        torque_cmd = min(max(torque_cmd, -t_max), t_max)
+        out_position[k] = pos_meas
+        out_velocity[k] = vel_est
+        out_torque[k] = torque_cmd + torque_noise[k]
+        out_current[k] = torque_act / kt
+        out_torque_actual[k] = torque_act
+
+        # --- mechanics ---
+        for _ in range(substeps):
+            torque_act += lag_gain * (torque_cmd - torque_act)
+            t_motor = torque_act * (1.0 + _periodic(theta_m, kt_ripple))
+            t_motor -= _periodic(theta_m, cogging)
+            theta_out = theta_l if two_mass else theta_m
+            omega_out = omega_l if two_mass else omega_m
+            t_load = params[P_OFFSET]
+            if mge != 0.0:
+                t_load += mge * math.cos(theta_out + grav_phase)
+            t_load += params[P_K_CABLE] * (theta_out - params[P_CABLE_ZERO])
+            if hyst_nm > 0.0:
+                hyst += h * hyst_rate * (omega_out - abs(omega_out) * hyst / hyst_nm)
+                t_load += hyst
+            if two_mass:
+                t_shaft = k_s * (theta_m - theta_l) + c_s * (omega_m - omega_l)
+                omega_l += h * (t_shaft - t_load) / j_l
+                theta_l += h * omega_l
+                t_drive = t_motor - t_shaft
+            else:
+                t_drive = t_motor - t_load
+            # friction with sticking: at rest until |t_drive| exceeds the breakaway torque
+            if omega_m == 0.0:
+                if abs(t_drive) <= ts:
+                    continue
+                omega_m = h * (t_drive - math.copysign(ts, t_drive)) * inv_j_m
+            else:
+                if omega_m > 0.0:
+                    tc = params[P_TC_POS]
+                    b = params[P_B_POS]
+                else:
+                    tc = params[P_TC_NEG]
+                    b = params[P_B_NEG]
+                if ts > tc:
+                    ratio = omega_m * inv_vs
+                    tc += (ts - tc) * math.exp(-ratio * ratio)
+                t_fric = math.copysign(tc, omega_m) + b * omega_m
+                omega_new = omega_m + h * (t_drive - t_fric) * inv_j_m
+                omega_m = 0.0 if omega_new * omega_m < 0.0 else omega_new
+            theta_m += h * omega_m
+
+    state[S_THETA_M] = theta_m
+    state[S_OMEGA_M] = omega_m
+    state[S_THETA_L] = theta_l
+    state[S_OMEGA_L] = omega_l
+    state[S_TORQUE_ACT] = torque_act
+    state[S_VEL_EST] = vel_est
+    state[S_INTEGRATOR] = integrator
+    state[S_POS_MEAS_PREV] = pos_prev
+    state[S_HYST] = hyst

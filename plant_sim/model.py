@@ -1,0 +1,217 @@
+"""The simulated axis: a stateful :class:`Plant` that runs command blocks through the kernel."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from hil.drives.base import Mode
+from hil.recording import Recording
+from plant_sim import kernel
+from plant_sim.params import Harmonic, PlantParams
+
+FloatArray = NDArray[np.float64]
+
+
+
+_KERNEL_MODE = {
+    Mode.TORQUE: kernel.MODE_TORQUE,
+    Mode.VELOCITY: kernel.MODE_VELOCITY,
+    Mode.POSITION: kernel.MODE_POSITION,
+}
+_COMMAND_COLUMN = {
+    Mode.TORQUE: "torque_cmd_nm",
+    Mode.VELOCITY: "velocity_cmd_rad_s",
+    Mode.POSITION: "position_cmd_rad",
+}
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class PlantTrace:
+    """What one block of control periods produced (the drive's view plus ground truth)."""
+
+    time_s: FloatArray
+    position_rad: FloatArray  # encoder, quantised
+    velocity_rad_s: FloatArray  # drive's filtered estimate
+    torque_nm: FloatArray  # commanded torque as reported, with measurement noise
+    current_a: FloatArray  # actual q-axis current (after the current-loop lag)
+    torque_actual_nm: FloatArray  # ground truth motor torque before K_t ripple
+
+
+PERIODIC_TABLE_SIZE = 1 << 16  # points per revolution for cogging and K_t ripple
+
+
+def periodic_table(harmonics: tuple[Harmonic, ...]) -> FloatArray:
+    """Sum of position harmonics over one revolution, closed (last point = first)."""
+    if not harmonics:
+        return np.zeros(0)
+    theta = np.linspace(0.0, 2 * np.pi, PERIODIC_TABLE_SIZE + 1)
+    table = np.zeros_like(theta)
+    for harmonic in harmonics:
+        table += harmonic.amplitude * np.sin(harmonic.order * theta + harmonic.phase_rad)
+    table[-1] = table[0]
+    return table
+
+
+def pack_params(params: PlantParams) -> FloatArray:
+    """The kernel's parameter vector."""
+    vector = np.zeros(kernel.N_PARAMS)
+    vector[kernel.P_J_MOTOR] = params.inertia_kg_m2
+    vector[kernel.P_J_LOAD] = params.load_inertia_kg_m2
+    vector[kernel.P_K_SHAFT] = params.shaft_stiffness_nm_rad
+    vector[kernel.P_C_SHAFT] = params.shaft_damping_nm_s_rad
+    vector[kernel.P_B_POS] = params.viscous_nm_s_rad
+    vector[kernel.P_B_NEG] = (
+        params.viscous_nm_s_rad
+        if params.viscous_neg_nm_s_rad is None
+        else params.viscous_neg_nm_s_rad
+    )
+    vector[kernel.P_TC_POS] = params.coulomb_nm
+    vector[kernel.P_TC_NEG] = (
+        params.coulomb_nm if params.coulomb_neg_nm is None else params.coulomb_neg_nm
+    )
+    vector[kernel.P_TS] = params.static_friction_nm
+    vector[kernel.P_VS] = params.stribeck_velocity_rad_s
+    vector[kernel.P_OFFSET] = params.torque_offset_nm
+    vector[kernel.P_MGE] = params.gravity_mge_nm
+    vector[kernel.P_GRAV_PHASE] = params.gravity_phase_rad
+    vector[kernel.P_K_CABLE] = params.cable_stiffness_nm_rad
+    vector[kernel.P_CABLE_ZERO] = params.cable_zero_rad
+    vector[kernel.P_HYST_NM] = params.cable_hysteresis_nm
+    vector[kernel.P_HYST_ANGLE] = params.cable_hysteresis_angle_rad
+    vector[kernel.P_TAU_I] = params.current_loop_time_constant_s
+    vector[kernel.P_T_MAX] = params.torque_limit_nm if math.isfinite(params.torque_limit_nm) else 1e12
+    vector[kernel.P_COUNTS] = params.encoder_counts_per_rev
+    vector[kernel.P_VEL_FILTER_HZ] = params.velocity_filter_hz
+    vector[kernel.P_KP_VEL] = params.velocity_kp_nm_s_rad
+    vector[kernel.P_KI_VEL] = params.velocity_ki_nm_rad
+    vector[kernel.P_KP_POS] = params.position_kp_1_s
+    vector[kernel.P_KT] = params.torque_constant_nm_a
+    return vector
+
+
+def substeps_for(params: PlantParams, fs_hz: float) -> int:
+    """Physics steps per control period: enough for the shaft resonance (ω·h ≤ 0.2)."""
+    if params.substeps > 0:
+        return params.substeps
+    if params.resonance_hz <= 0:
+        return 1
+    return max(1, math.ceil(2 * math.pi * params.resonance_hz / (0.2 * fs_hz)))
+
+
+class Plant:
+    """One simulated axis with its drive loops. Deterministic given ``seed``.
+
+    ``run`` may be called repeatedly; state (position, integrators, filters) carries over,
+    so an emulator can advance the plant one SYNC period at a time.
+    """
+
+    def __init__(
+        self,
+        params: PlantParams,
+        *,
+        fs_hz: float,
+        seed: int,
+        initial_position_rad: float = 0.0,
+    ) -> None:
+        if not fs_hz > 0:
+            raise ValueError(f"fs_hz must be > 0, got {fs_hz}")
+        self.params = params
+        self.fs_hz = float(fs_hz)
+        self._packed = pack_params(params)
+        self._cogging = periodic_table(params.cogging)
+        self._kt_ripple = periodic_table(params.kt_ripple)
+        self._substeps = substeps_for(params, self.fs_hz)
+        self._rng = np.random.default_rng(seed)
+        self._state = np.zeros(kernel.N_STATE)
+        self._state[kernel.S_THETA_M] = initial_position_rad
+        self._state[kernel.S_THETA_L] = initial_position_rad
+        self._state[kernel.S_POS_MEAS_PREV] = kernel._quantise(
+            initial_position_rad, float(params.encoder_counts_per_rev)
+        )
+        self._samples_done = 0
+
+    @property
+    def time_s(self) -> float:
+        return self._samples_done / self.fs_hz
+
+    @property
+    def position_rad(self) -> float:
+        """True motor-side position (not quantised)."""
+        return float(self._state[kernel.S_THETA_M])
+
+    @property
+    def velocity_rad_s(self) -> float:
+        return float(self._state[kernel.S_OMEGA_M])
+
+    def hold(self) -> None:
+        """Reset the velocity integrator (what a drive does on disable/enable)."""
+        self._state[kernel.S_INTEGRATOR] = 0.0
+
+    def run(self, mode: Mode, command: FloatArray) -> PlantTrace:
+        """Advance one control period per command sample."""
+        command = np.ascontiguousarray(command, dtype=np.float64)
+        n = command.shape[0]
+        noise = self._rng.normal(0.0, 1.0, n) * self.params.torque_noise_nm
+        outputs = [np.empty(n) for _ in range(5)]
+        kernel.run_kernel(
+            self._packed,
+            self._cogging,
+            self._kt_ripple,
+            self._state,
+            _KERNEL_MODE[mode],
+            command,
+            noise,
+            1.0 / self.fs_hz,
+            self._substeps,
+            *outputs,
+        )
+        time_s = (self._samples_done + np.arange(n)) / self.fs_hz
+        self._samples_done += n
+        position, velocity, torque, current, actual = outputs
+        return PlantTrace(
+            time_s=time_s,
+            position_rad=position,
+            velocity_rad_s=velocity,
+            torque_nm=torque,
+            current_a=current,
+            torque_actual_nm=actual,
+        )
+
+
+def trace_to_recording(
+    trace: PlantTrace,
+    *,
+    mode: Mode,
+    command: FloatArray,
+    metadata: dict[str, str] | None = None,
+) -> Recording:
+    """The recording a drive would deliver for ``trace`` (ground truth left out)."""
+    columns = {
+        "time_s": trace.time_s,
+        "position_rad": trace.position_rad,
+        "velocity_rad_s": trace.velocity_rad_s,
+        "torque_nm": trace.torque_nm,
+        _COMMAND_COLUMN[mode]: np.asarray(command, dtype=np.float64),
+        "current_a": trace.current_a,
+    }
+    return Recording(columns=columns, metadata=dict(metadata or {}), source="plant_sim")
+
+
+def simulate(
+    params: PlantParams,
+    *,
+    mode: Mode,
+    command: FloatArray,
+    fs_hz: float,
+    seed: int,
+    initial_position_rad: float = 0.0,
+) -> Recording:
+    """Simulate ``command`` (one sample per control period) from rest and return a Recording."""
+    plant = Plant(params, fs_hz=fs_hz, seed=seed, initial_position_rad=initial_position_rad)
+    trace = plant.run(mode, command)
+    metadata = {"drive": "plant_sim", "control_mode": mode.value, "seed": str(seed)}
+    return trace_to_recording(trace, mode=mode, command=command, metadata=metadata)

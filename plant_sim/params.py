@@ -1,0 +1,161 @@
+"""Physical and drive parameters of one simulated gimbal axis. Every effect is off by default."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass, fields, replace
+from typing import Any
+
+from hil.errors import ProfileError
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class Harmonic:
+    """One position harmonic: ``amplitude * sin(order * theta + phase_rad)``."""
+
+    order: int
+    amplitude: float
+    phase_rad: float = 0.0
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class PlantParams:
+    """A gimbal axis and its drive.
+
+    Mechanics: ``J·α = T_motor·(1 + K_t ripple(θ)) − cogging(θ) − friction(ω) − gravity(θ)
+    − cable(θ) − offset``; with ``load_inertia_kg_m2 > 0`` a two-mass system whose load is
+    coupled by a spring-damper shaft (gravity, cable and offset act on the load).
+    Friction: ``[T_c + (T_s − T_c)·exp(−(ω/v_s)²)]·sgn(ω) + B·ω`` with true sticking at
+    ω = 0 until the applied torque exceeds ``T_s``.
+    """
+
+    inertia_kg_m2: float
+    viscous_nm_s_rad: float = 0.0
+    coulomb_nm: float = 0.0
+    static_friction_nm: float = 0.0  # T_s; below coulomb_nm means no Stribeck peak
+    stribeck_velocity_rad_s: float = 0.02
+    coulomb_neg_nm: float | None = None  # asymmetric friction: negative direction
+    viscous_neg_nm_s_rad: float | None = None
+    torque_offset_nm: float = 0.0  # constant load torque the motor must hold
+    load_inertia_kg_m2: float = 0.0  # > 0: two-mass model
+    shaft_stiffness_nm_rad: float = 0.0
+    shaft_damping_nm_s_rad: float = 0.0
+    cogging: tuple[Harmonic, ...] = ()  # amplitude in N·m
+    kt_ripple: tuple[Harmonic, ...] = ()  # amplitude relative to K_t
+    gravity_mge_nm: float = 0.0  # holding torque m·g·e·cos(θ + gravity_phase_rad)
+    gravity_phase_rad: float = 0.0
+    cable_stiffness_nm_rad: float = 0.0
+    cable_zero_rad: float = 0.0
+    cable_hysteresis_nm: float = 0.0  # half width of the Dahl hysteresis loop
+    cable_hysteresis_angle_rad: float = 0.02  # travel over which hysteresis saturates
+    current_loop_time_constant_s: float = 0.0
+    torque_constant_nm_a: float = 0.1
+    torque_limit_nm: float = math.inf
+    encoder_counts_per_rev: int = 0  # 0: ideal encoder
+    torque_noise_nm: float = 0.0  # std of white noise on the reported torque
+    velocity_filter_hz: float = 0.0  # 0: raw position difference
+    velocity_kp_nm_s_rad: float = 0.05
+    velocity_ki_nm_rad: float = 1.0
+    position_kp_1_s: float = 30.0
+    substeps: int = 0  # physics steps per control period; 0: chosen from the dynamics
+
+    def __post_init__(self) -> None:
+        if not self.inertia_kg_m2 > 0:
+            raise ProfileError(f"inertia_kg_m2 must be > 0, got {self.inertia_kg_m2}")
+        for name in (
+            "viscous_nm_s_rad",
+            "coulomb_nm",
+            "static_friction_nm",
+            "load_inertia_kg_m2",
+            "shaft_stiffness_nm_rad",
+            "shaft_damping_nm_s_rad",
+            "cable_stiffness_nm_rad",
+            "cable_hysteresis_nm",
+            "current_loop_time_constant_s",
+            "torque_noise_nm",
+            "velocity_filter_hz",
+        ):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value >= 0):
+                raise ProfileError(f"{name} must be finite and >= 0, got {value}")
+        if self.stribeck_velocity_rad_s <= 0:
+            raise ProfileError("stribeck_velocity_rad_s must be > 0")
+        if self.cable_hysteresis_angle_rad <= 0:
+            raise ProfileError("cable_hysteresis_angle_rad must be > 0")
+        if self.load_inertia_kg_m2 > 0 and self.shaft_stiffness_nm_rad <= 0:
+            raise ProfileError("a two-mass plant needs shaft_stiffness_nm_rad > 0")
+        if not self.torque_limit_nm > 0:
+            raise ProfileError("torque_limit_nm must be > 0")
+
+    @property
+    def total_inertia_kg_m2(self) -> float:
+        return self.inertia_kg_m2 + self.load_inertia_kg_m2
+
+    @property
+    def resonance_hz(self) -> float:
+        """Two-mass resonance (0 for a rigid axis)."""
+        if self.load_inertia_kg_m2 <= 0:
+            return 0.0
+        reduced = self.inertia_kg_m2 * self.load_inertia_kg_m2 / self.total_inertia_kg_m2
+        return math.sqrt(self.shaft_stiffness_nm_rad / reduced) / (2 * math.pi)
+
+    def with_changes(self, **changes: Any) -> PlantParams:
+        return replace(self, **changes)
+
+
+_HARMONIC_FIELDS = ("cogging", "kt_ripple")
+
+
+def plant_from_mapping(data: Mapping[str, Any], *, source: str = "[plant]") -> PlantParams:
+    """Build :class:`PlantParams` from a TOML table, naming any unknown or bad key."""
+    known = {f.name for f in fields(PlantParams)}
+    kwargs: dict[str, Any] = {}
+    for key, value in data.items():
+        if key not in known:
+            raise ProfileError(f"unknown plant parameter '{key}'", source=source)
+        if key in _HARMONIC_FIELDS:
+            kwargs[key] = tuple(_harmonic(item, f"{source}.{key}") for item in value)
+        else:
+            kwargs[key] = value
+    try:
+        return PlantParams(**kwargs)
+    except TypeError as exc:
+        raise ProfileError(str(exc), source=source) from exc
+    except ProfileError as exc:
+        raise ProfileError(exc.message, source=source) from exc
+
+
+def _harmonic(item: Any, source: str) -> Harmonic:
+    if not isinstance(item, Mapping):
+        raise ProfileError("each harmonic is a table {order, amplitude, phase_rad}", source=source)
+    try:
+        return Harmonic(
+            order=int(item["order"]),
+            amplitude=float(item["amplitude"]),
+            phase_rad=float(item.get("phase_rad", 0.0)),
+        )
+    except KeyError as exc:
+        raise ProfileError(f"harmonic lacks {exc}", source=source) from exc
+
+
+def plant_to_mapping(params: PlantParams) -> dict[str, Any]:
+    """Inverse of :func:`plant_from_mapping` (only non-default values, TOML-ready)."""
+    out: dict[str, Any] = {}
+    for f in fields(PlantParams):
+        value = getattr(params, f.name)
+        if value is None:
+            continue
+        default = f.default
+        if value == default:
+            continue
+        if f.name in _HARMONIC_FIELDS:
+            out[f.name] = [
+                {"order": h.order, "amplitude": h.amplitude, "phase_rad": h.phase_rad}
+                for h in value
+            ]
+        elif isinstance(value, float) and math.isinf(value):
+            continue
+        else:
+            out[f.name] = value
+    return out
