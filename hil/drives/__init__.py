@@ -5,10 +5,13 @@ from __future__ import annotations
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from hil.drives.base import Drive
 from hil.errors import ProfileError
-from hil.profile import UnitProfile
+
+if TYPE_CHECKING:  # hil.profile imports hil.drives.base
+    from hil.profile import UnitProfile
 
 DRIVE_KINDS = ("sim", "canopen-emulator", "modbus-emulator", "canopen", "modbus")
 
