@@ -7,15 +7,16 @@ import math
 import tomllib
 from collections.abc import Mapping
 from dataclasses import dataclass, field
-from importlib import resources
 from pathlib import Path
 from typing import Any
 
+import fixtures
 from hil.drives.base import Limits
 from hil.errors import ProfileError
 from plant_sim.params import PlantParams, plant_from_mapping
 
 DEFAULT_PROFILE = "demo_gimbal_elevation"
+FIXTURES_DIR = Path(fixtures.__file__).parent
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -66,7 +67,7 @@ class UnitProfile:
 
 def builtin_profile_path(name: str = DEFAULT_PROFILE) -> Path:
     """Path of a profile shipped in ``fixtures/``."""
-    path = Path(str(resources.files("fixtures").joinpath(f"{name}.toml")))
+    path = FIXTURES_DIR / f"{name}.toml"
     if not path.is_file():
         raise ProfileError(f"no built-in profile named '{name}'", source=str(path.parent))
     return path

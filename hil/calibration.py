@@ -1,0 +1,190 @@
+"""One calibration run of one unit: raw recordings kept, measurements judged, outcome derived.
+
+Independent of pytest: the plugin creates one per session and hands it to protocols.
+"""
+
+from __future__ import annotations
+
+import logging
+import re
+import shutil
+import time
+from dataclasses import dataclass, field
+from datetime import UTC, datetime
+from pathlib import Path
+
+from hil.drives.base import Drive, DriveInfo, Excitation
+from hil.errors import DriveError
+from hil.identify.estimate import Estimate
+from hil.measurement import Measurement, Outcome, judge, with_method_accuracy
+from hil.profile import UnitProfile
+from hil.recording import Recording, write_recording
+
+log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class RawFile:
+    protocol: str
+    excitation: str
+    path: Path
+    sha256: str
+    samples: int
+    motion_time_s: float
+    complete: bool
+
+
+@dataclass(slots=True)
+class ProtocolRecord:
+    name: str
+    outcome: Outcome | None = None  # None until the protocol test reports
+    skipped: bool = False
+    motion_time_s: float = 0.0
+    wall_time_s: float = 0.0
+    messages: list[str] = field(default_factory=list)
+
+
+class CalibrationRun:
+    """Collects everything the certificate needs while protocols run."""
+
+    def __init__(
+        self,
+        *,
+        profile: UnitProfile,
+        unit_serial: str,
+        out_dir: Path,
+        drive_kind: str,
+    ) -> None:
+        if not re.fullmatch(r"[A-Za-z0-9][A-Za-z0-9._-]{0,63}", unit_serial):
+            raise ValueError(
+                f"unit serial {unit_serial!r} must be 1-64 letters, digits, '.', '_' or '-'"
+            )
+        self.profile = profile
+        self.unit_serial = unit_serial
+        self.drive_kind = drive_kind
+        self.unit_dir = out_dir / unit_serial
+        self.started = datetime.now(UTC)
+        self.drive_info: DriveInfo | None = None
+        self.raw_files: list[RawFile] = []
+        self.measurements: list[Measurement] = []
+        self.protocols: dict[str, ProtocolRecord] = {}
+        self.details: dict[str, dict[str, object]] = {}
+        self._archived = False
+
+    # -- used by protocols ----------------------------------------------------------------
+    def protocol(self, name: str) -> ProtocolRecord:
+        return self.protocols.setdefault(name, ProtocolRecord(name=name))
+
+    def run(self, drive: Drive, excitation: Excitation, *, protocol: str) -> Recording:
+        """Execute ``excitation`` and keep its raw recording, even a partial one on error."""
+        self.drive_info = drive.info
+        record = self.protocol(protocol)
+        started = time.perf_counter()
+        try:
+            recording = drive.run(excitation)
+        except DriveError as exc:
+            partial = exc.partial_recording
+            if isinstance(partial, Recording):
+                self._keep(partial, protocol, excitation, complete=False)
+            raise
+        finally:
+            record.wall_time_s += time.perf_counter() - started
+        record.motion_time_s += excitation.duration_s
+        self._keep(recording, protocol, excitation, complete=True)
+        return recording
+
+    def record(self, protocol: str, estimate: Estimate) -> Measurement:
+        """Judge ``estimate`` against the profile's declared measurement of the same name."""
+        spec = self.profile.measurement(estimate.name)
+        estimate = with_method_accuracy(estimate, spec)
+        measurement = Measurement(
+            protocol=protocol, spec=spec, estimate=estimate, outcome=judge(estimate, spec)
+        )
+        self.measurements = [m for m in self.measurements if m.spec.name != spec.name]
+        self.measurements.append(measurement)
+        log.info(
+            "%s = %.6g ± %.2g %s → %s",
+            spec.name,
+            estimate.value,
+            estimate.expanded_uncertainty,
+            spec.unit,
+            measurement.outcome.value,
+        )
+        return measurement
+
+    # -- used by the plugin ---------------------------------------------------------------
+    def report_protocol(self, name: str, outcome: Outcome, message: str = "") -> None:
+        record = self.protocol(name)
+        worse = {Outcome.PASS: 0, Outcome.MARGINAL: 1, Outcome.FAIL: 2, Outcome.ERROR: 3}
+        if record.outcome is None or worse[outcome] > worse[record.outcome]:
+            record.outcome = outcome
+        if message:
+            record.messages.append(message)
+
+    def report_skip(self, name: str, reason: str) -> None:
+        record = self.protocol(name)
+        record.skipped = True
+        record.messages.append(f"skipped: {reason}")
+
+    def overall_outcome(self, *, aborted: bool) -> Outcome:
+        """Never PASS when aborted, when a protocol failed or errored, or with no results."""
+        if aborted or not self.measurements:
+            return Outcome.ERROR
+        outcomes = [m.outcome for m in self.measurements]
+        outcomes += [p.outcome for p in self.protocols.values() if p.outcome is not None]
+        if any(p.outcome is None and not p.skipped for p in self.protocols.values()):
+            outcomes.append(Outcome.ERROR)
+        for worst in (Outcome.ERROR, Outcome.FAIL, Outcome.MARGINAL):
+            if worst in outcomes:
+                return worst
+        return Outcome.PASS
+
+    @property
+    def active(self) -> bool:
+        return bool(self.protocols)
+
+    # -- raw data -------------------------------------------------------------------------
+    def _keep(
+        self, recording: Recording, protocol: str, excitation: Excitation, *, complete: bool
+    ) -> None:
+        self.archive_previous()
+        suffix = "" if complete else "_PARTIAL"
+        name = re.sub(r"[^A-Za-z0-9._-]+", "_", f"{protocol}__{excitation.name}{suffix}")
+        path = self.unit_dir / "recordings" / f"{name}.csv.gz"
+        metadata = {
+            "unit_serial": self.unit_serial,
+            "unit_type": self.profile.unit_type,
+            "axis": self.profile.axis,
+            "protocol": protocol,
+            **recording.metadata,
+        }
+        kept = Recording(columns=recording.columns, metadata=metadata, source=str(path))
+        sha = write_recording(kept, path)
+        self.raw_files.append(
+            RawFile(
+                protocol=protocol,
+                excitation=excitation.name,
+                path=path,
+                sha256=sha,
+                samples=len(recording),
+                motion_time_s=recording.duration_s,
+                complete=complete,
+            )
+        )
+
+    def archive_previous(self) -> None:
+        """Move an earlier run of this unit to ``history/`` before writing anything."""
+        if self._archived:
+            return
+        self._archived = True
+        previous = [p for p in (self.unit_dir / "certificate.json", self.unit_dir / "recordings")
+                    if p.exists()]
+        if not previous:
+            return
+        stamp = datetime.fromtimestamp(previous[0].stat().st_mtime, UTC).strftime("%Y%m%dT%H%M%SZ")
+        target = self.unit_dir / "history" / stamp
+        target.mkdir(parents=True, exist_ok=True)
+        for item in self.unit_dir.iterdir():
+            if item.name != "history":
+                shutil.move(str(item), target / item.name)
+        log.info("previous calibration of %s moved to %s", self.unit_serial, target)

@@ -1,0 +1,136 @@
+"""Certificate content following the structure of ISO/IEC 17025 7.8 (no accreditation claimed)."""
+
+from __future__ import annotations
+
+import json
+import logging
+import platform
+import subprocess
+import uuid
+from dataclasses import asdict
+from datetime import UTC, datetime
+from pathlib import Path
+from typing import Any
+
+from hil import __version__
+from hil.calibration import CalibrationRun
+from hil.certificate.render import render_text
+from hil.measurement import DECISION_RULE
+
+log = logging.getLogger(__name__)
+SCHEMA = "gimbal-hil/certificate/v1"
+
+
+def git_revision() -> str | None:
+    """The source tree's commit, when running from a git checkout."""
+    here = Path(__file__).resolve().parent
+    try:
+        done = subprocess.run(
+            ["git", "rev-parse", "HEAD"], cwd=here, capture_output=True, text=True, timeout=5,
+            check=False,
+        )
+    except (OSError, subprocess.SubprocessError):
+        return None
+    if done.returncode != 0:
+        return None
+    dirty = subprocess.run(
+        ["git", "status", "--porcelain", "--untracked-files=no"], cwd=here,
+        capture_output=True, text=True, timeout=5, check=False,
+    ).stdout.strip()
+    return done.stdout.strip() + ("-dirty" if dirty else "")
+
+
+def build_certificate(run: CalibrationRun, *, aborted: bool, issued: datetime | None = None) -> dict[str, Any]:
+    issued = issued or datetime.now(UTC)
+    outcome = run.overall_outcome(aborted=aborted)
+    info = run.drive_info
+    return {
+        "schema": SCHEMA,
+        "certificate_id": f"{run.unit_serial}-{issued:%Y%m%dT%H%M%SZ}-{uuid.uuid4().hex[:8]}",
+        "title": "Calibration certificate: gimbal axis mechanical parameters",
+        "accreditation": "none claimed; structure follows ISO/IEC 17025:2017 clause 7.8",
+        "unit": {
+            "serial": run.unit_serial,
+            "type": run.profile.unit_type,
+            "axis": run.profile.axis,
+        },
+        "dates": {
+            "calibration_started": run.started.isoformat(timespec="seconds"),
+            "issued": issued.isoformat(timespec="seconds"),
+        },
+        "method": {
+            "profile": run.profile.source,
+            "profile_sha256": run.profile.sha256,
+            "protocols": {
+                name: {
+                    "outcome": (
+                        record.outcome.value
+                        if record.outcome
+                        else ("SKIPPED" if record.skipped else "NOT_COMPLETED")
+                    ),
+                    "motion_time_s": round(record.motion_time_s, 3),
+                    "wall_time_s": round(record.wall_time_s, 3),
+                    "messages": record.messages,
+                }
+                for name, record in run.protocols.items()
+            },
+            "details": run.details,
+        },
+        "machine_time": {
+            "motion_time_s": round(sum(r.motion_time_s for r in run.protocols.values()), 3),
+            "wall_time_s": round(sum(r.wall_time_s for r in run.protocols.values()), 3),
+        },
+        "drive": {"kind": run.drive_kind, **(_drive_info(info) if info else {})},
+        "conditions": {"drive_kind": run.drive_kind, "simulated": run.drive_kind == "sim"},
+        "software": {
+            "name": "gimbal-hil",
+            "version": __version__,
+            "git_revision": git_revision(),
+            "python": platform.python_version(),
+        },
+        "raw_data": [
+            {
+                "protocol": f.protocol,
+                "excitation": f.excitation,
+                "file": str(f.path.relative_to(run.unit_dir)),
+                "sha256": f.sha256,
+                "samples": f.samples,
+                "complete": f.complete,
+            }
+            for f in run.raw_files
+        ],
+        "results": [m.as_dict() for m in run.measurements],
+        "decision_rule": DECISION_RULE,
+        "outcome": outcome.value,
+        "aborted": aborted,
+        "conformity": _statement(outcome.value),
+    }
+
+
+def _drive_info(info: Any) -> dict[str, Any]:
+    data = asdict(info)
+    data["modes"] = [mode.value for mode in info.modes]
+    return data
+
+
+def _statement(outcome: str) -> str:
+    return {
+        "PASS": "The unit conforms to every specified limit.",
+        "MARGINAL": "The unit conforms; at least one result lies in a marginal band or its "
+        "uncertainty interval reaches a limit.",
+        "FAIL": "The unit does not conform: at least one result is outside its limits or a "
+        "protocol failed.",
+        "ERROR": "No conformity statement: the calibration did not complete.",
+    }[outcome]
+
+
+def write_certificate(run: CalibrationRun, *, aborted: bool) -> Path:
+    """Write ``certificate.json`` and ``certificate.txt`` in the unit's directory."""
+    run.archive_previous()
+    certificate = build_certificate(run, aborted=aborted)
+    run.unit_dir.mkdir(parents=True, exist_ok=True)
+    path = run.unit_dir / "certificate.json"
+    path.write_text(json.dumps(certificate, indent=2, default=str) + "\n", encoding="utf-8")
+    (run.unit_dir / "certificate.txt").write_text(render_text(certificate), encoding="utf-8")
+    log.info("certificate %s written to %s", certificate["certificate_id"], path)
+    return path

@@ -1,0 +1,69 @@
+"""An identified value with its standard uncertainty (GUM), and linear propagation helpers."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy import stats
+
+COVERAGE_PROBABILITY = 0.9545  # the coverage of k = 2 for a normal distribution
+
+
+def coverage_factor(dof: float) -> float:
+    """GUM coverage factor for ~95 % coverage: k = 2 for many degrees of freedom, Student-t
+    for few (``dof`` < 50)."""
+    if not math.isfinite(dof) or dof >= 50:
+        return 2.0
+    return float(stats.t.ppf(0.5 + COVERAGE_PROBABILITY / 2, max(dof, 1.0)))
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class Estimate:
+    """``value ± coverage_factor · standard_uncertainty`` in ``unit``.
+
+    ``dof`` are the effective degrees of freedom (Welch–Satterthwaite) behind the
+    uncertainty; ``cramer_rao_std`` is the bound on the standard deviation of any unbiased
+    estimator given the same data, when known.
+    """
+
+    name: str
+    value: float
+    standard_uncertainty: float
+    unit: str
+    dof: float = math.inf
+    cramer_rao_std: float | None = None
+
+    @property
+    def coverage_factor(self) -> float:
+        return coverage_factor(self.dof)
+
+    @property
+    def expanded_uncertainty(self) -> float:
+        return self.coverage_factor * self.standard_uncertainty
+
+    @property
+    def relative_uncertainty(self) -> float:
+        return self.standard_uncertainty / abs(self.value) if self.value else math.inf
+
+
+def combine_linear(
+    weights: NDArray[np.float64],
+    values: Sequence[float],
+    uncertainties: Sequence[float],
+    dofs: Sequence[float],
+) -> tuple[float, float, float]:
+    """Value, standard uncertainty and Welch–Satterthwaite dof of ``Σ wᵢ·xᵢ`` for independent
+    inputs ``xᵢ ± uᵢ`` with ``νᵢ`` degrees of freedom."""
+    w = np.asarray(weights, dtype=np.float64)
+    x = np.asarray(values, dtype=np.float64)
+    u = np.asarray(uncertainties, dtype=np.float64)
+    nu = np.asarray(dofs, dtype=np.float64)
+    contributions = (w * u) ** 2
+    variance = float(contributions.sum())
+    denominator = float(np.sum(contributions**2 / nu))
+    dof = variance**2 / denominator if denominator > 0 else math.inf
+    return float(w @ x), math.sqrt(variance), dof

@@ -1,0 +1,159 @@
+"""pytest plugin: options, the ``drive``/``calibration`` fixtures and the certificate hook.
+
+Thin on purpose: fixtures look things up, state lives in ``config.stash``.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+
+from hil.calibration import CalibrationRun
+from hil.certificate import write_certificate
+from hil.drives import DRIVE_KINDS, open_drive
+from hil.drives.base import Drive
+from hil.errors import HilError
+from hil.measurement import Outcome
+from hil.profile import UnitProfile, load_profile
+
+log = logging.getLogger(__name__)
+
+RUN_KEY = pytest.StashKey[CalibrationRun]()
+CERTIFICATE_KEY = pytest.StashKey[Path]()
+PROTOCOL_MARK = "protocol"
+
+
+def pytest_addoption(parser: pytest.Parser) -> None:
+    group = parser.getgroup("gimbal-hil", "gimbal-hil calibration")
+    group.addoption("--drive", default="sim", choices=DRIVE_KINDS,
+                    help="drive backend for calibration protocols (default: sim)")
+    group.addoption("--profile", default=None,
+                    help="unit profile TOML, or a built-in profile name (default: demo unit)")
+    group.addoption("--unit-serial", default=None,
+                    help="serial number of the unit under calibration (default SIM-0001 for sim)")
+    group.addoption("--out", default="certificates",
+                    help="directory for certificates and raw recordings (default: certificates)")
+    group.addoption("--station", default=None, type=Path,
+                    help="station TOML for real drives (interface, node id, EDS, register map)")
+    group.addoption("--seed", default=0, type=int, help="simulator seed (sim and emulators)")
+
+
+def pytest_configure(config: pytest.Config) -> None:
+    config.addinivalue_line("markers", f"{PROTOCOL_MARK}: a calibration protocol")
+
+
+@pytest.fixture(scope="session")
+def profile(pytestconfig: pytest.Config) -> UnitProfile:
+    """The unit profile named by ``--profile`` (default: the built-in demo unit)."""
+    try:
+        return load_profile(pytestconfig.getoption("--profile"))
+    except HilError as exc:
+        raise pytest.UsageError(str(exc)) from exc
+
+
+@pytest.fixture(scope="session")
+def calibration(pytestconfig: pytest.Config, profile: UnitProfile) -> CalibrationRun:
+    """The calibration run collecting recordings and judged measurements for the certificate."""
+    if RUN_KEY not in pytestconfig.stash:
+        kind = pytestconfig.getoption("--drive")
+        serial = pytestconfig.getoption("--unit-serial")
+        if serial is None:
+            if kind != "sim":
+                raise pytest.UsageError(f"--drive {kind} needs --unit-serial")
+            serial = "SIM-0001"
+        pytestconfig.stash[RUN_KEY] = CalibrationRun(
+            profile=profile,
+            unit_serial=serial,
+            out_dir=Path(pytestconfig.getoption("--out")),
+            drive_kind=kind,
+        )
+    return pytestconfig.stash[RUN_KEY]
+
+
+@pytest.fixture(scope="session")
+def drive_connection(
+    pytestconfig: pytest.Config, profile: UnitProfile, calibration: CalibrationRun
+) -> Iterator[Drive]:
+    """The open drive for the whole session; closed (and disabled) at the end."""
+    with open_drive(
+        pytestconfig.getoption("--drive"),
+        profile=profile,
+        unit_serial=calibration.unit_serial,
+        station=pytestconfig.getoption("--station"),
+        seed=pytestconfig.getoption("--seed"),
+    ) as drive:
+        calibration.drive_info = drive.info
+        yield drive
+
+
+@pytest.fixture(scope="module")
+def drive(drive_connection: Drive) -> Iterator[Drive]:
+    """The drive, enabled for one protocol module and always disabled afterwards."""
+    drive_connection.enable()
+    try:
+        yield drive_connection
+    except BaseException:
+        drive_connection.quick_stop()
+        raise
+    finally:
+        drive_connection.disable()
+
+
+def _protocol_name(item: pytest.Item) -> str | None:
+    mark = item.get_closest_marker(PROTOCOL_MARK)
+    if mark is None:
+        return None
+    return str(mark.args[0]) if mark.args else item.module.__name__.rsplit(".", 1)[-1]
+
+
+@pytest.hookimpl(wrapper=True)
+def pytest_runtest_makereport(
+    item: pytest.Item, call: pytest.CallInfo[None]
+) -> Iterator[None]:
+    report: pytest.TestReport = yield
+    name = _protocol_name(item)
+    run = item.config.stash.get(RUN_KEY, None)
+    if name is None or run is None:
+        return report
+    if report.failed:
+        outcome = Outcome.FAIL if report.when == "call" else Outcome.ERROR
+        if call.excinfo is not None and not isinstance(call.excinfo.value, AssertionError):
+            outcome = Outcome.ERROR
+        message = call.excinfo.exconly() if call.excinfo else report.longreprtext[:200]
+        run.report_protocol(name, outcome, f"{item.name}: {message[:300]}")
+    elif report.skipped:
+        reason = report.longrepr[2] if isinstance(report.longrepr, tuple) else "skipped"
+        run.report_skip(name, f"{item.name}: {reason}")
+    elif report.when == "call" and report.passed:
+        run.report_protocol(name, Outcome.PASS)
+    return report
+
+
+def pytest_sessionfinish(session: pytest.Session, exitstatus: int) -> None:
+    run = session.config.stash.get(RUN_KEY, None)
+    if run is None or not run.active:
+        return
+    aborted = exitstatus == pytest.ExitCode.INTERRUPTED or session.shouldstop is not False
+    session.config.stash[CERTIFICATE_KEY] = write_certificate(run, aborted=bool(aborted))
+
+
+def pytest_terminal_summary(terminalreporter: pytest.TerminalReporter) -> None:
+    config = terminalreporter.config
+    path = config.stash.get(CERTIFICATE_KEY, None)
+    run = config.stash.get(RUN_KEY, None)
+    if path is None or run is None:
+        return
+    terminalreporter.section("gimbal-hil calibration")
+    for m in run.measurements:
+        e = m.estimate
+        terminalreporter.write_line(
+            f"{m.spec.name:<26}{e.value:>12.6g} ± {e.expanded_uncertainty:<9.2g}"
+            f"{m.spec.unit:<11}{m.outcome.value}"
+        )
+    outcome = json.loads(path.read_text(encoding="utf-8"))["outcome"]
+    terminalreporter.write_line(f"certificate: {path}")
+    terminalreporter.write_line(f"unit {run.unit_serial}: {outcome}")

@@ -1,0 +1,116 @@
+"""J, B, T_c from sinusoidal velocity at two or more amplitudes (orthogonal correlation)."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+import pytest
+
+from hil.calibration import CalibrationRun
+from hil.drives.base import Drive, DriveInfo, Excitation, Mode
+from hil.identify.estimate import Estimate
+from hil.identify.inertia_friction import (
+    InertiaFrictionResult,
+    analyse_sine_run,
+    identify_inertia_friction,
+)
+from hil.profile import UnitProfile
+from hil.recording import Recording
+
+NAME = "inertia_friction"
+MEASUREMENTS = ("inertia_kg_m2", "viscous_nm_s_rad", "coulomb_nm", "inertia_amplitude_spread_pct")
+pytestmark = pytest.mark.protocol(NAME)
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class Spec:
+    frequency_hz: float
+    amplitudes_rad_s: tuple[float, ...]
+    settle_periods: int
+    periods: int
+    fs_hz: float
+
+    @classmethod
+    def from_profile(cls, profile: UnitProfile, info: DriveInfo) -> Spec:
+        settings = profile.protocol(NAME)
+        return cls(
+            frequency_hz=float(settings["frequency_hz"]),
+            amplitudes_rad_s=tuple(float(a) for a in settings["amplitudes_rad_s"]),
+            settle_periods=int(settings.get("settle_periods", 2)),
+            periods=int(settings.get("periods", 8)),
+            fs_hz=min(profile.sample_rate_hz, info.max_sample_rate_hz),
+        )
+
+
+def excitation(spec: Spec) -> list[Excitation]:
+    """One velocity sine per amplitude, whole periods, starting and ending at rest."""
+    samples = round((spec.settle_periods + spec.periods) * spec.fs_hz / spec.frequency_hz)
+    t = np.arange(samples) / spec.fs_hz
+    shape = np.sin(2 * math.pi * spec.frequency_hz * t)
+    return [
+        Excitation(
+            name=f"sine_{spec.frequency_hz:g}hz_{amplitude:g}rad_s",
+            mode=Mode.VELOCITY,
+            command=amplitude * shape,
+            fs_hz=spec.fs_hz,
+        )
+        for amplitude in spec.amplitudes_rad_s
+    ]
+
+
+def analyse(recordings: list[Recording], spec: Spec) -> InertiaFrictionResult:
+    runs = [
+        analyse_sine_run(r, frequency_hz=spec.frequency_hz, settle_periods=spec.settle_periods)
+        for r in recordings
+    ]
+    return identify_inertia_friction(runs)
+
+
+def amplitude_spread(result: InertiaFrictionResult) -> Estimate:
+    """Spread of the per-amplitude inertias in % of their mean: a position-dependent torque
+    (cogging, cable) commensurate with the sine's travel shows up here."""
+    per_run = np.array(
+        [r.quadrature_nm / (r.velocity_amplitude_rad_s * 2 * math.pi * r.frequency_hz)
+         for r in result.runs]
+    )
+    u = np.array(
+        [r.quadrature_u_nm / (r.velocity_amplitude_rad_s * 2 * math.pi * r.frequency_hz)
+         for r in result.runs]
+    )
+    spread = 100 * float(np.ptp(per_run) / per_run.mean())
+    u_spread = 100 * float(np.sqrt(np.sum(u**2)) / per_run.mean())
+    dof = float(min(r.periods for r in result.runs) - 1)
+    return Estimate(name="inertia_amplitude_spread_pct", value=spread,
+                    standard_uncertainty=u_spread, unit="%", dof=dof)
+
+
+@pytest.fixture(scope="module")
+def result(drive: Drive, calibration: CalibrationRun, profile: UnitProfile) -> InertiaFrictionResult:
+    spec = Spec.from_profile(profile, drive.info)
+    recordings = [calibration.run(drive, e, protocol=NAME) for e in excitation(spec)]
+    analysed = analyse(recordings, spec)
+    calibration.details[NAME] = {
+        "fit_pct": round(analysed.fit_pct, 2),
+        "noise_rms_nm": analysed.noise_rms_nm,
+        "components": [
+            {"velocity_amplitude_rad_s": r.velocity_amplitude_rad_s,
+             "quadrature_c_nm": r.quadrature_nm, "in_phase_s_nm": r.in_phase_nm,
+             "periods": r.periods}
+            for r in analysed.runs
+        ],
+    }
+    return analysed
+
+
+@pytest.mark.parametrize("parameter", MEASUREMENTS)
+def test_inertia_friction(parameter: str, result: InertiaFrictionResult,
+                          calibration: CalibrationRun) -> None:
+    estimates = {e.name: e for e in (result.inertia, result.viscous, result.coulomb)}
+    estimates["inertia_amplitude_spread_pct"] = amplitude_spread(result)
+    measurement = calibration.record(NAME, estimates[parameter])
+    assert measurement.outcome.value in ("PASS", "MARGINAL"), (
+        f"{parameter} = {measurement.estimate.value:.6g} {measurement.spec.unit} outside "
+        f"[{measurement.spec.lower_limit:.6g}, {measurement.spec.upper_limit:.6g}]"
+    )
