@@ -130,6 +130,19 @@ def _axis_kind(names: set[str], source: str) -> AxisKind:
 
 
 # -- reading ------------------------------------------------------------------------------
+def _read_text(path: Path) -> list[str]:
+    source = str(path)
+    try:
+        raw = path.read_bytes()
+        if path.suffix == ".gz":
+            raw = gzip.decompress(raw)
+        return raw.decode("utf-8").splitlines()
+    except (OSError, EOFError, gzip.BadGzipFile) as exc:
+        raise RecordingError(f"cannot read file: {exc}", source=source) from exc
+    except UnicodeDecodeError as exc:
+        raise RecordingError("file is not UTF-8 text", source=source) from exc
+
+
 def read_recording(path: str | Path) -> Recording:
     """Read a recording, refusing bad input with file, line and column named.
 
@@ -140,21 +153,19 @@ def read_recording(path: str | Path) -> Recording:
         not strictly increasing, fewer than 100 samples, unreadable file.
     """
     path = Path(path)
-    source = str(path)
-    try:
-        raw = path.read_bytes()
-        if path.suffix == ".gz":
-            raw = gzip.decompress(raw)
-        text = raw.decode("utf-8")
-    except (OSError, EOFError, gzip.BadGzipFile) as exc:
-        raise RecordingError(f"cannot read file: {exc}", source=source) from exc
-    except UnicodeDecodeError as exc:
-        raise RecordingError("file is not UTF-8 text", source=source) from exc
-    return parse_recording(text.splitlines(), source=source)
+    return parse_recording(_read_text(path), source=str(path))
 
 
-def parse_recording(lines: list[str], *, source: str) -> Recording:
-    """Parse the lines of a recording file (see :func:`read_recording`)."""
+@dataclass(frozen=True, slots=True)
+class _Table:
+    metadata: dict[str, str]
+    header: list[str]
+    cells: NDArray[np.str_]
+    line_numbers: list[int]
+
+
+def _parse_table(lines: list[str], *, source: str) -> _Table:
+    """Metadata, header and cells of a CSV with ``# key: value`` lines before the header."""
     metadata: dict[str, str] = {}
     header_index = None
     for index, line in enumerate(lines):
@@ -170,27 +181,19 @@ def parse_recording(lines: list[str], *, source: str) -> Recording:
         break
     if header_index is None:
         raise RecordingError("no header row", source=source)
-
     header = [name.strip() for name in lines[header_index].split(",")]
     seen: set[str] = set()
     for name in header:
         if name in seen:
             raise RecordingError("duplicate column name", source=source, column=name)
         seen.add(name)
-    kind = _axis_kind(seen, source)
-    required = ROTARY_REQUIRED if kind == "rotary" else LINEAR_REQUIRED
-    for name in required:
-        if name not in seen:
-            raise RecordingError("missing required column", source=source, column=name)
-
-    first_data_line = header_index + 2  # 1-based line number of the first data row
-    rows = [line.split(",") for line in lines[header_index + 1 :] if line.strip()]
-    data_line_numbers = [
-        number
-        for number, line in enumerate(lines[header_index + 1 :], start=first_data_line)
+    numbered = [
+        (number, line)
+        for number, line in enumerate(lines[header_index + 1 :], start=header_index + 2)
         if line.strip()
     ]
-    for row, number in zip(rows, data_line_numbers, strict=True):
+    rows = [line.split(",") for _, line in numbered]
+    for row, (number, _) in zip(rows, numbered, strict=True):
         if len(row) != len(header):
             raise RecordingError(
                 f"has {len(row)} fields, the header has {len(header)}", source=source, line=number
@@ -199,30 +202,68 @@ def parse_recording(lines: list[str], *, source: str) -> Recording:
         raise RecordingError(
             f"has {len(rows)} samples, at least {MIN_SAMPLES} are needed", source=source
         )
+    cells = np.array(rows, dtype=str)
+    return _Table(metadata, header, cells, [number for number, _ in numbered])
 
-    table = np.array(rows, dtype=str)
-    known = set(required) | set(ROTARY_OPTIONAL if kind == "rotary" else LINEAR_OPTIONAL)
-    columns: dict[str, FloatArray] = {}
-    for position, name in enumerate(header):
-        values = _to_float(table[:, position], name, data_line_numbers, source, strict=name in known)
-        if values is not None:
-            columns[name] = values
 
-    time_s = columns["time_s"]
-    steps = np.diff(time_s)
-    bad = np.flatnonzero(steps <= 0)
+def _strictly_increasing(time_s: FloatArray, table: _Table, source: str) -> None:
+    bad = np.flatnonzero(np.diff(time_s) <= 0)
     if bad.size:
         raise RecordingError(
             "time is not strictly increasing",
             source=source,
-            line=data_line_numbers[int(bad[0]) + 1],
+            line=table.line_numbers[int(bad[0]) + 1],
             column="time_s",
         )
-    recording = Recording(columns=columns, metadata=metadata, source=source)
+
+
+def parse_recording(lines: list[str], *, source: str) -> Recording:
+    """Parse the lines of a recording file (see :func:`read_recording`)."""
+    table = _parse_table(lines, source=source)
+    names = set(table.header)
+    kind = _axis_kind(names, source)
+    required = ROTARY_REQUIRED if kind == "rotary" else LINEAR_REQUIRED
+    for name in required:
+        if name not in names:
+            raise RecordingError("missing required column", source=source, column=name)
+    known = set(required) | set(ROTARY_OPTIONAL if kind == "rotary" else LINEAR_OPTIONAL)
+    columns: dict[str, FloatArray] = {}
+    for position, name in enumerate(table.header):
+        values = _to_float(
+            table.cells[:, position], name, table.line_numbers, source, strict=name in known
+        )
+        if values is not None:
+            columns[name] = values
+    _strictly_increasing(columns["time_s"], table, source)
+    recording = Recording(columns=columns, metadata=table.metadata, source=source)
     warnings = tuple(check_recording(recording))
     for message in warnings:
         log.warning("%s: %s", source, message)
-    return Recording(columns=columns, metadata=metadata, source=source, warnings=warnings)
+    return Recording(columns=columns, metadata=table.metadata, source=source, warnings=warnings)
+
+
+def read_command_csv(path: str | Path, *, allowed: tuple[str, ...]) -> dict[str, FloatArray]:
+    """A command file: ``time_s`` and exactly one of the ``allowed`` command columns."""
+    path = Path(path)
+    source = str(path)
+    table = _parse_table(_read_text(path), source=source)
+    present = [name for name in table.header if name in allowed]
+    if "time_s" not in table.header:
+        raise RecordingError("missing required column", source=source, column="time_s")
+    if len(present) != 1:
+        raise RecordingError(
+            f"needs exactly one command column of {', '.join(allowed)}; found {present or 'none'}",
+            source=source,
+        )
+    columns: dict[str, FloatArray] = {}
+    for name in ("time_s", present[0]):
+        values = _to_float(
+            table.cells[:, table.header.index(name)], name, table.line_numbers, source, strict=True
+        )
+        assert values is not None  # strict conversion returns values or raises
+        columns[name] = values
+    _strictly_increasing(columns["time_s"], table, source)
+    return columns
 
 
 def _to_float(
@@ -323,7 +364,7 @@ def write_recording(recording: Recording, path: str | Path) -> str:
 
 def _ordered(columns: Iterable[str]) -> list[str]:
     names = list(columns)
-    order = ROTARY_REQUIRED + LINEAR_REQUIRED[1:] + ROTARY_OPTIONAL + LINEAR_OPTIONAL
+    order = dict.fromkeys(ROTARY_REQUIRED + LINEAR_REQUIRED + ROTARY_OPTIONAL + LINEAR_OPTIONAL)
     known = [name for name in order if name in names]
     return known + [name for name in names if name not in known]
 
