@@ -1,0 +1,313 @@
+"""The CANopen link to one CiA 402 node: NMT, SDO, our PDO layout, SYNC ticks, monitoring.
+
+We are the SYNC producer. Every exchange with the drive's cyclic side is a *tick*: send
+the RPDO (controlword + target), send SYNC, collect the TPDOs that SYNC triggers. With
+``sync_pacing = "realtime"`` ticks follow the wall clock (the RPDO half a period before
+its SYNC, so it cannot lose arbitration to the SYNC); with ``"lockstep"`` the next tick
+starts as soon as the previous one was answered.
+
+canopen 2.4 traps avoided here (each has a test in ``tests/drives/test_canopen_traps.py``):
+``BaseNode402.setup_pdos`` asserts on an NMT state it only knows from a heartbeat, so we
+wait for the heartbeat and configure PDOs ourselves; a synchronous RPDO is only sent by
+``PdoMap.start()``, so we transmit it explicitly on every tick; ``check_statusword``
+treats any TPDO received twice as periodic, so we key feedback to our own SYNC count; and
+a python-can Notifier that died on a bus error is only visible through ``network.check()``,
+which every tick calls.
+"""
+
+from __future__ import annotations
+
+import logging
+import struct
+import threading
+import time
+from collections.abc import Callable
+from typing import Any
+
+import can
+import canopen
+from canopen.sdo import SdoAbortedError, SdoCommunicationError
+
+from hil.drives.base import Mode
+from hil.drives.cia402.protocol import (
+    RPDO_LAYOUT,
+    SW_FAULT,
+    TARGET_OBJECT,
+    TPDO1_FORMAT,
+    TPDO2_FORMAT,
+    TPDO_LAYOUT,
+    state_of,
+)
+from hil.drives.station import CanOpenStation
+from hil.errors import DriveCommunicationError, DriveFaultError, DriveStateError
+
+log = logging.getLogger(__name__)
+
+_TPDO1 = struct.Struct(TPDO1_FORMAT)
+_TPDO2 = struct.Struct(TPDO2_FORMAT)
+NMT_NAMES = {0: "INITIALISING", 4: "STOPPED", 5: "OPERATIONAL", 127: "PRE-OPERATIONAL"}
+
+
+class CanLink:
+    """Owns the python-can bus, the canopen network and the node's cyclic exchange."""
+
+    def __init__(self, station: CanOpenStation) -> None:
+        self.station = station
+        self.node_id = station.node_id
+        self.network = canopen.Network()
+        self.node: canopen.RemoteNode | None = None
+        self.sync_index = -1  # index of the last SYNC we sent
+        self.rx1: dict[int, bytes] = {}
+        self.rx2: dict[int, bytes] = {}
+        self.emcy: list[tuple[int, float]] = []
+        self.heartbeat_state: int | None = None
+        self.heartbeat_time = 0.0
+        self.mode = Mode.VELOCITY
+        self.controlword = 0
+        self.target = 0
+        self._answered = threading.Event()
+        self._heartbeat_seen = threading.Event()
+        self._next_deadline = 0.0
+        self._connected = False
+
+    # -- connection ------------------------------------------------------------------
+    def open(self) -> None:
+        st = self.station
+        try:
+            self.network.connect(
+                interface=st.interface, channel=st.channel, bitrate=st.bitrate, **st.can_options
+            )
+        except (can.CanError, OSError, ValueError, ImportError) as exc:
+            raise DriveCommunicationError(
+                f"cannot open CAN interface '{st.interface}' channel '{st.channel}': {exc}"
+            ) from exc
+        self._connected = True
+        node = canopen.RemoteNode(self.node_id, str(st.eds_path))
+        node.sdo.RESPONSE_TIMEOUT = st.sdo_timeout_s
+        self.network.add_node(node)
+        self.node = node
+        node.emcy.add_callback(self._on_emcy)
+        base = self.node_id
+        self.network.subscribe(0x700 + base, self._on_heartbeat)
+        self.network.subscribe(0x180 + base, self._on_tpdo1)
+        self.network.subscribe(0x280 + base, self._on_tpdo2)
+
+    def close(self) -> None:
+        if self._connected:
+            self._connected = False
+            try:
+                self.network.disconnect()
+            except Exception as exc:  # the receive thread may already have died
+                log.warning("CAN disconnect reported %r", exc)
+
+    @property
+    def connected(self) -> bool:
+        return self._connected
+
+    # -- listeners (python-can Notifier thread) -----------------------------------------
+    def _on_heartbeat(self, can_id: int, data: bytearray, timestamp: float) -> None:
+        if data:
+            self.heartbeat_state = data[0] & 0x7F
+            self.heartbeat_time = time.monotonic()
+            self._heartbeat_seen.set()
+
+    def _on_emcy(self, entry: Any) -> None:
+        if entry.code & 0xFF00:
+            self.emcy.append((int(entry.code), time.monotonic()))
+            log.warning("node %d EMCY 0x%04X (%s)", self.node_id, entry.code, entry.get_desc())
+
+    def _on_tpdo1(self, can_id: int, data: bytearray, timestamp: float) -> None:
+        index = self.sync_index
+        self.rx1[index] = bytes(data)
+        if index in self.rx2:
+            self._answered.set()
+
+    def _on_tpdo2(self, can_id: int, data: bytearray, timestamp: float) -> None:
+        index = self.sync_index
+        self.rx2[index] = bytes(data)
+        if index in self.rx1:
+            self._answered.set()
+
+    # -- health ----------------------------------------------------------------------
+    def check(self) -> None:
+        """Raise if the receive thread died (bus error) or the heartbeat stopped."""
+        try:
+            self.network.check()
+        except Exception as exc:
+            raise DriveCommunicationError(
+                f"CAN receive thread stopped on node {self.node_id}'s bus: {exc}"
+            ) from exc
+        age = time.monotonic() - self.heartbeat_time
+        if self.heartbeat_state is not None and age > self.station.heartbeat_timeout_s:
+            raise DriveCommunicationError(
+                f"no heartbeat from node {self.node_id} for {age:.2f} s"
+            )
+
+    def restart_receiver(self) -> bool:
+        """After a bus error: start a new Notifier so the drive's state can be verified."""
+        bus = self.network.bus
+        if bus is None:
+            return False
+        try:
+            if self.network.notifier is not None:
+                self.network.notifier.stop(0.5)
+            self.network.notifier = can.Notifier(bus, self.network.listeners, 0.2)
+        except Exception as exc:  # the bus itself may be gone
+            log.warning("could not restart the CAN receiver: %r", exc)
+            return False
+        return True
+
+    # -- SDO -------------------------------------------------------------------------
+    def read(self, index: int, subindex: int = 0) -> Any:
+        return self._sdo(lambda var: var.raw, index, subindex)
+
+    def write(self, index: int, subindex: int, value: Any) -> None:
+        def set_raw(var: Any) -> None:
+            var.raw = value
+
+        self._sdo(set_raw, index, subindex)
+
+    def _sdo(self, action: Callable[[Any], Any], index: int, subindex: int) -> Any:
+        assert self.node is not None
+        what = f"node {self.node_id} object 0x{index:04X}:{subindex:02X}"
+        try:
+            obj = self.node.sdo[index]
+            var = obj if subindex == 0 and not hasattr(obj, "values") else obj[subindex]
+            return action(var)
+        except SdoAbortedError as exc:
+            raise DriveStateError(f"{what}: SDO aborted ({exc})") from exc
+        except SdoCommunicationError as exc:
+            raise DriveCommunicationError(f"{what}: {exc}") from exc
+        except can.CanError as exc:
+            raise DriveCommunicationError(f"{what}: CAN error {exc}") from exc
+
+    # -- NMT -------------------------------------------------------------------------
+    def nmt(self, state: str, *, timeout_s: float | None = None) -> None:
+        """Command an NMT state and confirm it from the node's heartbeat."""
+        assert self.node is not None
+        expected = {"PRE-OPERATIONAL": 127, "OPERATIONAL": 5, "STOPPED": 4}[state]
+        self._heartbeat_seen.clear()
+        self.node.nmt.state = state
+        deadline = time.monotonic() + (timeout_s or self.station.heartbeat_timeout_s * 2)
+        while time.monotonic() < deadline:
+            self._heartbeat_seen.wait(0.05)
+            self._heartbeat_seen.clear()
+            if self.heartbeat_state == expected:
+                return
+        seen = NMT_NAMES.get(self.heartbeat_state or -1, str(self.heartbeat_state))
+        raise DriveCommunicationError(
+            f"node {self.node_id} did not confirm NMT {state} by heartbeat (last seen: {seen})"
+        )
+
+    def configure_pdos(self) -> None:
+        """Write our PDO layout (node must be PRE-OPERATIONAL; confirmed by the caller)."""
+        base = self.node_id
+        for n, entries in [(*RPDO_LAYOUT[m],) for m in (Mode.VELOCITY, Mode.TORQUE, Mode.POSITION)]:
+            self._map(0x1400 + n - 1, 0x1600 + n - 1, 0x200 + 0x100 * (n - 1) + base, entries)
+        for n, entries in TPDO_LAYOUT:
+            self._map(0x1800 + n - 1, 0x1A00 + n - 1, 0x180 + 0x100 * (n - 1) + base, entries)
+        for n in range(len(TPDO_LAYOUT) + 1, 5):  # the drive's other TPDOs: off
+            if 0x1800 + n - 1 in self.node.object_dictionary:  # type: ignore[union-attr]
+                cob = self.read(0x1800 + n - 1, 1)
+                self.write(0x1800 + n - 1, 1, cob | 0x80000000)
+
+    def _map(self, comm: int, mapping: int, cob: int, entries: tuple[tuple[int, int], ...]) -> None:
+        self.write(comm, 1, cob | 0x80000000)  # invalidate while remapping
+        self.write(comm, 2, 1)  # synchronous, every SYNC
+        self.write(mapping, 0, 0)
+        for sub, (index, bits) in enumerate(entries, start=1):
+            self.write(mapping, sub, index << 16 | bits)
+        self.write(mapping, 0, len(entries))
+        self.write(comm, 1, cob)
+
+    # -- the cyclic exchange ------------------------------------------------------------
+    def rpdo_payload(self, mode: Mode, controlword: int, target: int) -> tuple[int, bytes]:
+        n = RPDO_LAYOUT[mode][0]
+        fmt = "<H" + TARGET_OBJECT[mode][1]
+        return 0x200 + 0x100 * (n - 1) + self.node_id, struct.pack(fmt, controlword, target)
+
+    def tick(self, cob: int | None = None, payload: bytes | None = None) -> bool:
+        """One cycle: RPDO, SYNC, feedback. Returns whether both TPDOs of it arrived.
+
+        Without ``cob``/``payload`` the held controlword and target are sent.
+        """
+        if cob is None or payload is None:
+            cob, payload = self.rpdo_payload(self.mode, self.controlword, self.target)
+        period = self.station.sync_period_s
+        realtime = self.station.sync_pacing == "realtime"
+        try:
+            self.network.send_message(cob, payload)
+            if realtime:
+                _sleep_until(self._next_deadline)
+            self._answered.clear()
+            self.sync_index += 1
+            self.network.send_message(0x80, b"")
+        except can.CanError as exc:
+            raise DriveCommunicationError(f"CAN send failed: {exc}") from exc
+        except Exception as exc:  # network.check() re-raises what killed the receiver
+            raise DriveCommunicationError(f"CAN receive thread stopped: {exc}") from exc
+        if realtime:
+            now = time.monotonic()
+            if self._next_deadline < now - period:
+                self._next_deadline = now  # we fell behind: resynchronise
+            self._next_deadline += period
+            _sleep_until(self._next_deadline - period / 2)
+            answered = self.sync_index in self.rx1 and self.sync_index in self.rx2
+        else:
+            answered = self._answered.wait(self.station.pdo_timeout_s)
+        return answered
+
+    def latest_status(self) -> tuple[int, int] | None:
+        """(statusword, mode display) of the last SYNC, if its TPDO1 arrived."""
+        data = self.rx1.get(self.sync_index)
+        if data is None:
+            return None
+        statusword, _, mode = _TPDO1.unpack(data)
+        return int(statusword), int(mode)
+
+    def tick_until(self, what: str, done: Callable[[int, int], bool]) -> tuple[int, int]:
+        """Tick until ``done(statusword, mode_display)`` holds; fail on fault or timeout."""
+        deadline = time.monotonic() + self.station.state_timeout_s
+        last: tuple[int, int] | None = None
+        while True:
+            self.tick()
+            self.check()
+            last = self.latest_status() or last
+            if last is not None and done(*last):
+                return last
+            if time.monotonic() > deadline:
+                seen = "no statusword" if last is None else (
+                    f"statusword 0x{last[0]:04X} ({state_of(last[0])}), mode {last[1]}"
+                )
+                raise DriveStateError(f"node {self.node_id}: {what} not confirmed ({seen})")
+
+    def fault_code(self) -> int:
+        """0x603F, else the last EMCY code, else 0."""
+        try:
+            code = int(self.read(0x603F))
+        except (DriveCommunicationError, DriveStateError):
+            code = 0
+        if not code and self.emcy:
+            code = self.emcy[-1][0]
+        return code
+
+    def raise_if_faulted(self, statusword: int, context: str) -> None:
+        if statusword & SW_FAULT or self.emcy:
+            code = self.emcy[-1][0] if self.emcy else self.fault_code()
+            raise DriveFaultError(f"node {self.node_id} faulted {context}", code=code)
+
+    def decode(self, indices: list[int]) -> tuple[list[tuple[int, int, int]], list[tuple[int, int, int]]]:
+        """TPDO1/TPDO2 contents for the given SYNC indices (both must be present)."""
+        one = [_TPDO1.unpack(self.rx1[k]) for k in indices]
+        two = [_TPDO2.unpack(self.rx2[k]) for k in indices]
+        return one, two
+
+    def forget(self) -> None:
+        self.rx1.clear()
+        self.rx2.clear()
+
+
+def _sleep_until(deadline: float) -> None:
+    delay = deadline - time.monotonic()
+    if delay > 0:
+        time.sleep(delay)

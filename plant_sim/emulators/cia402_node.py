@@ -1,0 +1,549 @@
+"""A CiA 402 servo drive on a python-can bus, backed by :mod:`plant_sim`.
+
+The emulator is a ``canopen.LocalNode`` serving ``fixtures/gimbal_hil_servo.eds``: SDO
+server, NMT slave with heartbeat, EMCY producer, the CiA 402 state machine, RPDOs and
+TPDOs as configured (by SDO) in its object dictionary, and a drive recorder with a
+waveform table (objects 0x2100/0x2200). Its clock is the SYNC: on each SYNC it latches
+the synchronous RPDO data received since the previous SYNC, advances the plant by one
+communication period with that target held, and sends its synchronous TPDOs with the
+values sampled at the SYNC. A run over real CAN frames is therefore as fast as the frames
+go, not as fast as the wall clock.
+
+It knows nothing about the backend that talks to it.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import struct
+import threading
+from importlib import resources
+from pathlib import Path
+from typing import Any
+
+import can
+import canopen
+import numpy as np
+from canopen.objectdictionary import ODVariable
+from canopen.sdo import SdoAbortedError
+
+from hil.drives.base import Mode
+from plant_sim.emulators.faults import CanFaults
+from plant_sim.emulators.recorder import DriveRecorder
+from plant_sim.model import Plant
+from plant_sim.params import PlantParams
+
+log = logging.getLogger(__name__)
+
+EDS_NAME = "gimbal_hil_servo.eds"
+ABORT_VALUE_RANGE = 0x06090030
+ABORT_NOT_NOW = 0x08000022  # data cannot be transferred because of the device state
+
+# CiA 402 states and the statusword bits the drive reports in each
+NOT_READY, SWITCH_ON_DISABLED, READY, SWITCHED_ON, ENABLED, QUICK_STOP, FAULT_REACTION, FAULT = (
+    "NOT READY TO SWITCH ON", "SWITCH ON DISABLED", "READY TO SWITCH ON", "SWITCHED ON",
+    "OPERATION ENABLED", "QUICK STOP ACTIVE", "FAULT REACTION ACTIVE", "FAULT",
+)  # fmt: skip
+_STATUS_BITS = {
+    NOT_READY: 0x00, SWITCH_ON_DISABLED: 0x60, READY: 0x31, SWITCHED_ON: 0x33,
+    ENABLED: 0x37, QUICK_STOP: 0x17, FAULT_REACTION: 0x1F, FAULT: 0x08,
+}  # fmt: skip
+_MODES = {1: Mode.POSITION, 3: Mode.VELOCITY, 4: Mode.TORQUE, 8: Mode.POSITION,
+          9: Mode.VELOCITY, 10: Mode.TORQUE}  # fmt: skip
+_MODE_BITS = {1: 0x01, 3: 0x04, 4: 0x08, 8: 0x80, 9: 0x100, 10: 0x200}
+_FMT = {1: "?", 2: "b", 3: "h", 4: "i", 5: "B", 6: "H", 7: "I"}
+
+
+def default_eds_path() -> Path:
+    return Path(str(resources.files("fixtures").joinpath(EDS_NAME)))
+
+
+class _BusOffFrame(can.Message):  # type: ignore[misc]
+    """What the master's interface delivers when its controller went bus-off: reading it
+    raises, exactly where a real interface raises inside ``bus.recv``."""
+
+    def __bool__(self) -> bool:
+        raise can.CanOperationError("CAN controller is bus-off (injected)")
+
+
+class Cia402Emulator:
+    """One emulated servo axis on a python-can ``virtual`` channel (or any python-can bus).
+
+    Parameters
+    ----------
+    plant : PlantParams
+        The simulated axis.
+    fs_hz : float
+        The drive's control-loop rate (the plant's sample rate), Hz.
+    seed : int
+        Noise seed of the plant.
+    channel : str
+        python-can channel to join (``interface`` defaults to ``"virtual"``).
+    rated_torque_nm, rated_current_a : float
+        Written to 0x6076 (mN·m) and 0x6075 (mA); 0x6077/0x6078 are per-mille of them.
+    """
+
+    def __init__(
+        self,
+        plant: PlantParams,
+        *,
+        fs_hz: float,
+        seed: int,
+        channel: str,
+        interface: str = "virtual",
+        node_id: int = 5,
+        rated_torque_nm: float = 0.5,
+        rated_current_a: float | None = None,
+        serial_number: int = 1,
+        supported_modes: int = 0x038D,
+        enable_delay_syncs: int = 2,
+        faults: CanFaults | None = None,
+        eds_path: Path | None = None,
+    ) -> None:
+        self.plant = Plant(plant, fs_hz=fs_hz, seed=seed)
+        self.fs_hz = float(fs_hz)
+        self.faults = faults or CanFaults()
+        self.node_id = node_id
+        self.channel = channel
+        self.interface = interface
+        self.supported_modes = supported_modes
+        self.enable_delay_syncs = enable_delay_syncs
+        self.counts_per_rev = plant.encoder_counts_per_rev or (1 << 20)
+        self.rated_torque_nm = rated_torque_nm
+        self.rated_current_a = rated_current_a or rated_torque_nm / plant.torque_constant_nm_a
+        self._od = canopen.import_od(str(eds_path or default_eds_path()), node_id)
+        self._serial = serial_number
+        self._lock = threading.RLock()
+        self._network: canopen.Network | None = None
+        self.node: canopen.LocalNode | None = None
+        # drive state
+        self.state = SWITCH_ON_DISABLED
+        self.mode_display = 0
+        self.error_code = 0
+        self.controlword = 0
+        self.targets: dict[int, int] = {0x60FF: 0, 0x6071: 0, 0x607A: 0}
+        self.sync_count = 0
+        self.time_enabled_s = 0.0
+        self.emcy_sent: list[int] = []
+        self._enable_countdown = -1
+        self._ramp_velocity = 0.0
+        self._profile_velocity = 0.0
+        self._profile_torque = 0.0
+        self._fault_fired = False
+        self._bus_error_fired = False
+        self._tpdo_frames = 0
+        self._pending: dict[int, int] = {}
+        self._rpdos: list[tuple[int, int, list[tuple[int, int, str]]]] = []
+        self._tpdos: list[tuple[int, int, list[tuple[int, int, str]]]] = []
+        self._last_event: dict[int, bytes] = {}
+        self._pdo_dirty = True
+        self._sample = {0x6064: 0, 0x606C: 0, 0x6077: 0, 0x6078: 0}
+        self.recorder = DriveRecorder(
+            capacity=16384,
+            loop_period_us=round(1e6 / fs_hz),
+            counts_per_rad=self.counts_per_rev / (2 * math.pi),
+            rated_torque_nm=self.rated_torque_nm,
+            rated_current_a=self.rated_current_a,
+        )
+
+    # -- life cycle ------------------------------------------------------------------
+    def start(self) -> None:
+        network = canopen.Network()
+        network.connect(interface=self.interface, channel=self.channel, bitrate=1_000_000)
+        node = canopen.LocalNode(self.node_id, self._od)
+        network.add_node(node)
+        self._network, self.node = network, node
+        store = node.data_store
+        store.setdefault(0x1018, {})[4] = struct.pack("<I", self._serial)
+        store.setdefault(0x6076, {})[0] = struct.pack("<I", round(self.rated_torque_nm * 1e3))
+        store.setdefault(0x6075, {})[0] = struct.pack("<I", round(self.rated_current_a * 1e3))
+        store.setdefault(0x608F, {})[1] = struct.pack("<I", self.counts_per_rev)
+        node.add_read_callback(self._on_read)
+        node.add_write_callback(self._on_write)
+        if self.faults.sdo_delay_s > 0:
+            network.unsubscribe(node.sdo.rx_cobid, node.sdo.on_request)
+            network.subscribe(node.sdo.rx_cobid, self._delayed_sdo)
+        network.subscribe(0x80, self._on_sync)
+        network.subscribe(0, self._on_nmt)
+        for n in range(4):
+            network.subscribe(0x200 + 0x100 * n + self.node_id, self._on_rpdo)
+        node.nmt.send_command(0x81)  # reset: boot-up message
+        node.nmt.send_command(0x80)  # PRE-OPERATIONAL, heartbeat starts (0x1017)
+        log.info("CiA 402 emulator node %d up on %s", self.node_id, self.channel)
+
+    def stop(self) -> None:
+        if self._network is not None and self.node is not None:
+            self.node.nmt.stop_heartbeat()
+            self._network.disconnect()
+        self._network = None
+
+    def __enter__(self) -> Cia402Emulator:
+        self.start()
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.stop()
+
+    @property
+    def nmt_state(self) -> str:
+        return "STOPPED" if self.node is None else str(self.node.nmt.state)
+
+    @property
+    def statusword(self) -> int:
+        word = _STATUS_BITS[self.state] | 0x0200  # remote
+        if self.state == ENABLED and self.mode_display in (8, 9, 10):
+            word |= 0x1000  # drive follows the command value
+        if self.state == SWITCH_ON_DISABLED:
+            word &= ~0x20 & 0xFFFF
+        return word
+
+    # -- object access -----------------------------------------------------------------
+    def _on_read(self, *, index: int, subindex: int, od: ODVariable) -> Any:
+        with self._lock:
+            if index == 0x6041:
+                return self.statusword
+            if index == 0x6061:
+                return self.mode_display
+            if index == 0x603F:
+                return self.error_code
+            if index == 0x1001:
+                return self._error_register()
+            if index in self._sample:
+                return self._sample[index]
+            if index in self.targets:
+                return self.targets[index]
+            if index in (0x2100, 0x2200):
+                return self.recorder.read(index, subindex)
+        return None
+
+    def _on_write(self, *, index: int, subindex: int, od: ODVariable, data: bytes) -> None:
+        value: Any = data
+        if od.data_type in _FMT:
+            value = struct.unpack("<" + _FMT[od.data_type], data)[0]
+        with self._lock:
+            if 0x1400 <= index < 0x1C00:
+                if self.nmt_state == "OPERATIONAL" and subindex != 2:
+                    raise SdoAbortedError(ABORT_NOT_NOW)
+                self._pdo_dirty = True
+            elif index == 0x6040:
+                self._apply_controlword(int(value))
+            elif index == 0x6060:
+                if value not in _MODE_BITS or not self.supported_modes & _MODE_BITS[value]:
+                    raise SdoAbortedError(ABORT_VALUE_RANGE)
+                self.mode_display = int(value)
+            elif index in self.targets:
+                self.targets[index] = int(value)
+            elif index == 0x60C2 or index == 0x1006:
+                self._check_period(index, subindex, int(value))
+            elif index in (0x2100, 0x2200):
+                self.recorder.write(index, subindex, value, running=self.state == ENABLED)
+
+    def _check_period(self, index: int, subindex: int, value: int) -> None:
+        """0x1006 (µs) must be a whole number of control periods; 0x60C2 is taken as is."""
+        if index != 0x1006 or value == 0:
+            return
+        steps = value * 1e-6 * self.fs_hz
+        if steps < 1 - 1e-9 or abs(steps - round(steps)) > 1e-6:
+            raise SdoAbortedError(ABORT_VALUE_RANGE)
+
+    def _raw(self, index: int, subindex: int = 0) -> int:
+        assert self.node is not None
+        obj = self._od[index]
+        var = obj if isinstance(obj, ODVariable) else obj[subindex]
+        data = self.node.get_data(index, subindex)
+        return int(struct.unpack("<" + _FMT[var.data_type], data)[0])
+
+    def _interpolation(self) -> tuple[int, int]:
+        return self._raw(0x60C2, 1), self._raw(0x60C2, 2)
+
+    def steps_per_sync(self) -> int:
+        """Control periods per SYNC: 0x1006 when set, else 0x60C2."""
+        cycle_us = self._raw(0x1006)
+        if cycle_us:
+            return max(1, round(cycle_us * 1e-6 * self.fs_hz))
+        mantissa, exponent = self._interpolation()
+        return max(1, round(mantissa * 10.0**exponent * self.fs_hz))
+
+    def _error_register(self) -> int:
+        if not self.error_code:
+            return 0
+        return 0x01 | (0x02 if self.error_code & 0xF000 == 0x2000 else 0)
+
+    # -- state machine -----------------------------------------------------------------
+    def _apply_controlword(self, word: int) -> None:
+        rising_reset = bool(word & 0x80) and not self.controlword & 0x80
+        self.controlword = word
+        state = self.state
+        if state in (FAULT, FAULT_REACTION):
+            if rising_reset and state == FAULT and not self.faults.fault_persists:
+                self.error_code = 0
+                self.state = SWITCH_ON_DISABLED
+                self._emcy(0x0000)
+            return
+        command = word & 0x0F
+        if not command & 0x02:  # disable voltage
+            self._enter(SWITCH_ON_DISABLED)
+        elif not command & 0x04:  # quick stop
+            if state == ENABLED:
+                self._quick_stop()
+            elif state in (READY, SWITCHED_ON):
+                self._enter(SWITCH_ON_DISABLED)
+        elif command & 0x07 == 0x06:  # shutdown
+            if state in (SWITCH_ON_DISABLED, SWITCHED_ON, ENABLED):
+                self._enter(READY)
+        elif command == 0x07:  # switch on
+            if state in (READY, ENABLED):
+                self._enter(SWITCHED_ON)
+        elif command == 0x0F:  # enable operation
+            if state == READY:
+                self._enter(SWITCHED_ON)
+            if self.state == SWITCHED_ON and self._enable_countdown < 0:
+                self._enable_countdown = self.enable_delay_syncs
+                if self._enable_countdown == 0:
+                    self._enter(ENABLED)
+            elif state == QUICK_STOP and self._quick_stop_option() >= 5:
+                self._enter(ENABLED)
+
+    def _enter(self, state: str) -> None:
+        if state == self.state:
+            return
+        log.debug("emulator node %d: %s -> %s", self.node_id, self.state, state)
+        if state == ENABLED:
+            self.plant.hold()
+            self._profile_velocity = self.plant.velocity_rad_s
+            self._profile_torque = 0.0
+        self._enable_countdown = -1
+        self.state = state
+        self._send_event_tpdos()
+
+    def _quick_stop_option(self) -> int:
+        return self._raw(0x605A)
+
+    def _quick_stop(self) -> None:
+        option = self._quick_stop_option()
+        if option == 0:
+            self._enter(SWITCH_ON_DISABLED)
+            return
+        self._ramp_velocity = self.plant.velocity_rad_s
+        self._enter(QUICK_STOP)
+
+    def _trip(self, code: int) -> None:
+        self.error_code = code
+        self.state = FAULT
+        self._enable_countdown = -1
+        self._emcy(code)
+        self._send_event_tpdos()
+
+    def _emcy(self, code: int) -> None:
+        if self.node is not None and self._network is not None:
+            self.emcy_sent.append(code)
+            self.node.emcy.send(code, self._error_register())
+
+    # -- NMT ---------------------------------------------------------------------------
+    def _on_nmt(self, can_id: int, data: bytearray, timestamp: float) -> None:
+        if len(data) >= 2 and data[1] in (0, self.node_id) and data[0] in (0x80, 0x81, 0x82):
+            with self._lock:
+                self._pdo_dirty = True
+                if data[0] == 0x81:
+                    self._enter(SWITCH_ON_DISABLED)
+
+    # -- PDOs --------------------------------------------------------------------------
+    def _pdo_tables(self) -> None:
+        """Rebuild the RPDO/TPDO tables from the object dictionary (after any change)."""
+        if not self._pdo_dirty:
+            return
+        self._rpdos, self._tpdos = [], []
+        for comm, mapping, out in ((0x1400, 0x1600, self._rpdos), (0x1800, 0x1A00, self._tpdos)):
+            for n in range(4):
+                if comm + n not in self._od:
+                    continue
+                cob = self._raw(comm + n, 1)
+                if cob & 0x80000000:
+                    continue
+                entries = []
+                for sub in range(1, self._raw(mapping + n, 0) + 1):
+                    word = self._raw(mapping + n, sub)
+                    index, subindex, bits = word >> 16, (word >> 8) & 0xFF, word & 0xFF
+                    obj = self._od[index]
+                    var = obj if isinstance(obj, ODVariable) else obj[subindex]
+                    if bits != len(var):
+                        raise SdoAbortedError(0x06040042)
+                    entries.append((index, subindex, _FMT[var.data_type]))
+                out.append((cob & 0x7FF, self._raw(comm + n, 2), entries))
+        self._pdo_dirty = False
+
+    def _on_rpdo(self, can_id: int, data: bytearray, timestamp: float) -> None:
+        with self._lock:
+            if self.nmt_state != "OPERATIONAL":
+                return
+            self._pdo_tables()
+            for cob, trans, entries in self._rpdos:
+                if cob != can_id:
+                    continue
+                fmt = "<" + "".join(e[2] for e in entries)
+                if struct.calcsize(fmt) != len(data):
+                    return  # wrong length: ignored (a real drive would send EMCY 0x8210)
+                values = dict(zip((e[0] for e in entries), struct.unpack(fmt, data), strict=True))
+                if trans <= 240:
+                    self._pending.update(values)
+                else:
+                    self._apply(values)
+
+    def _apply(self, values: dict[int, int]) -> None:
+        for index, value in values.items():
+            if index == 0x6040:
+                self._apply_controlword(value)
+            elif index == 0x6060:
+                if value in _MODE_BITS and self.supported_modes & _MODE_BITS[value]:
+                    self.mode_display = value
+            elif index in self.targets:
+                self.targets[index] = value
+
+    def _pack(self, entries: list[tuple[int, int, str]]) -> bytes:
+        values = []
+        for index, subindex, _ in entries:
+            if index == 0x6041:
+                values.append(self.statusword)
+            elif index == 0x6061:
+                values.append(self.mode_display)
+            elif index == 0x603F:
+                values.append(self.error_code)
+            elif index == 0x2200:
+                values.append(int(self.recorder.read(index, subindex)))
+            else:
+                values.append(self._sample.get(index, self.targets.get(index, 0)))
+        return struct.pack("<" + "".join(e[2] for e in entries), *values)
+
+    def _send_tpdo(self, cob: int, payload: bytes) -> None:
+        assert self._network is not None
+        self._tpdo_frames += 1
+        drop_every = self.faults.drop_tpdo_every
+        if drop_every and self._tpdo_frames % drop_every == 0:
+            return
+        cutoff = self.faults.drop_all_tpdo_after_s
+        if cutoff is not None and self.time_enabled_s >= cutoff:
+            return
+        self._network.send_message(cob, payload)
+
+    def _send_event_tpdos(self) -> None:
+        if self._network is None or self.nmt_state != "OPERATIONAL":
+            return
+        self._pdo_tables()
+        for cob, trans, entries in self._tpdos:
+            if trans >= 254:
+                payload = self._pack(entries)
+                if self._last_event.get(cob) != payload:
+                    self._last_event[cob] = payload
+                    self._send_tpdo(cob, payload)
+
+    # -- the clock -----------------------------------------------------------------------
+    def _on_sync(self, can_id: int, data: bytearray, timestamp: float) -> None:
+        with self._lock:
+            self.sync_count += 1
+            operational = self.nmt_state == "OPERATIONAL"
+            if operational and self._pending:
+                pending, self._pending = self._pending, {}
+                self._apply(pending)
+            if self._enable_countdown > 0:
+                self._enable_countdown -= 1
+            if self._enable_countdown == 0 and self.state == SWITCHED_ON:
+                self._enter(ENABLED)
+            self._advance()
+            if not operational:
+                return
+            self._pdo_tables()
+            for cob, trans, entries in self._tpdos:
+                if 1 <= trans <= 240 and self.sync_count % trans == 0:
+                    self._send_tpdo(cob, self._pack(entries))
+            self._send_event_tpdos()
+            self._inject_bus_error()
+
+    def _advance(self) -> None:
+        """One communication period of the plant with the latched target held."""
+        steps = self.steps_per_sync()
+        period_s = steps / self.fs_hz
+        mode, command = self._command(steps, period_s)
+        trace = self.plant.run(mode, command)
+        self.recorder.capture(trace, enabled=self.state == ENABLED)
+        cpr = self.counts_per_rev
+        self._sample = {
+            0x6064: int(round(trace.position_rad[0] * cpr / (2 * math.pi))),
+            0x606C: int(round(trace.velocity_rad_s[0] * cpr / (2 * math.pi))),
+            0x6077: _clip16(trace.torque_nm[0] / self.rated_torque_nm * 1e3),
+            0x6078: _clip16(trace.current_a[0] / self.rated_current_a * 1e3),
+        }
+        if self.state == ENABLED:
+            self.time_enabled_s += period_s
+            after = self.faults.emcy_after_s
+            if after is not None and not self._fault_fired and self.time_enabled_s >= after:
+                self._fault_fired = True
+                self._trip(self.faults.emcy_code)
+        elif self.state == QUICK_STOP and self._ramp_velocity == 0.0:
+            if abs(self.plant.velocity_rad_s) < 1e-3 and self._quick_stop_option() < 5:
+                self._enter(SWITCH_ON_DISABLED)
+
+    def _command(self, steps: int, period_s: float) -> tuple[Mode, np.ndarray]:
+        cpr = self.counts_per_rev
+        if self.state == QUICK_STOP:
+            decel = self._raw(0x6085) * 2 * math.pi / cpr
+            step = min(decel * period_s, abs(self._ramp_velocity))
+            self._ramp_velocity -= math.copysign(step, self._ramp_velocity)
+            return Mode.VELOCITY, np.full(steps, self._ramp_velocity)
+        if self.state != ENABLED or self.mode_display not in _MODES:
+            return Mode.TORQUE, np.zeros(steps)
+        waveform = self.recorder.waveform_block(steps)
+        mode = _MODES[self.mode_display]
+        if mode is Mode.VELOCITY:
+            raw = self.targets[0x60FF] if waveform is None else waveform
+            value = np.asarray(raw, dtype=np.float64) * 2 * math.pi / cpr
+            if self.mode_display == 3:  # profile velocity: ramp at 0x6083
+                accel = self._raw(0x6083) * 2 * math.pi / cpr * period_s
+                target = float(np.mean(value))
+                self._profile_velocity += float(
+                    np.clip(target - self._profile_velocity, -accel, accel)
+                )
+                value = np.asarray(self._profile_velocity)
+            return mode, np.broadcast_to(value, (steps,)).copy()
+        if mode is Mode.TORQUE:
+            raw = self.targets[0x6071] if waveform is None else waveform
+            value = np.asarray(raw, dtype=np.float64) * self.rated_torque_nm / 1e3
+            if self.mode_display == 4:  # profile torque: slope 0x6087 (per-mille/s)
+                slope = self._raw(0x6087) * self.rated_torque_nm / 1e3 * period_s
+                target = float(np.mean(value))
+                self._profile_torque += float(
+                    np.clip(target - self._profile_torque, -slope, slope)
+                )
+                value = np.asarray(self._profile_torque)
+            limit = self._raw(0x6072) * self.rated_torque_nm / 1e3
+            return mode, np.clip(np.broadcast_to(value, (steps,)), -limit, limit)
+        raw = self.targets[0x607A] if waveform is None else waveform
+        value = np.asarray(raw, dtype=np.float64) * 2 * math.pi / cpr
+        return mode, np.broadcast_to(value, (steps,)).copy()
+
+    # -- fault injection -------------------------------------------------------------------
+    def _inject_bus_error(self) -> None:
+        after = self.faults.bus_error_after_s
+        if after is None or self._bus_error_fired or self.time_enabled_s < after:
+            return
+        self._bus_error_fired = True
+        from can.interfaces import virtual
+
+        own = getattr(self._network.bus, "queue", None) if self._network else None
+        with virtual.channels_lock:
+            for queue in virtual.channels.get(self.channel, []):
+                if queue is not own:
+                    queue.put(_BusOffFrame(arbitration_id=0, data=b""))
+        log.info("emulator node %d: injected a bus-off at the master", self.node_id)
+
+    def _delayed_sdo(self, can_id: int, data: bytearray, timestamp: float) -> None:
+        assert self.node is not None
+        timer = threading.Timer(
+            self.faults.sdo_delay_s, self.node.sdo.on_request, (can_id, bytes(data), timestamp)
+        )
+        timer.daemon = True
+        timer.start()
+
+
+def _clip16(value: float) -> int:
+    return int(min(max(round(value), -32768), 32767))

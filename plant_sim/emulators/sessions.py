@@ -1,0 +1,101 @@
+"""Start an emulator for a unit profile and hand back the station that reaches it."""
+
+from __future__ import annotations
+
+import dataclasses
+import uuid
+from collections.abc import Iterator
+from contextlib import contextmanager
+from importlib import resources
+from pathlib import Path
+from typing import Any
+
+from hil.drives.station import CanOpenStation, ModbusStation, load_station
+from hil.errors import ProfileError
+from hil.profile import UnitProfile
+from plant_sim.emulators.faults import CanFaults, ModbusFaults
+from plant_sim.params import PlantParams
+
+CANOPEN_STATION = "station_canopen_emulator.toml"
+MODBUS_STATION = "station_modbus_emulator.toml"
+
+
+def builtin_station(name: str) -> Path:
+    return Path(str(resources.files("fixtures").joinpath(name)))
+
+
+def _plant(profile: UnitProfile, kind: str) -> PlantParams:
+    if profile.plant is None:
+        raise ProfileError(f"--drive {kind} needs a [plant] table", source=profile.source)
+    return profile.plant
+
+
+def rated_torque_nm(profile: UnitProfile) -> float:
+    return float(profile.unit.get("rated_torque_nm", profile.limits.torque_nm))
+
+
+@contextmanager
+def canopen_emulator(
+    profile: UnitProfile,
+    *,
+    seed: int,
+    serial: int = 1,
+    faults: CanFaults | None = None,
+    station_changes: dict[str, Any] | None = None,
+    **emulator_options: Any,
+) -> Iterator[tuple[Any, CanOpenStation]]:
+    """A running CiA 402 emulator on a private virtual channel, and its station."""
+    from plant_sim.emulators.cia402_node import Cia402Emulator
+
+    station = load_station(builtin_station(CANOPEN_STATION))
+    assert isinstance(station, CanOpenStation)
+    channel = f"gimbal-hil-{uuid.uuid4().hex[:12]}"
+    station = dataclasses.replace(station, channel=channel, **(station_changes or {}))
+    emulator = Cia402Emulator(
+        _plant(profile, "canopen-emulator"),
+        fs_hz=profile.sample_rate_hz,
+        seed=seed,
+        channel=channel,
+        interface=station.interface,
+        node_id=station.node_id,
+        rated_torque_nm=rated_torque_nm(profile),
+        serial_number=serial,
+        faults=faults,
+        eds_path=station.eds_path,
+        **emulator_options,
+    )
+    with emulator:
+        yield emulator, station
+
+
+@contextmanager
+def modbus_emulator(
+    profile: UnitProfile,
+    *,
+    seed: int,
+    transport: str = "tcp",
+    faults: ModbusFaults | None = None,
+    station_changes: dict[str, Any] | None = None,
+    **emulator_options: Any,
+) -> Iterator[tuple[Any, ModbusStation]]:
+    """A running Modbus emulator on 127.0.0.1 (TCP, or RTU framing over ``socket://``)."""
+    from plant_sim.emulators.modbus_server import ModbusEmulator
+
+    station = load_station(builtin_station(MODBUS_STATION))
+    assert isinstance(station, ModbusStation)
+    emulator = ModbusEmulator(
+        _plant(profile, "modbus-emulator"),
+        fs_hz=profile.sample_rate_hz,
+        seed=seed,
+        register_map=station.register_map_path,
+        rated_torque_nm=rated_torque_nm(profile),
+        framing="rtu" if transport == "rtu" else "tcp",
+        faults=faults,
+        **emulator_options,
+    )
+    with emulator:
+        changes: dict[str, Any] = {"transport": transport, "port": emulator.port}
+        if transport == "rtu":
+            changes["serial_port"] = f"socket://127.0.0.1:{emulator.port}"
+        station = dataclasses.replace(station, **changes, **(station_changes or {}))
+        yield emulator, station
