@@ -68,11 +68,24 @@ class SineRun:
     periods: int
     samples: int
     noise_rms_nm: float  # non-periodic torque (noise, loop jitter)
-    # phase-free kinematics and periodic torque over the analysis window
+    # phase-free kinematics and measured torque over the analysis window
     time_s: FloatArray
     velocity_rad_s: FloatArray
     acceleration_rad_s2: FloatArray
-    torque_periodic_nm: FloatArray
+    torque_nm: FloatArray
+    phase_bin: NDArray[np.intp]  # index of each sample's phase bin within the period
+
+
+PHASE_BINS = 200
+
+
+def synchronous_average(signal: FloatArray, phase_bin: NDArray[np.intp]) -> FloatArray:
+    """Each sample replaced by the mean of its phase bin over all periods (the periodic
+    part of ``signal``); what is left over is noise and non-periodic motion."""
+    counts = np.bincount(phase_bin, minlength=PHASE_BINS)
+    sums = np.bincount(phase_bin, weights=signal, minlength=PHASE_BINS)
+    means = np.divide(sums, counts, out=np.zeros(PHASE_BINS), where=counts > 0)
+    return means[phase_bin]
 
 
 def analyse_sine_run(
@@ -105,12 +118,13 @@ def analyse_sine_run(
     phase = np.array([p[3] for p in per_period])
 
     design = harmonic_design(t, frequency_hz=frequency_hz, harmonics=POSITION_HARMONICS)
-    trend = np.column_stack([design, t - t.mean()])
+    trend = np.column_stack([design, t])
     pos_coef = np.linalg.lstsq(trend, position, rcond=None)[0]
     velocity, acceleration = _harmonic_derivatives(t, pos_coef, frequency_hz)
-    torque_coef = np.linalg.lstsq(design, torque, rcond=None)[0]
-    torque_periodic = design @ torque_coef
-    dof = max(len(t) - design.shape[1], 1)
+    phase_bin = np.minimum((np.mod(t * frequency_hz, 1.0) * PHASE_BINS).astype(np.intp),
+                           PHASE_BINS - 1)
+    torque_periodic = synchronous_average(torque, phase_bin)
+    dof = max(len(t) - PHASE_BINS, 1)
     noise_rms = float(np.sqrt(np.sum((torque - torque_periodic) ** 2) / dof))
 
     return SineRun(
@@ -127,7 +141,8 @@ def analyse_sine_run(
         time_s=t,
         velocity_rad_s=velocity,
         acceleration_rad_s2=acceleration,
-        torque_periodic_nm=torque_periodic,
+        torque_nm=torque,
+        phase_bin=phase_bin,
     )
 
 
@@ -256,10 +271,11 @@ def _model_fit(
     errors, signals = [], []
     for run in runs:
         predicted = regressors(run) @ np.array([inertia, viscous, coulomb])
-        residual = run.torque_periodic_nm - predicted
+        residual = synchronous_average(run.torque_nm - predicted, run.phase_bin)
         residual -= residual.mean()  # constant torques (gravity, offset) are not J, B, T_c
         errors.append(residual)
-        signals.append(run.torque_periodic_nm - run.torque_periodic_nm.mean())
+        periodic = synchronous_average(run.torque_nm, run.phase_bin)
+        signals.append(periodic - periodic.mean())
     error = np.concatenate(errors)
     signal = np.concatenate(signals)
     fit = 100.0 * (1.0 - float(np.linalg.norm(error) / np.linalg.norm(signal)))

@@ -1,0 +1,37 @@
+"""Shared test helpers: synthetic recordings with a known model."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from hil.recording import Recording
+
+
+def sine_model_recording(
+    *,
+    inertia: float,
+    viscous: float,
+    coulomb: float,
+    amplitude: float,
+    frequency_hz: float,
+    periods: int,
+    fs_hz: float,
+    noise_nm: float = 0.0,
+    seed: int = 0,
+) -> Recording:
+    """Ideal kinematics ω = A·sin(2πft) and torque J·α + B·ω + T_c·sgn(ω) (+ white noise)."""
+    # half-sample grid: no sample lands on a zero crossing, so sampled sgn(ω) stays odd
+    t = (np.arange(round(periods * fs_hz / frequency_hz)) + 0.5) / fs_hz
+    w = 2 * math.pi * frequency_hz
+    velocity = amplitude * np.sin(w * t)
+    position = amplitude / w * (1 - np.cos(w * t))
+    acceleration = amplitude * w * np.cos(w * t)
+    torque = inertia * acceleration + viscous * velocity + coulomb * np.sign(velocity)
+    torque = torque + np.random.default_rng(seed).normal(0.0, noise_nm, t.size) if noise_nm else torque
+    return Recording(
+        columns={"time_s": t, "position_rad": position, "velocity_rad_s": velocity,
+                 "torque_nm": torque},
+        source="synthetic",
+    )

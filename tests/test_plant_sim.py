@@ -1,0 +1,112 @@
+"""The simulated axis: physics checks that do not depend on identification code."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from hil.drives.base import Mode
+from plant_sim.model import Plant, simulate
+from plant_sim.params import Harmonic, PlantParams
+
+FS = 4000.0
+
+
+def test_every_effect_is_off_by_default_torque_step_gives_alpha_t_over_j() -> None:
+    params = PlantParams(inertia_kg_m2=0.002)
+    trace = Plant(params, fs_hz=FS, seed=0).run(Mode.TORQUE, np.full(4000, 0.01))
+    velocity = np.diff(trace.position_rad) * FS
+    acceleration = np.diff(velocity) * FS
+    np.testing.assert_allclose(acceleration[10:], 0.01 / 0.002, rtol=1e-6)
+    np.testing.assert_array_equal(trace.torque_nm, 0.01)
+
+
+def test_runs_are_deterministic_given_the_seed() -> None:
+    params = PlantParams(inertia_kg_m2=0.003, coulomb_nm=0.02, torque_noise_nm=0.002,
+                         encoder_counts_per_rev=4096, velocity_filter_hz=200.0)
+    command = 0.5 * np.sin(np.linspace(0, 20, 8000))
+    a = simulate(params, mode=Mode.VELOCITY, command=command, fs_hz=FS, seed=7)
+    b = simulate(params, mode=Mode.VELOCITY, command=command, fs_hz=FS, seed=7)
+    c = simulate(params, mode=Mode.VELOCITY, command=command, fs_hz=FS, seed=8)
+    np.testing.assert_array_equal(a.effort, b.effort)
+    assert not np.array_equal(a.effort, c.effort)
+
+
+@pytest.mark.parametrize("fraction", [0.2, 0.6, 0.95])
+def test_stiction_holds_below_breakaway_without_chattering(fraction: float) -> None:
+    params = PlantParams(inertia_kg_m2=0.003, coulomb_nm=0.02, static_friction_nm=0.03)
+    torque = fraction * 0.03
+    trace = Plant(params, fs_hz=FS, seed=0).run(Mode.TORQUE, np.full(8000, torque))
+    assert np.all(trace.position_rad == 0.0)
+
+
+def test_breakaway_above_static_friction_and_stribeck_curve() -> None:
+    params = PlantParams(inertia_kg_m2=0.003, coulomb_nm=0.02, static_friction_nm=0.03,
+                         stribeck_velocity_rad_s=0.02)
+    plant = Plant(params, fs_hz=FS, seed=0)
+    trace = plant.run(Mode.TORQUE, np.full(4000, 0.031))
+    assert trace.position_rad[-1] > 0
+    # at constant speed the drive's torque equals the Stribeck friction at that speed
+    for speed in (0.005, 0.05, 0.3):
+        held = Plant(params.with_changes(velocity_kp_nm_s_rad=0.5, velocity_ki_nm_rad=20.0),
+                     fs_hz=FS, seed=0).run(Mode.VELOCITY, np.full(16000, speed))
+        expected = 0.02 + 0.01 * math.exp(-((speed / 0.02) ** 2))
+        assert np.mean(held.torque_nm[-4000:]) == pytest.approx(expected, rel=0.02)
+
+
+def test_reversal_sticks_then_moves_the_other_way() -> None:
+    params = PlantParams(inertia_kg_m2=0.003, coulomb_nm=0.02, velocity_kp_nm_s_rad=0.3,
+                         velocity_ki_nm_rad=10.0)
+    t = np.arange(8000) / FS
+    trace = Plant(params, fs_hz=FS, seed=0).run(Mode.VELOCITY, 0.5 * np.sin(2 * np.pi * t[:3600]))
+    steps = np.diff(trace.position_rad)
+    sign_changes = np.count_nonzero(np.diff(np.sign(steps[steps != 0])))
+    assert sign_changes == 1  # exactly one reversal: no chattering at zero speed
+
+
+def test_two_mass_resonance_frequency() -> None:
+    params = PlantParams(inertia_kg_m2=0.002, load_inertia_kg_m2=0.006,
+                         shaft_stiffness_nm_rad=200.0, shaft_damping_nm_s_rad=0.001)
+    trace = Plant(params, fs_hz=FS, seed=0).run(
+        Mode.TORQUE, np.concatenate([[0.05], np.zeros(16383)])
+    )
+    velocity = np.diff(trace.position_rad) * FS
+    spectrum = np.abs(np.fft.rfft(velocity - velocity.mean()))
+    peak_hz = np.fft.rfftfreq(velocity.size, 1 / FS)[np.argmax(spectrum[5:]) + 5]
+    assert peak_hz == pytest.approx(params.resonance_hz, rel=0.03)
+
+
+def test_encoder_quantisation_saturation_and_gravity() -> None:
+    params = PlantParams(inertia_kg_m2=0.003, encoder_counts_per_rev=65536, torque_limit_nm=0.05,
+                         gravity_mge_nm=0.04, gravity_phase_rad=0.0, position_kp_1_s=20.0,
+                         velocity_kp_nm_s_rad=0.3, velocity_ki_nm_rad=10.0,
+                         velocity_filter_hz=100.0)
+    trace = Plant(params, fs_hz=FS, seed=0).run(Mode.POSITION, np.full(20000, 0.5))
+    counts = trace.position_rad / (2 * math.pi / 65536)
+    np.testing.assert_allclose(counts, np.round(counts), atol=1e-9)
+    assert np.max(np.abs(trace.torque_nm)) <= 0.05
+    # holding at 0.5 rad needs m·g·e·cos(0.5)
+    assert np.mean(trace.torque_nm[-4000:]) == pytest.approx(0.04 * math.cos(0.5), rel=0.02)
+
+
+def test_cogging_is_periodic_in_position() -> None:
+    params = PlantParams(inertia_kg_m2=0.003, cogging=(Harmonic(order=12, amplitude=0.01),),
+                         velocity_kp_nm_s_rad=0.5, velocity_ki_nm_rad=20.0)
+    speed = 0.5
+    trace = Plant(params, fs_hz=FS, seed=0).run(Mode.VELOCITY, np.full(int(FS * 8), speed))
+    keep = slice(int(FS), None)
+    theta, torque = trace.position_rad[keep], trace.torque_nm[keep]
+    design = np.column_stack([np.sin(12 * theta), np.cos(12 * theta), np.ones_like(theta)])
+    amplitude = np.hypot(*np.linalg.lstsq(design, torque, rcond=None)[0][:2])
+    assert amplitude == pytest.approx(0.01, rel=0.05)
+
+
+def test_invalid_parameters_are_refused() -> None:
+    from hil.errors import ProfileError
+
+    with pytest.raises(ProfileError, match="inertia"):
+        PlantParams(inertia_kg_m2=0.0)
+    with pytest.raises(ProfileError, match="two-mass"):
+        PlantParams(inertia_kg_m2=0.001, load_inertia_kg_m2=0.01)
