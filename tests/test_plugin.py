@@ -1,0 +1,107 @@
+"""End to end through pytest: protocols on the simulated drive produce a certificate."""
+
+from __future__ import annotations
+
+import json
+import re
+from pathlib import Path
+
+import pytest
+
+from hil.profile import builtin_profile_path
+
+pytest_plugins = ["pytester"]
+
+
+def _run(pytester: pytest.Pytester, out: Path, *args: str) -> pytest.RunResult:
+    return pytester.runpytest_inprocess(
+        "--pyargs", "protocols.test_inertia_friction", "-p", "no:cacheprovider", "--out", str(out), *args
+    )
+
+
+def _counts(result: pytest.RunResult) -> dict[str, int]:
+    outcomes = result.parseoutcomes()
+    return {key: outcomes.get(key, 0) for key in ("passed", "failed", "errors")}
+
+
+def _profile_with(tmp_path: Path, old: str, new: str) -> Path:
+    text = builtin_profile_path().read_text(encoding="utf-8")
+    assert old in text
+    path = tmp_path / "unit.toml"
+    path.write_text(text.replace(old, new), encoding="utf-8")
+    return path
+
+
+def test_calibration_writes_a_passing_certificate(pytester: pytest.Pytester, tmp_path: Path) -> None:
+    out = tmp_path / "certs"
+    result = _run(pytester, out, "--unit-serial", "GMB-0042")
+    assert result.ret == 0
+    assert _counts(result)["passed"] >= 4
+    cert = json.loads((out / "GMB-0042" / "certificate.json").read_text())
+    assert cert["outcome"] == "PASS"
+    assert cert["unit"]["serial"] == "GMB-0042"
+    assert re.fullmatch(r"GMB-0042-\d{8}T\d{6}Z-[0-9a-f]{8}", cert["certificate_id"])
+    assert len(cert["method"]["profile_sha256"]) == 64
+    assert cert["software"]["version"]
+    params = {r["parameter"]: r for r in cert["results"]}
+    assert {"inertia_kg_m2", "viscous_nm_s_rad", "coulomb_nm"} <= set(params)
+    for r in params.values():
+        assert r["expanded_uncertainty"] == pytest.approx(
+            r["coverage_factor"] * r["standard_uncertainty"])
+        assert r["lower_limit"] <= r["value"] <= r["upper_limit"]
+    assert params["inertia_kg_m2"]["value"] == pytest.approx(0.0036, rel=0.04)
+    for raw in cert["raw_data"]:
+        path = out / "GMB-0042" / raw["file"]
+        assert path.is_file()
+        import hashlib
+
+        assert hashlib.sha256(path.read_bytes()).hexdigest() == raw["sha256"]
+    assert (out / "GMB-0042" / "certificate.txt").read_text().count("OUTCOME: PASS") == 1
+    assert cert["machine_time"]["motion_time_s"] > 0
+
+
+def test_a_tolerance_miss_fails_the_certificate(pytester: pytest.Pytester, tmp_path: Path) -> None:
+    """The demo unit's J is 0.0036; a profile expecting 0.0050 ± 10 % must not pass it."""
+    profile = _profile_with(tmp_path, "nominal = 0.0036\ntolerance_pct = 15",
+                            "nominal = 0.0050\ntolerance_pct = 10")
+    out = tmp_path / "certs"
+    result = _run(pytester, out, "--profile", str(profile))
+    assert _counts(result)["failed"] == 1
+    assert result.ret == 1
+    cert = json.loads((out / "SIM-0001" / "certificate.json").read_text())
+    assert cert["outcome"] == "FAIL"
+    inertia = next(r for r in cert["results"] if r["parameter"] == "inertia_kg_m2")
+    assert inertia["outcome"] == "FAIL"
+
+
+def test_an_infrastructure_error_never_passes(pytester: pytest.Pytester, tmp_path: Path) -> None:
+    """A command beyond the unit's velocity limit is refused before motion: ERROR."""
+    profile = _profile_with(tmp_path, "velocity_rad_s = 3.0", "velocity_rad_s = 0.8")
+    out = tmp_path / "certs"
+    result = _run(pytester, out, "--profile", str(profile))
+    assert result.ret != 0
+    cert = json.loads((out / "SIM-0001" / "certificate.json").read_text())
+    assert cert["outcome"] == "ERROR"
+    assert cert["method"]["protocols"]["inertia_friction"]["outcome"] == "ERROR"
+    assert "exceeds" in " ".join(cert["method"]["protocols"]["inertia_friction"]["messages"])
+
+
+def test_recalibration_keeps_the_previous_certificate(
+    pytester: pytest.Pytester, tmp_path: Path
+) -> None:
+    out = tmp_path / "certs"
+    assert _run(pytester, out).ret == 0
+    first = json.loads((out / "SIM-0001" / "certificate.json").read_text())["certificate_id"]
+    assert _run(pytester, out, "--seed", "3").ret == 0
+    second = json.loads((out / "SIM-0001" / "certificate.json").read_text())["certificate_id"]
+    assert first != second
+    kept = list((out / "SIM-0001" / "history").glob("*/certificate.json"))
+    assert [json.loads(p.read_text())["certificate_id"] for p in kept] == [first]
+
+
+def test_bad_profile_is_a_usage_error(pytester: pytest.Pytester, tmp_path: Path) -> None:
+    bad = tmp_path / "bad.toml"
+    bad.write_text("[unit]\ntype = 'x'\n", encoding="utf-8")
+    result = _run(pytester, tmp_path / "certs", "--profile", str(bad))
+    assert result.ret != 0
+    assert "missing table [limits]" in "\n".join(result.outlines + result.errlines)
