@@ -4,9 +4,9 @@ The emulator is a ``canopen.LocalNode`` serving ``fixtures/gimbal_hil_servo.eds`
 server, NMT slave with heartbeat, EMCY producer, the CiA 402 state machine, RPDOs and
 TPDOs as configured (by SDO) in its object dictionary, and a drive recorder with a
 waveform table (objects 0x2100/0x2200). Its clock is the SYNC: on each SYNC it latches
-the synchronous RPDO data received since the previous SYNC, advances the plant by one
-communication period with that target held, and sends its synchronous TPDOs with the
-values sampled at the SYNC. A run over real CAN frames is therefore as fast as the frames
+its actual values (the last control-loop sample before the SYNC) and the synchronous RPDO
+data received since the previous SYNC, advances the plant by one communication period
+with that target held, and sends its synchronous TPDOs with the latched values. A run over real CAN frames is therefore as fast as the frames
 go, not as fast as the wall clock.
 
 It knows nothing about the backend that talks to it.
@@ -139,6 +139,10 @@ class Cia402Emulator:
         self._last_event: dict[int, bytes] = {}
         self._pdo_dirty = True
         self._sample = {0x6064: 0, 0x606C: 0, 0x6077: 0, 0x6078: 0}
+        self._next_sample = dict(self._sample)
+        self._previous_target: dict[int, float] = {}
+        self._raw_cache: dict[tuple[int, int], int] = {}
+        self._steps = 0
         self.recorder = DriveRecorder(
             capacity=16384,
             loop_period_us=round(1e6 / fs_hz),
@@ -218,26 +222,32 @@ class Cia402Emulator:
         return None
 
     def _on_write(self, *, index: int, subindex: int, od: ODVariable, data: bytes) -> None:
+        self._steps = 0
         value: Any = data
         if od.data_type in _FMT:
             value = struct.unpack("<" + _FMT[od.data_type], data)[0]
         with self._lock:
-            if 0x1400 <= index < 0x1C00:
-                if self.nmt_state == "OPERATIONAL" and subindex != 2:
-                    raise SdoAbortedError(ABORT_NOT_NOW)
-                self._pdo_dirty = True
-            elif index == 0x6040:
-                self._apply_controlword(int(value))
-            elif index == 0x6060:
-                if value not in _MODE_BITS or not self.supported_modes & _MODE_BITS[value]:
-                    raise SdoAbortedError(ABORT_VALUE_RANGE)
-                self.mode_display = int(value)
-            elif index in self.targets:
-                self.targets[index] = int(value)
-            elif index == 0x60C2 or index == 0x1006:
-                self._check_period(index, subindex, int(value))
-            elif index in (0x2100, 0x2200):
-                self.recorder.write(index, subindex, value, running=self.state == ENABLED)
+            self._write_checked(index, subindex, value)
+            if od.data_type in _FMT:  # the store is written after this callback
+                self._raw_cache[(index, subindex)] = int(value)
+
+    def _write_checked(self, index: int, subindex: int, value: Any) -> None:
+        if 0x1400 <= index < 0x1C00:
+            if self.nmt_state == "OPERATIONAL" and subindex != 2:
+                raise SdoAbortedError(ABORT_NOT_NOW)
+            self._pdo_dirty = True
+        elif index == 0x6040:
+            self._apply_controlword(int(value))
+        elif index == 0x6060:
+            if value not in _MODE_BITS or not self.supported_modes & _MODE_BITS[value]:
+                raise SdoAbortedError(ABORT_VALUE_RANGE)
+            self.mode_display = int(value)
+        elif index in self.targets:
+            self.targets[index] = int(value)
+        elif index == 0x60C2 or index == 0x1006:
+            self._check_period(index, subindex, int(value))
+        elif index in (0x2100, 0x2200):
+            self.recorder.write(index, subindex, value, running=self.state == ENABLED)
 
     def _check_period(self, index: int, subindex: int, value: int) -> None:
         """0x1006 (µs) must be a whole number of control periods; 0x60C2 is taken as is."""
@@ -248,17 +258,31 @@ class Cia402Emulator:
             raise SdoAbortedError(ABORT_VALUE_RANGE)
 
     def _raw(self, index: int, subindex: int = 0) -> int:
+        """An integer object's value (cached until the next write to it)."""
+        cached = self._raw_cache.get((index, subindex))
+        if cached is not None:
+            return cached
         assert self.node is not None
         obj = self._od[index]
         var = obj if isinstance(obj, ODVariable) else obj[subindex]
         data = self.node.get_data(index, subindex)
-        return int(struct.unpack("<" + _FMT[var.data_type], data)[0])
+        value = int(struct.unpack("<" + _FMT[var.data_type], data)[0])
+        if not var.writable or index not in (0x6041, 0x6061, 0x603F):
+            self._raw_cache[(index, subindex)] = value
+        return value
 
     def _interpolation(self) -> tuple[int, int]:
         return self._raw(0x60C2, 1), self._raw(0x60C2, 2)
 
     def steps_per_sync(self) -> int:
         """Control periods per SYNC: 0x1006 when set, else 0x60C2."""
+        if self._steps:
+            return self._steps
+        self._steps = self._steps_per_sync()
+        self._ramp = np.arange(1, self._steps + 1) / self._steps
+        return self._steps
+
+    def _steps_per_sync(self) -> int:
         cycle_us = self._raw(0x1006)
         if cycle_us:
             return max(1, round(cycle_us * 1e-6 * self.fs_hz))
@@ -310,6 +334,7 @@ class Cia402Emulator:
             return
         log.debug("emulator node %d: %s -> %s", self.node_id, self.state, state)
         if state == ENABLED:
+            self._previous_target = {}
             self.plant.hold()
             self._profile_velocity = self.plant.velocity_rad_s
             self._profile_torque = 0.0
@@ -354,6 +379,7 @@ class Cia402Emulator:
         if not self._pdo_dirty:
             return
         self._rpdos, self._tpdos = [], []
+        self._formats: dict[int, struct.Struct] = {}
         for comm, mapping, out in ((0x1400, 0x1600, self._rpdos), (0x1800, 0x1A00, self._tpdos)):
             for n in range(4):
                 if comm + n not in self._od:
@@ -401,19 +427,26 @@ class Cia402Emulator:
                 self.targets[index] = value
 
     def _pack(self, entries: list[tuple[int, int, str]]) -> bytes:
+        live = {
+            0x6041: self.statusword,
+            0x6061: self.mode_display,
+            0x603F: self.error_code,
+            0x1001: self._error_register(),
+        }
         values = []
         for index, subindex, _ in entries:
-            if index == 0x6041:
-                values.append(self.statusword)
-            elif index == 0x6061:
-                values.append(self.mode_display)
-            elif index == 0x603F:
-                values.append(self.error_code)
+            if index in live:
+                values.append(live[index])
             elif index == 0x2200:
                 values.append(int(self.recorder.read(index, subindex)))
             else:
                 values.append(self._sample.get(index, self.targets.get(index, 0)))
-        return struct.pack("<" + "".join(e[2] for e in entries), *values)
+        fmt = self._formats.get(id(entries))
+        if fmt is None:
+            fmt = self._formats[id(entries)] = struct.Struct(
+                "<" + "".join(e[2] for e in entries)
+            )
+        return fmt.pack(*values)
 
     def _send_tpdo(self, cob: int, payload: bytes) -> None:
         assert self._network is not None
@@ -441,6 +474,7 @@ class Cia402Emulator:
     def _on_sync(self, can_id: int, data: bytearray, timestamp: float) -> None:
         with self._lock:
             self.sync_count += 1
+            self._sample = self._next_sample  # actual values latched at this SYNC
             operational = self.nmt_state == "OPERATIONAL"
             if operational and self._pending:
                 pending, self._pending = self._pending, {}
@@ -466,12 +500,13 @@ class Cia402Emulator:
         mode, command = self._command(steps, period_s)
         trace = self.plant.run(mode, command)
         self.recorder.capture(trace, enabled=self.state == ENABLED)
+        # what the drive latches at the *next* SYNC: its most recent control-loop values
         cpr = self.counts_per_rev
-        self._sample = {
-            0x6064: int(round(trace.position_rad[0] * cpr / (2 * math.pi))),
-            0x606C: int(round(trace.velocity_rad_s[0] * cpr / (2 * math.pi))),
-            0x6077: _clip16(trace.torque_nm[0] / self.rated_torque_nm * 1e3),
-            0x6078: _clip16(trace.current_a[0] / self.rated_current_a * 1e3),
+        self._next_sample = {
+            0x6064: int(round(trace.position_rad[-1] * cpr / (2 * math.pi))),
+            0x606C: int(round(trace.velocity_rad_s[-1] * cpr / (2 * math.pi))),
+            0x6077: _clip16(trace.torque_nm[-1] / self.rated_torque_nm * 1e3),
+            0x6078: _clip16(trace.current_a[-1] / self.rated_current_a * 1e3),
         }
         if self.state == ENABLED:
             self.time_enabled_s += period_s
@@ -494,6 +529,13 @@ class Cia402Emulator:
             return Mode.TORQUE, np.zeros(steps)
         waveform = self.recorder.waveform_block(steps)
         mode = _MODES[self.mode_display]
+        if waveform is None and self.mode_display in (8, 9, 10):
+            # cyclic synchronous modes: interpolate linearly over the period
+            index = {Mode.VELOCITY: 0x60FF, Mode.TORQUE: 0x6071, Mode.POSITION: 0x607A}[mode]
+            new = float(self.targets[index])
+            old = self._previous_target.get(index, new)
+            self._previous_target = {index: new}
+            waveform = old + (new - old) * self._ramp
         if mode is Mode.VELOCITY:
             raw = self.targets[0x60FF] if waveform is None else waveform
             value = np.asarray(raw, dtype=np.float64) * 2 * math.pi / cpr

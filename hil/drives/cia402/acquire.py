@@ -42,6 +42,12 @@ RECORDER_SAMPLE = np.dtype([("pos", "<i4"), ("vel", "<i4"), ("torque", "<i2"), (
 _LIMITS = {"h": (-32768, 32767), "i": (-(2**31), 2**31 - 1)}
 
 
+class _Faulted(Exception):
+    def __init__(self, time_s: float) -> None:
+        super().__init__(time_s)
+        self.time_s = time_s
+
+
 def _raw_command(drive: CanOpenDrive, excitation: Excitation) -> np.ndarray:
     assert drive.scaling is not None
     sc, mode = drive.scaling, excitation.mode
@@ -79,51 +85,29 @@ def run_stream(drive: CanOpenDrive, excitation: Excitation) -> Recording:
     raw = _raw_command(drive, excitation)
     cob, _ = link.rpdo_payload(mode, CW_ENABLE_OPERATION, 0)
     packer = struct.Struct("<H" + TARGET_OBJECT[mode][1])
-    period_s = st.sync_period_s
     counts_margin = 0.05 * sc.counts_per_rad  # the drive's own 0x607D acts first
     travel = (drive.limits.travel_min_rad * sc.counts_per_rad - counts_margin,
               drive.limits.travel_max_rad * sc.counts_per_rad + counts_margin)  # fmt: skip
     link.forget()
     first = link.sync_index + 1
-    done = 0
-    lost_in_a_row = 0
     error: DriveError | None = None
     log.info("node %d: streaming %s (%d samples at %.0f Hz)", st.node_id, excitation.name,
-             len(raw), 1 / period_s)  # fmt: skip
+             len(raw), 1 / st.sync_period_s)  # fmt: skip
     try:
-        for k in range(len(raw)):
-            answered = link.tick(cob, packer.pack(CW_ENABLE_OPERATION, int(raw[k])))
-            done = k + 1
-            if not answered:
-                lost_in_a_row += 1
-                if lost_in_a_row > MAX_CONSECUTIVE_LOST:
-                    link.check()
-                    raise drive.comm_error(
-                        f"no feedback PDOs for {lost_in_a_row} SYNC periods "
-                        f"(at t = {k * period_s:.3f} s of '{excitation.name}')"
-                    )
-                continue
-            lost_in_a_row = 0
-            statusword, position, _ = struct.unpack("<Hib", link.rx1[link.sync_index])
-            if statusword & SW_FAULT or link.emcy:
-                code = link.emcy[-1][0] if link.emcy else 0
-                raise DriveFaultError(
-                    f"node {st.node_id} faulted at t = {k * period_s:.3f} s of "
-                    f"'{excitation.name}' (EMCY)",
-                    code=code or link.fault_code(),
-                )
-            if statusword & 0x6F != 0x27:
-                raise DriveStateError(
-                    f"node {st.node_id} left OPERATION ENABLED ({state_of(statusword)}) at "
-                    f"t = {k * period_s:.3f} s of '{excitation.name}'"
-                )
-            if not travel[0] <= position <= travel[1]:
-                raise DriveStateError(
-                    f"position {position / sc.counts_per_rad:.3f} rad left the travel limits "
-                    f"during '{excitation.name}'"
-                )
+        with link.direct_receive():
+            done = _stream_loop(drive, excitation, raw, cob, packer, travel)
+    except _Faulted as fault:
+        # 0x603F by SDO: only now that the Notifier receives again
+        code = link.emcy[-1][0] if link.emcy else link.fault_code()
+        error = DriveFaultError(
+            f"node {st.node_id} faulted at t = {fault.time_s:.3f} s of '{excitation.name}' "
+            f"({'EMCY' if link.emcy else 'statusword fault bit, 0x603F'})",
+            code=code,
+        )
+        done = link.sync_index - first + 1
     except DriveError as exc:
         error = exc
+        done = link.sync_index - first + 1
     except BaseException:
         drive.quick_stop()
         raise
@@ -143,6 +127,50 @@ def run_stream(drive: CanOpenDrive, excitation: Excitation) -> Recording:
         comm.partial_recording = recording
         raise comm
     return recording
+
+
+def _stream_loop(
+    drive: CanOpenDrive,
+    excitation: Excitation,
+    raw: np.ndarray,
+    cob: int,
+    packer: struct.Struct,
+    travel: tuple[float, float],
+) -> int:
+    """The cyclic exchange; returns the number of SYNCs sent."""
+    link, st = drive.link, drive.station
+    assert drive.scaling is not None
+    sc = drive.scaling
+    period_s = st.sync_period_s
+    lost_in_a_row = 0
+    done = 0
+    for k in range(len(raw)):
+        answered = link.tick(cob, packer.pack(CW_ENABLE_OPERATION, int(raw[k])))
+        done = k + 1
+        if not answered:
+            lost_in_a_row += 1
+            if lost_in_a_row > MAX_CONSECUTIVE_LOST:
+                link.check()
+                raise drive.comm_error(
+                    f"no feedback PDOs for {lost_in_a_row} SYNC periods "
+                    f"(at t = {k * period_s:.3f} s of '{excitation.name}')"
+                )
+            continue
+        lost_in_a_row = 0
+        statusword, position, _ = struct.unpack("<Hib", link.rx1[link.sync_index])
+        if statusword & SW_FAULT or link.emcy:
+            raise _Faulted(k * period_s)
+        if statusword & 0x6F != 0x27:
+            raise DriveStateError(
+                f"node {st.node_id} left OPERATION ENABLED ({state_of(statusword)}) at "
+                f"t = {k * period_s:.3f} s of '{excitation.name}'"
+            )
+        if not travel[0] <= position <= travel[1]:
+            raise DriveStateError(
+                f"position {position / sc.counts_per_rad:.3f} rad left the travel limits "
+                f"during '{excitation.name}'"
+            )
+    return done
 
 
 def _stream_recording(

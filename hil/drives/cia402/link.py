@@ -21,7 +21,8 @@ import logging
 import struct
 import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from typing import Any
 
 import can
@@ -69,6 +70,8 @@ class CanLink:
         self._heartbeat_seen = threading.Event()
         self._next_deadline = 0.0
         self._connected = False
+        self._direct = False
+        self.network.NOTIFIER_CYCLE = 0.05  # so the receive thread stops promptly
 
     # -- connection ------------------------------------------------------------------
     def open(self) -> None:
@@ -151,7 +154,7 @@ class CanLink:
         try:
             if self.network.notifier is not None:
                 self.network.notifier.stop(0.5)
-            self.network.notifier = can.Notifier(bus, self.network.listeners, 0.2)
+            self.network.notifier = can.Notifier(bus, self.network.listeners, 0.05)
         except Exception as exc:  # the bus itself may be gone
             log.warning("could not restart the CAN receiver: %r", exc)
             return False
@@ -238,24 +241,62 @@ class CanLink:
         try:
             self.network.send_message(cob, payload)
             if realtime:
-                _sleep_until(self._next_deadline)
+                self._wait(self._next_deadline, until_answered=False)
             self._answered.clear()
             self.sync_index += 1
             self.network.send_message(0x80, b"")
+            if realtime:
+                now = time.monotonic()
+                if self._next_deadline < now - period:
+                    self._next_deadline = now  # we fell behind: resynchronise
+                self._next_deadline += period
+                self._wait(self._next_deadline - period / 2, until_answered=False)
+                return self.sync_index in self.rx1 and self.sync_index in self.rx2
+            return self._wait(time.monotonic() + self.station.pdo_timeout_s, until_answered=True)
         except can.CanError as exc:
-            raise DriveCommunicationError(f"CAN send failed: {exc}") from exc
+            raise DriveCommunicationError(f"CAN error on node {self.node_id}'s bus: {exc}") from exc
+        except DriveCommunicationError:
+            raise
         except Exception as exc:  # network.check() re-raises what killed the receiver
             raise DriveCommunicationError(f"CAN receive thread stopped: {exc}") from exc
-        if realtime:
-            now = time.monotonic()
-            if self._next_deadline < now - period:
-                self._next_deadline = now  # we fell behind: resynchronise
-            self._next_deadline += period
-            _sleep_until(self._next_deadline - period / 2)
-            answered = self.sync_index in self.rx1 and self.sync_index in self.rx2
-        else:
-            answered = self._answered.wait(self.station.pdo_timeout_s)
-        return answered
+
+    def _wait(self, until: float, *, until_answered: bool) -> bool:
+        """Wait for this SYNC's TPDOs (or just for ``until``), receiving ourselves when in
+        direct mode (one thread hand-off less per cycle than the Notifier)."""
+        if not self._direct:
+            if until_answered:
+                return self._answered.wait(max(0.0, until - time.monotonic()))
+            _sleep_until(until)
+            return False
+        bus = self.network.bus
+        assert bus is not None
+        while True:
+            remaining = until - time.monotonic()
+            if remaining <= 0:
+                return False
+            msg = bus.recv(remaining)
+            if msg is None:
+                return False
+            if msg.is_error_frame or msg.is_remote_frame:
+                continue
+            self.network.notify(msg.arbitration_id, msg.data, msg.timestamp)
+            if until_answered and self._answered.is_set():
+                return True
+
+    @contextmanager
+    def direct_receive(self) -> Iterator[None]:
+        """Receive in the calling thread (no Notifier) for the duration of a run."""
+        network = self.network
+        if network.notifier is not None:
+            network.notifier.stop(1.0)
+            network.check()
+        self._direct = True
+        try:
+            yield
+        finally:
+            self._direct = False
+            if self._connected and network.bus is not None:
+                network.notifier = can.Notifier(network.bus, network.listeners, 0.05)
 
     def latest_status(self) -> tuple[int, int] | None:
         """(statusword, mode display) of the last SYNC, if its TPDO1 arrived."""
