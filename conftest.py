@@ -1,4 +1,4 @@
-"""Repo-level pytest wiring: hypothesis profiles (the gimbal-hil plugin loads via its entry point)."""
+"""Repo-level pytest wiring: hypothesis profiles (the plugin loads via its entry point)."""
 
 from __future__ import annotations
 

@@ -177,8 +177,11 @@ class CalibrationRun:
         if self._archived:
             return
         self._archived = True
-        previous = [p for p in (self.unit_dir / "certificate.json", self.unit_dir / "recordings")
-                    if p.exists()]
+        previous = [
+            p
+            for p in (self.unit_dir / "certificate.json", self.unit_dir / "recordings")
+            if p.exists()
+        ]
         if not previous:
             return
         stamp = datetime.fromtimestamp(previous[0].stat().st_mtime, UTC).strftime("%Y%m%dT%H%M%SZ")

@@ -27,8 +27,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     sim = commands.add_parser("simulate", help="simulate a unit and write a recording")
     sim.add_argument("--profile", default=None, help="unit profile TOML or built-in name")
     source = sim.add_mutually_exclusive_group(required=True)
-    source.add_argument("--command", type=Path, help="CSV with time_s and one command column "
-                        "(velocity_cmd_rad_s, torque_cmd_nm or position_cmd_rad)")
+    source.add_argument(
+        "--command",
+        type=Path,
+        help="CSV with time_s and one command column "
+        "(velocity_cmd_rad_s, torque_cmd_nm or position_cmd_rad)",
+    )
     source.add_argument("--duration", type=float, help="seconds of the built-in excitation")
     sim.add_argument("--out", type=Path, required=True, help="recording to write (.csv[.gz])")
     sim.add_argument("--seed", type=int, default=0)
@@ -51,8 +55,10 @@ def main(argv: Sequence[str] | None = None) -> int:
         diagnose_cli.add_arguments(diag)
 
     args = parser.parse_args(argv)
-    logging.basicConfig(level=logging.INFO if args.verbose else logging.WARNING,
-                        format="%(levelname)s %(name)s: %(message)s")
+    logging.basicConfig(
+        level=logging.INFO if args.verbose else logging.WARNING,
+        format="%(levelname)s %(name)s: %(message)s",
+    )
     try:
         if args.subcommand == "simulate":
             return _simulate(args)
@@ -81,8 +87,9 @@ def _simulate(args: argparse.Namespace) -> int:
     else:
         limits = profile.limits
         travel = min(-limits.travel_min_rad, limits.travel_max_rad)
-        command = identification_sequence(args.duration, fs_hz, travel_rad=travel,
-                                          max_velocity_rad_s=limits.velocity_rad_s)
+        command = identification_sequence(
+            args.duration, fs_hz, travel_rad=travel, max_velocity_rad_s=limits.velocity_rad_s
+        )
         mode, name = Mode.VELOCITY, f"builtin_{args.duration:g}s"
     drive = SimDrive(profile.plant, limits=profile.limits, fs_hz=fs_hz, seed=args.seed)
     with drive:
@@ -103,7 +110,7 @@ _COMMAND_COLUMNS = {
 def _command_from_csv(path: Path, fs_hz: float) -> tuple[Mode, FloatArray]:
     """Read a command file and resample it (linear) onto the drive's sample grid."""
     columns = read_command_csv(path, allowed=tuple(_COMMAND_COLUMNS))
-    (name, values), = ((k, v) for k, v in columns.items() if k != "time_s")
+    ((name, values),) = ((k, v) for k, v in columns.items() if k != "time_s")
     time_s = columns["time_s"]
     grid = time_s[0] + np.arange(int((time_s[-1] - time_s[0]) * fs_hz) + 1) / fs_hz
     return _COMMAND_COLUMNS[name], np.interp(grid, time_s, values)
@@ -119,8 +126,11 @@ def _calibrate(args: argparse.Namespace) -> int:
         options += ["--unit-serial", args.unit_serial]
     if args.station:
         options += ["--station", str(args.station)]
-    return int(pytest.main(["-p", "no:cacheprovider", "--pyargs", "protocols", "-q",
-                            *options, *args.pytest_args]))
+    return int(
+        pytest.main(
+            ["-p", "no:cacheprovider", "--pyargs", "protocols", "-q", *options, *args.pytest_args]
+        )
+    )
 
 
 if __name__ == "__main__":

@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from enum import Enum
+from enum import StrEnum
 
 from hil.identify.estimate import Estimate
 from hil.profile import MeasurementSpec
@@ -21,7 +21,7 @@ DECISION_RULE = (
 )
 
 
-class Outcome(str, Enum):
+class Outcome(StrEnum):
     PASS = "PASS"
     MARGINAL = "MARGINAL"
     FAIL = "FAIL"

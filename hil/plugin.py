@@ -29,16 +29,33 @@ PROTOCOL_MARK = "protocol"
 
 def pytest_addoption(parser: pytest.Parser) -> None:
     group = parser.getgroup("gimbal-hil", "gimbal-hil calibration")
-    group.addoption("--drive", default="sim", choices=DRIVE_KINDS,
-                    help="drive backend for calibration protocols (default: sim)")
-    group.addoption("--profile", default=None,
-                    help="unit profile TOML, or a built-in profile name (default: demo unit)")
-    group.addoption("--unit-serial", default=None,
-                    help="serial number of the unit under calibration (default SIM-0001 for sim)")
-    group.addoption("--out", default="certificates",
-                    help="directory for certificates and raw recordings (default: certificates)")
-    group.addoption("--station", default=None, type=Path,
-                    help="station TOML for real drives (interface, node id, EDS, register map)")
+    group.addoption(
+        "--drive",
+        default="sim",
+        choices=DRIVE_KINDS,
+        help="drive backend for calibration protocols (default: sim)",
+    )
+    group.addoption(
+        "--profile",
+        default=None,
+        help="unit profile TOML, or a built-in profile name (default: demo unit)",
+    )
+    group.addoption(
+        "--unit-serial",
+        default=None,
+        help="serial number of the unit under calibration (default SIM-0001 for sim)",
+    )
+    group.addoption(
+        "--out",
+        default="certificates",
+        help="directory for certificates and raw recordings (default: certificates)",
+    )
+    group.addoption(
+        "--station",
+        default=None,
+        type=Path,
+        help="station TOML for real drives (interface, node id, EDS, register map)",
+    )
     group.addoption("--seed", default=0, type=int, help="simulator seed (sim and emulators)")
 
 
@@ -111,9 +128,7 @@ def _protocol_name(item: pytest.Item) -> str | None:
 
 
 @pytest.hookimpl(wrapper=True)
-def pytest_runtest_makereport(
-    item: pytest.Item, call: pytest.CallInfo[None]
-) -> Iterator[None]:
+def pytest_runtest_makereport(item: pytest.Item, call: pytest.CallInfo[None]) -> Iterator[None]:
     report: pytest.TestReport = yield
     name = _protocol_name(item)
     run = item.config.stash.get(RUN_KEY, None)

@@ -112,7 +112,9 @@ def profile_from_mapping(data: Mapping[str, Any], *, source: str, sha256: str = 
         raise ProfileError(f"[limits] lacks {exc}", source=source) from exc
     if limits.travel_min_rad >= limits.travel_max_rad:
         raise ProfileError("[limits] travel_min_rad must be below travel_max_rad", source=source)
-    plant = plant_from_mapping(data["plant"], source=f"{source} [plant]") if "plant" in data else None
+    plant = (
+        plant_from_mapping(data["plant"], source=f"{source} [plant]") if "plant" in data else None
+    )
     measurements = {
         name: _measurement(name, spec, f"{source} [measurements.{name}]")
         for name, spec in _table(data, "measurements", source).items()

@@ -10,7 +10,9 @@ from numpy.typing import NDArray
 FloatArray = NDArray[np.float64]
 
 
-def sine(amplitude_rad_s: float, frequency_hz: float, duration_s: float, fs_hz: float) -> FloatArray:
+def sine(
+    amplitude_rad_s: float, frequency_hz: float, duration_s: float, fs_hz: float
+) -> FloatArray:
     t = np.arange(round(duration_s * fs_hz)) / fs_hz
     return amplitude_rad_s * np.sin(2 * math.pi * frequency_hz * t)
 
@@ -24,20 +26,23 @@ def staircase(speeds_rad_s: tuple[float, ...], step_s: float, fs_hz: float) -> F
 def sweep(travel_rad: float, speed_rad_s: float, fs_hz: float) -> FloatArray:
     """Out to +travel, back to −travel, home again at constant speed."""
     leg = round(travel_rad / speed_rad_s * fs_hz)
-    return np.concatenate([np.full(leg, speed_rad_s), np.full(2 * leg, -speed_rad_s),
-                           np.full(leg, speed_rad_s)])
+    return np.concatenate(
+        [np.full(leg, speed_rad_s), np.full(2 * leg, -speed_rad_s), np.full(leg, speed_rad_s)]
+    )
 
 
-def log_chirp(amplitude_rad_s: float, f0_hz: float, f1_hz: float, duration_s: float,
-              fs_hz: float) -> FloatArray:
+def log_chirp(
+    amplitude_rad_s: float, f0_hz: float, f1_hz: float, duration_s: float, fs_hz: float
+) -> FloatArray:
     t = np.arange(round(duration_s * fs_hz)) / fs_hz
     rate = math.log(f1_hz / f0_hz) / duration_s
     phase = 2 * math.pi * f0_hz * (np.exp(rate * t) - 1) / rate
     return amplitude_rad_s * np.sin(phase)
 
 
-def identification_sequence(duration_s: float, fs_hz: float, *, travel_rad: float,
-                            max_velocity_rad_s: float) -> FloatArray:
+def identification_sequence(
+    duration_s: float, fs_hz: float, *, travel_rad: float, max_velocity_rad_s: float
+) -> FloatArray:
     """A velocity command that exercises every effect, like the shared example recordings:
     two 2 Hz sines, a slow staircase, a full-travel sweep and a log chirp, scaled to fill
     ``duration_s`` (at least 8 s)."""

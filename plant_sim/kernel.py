@@ -82,7 +82,7 @@ def _periodic(theta: float, table: np.ndarray) -> float:
 
 
 @njit(cache=True, fastmath=True)
-def run_kernel(  # noqa: PLR0913, PLR0915
+def run_kernel(
     params: np.ndarray,
     cogging: np.ndarray,
     kt_ripple: np.ndarray,

@@ -16,7 +16,6 @@ from plant_sim.params import Harmonic, PlantParams
 FloatArray = NDArray[np.float64]
 
 
-
 _KERNEL_MODE = {
     Mode.TORQUE: kernel.MODE_TORQUE,
     Mode.VELOCITY: kernel.MODE_VELOCITY,
@@ -83,7 +82,9 @@ def pack_params(params: PlantParams) -> FloatArray:
     vector[kernel.P_HYST_NM] = params.cable_hysteresis_nm
     vector[kernel.P_HYST_ANGLE] = params.cable_hysteresis_angle_rad
     vector[kernel.P_TAU_I] = params.current_loop_time_constant_s
-    vector[kernel.P_T_MAX] = params.torque_limit_nm if math.isfinite(params.torque_limit_nm) else 1e12
+    vector[kernel.P_T_MAX] = (
+        params.torque_limit_nm if math.isfinite(params.torque_limit_nm) else 1e12
+    )
     vector[kernel.P_COUNTS] = params.encoder_counts_per_rev
     vector[kernel.P_VEL_FILTER_HZ] = params.velocity_filter_hz
     vector[kernel.P_KP_VEL] = params.velocity_kp_nm_s_rad

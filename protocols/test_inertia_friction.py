@@ -72,22 +72,33 @@ def amplitude_spread(result: InertiaFrictionResult) -> Estimate:
     """Spread of the per-amplitude inertias in % of their mean: a position-dependent torque
     (cogging, cable) commensurate with the sine's travel shows up here."""
     per_run = np.array(
-        [r.quadrature_nm / (r.velocity_amplitude_rad_s * 2 * math.pi * r.frequency_hz)
-         for r in result.runs]
+        [
+            r.quadrature_nm / (r.velocity_amplitude_rad_s * 2 * math.pi * r.frequency_hz)
+            for r in result.runs
+        ]
     )
     u = np.array(
-        [r.quadrature_u_nm / (r.velocity_amplitude_rad_s * 2 * math.pi * r.frequency_hz)
-         for r in result.runs]
+        [
+            r.quadrature_u_nm / (r.velocity_amplitude_rad_s * 2 * math.pi * r.frequency_hz)
+            for r in result.runs
+        ]
     )
     spread = 100 * float(np.ptp(per_run) / per_run.mean())
     u_spread = 100 * float(np.sqrt(np.sum(u**2)) / per_run.mean())
     dof = float(min(r.periods for r in result.runs) - 1)
-    return Estimate(name="inertia_amplitude_spread_pct", value=spread,
-                    standard_uncertainty=u_spread, unit="%", dof=dof)
+    return Estimate(
+        name="inertia_amplitude_spread_pct",
+        value=spread,
+        standard_uncertainty=u_spread,
+        unit="%",
+        dof=dof,
+    )
 
 
 @pytest.fixture(scope="module")
-def result(drive: Drive, calibration: CalibrationRun, profile: UnitProfile) -> InertiaFrictionResult:
+def result(
+    drive: Drive, calibration: CalibrationRun, profile: UnitProfile
+) -> InertiaFrictionResult:
     spec = Spec.from_profile(profile, drive.info)
     recordings = [calibration.run(drive, e, protocol=NAME) for e in excitation(spec)]
     analysed = analyse(recordings, spec)
@@ -95,9 +106,12 @@ def result(drive: Drive, calibration: CalibrationRun, profile: UnitProfile) -> I
         "fit_pct": round(analysed.fit_pct, 2),
         "noise_rms_nm": analysed.noise_rms_nm,
         "components": [
-            {"velocity_amplitude_rad_s": r.velocity_amplitude_rad_s,
-             "quadrature_c_nm": r.quadrature_nm, "in_phase_s_nm": r.in_phase_nm,
-             "periods": r.periods}
+            {
+                "velocity_amplitude_rad_s": r.velocity_amplitude_rad_s,
+                "quadrature_c_nm": r.quadrature_nm,
+                "in_phase_s_nm": r.in_phase_nm,
+                "periods": r.periods,
+            }
             for r in analysed.runs
         ],
     }
@@ -105,8 +119,9 @@ def result(drive: Drive, calibration: CalibrationRun, profile: UnitProfile) -> I
 
 
 @pytest.mark.parametrize("parameter", MEASUREMENTS)
-def test_inertia_friction(parameter: str, result: InertiaFrictionResult,
-                          calibration: CalibrationRun) -> None:
+def test_inertia_friction(
+    parameter: str, result: InertiaFrictionResult, calibration: CalibrationRun
+) -> None:
     estimates = {e.name: e for e in (result.inertia, result.viscous, result.coulomb)}
     estimates["inertia_amplitude_spread_pct"] = amplitude_spread(result)
     measurement = calibration.record(NAME, estimates[parameter])

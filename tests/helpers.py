@@ -29,9 +29,15 @@ def sine_model_recording(
     position = amplitude / w * (1 - np.cos(w * t))
     acceleration = amplitude * w * np.cos(w * t)
     torque = inertia * acceleration + viscous * velocity + coulomb * np.sign(velocity)
-    torque = torque + np.random.default_rng(seed).normal(0.0, noise_nm, t.size) if noise_nm else torque
+    torque = (
+        torque + np.random.default_rng(seed).normal(0.0, noise_nm, t.size) if noise_nm else torque
+    )
     return Recording(
-        columns={"time_s": t, "position_rad": position, "velocity_rad_s": velocity,
-                 "torque_nm": torque},
+        columns={
+            "time_s": t,
+            "position_rad": position,
+            "velocity_rad_s": velocity,
+            "torque_nm": torque,
+        },
         source="synthetic",
     )

@@ -38,9 +38,13 @@ def plausible_plants(draw: st.DrawFn) -> PlantParams:
         inertia_kg_m2=inertia,
         viscous_nm_s_rad=draw(st.floats(0.002, 0.012)),
         coulomb_nm=draw(st.floats(0.008, 0.035)),
-        cogging=(Harmonic(order=draw(st.integers(24, 120)),
-                          amplitude=draw(st.floats(0.0, 0.02)) * smallest_inertial_torque,
-                          phase_rad=draw(st.floats(0.0, 2 * math.pi))),),
+        cogging=(
+            Harmonic(
+                order=draw(st.integers(24, 120)),
+                amplitude=draw(st.floats(0.0, 0.02)) * smallest_inertial_torque,
+                phase_rad=draw(st.floats(0.0, 2 * math.pi)),
+            ),
+        ),
         current_loop_time_constant_s=draw(st.floats(5e-5, 6e-4)),
         encoder_counts_per_rev=draw(st.sampled_from([1 << 17, 1 << 18, 1 << 19])),
         torque_noise_nm=draw(st.floats(2e-4, 3e-3)),
@@ -55,9 +59,11 @@ def plausible_plants(draw: st.DrawFn) -> PlantParams:
 @given(plant=plausible_plants(), seed=st.integers(0, 2**16))
 def test_recovers_j_b_tc_within_the_profiles_accuracy_claim(plant: PlantParams, seed: int) -> None:
     result = _identify(plant, PROFILE, seed)
-    for estimate, truth in ((result.inertia, plant.inertia_kg_m2),
-                            (result.viscous, plant.viscous_nm_s_rad),
-                            (result.coulomb, plant.coulomb_nm)):
+    for estimate, truth in (
+        (result.inertia, plant.inertia_kg_m2),
+        (result.viscous, plant.viscous_nm_s_rad),
+        (result.coulomb, plant.coulomb_nm),
+    ):
         claim = PROFILE.measurement(estimate.name).accuracy_rel
         assert claim is not None
         assert abs(estimate.value / truth - 1) <= claim, (estimate.name, estimate.value, truth)
@@ -70,15 +76,20 @@ def test_strong_commensurate_cogging_biases_j_and_is_not_certified(
     """Cogging whose period matches the sine's travel (2A/ω ≈ 0.08 rad at 0.5 rad/s) adds a
     position-dependent torque the basic model lacks."""
     assert PROFILE.plant is not None
-    plant = dataclasses.replace(PROFILE.plant, cogging=(Harmonic(order=order,
-                                                                 amplitude=amplitude_nm),))
+    plant = dataclasses.replace(
+        PROFILE.plant, cogging=(Harmonic(order=order, amplitude=amplitude_nm),)
+    )
     result = _identify(plant, PROFILE, seed=1)
     claim = PROFILE.measurement("inertia_kg_m2").accuracy_rel
     assert claim is not None
     assert abs(result.inertia.value / plant.inertia_kg_m2 - 1) > claim  # the bias is real
 
-    run = CalibrationRun(profile=PROFILE, unit_serial="HIDDEN-1", out_dir=tmp_path,  # type: ignore[arg-type]
-                         drive_kind="sim")
+    run = CalibrationRun(
+        profile=PROFILE,
+        unit_serial="HIDDEN-1",
+        out_dir=tmp_path,  # type: ignore[arg-type]
+        drive_kind="sim",
+    )
     spread = run.record(protocol.NAME, protocol.amplitude_spread(result))
     assert spread.outcome is Outcome.FAIL
     for estimate in (result.inertia, result.viscous, result.coulomb):
@@ -91,6 +102,10 @@ def test_same_unit_without_cogging_passes_the_spread_check(tmp_path: object) -> 
     assert PROFILE.plant is not None
     plant = dataclasses.replace(PROFILE.plant, cogging=())
     result = _identify(plant, PROFILE, seed=1)
-    run = CalibrationRun(profile=PROFILE, unit_serial="CLEAN-1", out_dir=tmp_path,  # type: ignore[arg-type]
-                         drive_kind="sim")
+    run = CalibrationRun(
+        profile=PROFILE,
+        unit_serial="CLEAN-1",
+        out_dir=tmp_path,  # type: ignore[arg-type]
+        drive_kind="sim",
+    )
     assert run.record(protocol.NAME, protocol.amplitude_spread(result)).outcome is Outcome.PASS

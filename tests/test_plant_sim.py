@@ -24,8 +24,13 @@ def test_every_effect_is_off_by_default_torque_step_gives_alpha_t_over_j() -> No
 
 
 def test_runs_are_deterministic_given_the_seed() -> None:
-    params = PlantParams(inertia_kg_m2=0.003, coulomb_nm=0.02, torque_noise_nm=0.002,
-                         encoder_counts_per_rev=4096, velocity_filter_hz=200.0)
+    params = PlantParams(
+        inertia_kg_m2=0.003,
+        coulomb_nm=0.02,
+        torque_noise_nm=0.002,
+        encoder_counts_per_rev=4096,
+        velocity_filter_hz=200.0,
+    )
     command = 0.5 * np.sin(np.linspace(0, 20, 8000))
     a = simulate(params, mode=Mode.VELOCITY, command=command, fs_hz=FS, seed=7)
     b = simulate(params, mode=Mode.VELOCITY, command=command, fs_hz=FS, seed=7)
@@ -43,22 +48,25 @@ def test_stiction_holds_below_breakaway_without_chattering(fraction: float) -> N
 
 
 def test_breakaway_above_static_friction_and_stribeck_curve() -> None:
-    params = PlantParams(inertia_kg_m2=0.003, coulomb_nm=0.02, static_friction_nm=0.03,
-                         stribeck_velocity_rad_s=0.02)
+    params = PlantParams(
+        inertia_kg_m2=0.003, coulomb_nm=0.02, static_friction_nm=0.03, stribeck_velocity_rad_s=0.02
+    )
     plant = Plant(params, fs_hz=FS, seed=0)
     trace = plant.run(Mode.TORQUE, np.full(4000, 0.031))
     assert trace.position_rad[-1] > 0
     # at constant speed the drive's torque equals the Stribeck friction at that speed
     for speed in (0.005, 0.05, 0.3):
-        held = Plant(params.with_changes(velocity_kp_nm_s_rad=0.5, velocity_ki_nm_rad=20.0),
-                     fs_hz=FS, seed=0).run(Mode.VELOCITY, np.full(16000, speed))
+        held = Plant(
+            params.with_changes(velocity_kp_nm_s_rad=0.5, velocity_ki_nm_rad=20.0), fs_hz=FS, seed=0
+        ).run(Mode.VELOCITY, np.full(16000, speed))
         expected = 0.02 + 0.01 * math.exp(-((speed / 0.02) ** 2))
         assert np.mean(held.torque_nm[-4000:]) == pytest.approx(expected, rel=0.02)
 
 
 def test_reversal_sticks_then_moves_the_other_way() -> None:
-    params = PlantParams(inertia_kg_m2=0.003, coulomb_nm=0.02, velocity_kp_nm_s_rad=0.3,
-                         velocity_ki_nm_rad=10.0)
+    params = PlantParams(
+        inertia_kg_m2=0.003, coulomb_nm=0.02, velocity_kp_nm_s_rad=0.3, velocity_ki_nm_rad=10.0
+    )
     t = np.arange(8000) / FS
     trace = Plant(params, fs_hz=FS, seed=0).run(Mode.VELOCITY, 0.5 * np.sin(2 * np.pi * t[:3600]))
     steps = np.diff(trace.position_rad)
@@ -67,8 +75,12 @@ def test_reversal_sticks_then_moves_the_other_way() -> None:
 
 
 def test_two_mass_resonance_frequency() -> None:
-    params = PlantParams(inertia_kg_m2=0.002, load_inertia_kg_m2=0.006,
-                         shaft_stiffness_nm_rad=200.0, shaft_damping_nm_s_rad=0.001)
+    params = PlantParams(
+        inertia_kg_m2=0.002,
+        load_inertia_kg_m2=0.006,
+        shaft_stiffness_nm_rad=200.0,
+        shaft_damping_nm_s_rad=0.001,
+    )
     trace = Plant(params, fs_hz=FS, seed=0).run(
         Mode.TORQUE, np.concatenate([[0.05], np.zeros(16383)])
     )
@@ -79,10 +91,17 @@ def test_two_mass_resonance_frequency() -> None:
 
 
 def test_encoder_quantisation_saturation_and_gravity() -> None:
-    params = PlantParams(inertia_kg_m2=0.003, encoder_counts_per_rev=65536, torque_limit_nm=0.05,
-                         gravity_mge_nm=0.04, gravity_phase_rad=0.0, position_kp_1_s=20.0,
-                         velocity_kp_nm_s_rad=0.3, velocity_ki_nm_rad=10.0,
-                         velocity_filter_hz=100.0)
+    params = PlantParams(
+        inertia_kg_m2=0.003,
+        encoder_counts_per_rev=65536,
+        torque_limit_nm=0.05,
+        gravity_mge_nm=0.04,
+        gravity_phase_rad=0.0,
+        position_kp_1_s=20.0,
+        velocity_kp_nm_s_rad=0.3,
+        velocity_ki_nm_rad=10.0,
+        velocity_filter_hz=100.0,
+    )
     trace = Plant(params, fs_hz=FS, seed=0).run(Mode.POSITION, np.full(20000, 0.5))
     counts = trace.position_rad / (2 * math.pi / 65536)
     np.testing.assert_allclose(counts, np.round(counts), atol=1e-9)
@@ -92,8 +111,12 @@ def test_encoder_quantisation_saturation_and_gravity() -> None:
 
 
 def test_cogging_is_periodic_in_position() -> None:
-    params = PlantParams(inertia_kg_m2=0.003, cogging=(Harmonic(order=12, amplitude=0.01),),
-                         velocity_kp_nm_s_rad=0.5, velocity_ki_nm_rad=20.0)
+    params = PlantParams(
+        inertia_kg_m2=0.003,
+        cogging=(Harmonic(order=12, amplitude=0.01),),
+        velocity_kp_nm_s_rad=0.5,
+        velocity_ki_nm_rad=20.0,
+    )
     speed = 0.5
     trace = Plant(params, fs_hz=FS, seed=0).run(Mode.VELOCITY, np.full(int(FS * 8), speed))
     keep = slice(int(FS), None)

@@ -15,7 +15,13 @@ pytest_plugins = ["pytester"]
 
 def _run(pytester: pytest.Pytester, out: Path, *args: str) -> pytest.RunResult:
     return pytester.runpytest_inprocess(
-        "--pyargs", "protocols.test_inertia_friction", "-p", "no:cacheprovider", "--out", str(out), *args
+        "--pyargs",
+        "protocols.test_inertia_friction",
+        "-p",
+        "no:cacheprovider",
+        "--out",
+        str(out),
+        *args,
     )
 
 
@@ -32,7 +38,9 @@ def _profile_with(tmp_path: Path, old: str, new: str) -> Path:
     return path
 
 
-def test_calibration_writes_a_passing_certificate(pytester: pytest.Pytester, tmp_path: Path) -> None:
+def test_calibration_writes_a_passing_certificate(
+    pytester: pytest.Pytester, tmp_path: Path
+) -> None:
     out = tmp_path / "certs"
     result = _run(pytester, out, "--unit-serial", "GMB-0042")
     assert result.ret == 0
@@ -47,7 +55,8 @@ def test_calibration_writes_a_passing_certificate(pytester: pytest.Pytester, tmp
     assert {"inertia_kg_m2", "viscous_nm_s_rad", "coulomb_nm"} <= set(params)
     for r in params.values():
         assert r["expanded_uncertainty"] == pytest.approx(
-            r["coverage_factor"] * r["standard_uncertainty"])
+            r["coverage_factor"] * r["standard_uncertainty"]
+        )
         assert r["lower_limit"] <= r["value"] <= r["upper_limit"]
     assert params["inertia_kg_m2"]["value"] == pytest.approx(0.0036, rel=0.04)
     for raw in cert["raw_data"]:
@@ -62,8 +71,9 @@ def test_calibration_writes_a_passing_certificate(pytester: pytest.Pytester, tmp
 
 def test_a_tolerance_miss_fails_the_certificate(pytester: pytest.Pytester, tmp_path: Path) -> None:
     """The demo unit's J is 0.0036; a profile expecting 0.0050 ± 10 % must not pass it."""
-    profile = _profile_with(tmp_path, "nominal = 0.0036\ntolerance_pct = 15",
-                            "nominal = 0.0050\ntolerance_pct = 10")
+    profile = _profile_with(
+        tmp_path, "nominal = 0.0036\ntolerance_pct = 15", "nominal = 0.0050\ntolerance_pct = 10"
+    )
     out = tmp_path / "certs"
     result = _run(pytester, out, "--profile", str(profile))
     assert _counts(result)["failed"] == 1

@@ -28,8 +28,14 @@ def _write(tmp_path: Path, lines: list[str], name: str = "rec.csv") -> Path:
 def test_round_trip_keeps_columns_metadata_and_values(tmp_path: Path) -> None:
     t = np.arange(500) / 1000.0
     rec = Recording(
-        columns={"time_s": t, "position_rad": np.sin(t), "velocity_rad_s": np.cos(t),
-                 "torque_nm": 0.01 * t, "current_a": 0.1 * t, "vendor_extra": t},
+        columns={
+            "time_s": t,
+            "position_rad": np.sin(t),
+            "velocity_rad_s": np.cos(t),
+            "torque_nm": 0.01 * t,
+            "current_a": 0.1 * t,
+            "vendor_extra": t,
+        },
         metadata={"unit_serial": "GMB-0042", "axis": "elevation"},
     )
     for name in ("r.csv", "r.csv.gz"):
@@ -51,23 +57,37 @@ def test_unknown_text_columns_are_ignored(tmp_path: Path) -> None:
 @pytest.mark.parametrize(
     ("mutate", "message", "line", "column"),
     [
-        (lambda ls: [ls[0].replace(",torque_nm", ",torque")] + ls[1:], "missing required column",
-         None, "torque_nm"),
-        (lambda ls: ls[:50] + ["0.049,0,0.1,abc"] + ls[51:], "non-numeric value 'abc'", 51,
-         "torque_nm"),
-        (lambda ls: ls[:10] + ["0.009,nan,0.1,0"] + ls[11:], "non-finite", 11, "position_rad"),
-        (lambda ls: ls[:20] + ["0.005,0,0.1,0"] + ls[21:], "not strictly increasing", 21,
-         "time_s"),
+        (
+            lambda ls: [ls[0].replace(",torque_nm", ",torque"), *ls[1:]],
+            "missing required column",
+            None,
+            "torque_nm",
+        ),
+        (
+            lambda ls: [*ls[:50], "0.049,0,0.1,abc", *ls[51:]],
+            "non-numeric value 'abc'",
+            51,
+            "torque_nm",
+        ),
+        (lambda ls: [*ls[:10], "0.009,nan,0.1,0", *ls[11:]], "non-finite", 11, "position_rad"),
+        (lambda ls: [*ls[:20], "0.005,0,0.1,0", *ls[21:]], "not strictly increasing", 21, "time_s"),
         (lambda ls: ls[:60], "at least 100", None, None),
-        (lambda ls: [HEADER + ",torque_nm"] + [r + ",0" for r in ls[1:]], "duplicate column",
-         None, "torque_nm"),
-        (lambda ls: [HEADER + ",force_n"] + [r + ",0" for r in ls[1:]], "mixes rotary", None,
-         None),
-        (lambda ls: ls[:30] + ["0.029,0,0.1"] + ls[31:], "has 3 fields", 31, None),
+        (
+            lambda ls: [HEADER + ",torque_nm"] + [r + ",0" for r in ls[1:]],
+            "duplicate column",
+            None,
+            "torque_nm",
+        ),
+        (lambda ls: [HEADER + ",force_n"] + [r + ",0" for r in ls[1:]], "mixes rotary", None, None),
+        (lambda ls: [*ls[:30], "0.029,0,0.1", *ls[31:]], "has 3 fields", 31, None),
     ],
 )
 def test_bad_input_is_refused_with_file_line_and_column(
-    tmp_path: Path, mutate, message: str, line: int | None, column: str | None  # type: ignore[no-untyped-def]
+    tmp_path: Path,
+    mutate,
+    message: str,
+    line: int | None,
+    column: str | None,  # type: ignore[no-untyped-def]
 ) -> None:
     path = _write(tmp_path, mutate([HEADER, *_rows()]))
     with pytest.raises(RecordingError, match=message) as caught:
@@ -98,8 +118,14 @@ def test_warnings_for_gaps_saturation_and_frozen_position(tmp_path: Path) -> Non
     t = np.arange(1000) / 1000.0
     t[500:] += 0.05  # a 50-sample gap
     torque = np.clip(np.sin(20 * t), -0.5, 0.5)  # clipped a large part of the time
-    rec = Recording(columns={"time_s": t, "position_rad": np.zeros_like(t),
-                             "velocity_rad_s": np.zeros_like(t), "torque_nm": torque})
+    rec = Recording(
+        columns={
+            "time_s": t,
+            "position_rad": np.zeros_like(t),
+            "velocity_rad_s": np.zeros_like(t),
+            "torque_nm": torque,
+        }
+    )
     write_recording(rec, tmp_path / "w.csv")
     warnings = " | ".join(read_recording(tmp_path / "w.csv").warnings)
     assert "gap" in warnings
@@ -108,7 +134,7 @@ def test_warnings_for_gaps_saturation_and_frozen_position(tmp_path: Path) -> Non
 
 
 def test_linear_axis_uses_linear_columns(tmp_path: Path) -> None:
-    lines = ["time_s,position_m,velocity_m_s,force_n"] + _rows()
+    lines = ["time_s,position_m,velocity_m_s,force_n", *_rows()]
     rec = read_recording(_write(tmp_path, lines))
     assert rec.axis_kind == "linear"
     assert rec.units["effort"] == "N"
@@ -130,7 +156,8 @@ def test_shared_examples_and_real_data_are_read() -> None:
 
 def test_gzip_is_deterministic(tmp_path: Path) -> None:
     t = np.arange(200) / 100.0
-    rec = Recording(columns={"time_s": t, "position_rad": t, "velocity_rad_s": t,
-                             "torque_nm": t})
-    assert write_recording(rec, tmp_path / "a.csv.gz") == write_recording(rec, tmp_path / "b.csv.gz")
+    rec = Recording(columns={"time_s": t, "position_rad": t, "velocity_rad_s": t, "torque_nm": t})
+    assert write_recording(rec, tmp_path / "a.csv.gz") == write_recording(
+        rec, tmp_path / "b.csv.gz"
+    )
     assert gzip.decompress((tmp_path / "a.csv.gz").read_bytes()).startswith(b"time_s,")

@@ -26,7 +26,11 @@ def git_revision() -> str | None:
     here = Path(__file__).resolve().parent
     try:
         done = subprocess.run(
-            ["git", "rev-parse", "HEAD"], cwd=here, capture_output=True, text=True, timeout=5,
+            ["git", "rev-parse", "HEAD"],
+            cwd=here,
+            capture_output=True,
+            text=True,
+            timeout=5,
             check=False,
         )
     except (OSError, subprocess.SubprocessError):
@@ -34,13 +38,19 @@ def git_revision() -> str | None:
     if done.returncode != 0:
         return None
     dirty = subprocess.run(
-        ["git", "status", "--porcelain", "--untracked-files=no"], cwd=here,
-        capture_output=True, text=True, timeout=5, check=False,
+        ["git", "status", "--porcelain", "--untracked-files=no"],
+        cwd=here,
+        capture_output=True,
+        text=True,
+        timeout=5,
+        check=False,
     ).stdout.strip()
     return done.stdout.strip() + ("-dirty" if dirty else "")
 
 
-def build_certificate(run: CalibrationRun, *, aborted: bool, issued: datetime | None = None) -> dict[str, Any]:
+def build_certificate(
+    run: CalibrationRun, *, aborted: bool, issued: datetime | None = None
+) -> dict[str, Any]:
     issued = issued or datetime.now(UTC)
     outcome = run.overall_outcome(aborted=aborted)
     info = run.drive_info

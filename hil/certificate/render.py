@@ -17,7 +17,8 @@ def render_text(cert: dict[str, Any]) -> str:
         f"{cert['drive'].get('model', '')} fw {cert['drive'].get('firmware_version', '?')}",
         f"Software       : gimbal-hil {cert['software']['version']} "
         f"({cert['software']['git_revision'] or 'no git revision'})",
-        f"Profile        : {cert['method']['profile']} (sha256 {cert['method']['profile_sha256'][:12]}…)",
+        f"Profile        : {cert['method']['profile']} "
+        f"(sha256 {cert['method']['profile_sha256'][:12]}…)",
         f"Machine time   : {cert['machine_time']['motion_time_s']:.1f} s of motion, "
         f"{cert['machine_time']['wall_time_s']:.1f} s wall",
         "",

@@ -120,7 +120,9 @@ def check_limits(excitation: Excitation, limits: Limits, *, start_position_rad: 
 def _check_peak(where: str, what: str, values: FloatArray, limit: float, unit: str) -> None:
     peak = float(np.max(np.abs(values)))
     if peak > limit:
-        raise LimitViolationError(f"{where}: peak {what} {peak:.4g} {unit} exceeds {limit:.4g} {unit}")
+        raise LimitViolationError(
+            f"{where}: peak {what} {peak:.4g} {unit} exceeds {limit:.4g} {unit}"
+        )
 
 
 class Drive(abc.ABC):

@@ -38,9 +38,7 @@ def orthogonal_components(
     for uniform sampling over whole periods, and still unbiased for irregular timestamps.
     """
     omega = 2 * math.pi * frequency_hz
-    design = np.column_stack(
-        [np.cos(omega * time_s), np.sin(omega * time_s), np.ones_like(time_s)]
-    )
+    design = np.column_stack([np.cos(omega * time_s), np.sin(omega * time_s), np.ones_like(time_s)])
     coefficients = np.linalg.lstsq(design, signal, rcond=None)[0]
     return float(coefficients[0]), float(coefficients[1])
 
@@ -88,9 +86,7 @@ def synchronous_average(signal: FloatArray, phase_bin: NDArray[np.intp]) -> Floa
     return means[phase_bin]
 
 
-def analyse_sine_run(
-    recording: Recording, *, frequency_hz: float, settle_periods: int
-) -> SineRun:
+def analyse_sine_run(recording: Recording, *, frequency_hz: float, settle_periods: int) -> SineRun:
     """Reduce one sinusoidal-velocity run (starting at the recording's first sample).
 
     The first ``settle_periods`` are discarded; every following whole period is used.
@@ -110,8 +106,10 @@ def analyse_sine_run(
     position = recording.position[window]
     torque = recording.effort[window]
 
-    per_period = [_period_components(t, position, torque, frequency_hz, k) for k in
-                  range(settle_periods, total)]
+    per_period = [
+        _period_components(t, position, torque, frequency_hz, k)
+        for k in range(settle_periods, total)
+    ]
     quadrature = np.array([p[0] for p in per_period])
     in_phase = np.array([p[1] for p in per_period])
     amplitude = np.array([p[2] for p in per_period])
@@ -121,8 +119,9 @@ def analyse_sine_run(
     trend = np.column_stack([design, t])
     pos_coef = np.linalg.lstsq(trend, position, rcond=None)[0]
     velocity, acceleration = _harmonic_derivatives(t, pos_coef, frequency_hz)
-    phase_bin = np.minimum((np.mod(t * frequency_hz, 1.0) * PHASE_BINS).astype(np.intp),
-                           PHASE_BINS - 1)
+    phase_bin = np.minimum(
+        (np.mod(t * frequency_hz, 1.0) * PHASE_BINS).astype(np.intp), PHASE_BINS - 1
+    )
     torque_periodic = synchronous_average(torque, phase_bin)
     dof = max(len(t) - PHASE_BINS, 1)
     noise_rms = float(np.sqrt(np.sum((torque - torque_periodic) ** 2) / dof))
@@ -155,8 +154,9 @@ def _period_components(
     omega = 2 * math.pi * frequency_hz
     cos, sin = np.cos(omega * tk), np.sin(omega * tk)
     ones = np.ones_like(tk)
-    pos = np.linalg.lstsq(np.column_stack([cos, sin, ones, tk - tk.mean()]), position[mask],
-                          rcond=None)[0]
+    pos = np.linalg.lstsq(
+        np.column_stack([cos, sin, ones, tk - tk.mean()]), position[mask], rcond=None
+    )[0]
     tor = np.linalg.lstsq(np.column_stack([cos, sin, ones]), torque[mask], rcond=None)[0]
     # x = Xc·cos + Xs·sin  →  v = ω·Xs·cos − ω·Xc·sin = V·sin(ωt + φ)
     v_sin, v_cos = -omega * pos[0], omega * pos[1]
@@ -232,13 +232,30 @@ def identify_inertia_friction(runs: Sequence[SineRun]) -> InertiaFrictionResult:
     noise = float(np.sqrt(np.mean([r.noise_rms_nm**2 for r in runs])))
     crb = cramer_rao_std(runs, noise_rms_nm=noise)
     return InertiaFrictionResult(
-        inertia=Estimate(name="inertia_kg_m2", value=inertia[0], standard_uncertainty=inertia[1],
-                         unit="kg·m²", dof=inertia[2], cramer_rao_std=float(crb[0])),
-        viscous=Estimate(name="viscous_nm_s_rad", value=viscous[0],
-                         standard_uncertainty=viscous[1], unit="N·m·s/rad", dof=viscous[2],
-                         cramer_rao_std=float(crb[1])),
-        coulomb=Estimate(name="coulomb_nm", value=coulomb[0], standard_uncertainty=coulomb[1],
-                         unit="N·m", dof=coulomb[2], cramer_rao_std=float(crb[2])),
+        inertia=Estimate(
+            name="inertia_kg_m2",
+            value=inertia[0],
+            standard_uncertainty=inertia[1],
+            unit="kg·m²",
+            dof=inertia[2],
+            cramer_rao_std=float(crb[0]),
+        ),
+        viscous=Estimate(
+            name="viscous_nm_s_rad",
+            value=viscous[0],
+            standard_uncertainty=viscous[1],
+            unit="N·m·s/rad",
+            dof=viscous[2],
+            cramer_rao_std=float(crb[1]),
+        ),
+        coulomb=Estimate(
+            name="coulomb_nm",
+            value=coulomb[0],
+            standard_uncertainty=coulomb[1],
+            unit="N·m",
+            dof=coulomb[2],
+            cramer_rao_std=float(crb[2]),
+        ),
         runs=tuple(runs),
         fit_pct=fit_pct,
         lack_of_fit_rms_nm=lack_rms,

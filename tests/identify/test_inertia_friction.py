@@ -18,13 +18,15 @@ from tests.helpers import sine_model_recording
 ARTICLE = {"inertia": 0.0036, "viscous": 0.005, "coulomb": 0.020}
 
 
-@pytest.mark.parametrize(("amplitude", "c_expected", "s_expected"),
-                         [(0.5, 0.02262, 0.02796), (1.0, 0.04524, 0.03046)])
+@pytest.mark.parametrize(
+    ("amplitude", "c_expected", "s_expected"), [(0.5, 0.02262, 0.02796), (1.0, 0.04524, 0.03046)]
+)
 def test_article_worked_example_to_five_decimals(
     amplitude: float, c_expected: float, s_expected: float
 ) -> None:
-    rec = sine_model_recording(**ARTICLE, amplitude=amplitude, frequency_hz=2.0, periods=10,
-                               fs_hz=4000.0)
+    rec = sine_model_recording(
+        **ARTICLE, amplitude=amplitude, frequency_hz=2.0, periods=10, fs_hz=4000.0
+    )
     c, s = orthogonal_components(rec.effort, time_s=rec.time_s, frequency_hz=2.0)
     assert round(c, 5) == c_expected
     assert round(s, 5) == s_expected
@@ -33,9 +35,11 @@ def test_article_worked_example_to_five_decimals(
 def test_noise_free_model_is_recovered_exactly() -> None:
     runs = [
         analyse_sine_run(
-            sine_model_recording(**ARTICLE, amplitude=a, frequency_hz=2.0, periods=10,
-                                 fs_hz=4000.0),
-            frequency_hz=2.0, settle_periods=2,
+            sine_model_recording(
+                **ARTICLE, amplitude=a, frequency_hz=2.0, periods=10, fs_hz=4000.0
+            ),
+            frequency_hz=2.0,
+            settle_periods=2,
         )
         for a in (0.5, 1.0, 1.5)
     ]
@@ -54,9 +58,17 @@ def test_reported_uncertainty_matches_the_scatter_and_the_cramer_rao_bound() -> 
     for seed in range(40):
         runs = [
             analyse_sine_run(
-                sine_model_recording(**ARTICLE, amplitude=a, frequency_hz=2.0, periods=10,
-                                     fs_hz=2000.0, noise_nm=noise, seed=100 * seed + i),
-                frequency_hz=2.0, settle_periods=2,
+                sine_model_recording(
+                    **ARTICLE,
+                    amplitude=a,
+                    frequency_hz=2.0,
+                    periods=10,
+                    fs_hz=2000.0,
+                    noise_nm=noise,
+                    seed=100 * seed + i,
+                ),
+                frequency_hz=2.0,
+                settle_periods=2,
             )
             for i, a in enumerate((0.5, 1.0))
         ]
@@ -79,7 +91,8 @@ def test_reported_uncertainty_matches_the_scatter_and_the_cramer_rao_bound() -> 
 def test_single_amplitude_is_refused() -> None:
     run = analyse_sine_run(
         sine_model_recording(**ARTICLE, amplitude=0.5, frequency_hz=2.0, periods=6, fs_hz=2000.0),
-        frequency_hz=2.0, settle_periods=2,
+        frequency_hz=2.0,
+        settle_periods=2,
     )
     with pytest.raises(IdentificationError, match="two or more amplitudes"):
         identify_inertia_friction([run])
@@ -88,7 +101,6 @@ def test_single_amplitude_is_refused() -> None:
 
 
 def test_too_few_periods_is_refused() -> None:
-    rec = sine_model_recording(**ARTICLE, amplitude=0.5, frequency_hz=2.0, periods=3,
-                               fs_hz=2000.0)
+    rec = sine_model_recording(**ARTICLE, amplitude=0.5, frequency_hz=2.0, periods=3, fs_hz=2000.0)
     with pytest.raises(IdentificationError, match="whole periods"):
         analyse_sine_run(rec, frequency_hz=2.0, settle_periods=2)
