@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import json
 import logging
-from collections.abc import Iterator
+from collections.abc import Generator, Iterator
 from pathlib import Path
 
 import pytest
@@ -124,11 +124,13 @@ def _protocol_name(item: pytest.Item) -> str | None:
     mark = item.get_closest_marker(PROTOCOL_MARK)
     if mark is None:
         return None
-    return str(mark.args[0]) if mark.args else item.module.__name__.rsplit(".", 1)[-1]
+    return str(mark.args[0]) if mark.args else item.name
 
 
 @pytest.hookimpl(wrapper=True)
-def pytest_runtest_makereport(item: pytest.Item, call: pytest.CallInfo[None]) -> Iterator[None]:
+def pytest_runtest_makereport(
+    item: pytest.Item, call: pytest.CallInfo[None]
+) -> Generator[None, pytest.TestReport, pytest.TestReport]:
     report: pytest.TestReport = yield
     name = _protocol_name(item)
     run = item.config.stash.get(RUN_KEY, None)

@@ -78,7 +78,7 @@ def _periodic(theta: float, table: np.ndarray) -> float:
     if i >= size:
         i = size - 1
     frac = x - i
-    return table[i] + frac * (table[i + 1] - table[i])
+    return float(table[i] + frac * (table[i + 1] - table[i]))
 
 
 @njit(cache=True, fastmath=True)

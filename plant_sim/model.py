@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -158,7 +159,8 @@ class Plant:
         n = command.shape[0]
         noise = self._rng.normal(0.0, 1.0, n) * self.params.torque_noise_nm
         outputs = [np.empty(n) for _ in range(5)]
-        kernel.run_kernel(
+        run_kernel: Callable[..., None] = kernel.run_kernel
+        run_kernel(
             self._packed,
             self._cogging,
             self._kt_ripple,

@@ -3,11 +3,10 @@
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
-from numpy.typing import NDArray
+from numpy.typing import ArrayLike
 from scipy import stats
 
 COVERAGE_PROBABILITY = 0.9545  # the coverage of k = 2 for a normal distribution
@@ -51,10 +50,10 @@ class Estimate:
 
 
 def combine_linear(
-    weights: NDArray[np.float64],
-    values: Sequence[float],
-    uncertainties: Sequence[float],
-    dofs: Sequence[float],
+    weights: ArrayLike,
+    values: ArrayLike,
+    uncertainties: ArrayLike,
+    dofs: ArrayLike,
 ) -> tuple[float, float, float]:
     """Value, standard uncertainty and Welch–Satterthwaite dof of ``Σ wᵢ·xᵢ`` for independent
     inputs ``xᵢ ± uᵢ`` with ``νᵢ`` degrees of freedom."""
