@@ -98,6 +98,7 @@ class Cia402Emulator:
         serial_number: int = 1,
         supported_modes: int = 0x038D,
         enable_delay_syncs: int = 2,
+        lock_mode_while_enabled: bool = False,
         faults: CanFaults | None = None,
         eds_path: Path | None = None,
     ) -> None:
@@ -109,6 +110,7 @@ class Cia402Emulator:
         self.interface = interface
         self.supported_modes = supported_modes
         self.enable_delay_syncs = enable_delay_syncs
+        self.lock_mode_while_enabled = lock_mode_while_enabled
         self.counts_per_rev = plant.encoder_counts_per_rev or (1 << 20)
         self.rated_torque_nm = rated_torque_nm
         self.rated_current_a = rated_current_a or rated_torque_nm / plant.torque_constant_nm_a
@@ -211,6 +213,8 @@ class Cia402Emulator:
                 return self.mode_display
             if index == 0x603F:
                 return self.error_code
+            if index == 0x6502:
+                return self.supported_modes
             if index == 0x1001:
                 return self._error_register()
             if index in self._sample:
@@ -241,7 +245,8 @@ class Cia402Emulator:
         elif index == 0x6060:
             if value not in _MODE_BITS or not self.supported_modes & _MODE_BITS[value]:
                 raise SdoAbortedError(ABORT_VALUE_RANGE)
-            self.mode_display = int(value)
+            if not (self.lock_mode_while_enabled and self.state == ENABLED):
+                self.mode_display = int(value)
         elif index in self.targets:
             self.targets[index] = int(value)
         elif index == 0x60C2 or index == 0x1006:

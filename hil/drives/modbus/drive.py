@@ -1,0 +1,350 @@
+"""ModbusDrive: the Drive contract over Modbus TCP or RTU (pymodbus), by polling.
+
+Each poll writes the command sample due at that moment and reads the feedback block;
+the recording's ``time_s`` is the host's monotonic clock at the middle of each read
+transaction, so sampling is irregular and says so. ``info.max_sample_rate_hz`` is measured
+at connection (70 % of the sustained poll rate, rounded down to 1-2-5) and capped by the
+station's ``max_poll_rate_hz``.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import time
+from typing import Any
+
+import numpy as np
+from pymodbus.client import ModbusSerialClient, ModbusTcpClient
+from pymodbus.exceptions import ModbusException
+from pymodbus.framer import FramerType
+
+from hil.drives.base import (
+    Drive,
+    DriveInfo,
+    DriveState,
+    DriveStatus,
+    Excitation,
+    Limits,
+    Mode,
+    check_limits,
+)
+from hil.drives.modbus.regmap import FEEDBACK, RegisterMap, load_register_map
+from hil.drives.station import ModbusStation
+from hil.errors import DriveCommunicationError, DriveError, DriveFaultError, DriveStateError
+from hil.recording import Recording
+
+log = logging.getLogger(__name__)
+
+EXCEPTION_NAMES = {1: "ILLEGAL FUNCTION", 2: "ILLEGAL DATA ADDRESS", 3: "ILLEGAL DATA VALUE",
+                   4: "SERVER DEVICE FAILURE", 5: "ACKNOWLEDGE", 6: "SERVER DEVICE BUSY",
+                   0x0B: "GATEWAY TARGET FAILED TO RESPOND"}  # fmt: skip
+COMMAND_COLUMN = {Mode.TORQUE: "torque_cmd_nm", Mode.VELOCITY: "velocity_cmd_rad_s",
+                  Mode.POSITION: "position_cmd_rad"}  # fmt: skip
+
+
+def nice_rate(rate_hz: float) -> float:
+    """Largest 1-2-5 value not above ``rate_hz``."""
+    decade = 10.0 ** math.floor(math.log10(rate_hz))
+    for step in (5.0, 2.0, 1.0):
+        if step * decade <= rate_hz:
+            return step * decade
+    return decade  # pragma: no cover
+
+
+class ModbusDrive(Drive):
+    def __init__(self, station: ModbusStation, *, limits: Limits) -> None:
+        self.station = station
+        self.limits = limits
+        self.map: RegisterMap = load_register_map(station.register_map_path)
+        self._state = DriveState.DISABLED
+        self._blocks = self.map.blocks(FEEDBACK)
+        self._client = self._make_client()
+        self._connect()
+        try:
+            self._info = self._read_info()
+        except BaseException:
+            self._client.close()
+            raise
+
+    # -- transport -----------------------------------------------------------------------
+    def _make_client(self) -> Any:
+        st = self.station
+        if st.transport == "tcp":
+            return ModbusTcpClient(st.host, port=st.port, timeout=st.timeout_s, retries=0)
+        return ModbusSerialClient(
+            st.serial_port, framer=FramerType.RTU, baudrate=st.baudrate, parity=st.parity,
+            stopbits=st.stopbits, timeout=st.timeout_s, retries=0,
+        )  # fmt: skip
+
+    def _where(self) -> str:
+        st = self.station
+        link = f"{st.host}:{st.port}" if st.transport == "tcp" else st.serial_port
+        return f"modbus {st.transport} {link} unit {st.unit_id}"
+
+    def _connect(self) -> None:
+        if not self._client.connect():
+            raise DriveCommunicationError(f"{self._where()}: cannot connect")
+
+    def _call(self, what: str, method: str, *args: Any, **kwargs: Any) -> Any:
+        gap = self.map.frame_gap_s
+        if gap:
+            time.sleep(gap)
+        try:
+            response = getattr(self._client, method)(*args, device_id=self.station.unit_id, **kwargs)
+        except ModbusException as exc:
+            raise DriveCommunicationError(f"{self._where()}: {what}: {exc}") from exc
+        except OSError as exc:
+            raise DriveCommunicationError(f"{self._where()}: {what}: {exc}") from exc
+        if response.isError():
+            code = int(getattr(response, "exception_code", 0))
+            name = EXCEPTION_NAMES.get(code, "unknown")
+            raise DriveFaultError(
+                f"{self._where()}: {what} answered with Modbus exception {code} ({name})",
+                code=code,
+            )
+        return response
+
+    def _read_regs(self, address: int, count: int) -> list[int]:
+        response = self._call(f"read {count} registers at {address}", "read_holding_registers",
+                              address, count=count)  # fmt: skip
+        return list(response.registers)
+
+    def read_values(self, names: tuple[str, ...]) -> dict[str, float]:
+        words: dict[int, int] = {}
+        for address, count in self.map.blocks(names):
+            for offset, value in enumerate(self._read_regs(address, count)):
+                words[address + offset] = value
+        out = {}
+        for name in names:
+            if name in self.map.registers:
+                r = self.map[name]
+                out[name] = r.decode([words[r.address + i] for i in range(r.count)])
+        return out
+
+    def write_value(self, name: str, value_si: float) -> None:
+        register = self.map[name]
+        self._call(f"write {name}", "write_registers", register.address, register.encode(value_si))
+
+    # -- info ----------------------------------------------------------------------------
+    def _read_info(self) -> DriveInfo:
+        ident = self.read_values(("firmware_version", "serial_number", "rated_torque"))
+        firmware = int(ident.get("firmware_version", 0))
+        rate = self._measure_poll_rate()
+        return DriveInfo(
+            vendor="modbus",
+            model=self.map.model,
+            firmware_version=f"{firmware >> 8}.{firmware & 0xFF}",
+            serial=str(int(ident.get("serial_number", 0))),
+            rated_torque_nm=float(ident.get("rated_torque", self.limits.torque_nm)),
+            limits=self.limits,
+            modes=tuple(Mode(name) for name in self.map.modes if name in ("torque", "velocity", "position")),
+            max_sample_rate_hz=rate,
+            transport=self._where(),
+        )
+
+    def _measure_poll_rate(self, polls: int = 20) -> float:
+        start = time.monotonic()
+        for _ in range(polls):
+            self._feedback()
+        per_poll = (time.monotonic() - start) / polls
+        achievable = 0.7 / per_poll
+        return nice_rate(min(self.station.max_poll_rate_hz, achievable))
+
+    @property
+    def info(self) -> DriveInfo:
+        return self._info
+
+    # -- state ---------------------------------------------------------------------------
+    def _feedback(self) -> tuple[float, dict[str, float]]:
+        """One poll of the feedback block: (host time at the middle, values)."""
+        words: dict[int, int] = {}
+        t0 = time.monotonic()
+        for address, count in self._blocks:
+            for offset, value in enumerate(self._read_regs(address, count)):
+                words[address + offset] = value
+        t1 = time.monotonic()
+        values = {}
+        for name in FEEDBACK:
+            if name in self.map.registers:
+                r = self.map[name]
+                values[name] = r.decode([words[r.address + i] for i in range(r.count)])
+        return (t0 + t1) / 2, values
+
+    def _bit(self, values: dict[str, float], name: str) -> bool:
+        return bool(int(values["status_word"]) >> self.map.status_bits[name] & 1)
+
+    def status(self) -> DriveStatus:
+        _, v = self._feedback()
+        fault = self._bit(v, "fault")
+        state = DriveState.FAULT if fault else (
+            DriveState.QUICK_STOPPED if self._bit(v, "quick_stop_active") else
+            DriveState.ENABLED if self._bit(v, "enabled") else DriveState.DISABLED
+        )  # fmt: skip
+        return DriveStatus(state=state, position_rad=v["position"], velocity_rad_s=v["velocity"],
+                           fault_code=int(v["fault_code"]) if fault else None)  # fmt: skip
+
+    def _control(self, *bits: str) -> None:
+        word = sum(1 << self.map.control_bits[b] for b in bits)
+        self.write_value("control_word", word)
+
+    def _await(self, what: str, done: Any, timeout_s: float = 2.0) -> dict[str, float]:
+        deadline = time.monotonic() + timeout_s
+        while True:
+            _, values = self._feedback()
+            if done(values):
+                return values
+            if time.monotonic() > deadline:
+                raise DriveStateError(f"{self._where()}: {what} not confirmed "
+                                      f"(status word 0x{int(values['status_word']):04X})")  # fmt: skip
+            time.sleep(0.005)
+
+    def enable(self, mode: Mode = Mode.VELOCITY) -> None:
+        _, values = self._feedback()
+        if self._bit(values, "fault"):
+            code = int(values["fault_code"])
+            self._control("fault_reset")
+            self._control()
+            values = self._await("fault reset", lambda v: not self._bit(v, "fault"))
+            log.info("%s: fault 0x%04X reset", self._where(), code)
+        self._select(mode)
+        self._control("enable")
+        self._await("enable", lambda v: self._bit(v, "enabled") or self._bit(v, "fault"))
+        self._raise_if_faulted("while enabling")
+        self._state = DriveState.ENABLED
+
+    def _select(self, mode: Mode) -> None:
+        self.write_value(f"{mode.value}_cmd", self._hold_value(mode))
+        self.write_value("mode", self.map.modes[mode.value])
+        if int(self.read_values(("mode",))["mode"]) != self.map.modes[mode.value]:
+            raise DriveStateError(f"{self._where()}: mode register does not show {mode.value}")
+        self._mode = mode
+
+    def _hold_value(self, mode: Mode) -> float:
+        if mode is Mode.POSITION:
+            return self.read_values(("position",))["position"]
+        return 0.0
+
+    def _raise_if_faulted(self, context: str) -> None:
+        _, values = self._feedback()
+        if self._bit(values, "fault"):
+            self._state = DriveState.FAULT
+            raise DriveFaultError(f"{self._where()}: drive fault {context}",
+                                  code=int(values["fault_code"]))  # fmt: skip
+
+    def disable(self) -> None:
+        if not self._client.connected:
+            self._state = DriveState.DISABLED
+            return
+        try:
+            self._control()
+            self._await("disable", lambda v: not self._bit(v, "enabled"))
+        except DriveError as exc:
+            log.error("%s: disable not confirmed: %s", self._where(), exc)
+        self._state = DriveState.DISABLED
+
+    def quick_stop(self) -> None:
+        try:
+            if not self._client.connected:
+                self._connect()  # the drive's watchdog stops it anyway; try to confirm
+            self._control("quick_stop")
+            self._await("quick stop", lambda v: not self._bit(v, "enabled") and
+                        abs(v["velocity"]) < 1e-2, timeout_s=5.0)  # fmt: skip
+        except DriveError as exc:
+            log.error("%s: quick stop not confirmed: %s", self._where(), exc)
+        self._state = DriveState.QUICK_STOPPED
+
+    def close(self) -> None:
+        try:
+            self.disable()
+        finally:
+            self._client.close()
+
+    # -- run -----------------------------------------------------------------------------
+    def run(self, excitation: Excitation) -> Recording:
+        if self._state is not DriveState.ENABLED:
+            raise DriveStateError(f"cannot run '{excitation.name}': drive is {self._state.value}")
+        if excitation.fs_hz > self._info.max_sample_rate_hz * (1 + 1e-9):
+            raise DriveStateError(
+                f"excitation '{excitation.name}' is sampled at {excitation.fs_hz} Hz; this "
+                f"Modbus link polls at up to {self._info.max_sample_rate_hz:g} Hz"
+            )
+        start = self.status()
+        check_limits(excitation, self.limits, start_position_rad=start.position_rad)
+        if excitation.mode is not getattr(self, "_mode", None):
+            self._select(excitation.mode)
+        rows: list[tuple[float, float, dict[str, float]]] = []
+        error: DriveError | None = None
+        try:
+            self._poll(excitation, rows)
+        except DriveError as exc:
+            error = exc
+        except BaseException:
+            self.quick_stop()
+            raise
+        recording = self._recording(excitation, rows)
+        if error is not None:
+            if isinstance(error, DriveFaultError):
+                self._state = DriveState.FAULT
+            self.quick_stop()
+            self.disable()
+            error.partial_recording = recording
+            raise error
+        self.write_value(f"{excitation.mode.value}_cmd", self._hold_value(excitation.mode))
+        return recording
+
+    def _poll(self, excitation: Excitation, rows: list[tuple[float, float, dict[str, float]]]) -> None:
+        command = np.asarray(excitation.command, dtype=np.float64)
+        name = f"{excitation.mode.value}_cmd"
+        fs, n = excitation.fs_hz, len(command)
+        last_index = -1
+        t0 = time.monotonic()
+        while True:
+            index = int((time.monotonic() - t0) * fs)
+            if index >= n:
+                return
+            if index != last_index:
+                self.write_value(name, float(command[index]))
+                last_index = index
+            stamp, values = self._feedback()
+            rows.append((stamp - t0, float(command[index]), values))
+            if self._bit(values, "fault"):
+                raise DriveFaultError(
+                    f"{self._where()}: drive fault at t = {stamp - t0:.3f} s of "
+                    f"'{excitation.name}'", code=int(values["fault_code"]))  # fmt: skip
+            if not self._bit(values, "enabled"):
+                raise DriveStateError(f"{self._where()}: drive disabled itself during "
+                                      f"'{excitation.name}'")  # fmt: skip
+            next_due = t0 + (index + 1) / fs
+            delay = next_due - time.monotonic()
+            if delay > 0:
+                time.sleep(delay)
+
+    def _recording(self, excitation: Excitation,
+                   rows: list[tuple[float, float, dict[str, float]]]) -> Recording:  # fmt: skip
+        def column(key: str) -> np.ndarray:
+            return np.asarray([r[2].get(key, np.nan) for r in rows], dtype=np.float64)
+
+        columns = {
+            "time_s": np.asarray([r[0] for r in rows], dtype=np.float64),
+            "position_rad": column("position"),
+            "velocity_rad_s": column("velocity"),
+            "torque_nm": column("torque"),
+            COMMAND_COLUMN[excitation.mode]: np.asarray([r[1] for r in rows], dtype=np.float64),
+        }
+        if "current" in self.map.registers:
+            columns["current_a"] = column("current")
+        metadata = {
+            "drive": self._where(),
+            "unit_id": str(self.station.unit_id),
+            "model": self._info.model,
+            "firmware": self._info.firmware_version,
+            "serial": self._info.serial,
+            "transport": self._info.transport,
+            "excitation": excitation.name,
+            "control_mode": excitation.mode.value,
+            "acquisition": "polled (host timestamps, irregular)",
+            "poll_rate_hz": f"{len(rows) / max(excitation.duration_s, 1e-9):.1f}",
+            **excitation.metadata,
+        }
+        return Recording(columns=columns, metadata=metadata, source=f"modbus:{excitation.name}")

@@ -1,0 +1,294 @@
+"""A Modbus servo drive (TCP, or RTU framing over a TCP socket) backed by :mod:`plant_sim`.
+
+A pymodbus server on 127.0.0.1 serves the holding registers of the register map it is
+given (``fixtures/regmap_*.toml``). Unlike the CANopen emulator, the plant steps in real
+time: every request first advances it to the wall clock with the last command held, and
+a background task keeps it going between requests (and runs the drive's communication
+watchdog). Faults: line delay, exception responses, a drive trip, a dropped connection,
+a drive that stops answering.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+import math
+import threading
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from pymodbus import FramerType
+from pymodbus.constants import ExcCodes
+from pymodbus.datastore import ModbusServerContext
+from pymodbus.datastore.context import ModbusBaseDeviceContext
+from pymodbus.server import ModbusTcpServer
+
+from hil.drives.base import Mode
+from hil.drives.modbus.regmap import FEEDBACK, load_register_map
+from plant_sim.emulators.faults import ModbusFaults
+from plant_sim.model import Plant
+from plant_sim.params import PlantParams
+
+log = logging.getLogger(__name__)
+
+WATCHDOG_FAULT = 0x8130  # CiA-style "life guard / heartbeat error"
+QUICK_STOP_DECEL_RAD_S2 = 20.0
+REGISTERS = 128
+
+
+class _Context(ModbusBaseDeviceContext):  # type: ignore[misc]
+    def __init__(self, emulator: ModbusEmulator) -> None:
+        self.emulator = emulator
+
+    def reset(self) -> None:  # pragma: no cover - required by the interface
+        pass
+
+    async def async_getValues(self, func_code: int, address: int, count: int = 1) -> Any:
+        return await self.emulator.serve(func_code, address, count, None)
+
+    async def async_setValues(self, func_code: int, address: int, values: list[int]) -> Any:
+        return await self.emulator.serve(func_code, address, len(values), values)
+
+
+class ModbusEmulator:
+    """One emulated servo axis behind a Modbus server on 127.0.0.1 (an ephemeral port)."""
+
+    def __init__(
+        self,
+        plant: PlantParams,
+        *,
+        fs_hz: float,
+        seed: int,
+        register_map: Path,
+        rated_torque_nm: float,
+        framing: str = "tcp",
+        faults: ModbusFaults | None = None,
+        serial_number: int = 1,
+        watchdog_s: float = 0.5,
+    ) -> None:
+        self.plant = Plant(plant, fs_hz=fs_hz, seed=seed)
+        self.fs_hz = float(fs_hz)
+        self.map = load_register_map(register_map)
+        self.rated_torque_nm = rated_torque_nm
+        self.framing = framing
+        self.faults = faults or ModbusFaults()
+        self.watchdog_s = watchdog_s
+        self.port = 0
+        self.regs = np.zeros(REGISTERS, dtype=np.int64)
+        self.enabled = False
+        self.quick_stopping = False
+        self.fault_code = 0
+        self.time_enabled_s = 0.0
+        self.requests = 0
+        self._ramp = 0.0
+        self._control = 0
+        self._last_request = time.monotonic()
+        self._clock = time.monotonic()
+        self._lock = threading.Lock()
+        self._dropped = False
+        self._loop: asyncio.AbstractEventLoop | None = None
+        self._thread: threading.Thread | None = None
+        self._server: ModbusTcpServer | None = None
+        self._ready = threading.Event()
+        self._stopping = False
+        self._put("firmware_version", 2 * 256 + 1)
+        self._put("serial_number", serial_number)
+        self._put("rated_torque", rated_torque_nm)
+        self._put("mode", self.map.modes["velocity"])
+        self._sample(self._hold_trace())
+
+    # -- life cycle ----------------------------------------------------------------------
+    def start(self) -> None:
+        self._thread = threading.Thread(target=self._serve_forever, name="modbus-emulator",
+                                        daemon=True)  # fmt: skip
+        self._thread.start()
+        if not self._ready.wait(10):
+            raise RuntimeError("Modbus emulator did not start")
+        log.info("Modbus emulator (%s) on 127.0.0.1:%d", self.framing, self.port)
+
+    def _serve_forever(self) -> None:
+        loop = asyncio.new_event_loop()
+        self._loop = loop
+        loop.run_until_complete(self._main())
+        loop.close()
+
+    async def _main(self) -> None:
+        context = ModbusServerContext(devices=_Context(self), single=True)
+        framer = FramerType.RTU if self.framing == "rtu" else FramerType.SOCKET
+        server = ModbusTcpServer(context, framer=framer, address=("127.0.0.1", 0))
+        self._server = server
+        await server.serve_forever(background=True)
+        self.port = int(server.transport.sockets[0].getsockname()[1])
+        self._ready.set()
+        while not self._stopping:
+            await asyncio.sleep(0.005)
+            with self._lock:
+                self._advance()
+                self._watchdog()
+        await server.shutdown()
+
+    def stop(self) -> None:
+        self._stopping = True
+        if self._thread is not None:
+            self._thread.join(10)
+        self._thread = None
+
+    def __enter__(self) -> ModbusEmulator:
+        self.start()
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.stop()
+
+    # -- requests ------------------------------------------------------------------------
+    async def serve(self, func_code: int, address: int, count: int, values: list[int] | None) -> Any:
+        f = self.faults
+        if f.response_delay_s:
+            await asyncio.sleep(f.response_delay_s)
+        with self._lock:
+            self._advance()
+            self._last_request = time.monotonic()
+            self.requests += 1
+            elapsed = self.time_enabled_s
+            if f.drop_connection_after_s is not None and elapsed >= f.drop_connection_after_s:
+                self._dropped = True
+            if self._dropped:
+                self._drop_connections()
+                return ExcCodes.DEVICE_FAILURE  # never arrives: the connection is gone
+            if f.stop_answering_after_s is not None and elapsed >= f.stop_answering_after_s:
+                stall = True
+            else:
+                stall = False
+                if f.exception_after_s is not None and elapsed >= f.exception_after_s:
+                    return ExcCodes(f.exception_code)
+                if address < 0 or address + count > REGISTERS:
+                    return ExcCodes.ILLEGAL_ADDRESS
+                if values is None:
+                    if count > self.map.max_registers_per_read:
+                        return ExcCodes.ILLEGAL_VALUE
+                    return [int(v) & 0xFFFF for v in self.regs[address : address + count]]
+                self._write(address, values)
+                return None
+        if stall:
+            await asyncio.sleep(3600)
+        return None
+
+    def _drop_connections(self) -> None:
+        if self._server is None:
+            return
+        for connection in list(self._server.active_connections.values()):
+            transport = getattr(connection, "transport", None)
+            if transport is not None:
+                transport.close()
+
+    def _write(self, address: int, values: list[int]) -> None:
+        for offset, value in enumerate(values):
+            self.regs[address + offset] = value
+        control = self.map["control_word"]
+        if address <= control.address < address + len(values):
+            self._apply_control(int(self._get("control_word")))
+
+    def _apply_control(self, word: int) -> None:
+        bits = self.map.control_bits
+        rising = word & ~self._control
+        self._control = word
+        if rising & (1 << bits["fault_reset"]) and self.fault_code:
+            self.fault_code = 0
+        if self.fault_code:
+            self.enabled = False
+            return
+        if word & (1 << bits["quick_stop"]):
+            if self.enabled and not self.quick_stopping:
+                self.quick_stopping = True
+                self._ramp = self.plant.velocity_rad_s
+            return
+        want = bool(word & (1 << bits["enable"]))
+        if want and not self.enabled:
+            self.plant.hold()
+            self.quick_stopping = False
+        self.enabled = want
+
+    # -- registers -----------------------------------------------------------------------
+    def _put(self, name: str, value: float) -> None:
+        register = self.map[name] if name in self.map.registers else None
+        if register is None:
+            return
+        words = register.encode(value)
+        self.regs[register.address : register.address + register.count] = words
+
+    def _get(self, name: str) -> float:
+        register = self.map[name]
+        words = [int(w) & 0xFFFF for w in self.regs[register.address : register.address + register.count]]
+        return register.decode(words)
+
+    def _status_word(self) -> int:
+        bits = self.map.status_bits
+        word = 0
+        if self.enabled and not self.quick_stopping:
+            word |= 1 << bits["enabled"]
+        if self.fault_code:
+            word |= 1 << bits["fault"]
+        if self.quick_stopping:
+            word |= 1 << bits["quick_stop_active"]
+        return word
+
+    # -- the plant, in real time -------------------------------------------------------------
+    def _advance(self) -> None:
+        now = time.monotonic()
+        steps = int((now - self._clock) * self.fs_hz)
+        while steps > 0:
+            block = min(steps, int(self.fs_hz))
+            self._clock += block / self.fs_hz
+            steps -= block
+            mode, command = self._command(block)
+            trace = self.plant.run(mode, command)
+            if self.enabled:
+                self.time_enabled_s += block / self.fs_hz
+            self._sample(trace)
+            after = self.faults.drive_fault_after_s
+            if after is not None and self.enabled and self.time_enabled_s >= after:
+                self._trip(self.faults.drive_fault_code)
+
+    def _command(self, steps: int) -> tuple[Mode, np.ndarray]:
+        if self.enabled and self.quick_stopping:
+            decel = QUICK_STOP_DECEL_RAD_S2 * steps / self.fs_hz
+            self._ramp -= math.copysign(min(decel, abs(self._ramp)), self._ramp)
+            if self._ramp == 0.0 and abs(self.plant.velocity_rad_s) < 1e-3:
+                self.enabled = False
+            return Mode.VELOCITY, np.full(steps, self._ramp)
+        if not self.enabled:
+            return Mode.TORQUE, np.zeros(steps)
+        modes = {v: k for k, v in self.map.modes.items()}
+        name = modes.get(int(self._get("mode")), "velocity")
+        mode = Mode(name)
+        return mode, np.full(steps, self._get(f"{name}_cmd"))
+
+    def _hold_trace(self) -> Any:
+        return self.plant.run(Mode.TORQUE, np.zeros(1))
+
+    def _sample(self, trace: Any) -> None:
+        self._put("status_word", self._status_word())
+        self._put("fault_code", self.fault_code)
+        self._put("position", float(trace.position_rad[-1]))
+        self._put("velocity", float(trace.velocity_rad_s[-1]))
+        self._put("torque", float(np.clip(trace.torque_nm[-1], -16 * self.rated_torque_nm,
+                                           16 * self.rated_torque_nm)))  # fmt: skip
+        self._put("current", float(trace.current_a[-1]))
+        for name in FEEDBACK:
+            if name not in self.map.registers:
+                raise KeyError(name)
+
+    def _trip(self, code: int) -> None:
+        if not self.fault_code:
+            log.info("Modbus emulator: drive fault 0x%04X", code)
+        self.fault_code = code
+        self.enabled = False
+        self.quick_stopping = False
+        self._put("status_word", self._status_word())
+        self._put("fault_code", code)
+
+    def _watchdog(self) -> None:
+        if self.enabled and time.monotonic() - self._last_request > self.watchdog_s:
+            self._trip(WATCHDOG_FAULT)
