@@ -108,16 +108,19 @@ def drive_connection(
 
 
 @pytest.fixture(scope="module")
-def drive(drive_connection: Drive) -> Iterator[Drive]:
-    """The drive, enabled for one protocol module and always disabled afterwards."""
+def drive(request: pytest.FixtureRequest, drive_connection: Drive) -> Iterator[Drive]:
+    """The drive, enabled for one protocol module; afterwards quick-stopped if anything in
+    the module failed, and always disabled."""
+    failures_before = request.session.testsfailed
     drive_connection.enable()
     try:
         yield drive_connection
-    except BaseException:
-        drive_connection.quick_stop()
-        raise
     finally:
-        drive_connection.disable()
+        try:
+            if request.session.testsfailed != failures_before:
+                drive_connection.quick_stop()
+        finally:
+            drive_connection.disable()
 
 
 def _protocol_name(item: pytest.Item) -> str | None:

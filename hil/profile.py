@@ -105,8 +105,8 @@ def profile_from_mapping(data: Mapping[str, Any], *, source: str, sha256: str = 
         limits = Limits(
             velocity_rad_s=_positive(limits_table, "velocity_rad_s", f"{source} [limits]"),
             torque_nm=_positive(limits_table, "torque_nm", f"{source} [limits]"),
-            travel_min_rad=float(limits_table["travel_min_rad"]),
-            travel_max_rad=float(limits_table["travel_max_rad"]),
+            travel_min_rad=_number(limits_table, "travel_min_rad", f"{source} [limits]"),
+            travel_max_rad=_number(limits_table, "travel_max_rad", f"{source} [limits]"),
         )
     except KeyError as exc:
         raise ProfileError(f"[limits] lacks {exc}", source=source) from exc
@@ -141,10 +141,19 @@ def _table(data: Mapping[str, Any], key: str, source: str) -> Mapping[str, Any]:
     return value
 
 
+def _number(table: Mapping[str, Any], key: str, source: str) -> float:
+    try:
+        return float(table[key])
+    except KeyError:
+        raise ProfileError(f"missing key '{key}'", source=source) from None
+    except (TypeError, ValueError) as exc:
+        raise ProfileError(f"'{key}' must be a number, got {table[key]!r}", source=source) from exc
+
+
 def _positive(table: Mapping[str, Any], key: str, source: str) -> float:
     if key not in table:
         raise ProfileError(f"missing key '{key}'", source=source)
-    value = float(table[key])
+    value = _number(table, key, source)
     if not (math.isfinite(value) and value > 0):
         raise ProfileError(f"'{key}' must be a positive number, got {table[key]!r}", source=source)
     return value
@@ -154,12 +163,12 @@ def _measurement(name: str, spec: Mapping[str, Any], source: str) -> Measurement
     """Limits as ``lower``/``upper`` or as ``tolerance_pct`` around ``nominal``."""
     if "nominal" not in spec:
         raise ProfileError("missing key 'nominal'", source=source)
-    nominal = float(spec["nominal"])
+    nominal = _number(spec, "nominal", source)
     if "tolerance_pct" in spec:
-        half = abs(nominal) * float(spec["tolerance_pct"]) / 100.0
+        half = abs(nominal) * _number(spec, "tolerance_pct", source) / 100.0
         lower, upper = nominal - half, nominal + half
     elif "lower" in spec and "upper" in spec:
-        lower, upper = float(spec["lower"]), float(spec["upper"])
+        lower, upper = _number(spec, "lower", source), _number(spec, "upper", source)
     else:
         raise ProfileError("needs 'tolerance_pct' or both 'lower' and 'upper'", source=source)
     if not lower < upper:

@@ -1,0 +1,76 @@
+"""Decision rule, Type B method accuracy, profile validation."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import pytest
+
+from hil.errors import ProfileError
+from hil.identify.estimate import Estimate, coverage_factor
+from hil.measurement import Outcome, judge, with_method_accuracy
+from hil.profile import MeasurementSpec, builtin_profile_path, load_profile
+
+SPEC = MeasurementSpec(name="x", unit="N·m", nominal=1.0, lower_limit=0.9, upper_limit=1.1,
+                       marginal_fraction=0.2, accuracy_rel=0.03)
+
+
+@pytest.mark.parametrize(
+    ("value", "u", "expected"),
+    [
+        (1.0, 0.01, Outcome.PASS),
+        (1.085, 0.001, Outcome.MARGINAL),  # inside the marginal band (last 20 % of ±0.1)
+        (1.06, 0.03, Outcome.MARGINAL),  # value + U = 1.12 crosses the upper limit
+        (1.11, 0.001, Outcome.FAIL),
+        (0.89, 0.0, Outcome.FAIL),
+        (math.nan, 0.0, Outcome.FAIL),
+    ],
+)
+def test_decision_rule(value: float, u: float, expected: Outcome) -> None:
+    estimate = Estimate(name="x", value=value, standard_uncertainty=u, unit="N·m")
+    assert judge(estimate, SPEC) is expected
+
+
+def test_coverage_factor_follows_student_t_for_few_degrees_of_freedom() -> None:
+    assert coverage_factor(math.inf) == 2.0
+    assert coverage_factor(7) == pytest.approx(2.43, abs=0.01)
+    assert coverage_factor(2) == pytest.approx(4.53, abs=0.01)
+
+
+def test_method_accuracy_enters_as_rectangular_type_b() -> None:
+    estimate = Estimate(name="x", value=2.0, standard_uncertainty=0.01, unit="N·m", dof=7)
+    combined = with_method_accuracy(estimate, SPEC)
+    assert combined.standard_uncertainty == pytest.approx(math.hypot(0.01, 0.06 / math.sqrt(3)))
+    assert combined.dof > estimate.dof
+
+
+def _profile_text() -> str:
+    return builtin_profile_path().read_text(encoding="utf-8")
+
+
+@pytest.mark.parametrize(
+    ("old", "new", "message"),
+    [
+        ("[limits]", "[limit]", "missing table \\[limits\\]"),
+        ("torque_nm = 0.5\ntravel", "torque_nm = -1\ntravel", "'torque_nm' must be a positive"),
+        ("inertia_kg_m2 = 0.0036\n", "inertia_kg_m = 0.0036\n", "unknown plant parameter"),
+        ("nominal = 0.0036\ntolerance_pct = 15", "nominal = 0.0036", "tolerance_pct"),
+        ("sample_rate_hz = 4000.0", "sample_rate_hz = 'fast'", "must be a number, got 'fast'"),
+    ],
+)
+def test_bad_profiles_name_file_and_key(tmp_path: Path, old: str, new: str, message: str) -> None:
+    text = _profile_text()
+    assert old in text
+    path = tmp_path / "bad.toml"
+    path.write_text(text.replace(old, new, 1), encoding="utf-8")
+    with pytest.raises(ProfileError, match=message) as caught:
+        load_profile(path)
+    assert str(path) in str(caught.value)
+
+
+def test_missing_profile_and_unknown_builtin(tmp_path: Path) -> None:
+    with pytest.raises(ProfileError, match="not found"):
+        load_profile(tmp_path / "nope.toml")
+    with pytest.raises(ProfileError, match="no built-in profile"):
+        load_profile("no_such_unit")
