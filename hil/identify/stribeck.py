@@ -31,6 +31,7 @@ FloatArray = NDArray[np.float64]
 BLOCKS = 8  # sub-windows per matched range, for the Type A scatter
 STALL_FRACTION = 0.25  # a velocity window below this fraction of the command has stuck
 JUMP_CV = 0.5  # coefficient of variation of window velocities above which motion is jerky
+RESOLVED_FRACTION = 0.6  # a clean speed at or below this fraction of v_s is required
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -255,10 +256,13 @@ def fit_stribeck(points: Sequence[SpeedPoint]) -> StribeckResult:
     vs = math.exp(float(found.x))
     coef, cost = _linear_fit(v, f, w, vs)
     tc, delta, b = (float(c) for c in coef)
-    if v.min() >= vs:
+    if v.min() > RESOLVED_FRACTION * vs:
+        stuck = sorted(p.speed_rad_s for p in points if p.stick_slip)
         raise IdentificationError(
-            f"no clean speed below the fitted v_s = {vs:.3g} rad/s: the Stribeck rise is not "
-            "resolved (extend the staircase to lower speeds)"
+            f"lowest clean speed {v.min():.3g} rad/s is above {RESOLVED_FRACTION:g}·v_s "
+            f"(fitted v_s = {vs:.3g} rad/s): the Stribeck rise is not resolved"
+            + (f"; stick-slip at {[round(s, 4) for s in stuck]} rad/s" if stuck else
+               " (extend the staircase to lower speeds)")
         )
     # covariance of (T_c, ΔT, B, v_s) from the weighted Jacobian, scaled by the lack of fit
     e = np.exp(-((v / vs) ** 2))
