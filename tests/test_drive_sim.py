@@ -58,10 +58,15 @@ def test_run_needs_an_enabled_drive_and_the_drive_rate() -> None:
 
 def test_leaving_the_context_disables_even_on_error() -> None:
     drive = _drive()
-    with pytest.raises(RuntimeError), drive:
-        drive.enable()
-        assert drive.status().state is DriveState.ENABLED
-        raise RuntimeError("operator pulled the plug")
+
+    def calibrate_and_crash() -> None:
+        with drive:
+            drive.enable()
+            assert drive.status().state is DriveState.ENABLED
+            raise RuntimeError("operator pulled the plug")
+
+    with pytest.raises(RuntimeError, match="plug"):
+        calibrate_and_crash()
     assert drive.status().state is DriveState.DISABLED
     drive.disable()  # idempotent
     assert drive.status().state is DriveState.DISABLED
