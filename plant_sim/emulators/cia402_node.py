@@ -571,7 +571,9 @@ class Cia402Emulator:
     # -- fault injection -------------------------------------------------------------------
     def _inject_bus_error(self) -> None:
         after = self.faults.bus_error_after_s
-        if after is None or self._bus_error_fired or self.time_enabled_s < after:
+        if after is None or self._bus_error_fired or self.state != ENABLED:
+            return
+        if self.time_enabled_s < after:
             return
         self._bus_error_fired = True
         from can.interfaces import virtual

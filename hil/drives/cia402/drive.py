@@ -288,10 +288,9 @@ class CanOpenDrive(Drive):
             link.check()
             deadline = time.monotonic() + self.station.state_timeout_s * 3
             while time.monotonic() < deadline:
-                link.tick()
-                status = link.latest_status()
+                status = link.latest_status() if link.tick() else None
                 if status is None:
-                    continue
+                    status = int(link.read(0x6041)), 0
                 state = state_of(status[0])
                 if state in ("SWITCH ON DISABLED", "FAULT"):
                     break

@@ -311,9 +311,12 @@ class CanLink:
         deadline = time.monotonic() + self.station.state_timeout_s
         last: tuple[int, int] | None = None
         while True:
-            self.tick()
+            answered = self.tick()
             self.check()
-            last = self.latest_status() or last
+            if answered:
+                last = self.latest_status() or last
+            else:  # TPDOs missing: ask by SDO rather than wait for a lost PDO
+                last = int(self.read(0x6041)), int(self.read(0x6061))
             if last is not None and done(*last):
                 return last
             if time.monotonic() > deadline:
