@@ -1,0 +1,239 @@
+"""Gravity unbalance (m·g·e) and cable stiffness/hysteresis from a slow two-way sweep.
+
+The axis sweeps the travel at constant speed up and back down. In position bins the torque
+of the two passes is ``T± = L(θ) ± F`` with ``F`` the sliding friction plus the saturated
+cable hysteresis, and the load
+
+    L(θ) = m·g·e·cos(θ + φ) + k_cable·θ + c
+
+(``c``: offset torque, cable zero). The half sum over bins both passes covered cancels ``F``
+(and the K_t ripple's effect on it); the joint linear fit in ``[cos θ, sin θ, θ, 1]``
+separates gravity from the cable's spring, which a gravity-only fit would absorb into the
+``sin θ`` term (``θ ≈ sin θ`` near the horizon; the curvature over a wide travel tells them
+apart). Cogging averages within bins; what remains is treated as scatter (Type A from the
+fit residual, ``n − 4`` degrees of freedom).
+
+The cable's hysteresis is separated from friction by its *transient*: after the reversal
+the friction flips at once, while a Dahl-type hysteresis torque turns over within a short
+travel ``s₀``. The difference of the two passes at equal position then follows
+``D(s) = 2(F + h) − 2h·exp(−s/s₀)`` in the travel ``s`` since reversal (separable least
+squares, 1-D search over ``s₀``).
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy.optimize import minimize_scalar
+
+from hil.errors import IdentificationError
+from hil.identify.estimate import Estimate
+
+FloatArray = NDArray[np.float64]
+STANDARD_GRAVITY_M_S2 = 9.80665
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class SweepPlan:
+    """Velocity command of the sweep and where its passes lie (sample indices).
+
+    ``up`` and ``down``: the full-travel passes. Then a fast ``rewind`` back up (slowing to
+    the probe speed for its last quarter probe length) and the slow downward ``probe``,
+    whose hysteresis is in transient while ``down`` at the same positions had long settled.
+    """
+
+    command_rad_s: FloatArray
+    up: tuple[int, int]
+    down: tuple[int, int]
+    probe: tuple[int, int]
+
+
+def sweep_plan(
+    *, start_rad: float, stop_rad: float, speed_rad_s: float, rewind_speed_rad_s: float,
+    probe_rad: float, probe_speed_rad_s: float, fs_hz: float,
+) -> SweepPlan:
+    """``start → stop → start`` at ``speed_rad_s`` (``start < stop``), back up to
+    ``stop − probe_rad`` at ``rewind_speed_rad_s`` and down again over ``probe_rad`` at
+    ``probe_speed_rad_s`` (slow, so the loop settles within a small part of the transient;
+    the friction's change with speed is a constant the hysteresis fit absorbs)."""
+    if not stop_rad - start_rad > 3 * probe_rad:
+        raise IdentificationError("sweep must be longer than three probe lengths")
+    n = round((stop_rad - start_rad) / speed_rad_s * fs_hz)
+    turn = stop_rad - probe_rad
+    probe = round(probe_rad / probe_speed_rad_s * fs_hz)
+    approach = round(0.25 * probe_rad / probe_speed_rad_s * fs_hz)  # slow down, then reverse
+    rewind = round((turn - start_rad - 0.25 * probe_rad) / rewind_speed_rad_s * fs_hz)
+    command = np.concatenate([np.full(n, speed_rad_s), np.full(n, -speed_rad_s),
+                              np.full(rewind, rewind_speed_rad_s),
+                              np.full(approach, probe_speed_rad_s),
+                              np.full(probe, -probe_speed_rad_s)])
+    begin = 2 * n + rewind + approach
+    return SweepPlan(command_rad_s=command, up=(0, n), down=(n, 2 * n),
+                     probe=(begin, begin + probe))
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class GravityCableResult:
+    mge: Estimate  # N·m
+    phase: Estimate  # rad
+    stiffness: Estimate  # N·m/rad
+    offset_nm: float
+    hysteresis: Estimate  # N·m, half width of the cable's loop
+    hysteresis_angle_rad: float  # s₀
+    friction_nm: float  # sliding friction at the sweep speed (loop half width − h)
+    loop_half_width_nm: float  # F + h
+    bins: int
+    residual_rms_nm: float
+    bin_centres_rad: FloatArray
+    load_nm: FloatArray  # half sum per bin
+    half_difference_nm: FloatArray  # F + hysteresis per bin
+
+
+def eccentricity_mm(mge: Estimate, *, mass_kg: float) -> Estimate:
+    """Centre-of-mass offset ``e = m·g·e / (m·g)`` in mm (mass taken as exact)."""
+    scale = 1000.0 / (mass_kg * STANDARD_GRAVITY_M_S2)
+    return Estimate(name="eccentricity_mm", value=mge.value * scale,
+                    standard_uncertainty=mge.standard_uncertainty * scale, unit="mm",
+                    dof=mge.dof)
+
+
+def identify_gravity_cable(
+    *,
+    position_rad: FloatArray,
+    torque_nm: FloatArray,
+    plan: SweepPlan,
+    exclude_rad: float,
+    bins: int,
+    settle_rad: float,
+) -> GravityCableResult:
+    """Fit gravity, cable and hysteresis to a recorded ``plan`` (same sample indexing).
+
+    Parameters
+    ----------
+    position_rad, torque_nm
+        The recording of ``plan.command_rad_s``.
+    exclude_rad
+        Travel left out at each end of the passes for the load fit (start-up and
+        hysteresis transients).
+    bins
+        Number of position bins for the load fit.
+    settle_rad
+        Travel after the probe's reversal skipped (velocity-loop transient).
+    """
+    if len(position_rad) != len(plan.command_rad_s):
+        raise IdentificationError(
+            f"recording has {len(position_rad)} samples, the sweep {len(plan.command_rad_s)}"
+        )
+    (a0, a1), (b0, b1), (c0, c1) = plan.up, plan.down, plan.probe
+    p1, t1 = position_rad[a0:a1], torque_nm[a0:a1]
+    p2, t2 = position_rad[b0:b1], torque_nm[b0:b1]
+    low = max(p1.min(), p2.min()) + exclude_rad
+    high = min(p1.max(), p2.max()) - exclude_rad
+    if not high - low > 1.0:
+        raise IdentificationError(
+            f"usable sweep [{low:.3g}, {high:.3g}] rad is under 1 rad: gravity and cable "
+            "cannot be told apart"
+        )
+    edges = np.linspace(low, high, bins + 1)
+    i1 = np.digitize(p1, edges) - 1
+    i2 = np.digitize(p2, edges) - 1
+    rows, load, half_diff, centres = [], [], [], []
+    for k in range(bins):
+        m1, m2 = i1 == k, i2 == k
+        if m1.sum() < 5 or m2.sum() < 5:
+            continue
+        regress = [np.array([np.cos(x).mean(), np.sin(x).mean(), x.mean(), 1.0])
+                   for x in (p1[m1], p2[m2])]
+        rows.append((regress[0] + regress[1]) / 2)
+        load.append((t1[m1].mean() + t2[m2].mean()) / 2)
+        half_diff.append((t1[m1].mean() - t2[m2].mean()) / 2)
+        centres.append((edges[k] + edges[k + 1]) / 2)
+    design, y = np.array(rows), np.array(load)
+    if len(y) < 8:
+        raise IdentificationError(f"only {len(y)} position bins hold both passes; need 8")
+    coef = np.linalg.lstsq(design, y, rcond=None)[0]
+    residual = y - design @ coef
+    dof = len(y) - 4
+    cov = float(residual @ residual) / dof * np.linalg.inv(design.T @ design)
+    a, b, k_cable, offset = (float(c) for c in coef)
+    mge = math.hypot(a, b)
+    # m·g·e·cos(θ + φ) = a·cos θ + b·sin θ with a = mge·cos φ, b = −mge·sin φ
+    grad_mge = np.array([a / mge, b / mge])
+    grad_phase = np.array([b / mge**2, -a / mge**2])
+    cov_ab = cov[:2, :2]
+    hysteresis, s0 = _hysteresis(p2, t2, position_rad[c0:c1], torque_nm[c0:c1],
+                                 settle_rad=settle_rad)
+    loop = float(np.mean(half_diff))
+    return GravityCableResult(
+        mge=Estimate(name="gravity_mge_nm", value=mge,
+                     standard_uncertainty=math.sqrt(grad_mge @ cov_ab @ grad_mge),
+                     unit="N·m", dof=dof),
+        phase=Estimate(name="gravity_phase_rad", value=math.atan2(-b, a),
+                       standard_uncertainty=math.sqrt(grad_phase @ cov_ab @ grad_phase),
+                       unit="rad", dof=dof),
+        stiffness=Estimate(name="cable_stiffness_nm_rad", value=k_cable,
+                           standard_uncertainty=math.sqrt(cov[2, 2]), unit="N·m/rad", dof=dof),
+        offset_nm=offset,
+        hysteresis=hysteresis,
+        hysteresis_angle_rad=s0,
+        friction_nm=loop - hysteresis.value,
+        loop_half_width_nm=loop,
+        bins=len(y),
+        residual_rms_nm=float(np.sqrt(np.mean(residual**2))),
+        bin_centres_rad=np.array(centres),
+        load_nm=y,
+        half_difference_nm=np.array(half_diff),
+    )
+
+
+def _hysteresis(
+    p_ref: FloatArray, t_ref: FloatArray, p_probe: FloatArray, t_probe: FloatArray, *,
+    settle_rad: float,
+) -> tuple[Estimate, float]:
+    """``h`` and ``s₀`` from the probe minus the settled pass in the same direction at the
+    same positions: ``2h·exp(−s/s₀)`` (friction, gravity, cable and cogging cancel; K_t
+    ripple only scales the small hysteresis term)."""
+    reversal = float(p_probe.max())  # the axis overshoots the command's reversal a little
+    s = reversal - p_probe  # travel since the reversal (probe runs downwards)
+    length = float(s.max())
+    edges = np.linspace(settle_rad, length, 41)
+    order = np.argsort(p_ref)
+    sorted_ref = p_ref[order]
+    ss, dd = [], []
+    for lo, hi in itertools.pairwise(edges):
+        m = (s >= lo) & (s < hi)
+        j = order[np.searchsorted(sorted_ref, reversal - hi):np.searchsorted(sorted_ref,
+                                                                             reversal - lo)]
+        if m.sum() < 3 or j.size < 3:
+            continue
+        ss.append(float(s[m].mean()))
+        dd.append(float(t_probe[m].mean()) - float(t_ref[j].mean()))
+    if len(ss) < 10:
+        raise IdentificationError("too few samples after the reversal for the hysteresis fit")
+    s_arr, d_arr = np.array(ss), np.array(dd)
+
+    def fit(s0: float) -> tuple[FloatArray, float]:
+        design = np.column_stack([np.ones_like(s_arr), np.exp(-s_arr / s0)])
+        coef = np.asarray(np.linalg.lstsq(design, d_arr, rcond=None)[0], dtype=np.float64)
+        r = d_arr - design @ coef
+        return coef, float(r @ r)
+
+    grid = np.log(np.geomspace(settle_rad / 2, length / 2, 40))
+    best = int(np.argmin([fit(math.exp(g))[1] for g in grid]))
+    found = minimize_scalar(lambda g: fit(math.exp(g))[1],
+                            bounds=(grid[max(best - 1, 0)], grid[min(best + 1, len(grid) - 1)]),
+                            method="bounded")
+    s0 = math.exp(float(found.x))
+    coef, cost = fit(s0)
+    amplitude = float(coef[1])
+    e = np.exp(-s_arr / s0)
+    jac = np.column_stack([np.ones_like(s_arr), e, amplitude * e * s_arr / s0**2])
+    dof = len(s_arr) - 3
+    cov = cost / dof * np.linalg.pinv(jac.T @ jac)
+    estimate = Estimate(name="cable_hysteresis_nm", value=amplitude / 2,
+                        standard_uncertainty=math.sqrt(cov[1, 1]) / 2, unit="N·m", dof=dof)
+    return estimate, s0

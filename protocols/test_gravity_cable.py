@@ -1,0 +1,148 @@
+"""m·g·e (gravity unbalance) and k_cable from one slow two-way sweep of the travel.
+
+One protocol for both because they are separated by one joint fit of the load torque
+(``cos θ``, ``sin θ``, ``θ``, 1) over the same sweep: two sweeps would double the motion
+for the same information. The sweep passes every elevation in both directions, so the
+friction cancels in the half sum of the two passes (the 48 position bins are the
+"holding" elevations).
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass
+
+import numpy as np
+import pytest
+
+from hil.calibration import CalibrationRun
+from hil.drives.base import Drive, DriveInfo, Excitation, Mode
+from hil.identify.estimate import Estimate
+from hil.identify.gravity_cable import (
+    GravityCableResult,
+    SweepPlan,
+    eccentricity_mm,
+    identify_gravity_cable,
+    sweep_plan,
+)
+from hil.identify.moves import position_move
+from hil.profile import UnitProfile
+
+log = logging.getLogger(__name__)
+
+NAME = "gravity_cable"
+MEASUREMENTS = ("gravity_mge_nm", "gravity_phase_rad", "eccentricity_mm",
+                "cable_stiffness_nm_rad")
+pytestmark = pytest.mark.protocol(NAME)
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class Spec:
+    margin_rad: float
+    speed_rad_s: float
+    rewind_speed_rad_s: float
+    probe_rad: float
+    probe_speed_rad_s: float
+    probe_settle_s: float
+    exclude_rad: float
+    bins: int
+    move_speed_rad_s: float
+    fs_hz: float
+    travel_min_rad: float
+    travel_max_rad: float
+    mass_kg: float | None
+
+    @classmethod
+    def from_profile(cls, profile: UnitProfile, info: DriveInfo) -> Spec:
+        settings = profile.protocol(NAME)
+        mass = profile.unit.get("mass_kg")
+        return cls(
+            margin_rad=float(settings.get("margin_rad", 0.1)),
+            speed_rad_s=float(settings.get("speed_rad_s", 0.15)),
+            rewind_speed_rad_s=float(settings.get("rewind_speed_rad_s", 0.6)),
+            probe_rad=float(settings.get("probe_rad", 0.2)),
+            probe_speed_rad_s=float(settings.get("probe_speed_rad_s", 0.05)),
+            probe_settle_s=float(settings.get("probe_settle_s", 0.12)),
+            exclude_rad=float(settings.get("exclude_rad", 0.1)),
+            bins=int(settings.get("bins", 48)),
+            move_speed_rad_s=float(settings.get("move_speed_rad_s", 0.5)),
+            fs_hz=min(profile.sample_rate_hz, info.max_sample_rate_hz),
+            travel_min_rad=info.limits.travel_min_rad,
+            travel_max_rad=info.limits.travel_max_rad,
+            mass_kg=None if mass is None else float(mass),
+        )
+
+    @property
+    def start_rad(self) -> float:
+        return self.travel_min_rad + self.margin_rad
+
+    @property
+    def plan(self) -> SweepPlan:
+        return sweep_plan(start_rad=self.start_rad,
+                          stop_rad=self.travel_max_rad - self.margin_rad,
+                          speed_rad_s=self.speed_rad_s,
+                          rewind_speed_rad_s=self.rewind_speed_rad_s,
+                          probe_rad=self.probe_rad, probe_speed_rad_s=self.probe_speed_rad_s,
+                          fs_hz=self.fs_hz)
+
+
+def excitation(spec: Spec, *, position_rad: float) -> list[Excitation]:
+    """A position move to the lower end of the travel, then the sweep."""
+    return [
+        Excitation(name="move_to_start", mode=Mode.POSITION, fs_hz=spec.fs_hz,
+                   command=position_move(position_rad, spec.start_rad, fs_hz=spec.fs_hz,
+                                         speed_rad_s=spec.move_speed_rad_s, hold_s=0.2)),
+        Excitation(name="sweep", mode=Mode.VELOCITY, fs_hz=spec.fs_hz,
+                   command=spec.plan.command_rad_s),
+    ]
+
+
+def analyse(position_rad: np.ndarray, torque_nm: np.ndarray, spec: Spec) -> GravityCableResult:
+    return identify_gravity_cable(position_rad=position_rad, torque_nm=torque_nm,
+                                  plan=spec.plan, exclude_rad=spec.exclude_rad, bins=spec.bins,
+                                  settle_rad=spec.probe_settle_s * spec.probe_speed_rad_s)
+
+
+@pytest.fixture(scope="module")
+def spec(drive: Drive, profile: UnitProfile) -> Spec:
+    return Spec.from_profile(profile, drive.info)
+
+
+@pytest.fixture(scope="module")
+def result(drive: Drive, calibration: CalibrationRun, spec: Spec) -> GravityCableResult:
+    move, sweep = excitation(spec, position_rad=drive.status().position_rad)
+    calibration.run(drive, move, protocol=NAME)
+    recording = calibration.run(drive, sweep, protocol=NAME)
+    analysed = analyse(recording.position, recording.effort, spec)
+    calibration.details[NAME] = {
+        "offset_nm": analysed.offset_nm,
+        "cable_hysteresis_nm": analysed.hysteresis.value,
+        "cable_hysteresis_u_nm": analysed.hysteresis.standard_uncertainty,
+        "cable_hysteresis_angle_rad": analysed.hysteresis_angle_rad,
+        "loop_half_width_nm": analysed.loop_half_width_nm,
+        "sliding_friction_at_sweep_speed_nm": analysed.friction_nm,
+        "bins": analysed.bins,
+        "residual_rms_nm": analysed.residual_rms_nm,
+        "load_nm_by_elevation_rad": [
+            [float(c), float(v)] for c, v in zip(analysed.bin_centres_rad, analysed.load_nm,
+                                                 strict=True)
+        ],
+    }
+    return analysed
+
+
+@pytest.mark.parametrize("parameter", MEASUREMENTS)
+def test_gravity_cable(parameter: str, result: GravityCableResult, spec: Spec,
+                       calibration: CalibrationRun) -> None:
+    estimates: dict[str, Estimate] = {
+        e.name: e for e in (result.mge, result.phase, result.stiffness)
+    }
+    if parameter == "eccentricity_mm":
+        if spec.mass_kg is None:
+            pytest.skip("the profile's [unit] gives no mass_kg: e cannot be derived from m·g·e")
+        estimates[parameter] = eccentricity_mm(result.mge, mass_kg=spec.mass_kg)
+    measurement = calibration.record(NAME, estimates[parameter])
+    assert measurement.outcome.value in ("PASS", "MARGINAL"), (
+        f"{parameter} = {measurement.estimate.value:.6g} {measurement.spec.unit} outside "
+        f"[{measurement.spec.lower_limit:.6g}, {measurement.spec.upper_limit:.6g}]"
+    )
