@@ -10,11 +10,12 @@ import pytest
 
 from hil.calibration import CalibrationRun
 from hil.drives.base import Drive, DriveInfo, Excitation, Mode
-from hil.identify.estimate import Estimate
 from hil.identify.inertia_friction import (
     InertiaFrictionResult,
+    Method,
     analyse_sine_run,
     identify_inertia_friction,
+    inertia_amplitude_spread,
 )
 from hil.profile import UnitProfile
 from hil.recording import Recording
@@ -31,6 +32,7 @@ class Spec:
     settle_periods: int
     periods: int
     fs_hz: float
+    method: Method = "orthogonal"
 
     @classmethod
     def from_profile(cls, profile: UnitProfile, info: DriveInfo) -> Spec:
@@ -41,6 +43,7 @@ class Spec:
             settle_periods=int(settings.get("settle_periods", 2)),
             periods=int(settings.get("periods", 8)),
             fs_hz=min(profile.sample_rate_hz, info.max_sample_rate_hz),
+            method="least_squares" if settings.get("method") == "least_squares" else "orthogonal",
         )
 
 
@@ -65,34 +68,7 @@ def analyse(recordings: list[Recording], spec: Spec) -> InertiaFrictionResult:
         analyse_sine_run(r, frequency_hz=spec.frequency_hz, settle_periods=spec.settle_periods)
         for r in recordings
     ]
-    return identify_inertia_friction(runs)
-
-
-def amplitude_spread(result: InertiaFrictionResult) -> Estimate:
-    """Spread of the per-amplitude inertias in % of their mean: a position-dependent torque
-    (cogging, cable) commensurate with the sine's travel shows up here."""
-    per_run = np.array(
-        [
-            r.quadrature_nm / (r.velocity_amplitude_rad_s * 2 * math.pi * r.frequency_hz)
-            for r in result.runs
-        ]
-    )
-    u = np.array(
-        [
-            r.quadrature_u_nm / (r.velocity_amplitude_rad_s * 2 * math.pi * r.frequency_hz)
-            for r in result.runs
-        ]
-    )
-    spread = 100 * float(np.ptp(per_run) / per_run.mean())
-    u_spread = 100 * float(np.sqrt(np.sum(u**2)) / per_run.mean())
-    dof = float(min(r.periods for r in result.runs) - 1)
-    return Estimate(
-        name="inertia_amplitude_spread_pct",
-        value=spread,
-        standard_uncertainty=u_spread,
-        unit="%",
-        dof=dof,
-    )
+    return identify_inertia_friction(runs, method=spec.method)
 
 
 @pytest.fixture(scope="module")
@@ -123,7 +99,7 @@ def test_inertia_friction(
     parameter: str, result: InertiaFrictionResult, calibration: CalibrationRun
 ) -> None:
     estimates = {e.name: e for e in (result.inertia, result.viscous, result.coulomb)}
-    estimates["inertia_amplitude_spread_pct"] = amplitude_spread(result)
+    estimates["inertia_amplitude_spread_pct"] = inertia_amplitude_spread(result)
     measurement = calibration.record(NAME, estimates[parameter])
     assert measurement.outcome.value in ("PASS", "MARGINAL"), (
         f"{parameter} = {measurement.estimate.value:.6g} {measurement.spec.unit} outside "

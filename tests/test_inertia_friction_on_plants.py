@@ -14,7 +14,7 @@ from hypothesis import strategies as st
 import protocols.test_inertia_friction as protocol
 from hil.calibration import CalibrationRun
 from hil.drives.sim import SimDrive
-from hil.identify.inertia_friction import InertiaFrictionResult
+from hil.identify.inertia_friction import InertiaFrictionResult, inertia_amplitude_spread
 from hil.measurement import Outcome
 from hil.profile import UnitProfile, load_profile
 from plant_sim.params import Harmonic, PlantParams
@@ -90,7 +90,7 @@ def test_strong_commensurate_cogging_biases_j_and_is_not_certified(
         out_dir=tmp_path,  # type: ignore[arg-type]
         drive_kind="sim",
     )
-    spread = run.record(protocol.NAME, protocol.amplitude_spread(result))
+    spread = run.record(protocol.NAME, inertia_amplitude_spread(result))
     assert spread.outcome is Outcome.FAIL
     for estimate in (result.inertia, result.viscous, result.coulomb):
         run.record(protocol.NAME, estimate)
@@ -108,4 +108,4 @@ def test_same_unit_without_cogging_passes_the_spread_check(tmp_path: object) -> 
         out_dir=tmp_path,  # type: ignore[arg-type]
         drive_kind="sim",
     )
-    assert run.record(protocol.NAME, protocol.amplitude_spread(result)).outcome is Outcome.PASS
+    assert run.record(protocol.NAME, inertia_amplitude_spread(result)).outcome is Outcome.PASS

@@ -1,0 +1,35 @@
+"""Phase-free velocity and acceleration from encoder position (no filter lag)."""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy.signal import savgol_filter
+
+FloatArray = NDArray[np.float64]
+IRREGULAR_JITTER = 0.01  # relative spread of sample steps above which we resample
+
+
+def phase_free_derivatives(
+    position: FloatArray, *, time_s: FloatArray, window_s: float
+) -> tuple[FloatArray, FloatArray]:
+    """Velocity and acceleration of ``position`` by a centred Savitzky–Golay fit (quintic,
+    ``window_s`` wide): zero phase, so torque and motion stay aligned.
+
+    Irregular timestamps (polled transports) are handled by interpolating onto a uniform
+    grid at the median step and back.
+    """
+    steps = np.diff(time_s)
+    step = float(np.median(steps))
+    window = max(7, round(window_s / step) | 1)
+    if window >= len(position):
+        raise ValueError(f"derivative window {window} samples exceeds the {len(position)} given")
+    if np.ptp(steps) <= IRREGULAR_JITTER * step:
+        velocity = savgol_filter(position, window, 5, deriv=1, delta=step)
+        acceleration = savgol_filter(position, window, 5, deriv=2, delta=step)
+        return np.asarray(velocity, dtype=np.float64), np.asarray(acceleration, dtype=np.float64)
+    grid = time_s[0] + step * np.arange(int((time_s[-1] - time_s[0]) / step) + 1)
+    uniform = np.interp(grid, time_s, position)
+    velocity = savgol_filter(uniform, window, 5, deriv=1, delta=step)
+    acceleration = savgol_filter(uniform, window, 5, deriv=2, delta=step)
+    return np.interp(time_s, grid, velocity), np.interp(time_s, grid, acceleration)
