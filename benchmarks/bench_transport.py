@@ -25,8 +25,12 @@ def sine_excitations(fs_hz: float, settings: dict[str, object]) -> list[Excitati
     periods = int(settings.get("settle_periods", 2)) + int(settings.get("periods", 8))  # type: ignore[call-overload]
     t = np.arange(round(periods * fs_hz / frequency)) / fs_hz
     return [
-        Excitation(name=f"sine_{a:g}", mode=Mode.VELOCITY,
-                   command=float(a) * np.sin(2 * math.pi * frequency * t), fs_hz=fs_hz)
+        Excitation(
+            name=f"sine_{a:g}",
+            mode=Mode.VELOCITY,
+            command=float(a) * np.sin(2 * math.pi * frequency * t),
+            fs_hz=fs_hz,
+        )
         for a in settings["amplitudes_rad_s"]  # type: ignore[attr-defined]
     ]
 
@@ -55,8 +59,10 @@ def main() -> None:
     args = parser.parse_args()
     for kind in args.kinds:
         duration, wall, fs = bench(kind, args.repeat)
-        print(f"{kind:<18} {fs:>6.0f} Hz  excitation {duration:6.2f} s  wall {wall:6.2f} s  "
-              f"speed {duration / wall:6.2f}x real time")
+        print(
+            f"{kind:<18} {fs:>6.0f} Hz  excitation {duration:6.2f} s  wall {wall:6.2f} s  "
+            f"speed {duration / wall:6.2f}x real time"
+        )
 
 
 if __name__ == "__main__":

@@ -73,11 +73,11 @@ def _open_field_drive(
 
     serial = int.from_bytes(unit_serial.encode()[-4:].rjust(4, b"\0"), "big")
     if kind == "canopen-emulator":
-        with canopen_emulator(profile, seed=seed, serial=serial) as (_, emulated):
+        with canopen_emulator(profile, seed=seed, serial=serial) as (_, emulated):  # noqa: SIM117
             with _backend(emulated, profile) as drive:
                 yield drive
         return
-    with modbus_emulator(profile, seed=seed) as (_, emulated_modbus):
+    with modbus_emulator(profile, seed=seed) as (_, emulated_modbus):  # noqa: SIM117
         with _backend(emulated_modbus, profile) as drive:
             yield drive
 

@@ -118,19 +118,37 @@ def resolve_fixture(name: str, *, base_dir: Path, source: str) -> Path:
     builtin = Path(str(resources.files("fixtures").joinpath(Path(name).name)))
     if builtin.is_file():
         return builtin
-    raise ProfileError(f"file '{name}' not found (looked in {base_dir} and fixtures/)", source=source)
+    raise ProfileError(
+        f"file '{name}' not found (looked in {base_dir} and fixtures/)", source=source
+    )
 
 
 _CANOPEN_KEYS = {
-    "interface", "channel", "bitrate", "node_id", "eds", "sync_period_s", "sync_pacing",
-    "max_bus_load", "sdo_timeout_s", "pdo_timeout_s", "heartbeat_period_s",
-    "heartbeat_timeout_s", "state_timeout_s", "acquisition", "lost_sample_fraction",
+    "interface",
+    "channel",
+    "bitrate",
+    "node_id",
+    "eds",
+    "sync_period_s",
+    "sync_pacing",
+    "max_bus_load",
+    "sdo_timeout_s",
+    "pdo_timeout_s",
+    "heartbeat_period_s",
+    "heartbeat_timeout_s",
+    "state_timeout_s",
+    "acquisition",
+    "lost_sample_fraction",
     "options",
-}  # fmt: skip
+}
 _SCALING_KEYS = {
-    "rated_torque_nm", "rated_current_a", "counts_per_rev", "velocity_units_per_rad_s",
-    "quick_stop_option_code", "quick_stop_decel_rad_s2",
-}  # fmt: skip
+    "rated_torque_nm",
+    "rated_current_a",
+    "counts_per_rev",
+    "velocity_units_per_rad_s",
+    "quick_stop_option_code",
+    "quick_stop_decel_rad_s2",
+}
 
 
 def _canopen(
@@ -182,9 +200,19 @@ def _canopen(
 
 
 _MODBUS_KEYS = {
-    "transport", "register_map", "host", "port", "serial_port", "baudrate", "parity",
-    "stopbits", "unit_id", "timeout_s", "max_poll_rate_hz", "watchdog_s",
-}  # fmt: skip
+    "transport",
+    "register_map",
+    "host",
+    "port",
+    "serial_port",
+    "baudrate",
+    "parity",
+    "stopbits",
+    "unit_id",
+    "timeout_s",
+    "max_poll_rate_hz",
+    "watchdog_s",
+}
 
 
 def _modbus(table: Mapping[str, Any], source: str, base_dir: Path) -> ModbusStation:

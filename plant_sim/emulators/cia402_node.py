@@ -6,8 +6,8 @@ TPDOs as configured (by SDO) in its object dictionary, and a drive recorder with
 waveform table (objects 0x2100/0x2200). Its clock is the SYNC: on each SYNC it latches
 its actual values (the last control-loop sample before the SYNC) and the synchronous RPDO
 data received since the previous SYNC, advances the plant by one communication period
-with that target held, and sends its synchronous TPDOs with the latched values. A run over real CAN frames is therefore as fast as the frames
-go, not as fast as the wall clock.
+with that target held, and sends its synchronous TPDOs with the latched values. A run
+over real CAN frames is therefore as fast as the frames go, not as fast as the wall clock.
 
 It knows nothing about the backend that talks to it.
 """
@@ -26,7 +26,7 @@ import can
 import canopen
 import numpy as np
 from canopen.objectdictionary import ODVariable
-from canopen.sdo import SdoAbortedError
+from canopen.sdo.exceptions import SdoAbortedError
 
 from hil.drives.base import Mode
 from plant_sim.emulators.faults import CanFaults
@@ -42,15 +42,33 @@ ABORT_NOT_NOW = 0x08000022  # data cannot be transferred because of the device s
 
 # CiA 402 states and the statusword bits the drive reports in each
 NOT_READY, SWITCH_ON_DISABLED, READY, SWITCHED_ON, ENABLED, QUICK_STOP, FAULT_REACTION, FAULT = (
-    "NOT READY TO SWITCH ON", "SWITCH ON DISABLED", "READY TO SWITCH ON", "SWITCHED ON",
-    "OPERATION ENABLED", "QUICK STOP ACTIVE", "FAULT REACTION ACTIVE", "FAULT",
-)  # fmt: skip
+    "NOT READY TO SWITCH ON",
+    "SWITCH ON DISABLED",
+    "READY TO SWITCH ON",
+    "SWITCHED ON",
+    "OPERATION ENABLED",
+    "QUICK STOP ACTIVE",
+    "FAULT REACTION ACTIVE",
+    "FAULT",
+)
 _STATUS_BITS = {
-    NOT_READY: 0x00, SWITCH_ON_DISABLED: 0x60, READY: 0x31, SWITCHED_ON: 0x33,
-    ENABLED: 0x37, QUICK_STOP: 0x17, FAULT_REACTION: 0x1F, FAULT: 0x08,
-}  # fmt: skip
-_MODES = {1: Mode.POSITION, 3: Mode.VELOCITY, 4: Mode.TORQUE, 8: Mode.POSITION,
-          9: Mode.VELOCITY, 10: Mode.TORQUE}  # fmt: skip
+    NOT_READY: 0x00,
+    SWITCH_ON_DISABLED: 0x60,
+    READY: 0x31,
+    SWITCHED_ON: 0x33,
+    ENABLED: 0x37,
+    QUICK_STOP: 0x17,
+    FAULT_REACTION: 0x1F,
+    FAULT: 0x08,
+}
+_MODES = {
+    1: Mode.POSITION,
+    3: Mode.VELOCITY,
+    4: Mode.TORQUE,
+    8: Mode.POSITION,
+    9: Mode.VELOCITY,
+    10: Mode.TORQUE,
+}
 _MODE_BITS = {1: 0x01, 3: 0x04, 4: 0x08, 8: 0x80, 9: 0x100, 10: 0x200}
 _FMT = {1: "?", 2: "b", 3: "h", 4: "i", 5: "B", 6: "H", 7: "I"}
 
@@ -165,8 +183,8 @@ class Cia402Emulator:
         store.setdefault(0x6076, {})[0] = struct.pack("<I", round(self.rated_torque_nm * 1e3))
         store.setdefault(0x6075, {})[0] = struct.pack("<I", round(self.rated_current_a * 1e3))
         store.setdefault(0x608F, {})[1] = struct.pack("<I", self.counts_per_rev)
-        node.add_read_callback(self._on_read)
-        node.add_write_callback(self._on_write)
+        node.add_read_callback(self._on_read)  # type: ignore[no-untyped-call]
+        node.add_write_callback(self._on_write)  # type: ignore[no-untyped-call]
         if self.faults.sdo_delay_s > 0:
             network.unsubscribe(node.sdo.rx_cobid, node.sdo.on_request)
             network.subscribe(node.sdo.rx_cobid, self._delayed_sdo)
@@ -180,7 +198,7 @@ class Cia402Emulator:
 
     def stop(self) -> None:
         if self._network is not None and self.node is not None:
-            self.node.nmt.stop_heartbeat()
+            self.node.nmt.stop_heartbeat()  # type: ignore[no-untyped-call]
             self._network.disconnect()
         self._network = None
 
@@ -271,7 +289,7 @@ class Cia402Emulator:
         obj = self._od[index]
         var = obj if isinstance(obj, ODVariable) else obj[subindex]
         data = self.node.get_data(index, subindex)
-        value = int(struct.unpack("<" + _FMT[var.data_type], data)[0])
+        value = int(struct.unpack("<" + _FMT[var.data_type], data)[0])  # type: ignore[index]
         if not var.writable or index not in (0x6041, 0x6061, 0x603F):
             self._raw_cache[(index, subindex)] = value
         return value
@@ -400,7 +418,7 @@ class Cia402Emulator:
                     var = obj if isinstance(obj, ODVariable) else obj[subindex]
                     if bits != len(var):
                         raise SdoAbortedError(0x06040042)
-                    entries.append((index, subindex, _FMT[var.data_type]))
+                    entries.append((index, subindex, _FMT[var.data_type]))  # type: ignore[index]
                 out.append((cob & 0x7FF, self._raw(comm + n, 2), entries))
         self._pdo_dirty = False
 
@@ -448,9 +466,7 @@ class Cia402Emulator:
                 values.append(self._sample.get(index, self.targets.get(index, 0)))
         fmt = self._formats.get(id(entries))
         if fmt is None:
-            fmt = self._formats[id(entries)] = struct.Struct(
-                "<" + "".join(e[2] for e in entries)
-            )
+            fmt = self._formats[id(entries)] = struct.Struct("<" + "".join(e[2] for e in entries))
         return fmt.pack(*values)
 
     def _send_tpdo(self, cob: int, payload: bytes) -> None:
@@ -508,8 +524,8 @@ class Cia402Emulator:
         # what the drive latches at the *next* SYNC: its most recent control-loop values
         cpr = self.counts_per_rev
         self._next_sample = {
-            0x6064: int(round(trace.position_rad[-1] * cpr / (2 * math.pi))),
-            0x606C: int(round(trace.velocity_rad_s[-1] * cpr / (2 * math.pi))),
+            0x6064: round(trace.position_rad[-1] * cpr / (2 * math.pi)),
+            0x606C: round(trace.velocity_rad_s[-1] * cpr / (2 * math.pi)),
             0x6077: _clip16(trace.torque_nm[-1] / self.rated_torque_nm * 1e3),
             0x6078: _clip16(trace.current_a[-1] / self.rated_current_a * 1e3),
         }
@@ -519,9 +535,13 @@ class Cia402Emulator:
             if after is not None and not self._fault_fired and self.time_enabled_s >= after:
                 self._fault_fired = True
                 self._trip(self.faults.emcy_code)
-        elif self.state == QUICK_STOP and self._ramp_velocity == 0.0:
-            if abs(self.plant.velocity_rad_s) < 1e-3 and self._quick_stop_option() < 5:
-                self._enter(SWITCH_ON_DISABLED)
+        elif (
+            self.state == QUICK_STOP
+            and self._ramp_velocity == 0.0
+            and abs(self.plant.velocity_rad_s) < 1e-3
+            and self._quick_stop_option() < 5
+        ):
+            self._enter(SWITCH_ON_DISABLED)
 
     def _command(self, steps: int, period_s: float) -> tuple[Mode, np.ndarray]:
         cpr = self.counts_per_rev
@@ -558,9 +578,7 @@ class Cia402Emulator:
             if self.mode_display == 4:  # profile torque: slope 0x6087 (per-mille/s)
                 slope = self._raw(0x6087) * self.rated_torque_nm / 1e3 * period_s
                 target = float(np.mean(value))
-                self._profile_torque += float(
-                    np.clip(target - self._profile_torque, -slope, slope)
-                )
+                self._profile_torque += float(np.clip(target - self._profile_torque, -slope, slope))
                 value = np.asarray(self._profile_torque)
             limit = self._raw(0x6072) * self.rated_torque_nm / 1e3
             return mode, np.clip(np.broadcast_to(value, (steps,)), -limit, limit)

@@ -45,11 +45,13 @@ class _Context(ModbusBaseDeviceContext):  # type: ignore[misc]
     def reset(self) -> None:  # pragma: no cover - required by the interface
         pass
 
-    async def async_getValues(self, func_code: int, address: int, count: int = 1) -> Any:
+    async def async_getValues(self, func_code: int, address: int, count: int = 1) -> Any:  # noqa: N802
         return await self.emulator.serve(func_code, address, count, None)
 
-    async def async_setValues(self, func_code: int, address: int, values: list[int]) -> Any:
-        return await self.emulator.serve(func_code, address, len(values), values)
+    async def async_setValues(  # noqa: N802
+        self, func_code: int, address: int, values: list[int] | list[bool]
+    ) -> Any:
+        return await self.emulator.serve(func_code, address, len(values), [int(v) for v in values])
 
 
 class ModbusEmulator:
@@ -101,8 +103,9 @@ class ModbusEmulator:
 
     # -- life cycle ----------------------------------------------------------------------
     def start(self) -> None:
-        self._thread = threading.Thread(target=self._serve_forever, name="modbus-emulator",
-                                        daemon=True)  # fmt: skip
+        self._thread = threading.Thread(
+            target=self._serve_forever, name="modbus-emulator", daemon=True
+        )
         self._thread.start()
         if not self._ready.wait(10):
             raise RuntimeError("Modbus emulator did not start")
@@ -115,19 +118,19 @@ class ModbusEmulator:
         loop.close()
 
     async def _main(self) -> None:
-        context = ModbusServerContext(devices=_Context(self), single=True)
+        context = ModbusServerContext(devices=_Context(self), single=True)  # type: ignore[no-untyped-call]
         framer = FramerType.RTU if self.framing == "rtu" else FramerType.SOCKET
         server = ModbusTcpServer(context, framer=framer, address=("127.0.0.1", 0))
         self._server = server
         await server.serve_forever(background=True)
-        self.port = int(server.transport.sockets[0].getsockname()[1])
+        self.port = int(getattr(server.transport, "sockets")[0].getsockname()[1])  # noqa: B009
         self._ready.set()
         while not self._stopping:
             await asyncio.sleep(0.005)
             with self._lock:
                 self._advance()
                 self._watchdog()
-        await server.shutdown()
+        await server.shutdown()  # type: ignore[no-untyped-call]
 
     def stop(self) -> None:
         self._stopping = True
@@ -143,7 +146,9 @@ class ModbusEmulator:
         self.stop()
 
     # -- requests ------------------------------------------------------------------------
-    async def serve(self, func_code: int, address: int, count: int, values: list[int] | None) -> Any:
+    async def serve(
+        self, func_code: int, address: int, count: int, values: list[int] | None
+    ) -> Any:
         f = self.faults
         if f.response_delay_s:
             await asyncio.sleep(f.response_delay_s)
@@ -220,7 +225,9 @@ class ModbusEmulator:
 
     def _get(self, name: str) -> float:
         register = self.map[name]
-        words = [int(w) & 0xFFFF for w in self.regs[register.address : register.address + register.count]]
+        words = [
+            int(w) & 0xFFFF for w in self.regs[register.address : register.address + register.count]
+        ]
         return register.decode(words)
 
     def _status_word(self) -> int:
@@ -273,8 +280,12 @@ class ModbusEmulator:
         self._put("fault_code", self.fault_code)
         self._put("position", float(trace.position_rad[-1]))
         self._put("velocity", float(trace.velocity_rad_s[-1]))
-        self._put("torque", float(np.clip(trace.torque_nm[-1], -16 * self.rated_torque_nm,
-                                           16 * self.rated_torque_nm)))  # fmt: skip
+        self._put(
+            "torque",
+            float(
+                np.clip(trace.torque_nm[-1], -16 * self.rated_torque_nm, 16 * self.rated_torque_nm)
+            ),
+        )
         self._put("current", float(trace.current_a[-1]))
         for name in FEEDBACK:
             if name not in self.map.registers:

@@ -12,7 +12,7 @@ from __future__ import annotations
 from typing import Any
 
 import numpy as np
-from canopen.sdo import SdoAbortedError
+from canopen.sdo.exceptions import SdoAbortedError
 
 from plant_sim.model import PlantTrace
 
@@ -115,5 +115,3 @@ class DriveRecorder:
             self._count += len(idx)
         if self._cursor >= total:
             self.status = DONE
-
-

@@ -6,8 +6,8 @@ import math
 
 import numpy as np
 import pytest
-from conftest import sine
 
+from conftest import sine
 from hil.drives import open_drive
 from hil.drives.base import DriveState, Excitation, Mode
 from hil.drives.cia402 import CanOpenDrive
@@ -48,8 +48,14 @@ def test_sine_over_canopen_agrees_with_simdrive(profile: UnitProfile) -> None:
         spec = profile.measurement(a.name)
         assert spec.lower_limit < a.value < spec.upper_limit
     rec = recordings[0]
-    assert set(rec.columns) >= {"time_s", "position_rad", "velocity_rad_s", "torque_nm",
-                                "velocity_cmd_rad_s", "current_a"}
+    assert set(rec.columns) >= {
+        "time_s",
+        "position_rad",
+        "velocity_rad_s",
+        "torque_nm",
+        "velocity_cmd_rad_s",
+        "current_a",
+    }
     assert np.allclose(np.diff(rec.time_s), 1e-3)  # times from the SYNC count
     assert rec.metadata["drive"] == "canopen node 5"
     assert rec.metadata["firmware"] == "1.4.0"
@@ -74,14 +80,17 @@ def test_limits_refused_before_any_motion(profile: UnitProfile) -> None:
 
 def test_drive_recorder_at_the_loop_rate(profile: UnitProfile) -> None:
     """Above the 1 kHz stream: waveform table down, trace buffer up by segmented SDO."""
-    with canopen_emulator(profile, seed=2, station_changes={"acquisition": "auto"}) as (
-        emulator, station
+    with (
+        canopen_emulator(profile, seed=2, station_changes={"acquisition": "auto"}) as (
+            _emulator,
+            station,
+        ),
+        CanOpenDrive(station, limits=profile.limits) as drive,
     ):
-        with CanOpenDrive(station, limits=profile.limits) as drive:
-            assert drive.info.max_sample_rate_hz == pytest.approx(4000.0)
-            drive.enable()
-            excitation = sine(0.5, fs_hz=4000.0, periods=1)
-            recording = drive.run(excitation)
+        assert drive.info.max_sample_rate_hz == pytest.approx(4000.0)
+        drive.enable()
+        excitation = sine(0.5, fs_hz=4000.0, periods=1)
+        recording = drive.run(excitation)
     assert len(recording) == len(excitation.command)
     assert recording.metadata["acquisition"] == "drive recorder"
     assert np.allclose(np.diff(recording.time_s), 1 / 4000.0)
@@ -90,7 +99,7 @@ def test_drive_recorder_at_the_loop_rate(profile: UnitProfile) -> None:
 
 
 def test_profile_velocity_when_the_drive_lacks_cyclic_modes(profile: UnitProfile) -> None:
-    with canopen_emulator(profile, seed=3, supported_modes=0x000D) as (emulator, station):
+    with canopen_emulator(profile, seed=3, supported_modes=0x000D) as (emulator, station):  # noqa: SIM117
         with CanOpenDrive(station, limits=profile.limits) as drive:
             assert Mode.POSITION not in drive.info.modes
             drive.enable()
@@ -106,8 +115,9 @@ def test_quick_stop_brings_the_axis_to_rest(profile: UnitProfile) -> None:
     with canopen_emulator(profile, seed=4) as (emulator, station):
         with CanOpenDrive(station, limits=profile.limits) as drive:
             drive.enable()
-            ramp = Excitation(name="ramp", mode=Mode.VELOCITY, fs_hz=1000.0,
-                              command=np.linspace(0, 1.0, 200))  # fmt: skip
+            ramp = Excitation(
+                name="ramp", mode=Mode.VELOCITY, fs_hz=1000.0, command=np.linspace(0, 1.0, 200)
+            )
             drive.run(ramp)  # ends moving at 1 rad/s... then the hold target applies
             drive.quick_stop()
             assert drive.status().state in (DriveState.DISABLED, DriveState.QUICK_STOPPED)
@@ -119,17 +129,22 @@ def test_station_errors_name_the_file(tmp_path: object, profile: UnitProfile) ->
     from pathlib import Path
 
     missing = Path(str(tmp_path)) / "nope.toml"
-    with pytest.raises(ProfileError, match="nope.toml"), open_drive(
-        "canopen", profile=profile, unit_serial="X", station=missing
+    with (
+        pytest.raises(ProfileError, match=r"nope\.toml"),
+        open_drive("canopen", profile=profile, unit_serial="X", station=missing),
     ):
         pass
     bad = Path(str(tmp_path)) / "bad.toml"
-    bad.write_text('[canopen]\ninterface = "virtual"\nchannel = "x"\nnode_id = 300\neds = "a.eds"\n')
-    with pytest.raises(ProfileError, match="bad.toml"), open_drive(
-        "canopen", profile=profile, unit_serial="X", station=bad
+    bad.write_text(
+        '[canopen]\ninterface = "virtual"\nchannel = "x"\nnode_id = 300\neds = "a.eds"\n'
+    )
+    with (
+        pytest.raises(ProfileError, match=r"bad\.toml"),
+        open_drive("canopen", profile=profile, unit_serial="X", station=bad),
     ):
         pass
-    with pytest.raises(ProfileError, match="--station"), open_drive(
-        "modbus", profile=profile, unit_serial="X"
+    with (
+        pytest.raises(ProfileError, match="--station"),
+        open_drive("modbus", profile=profile, unit_serial="X"),
     ):
         pass

@@ -4,8 +4,8 @@ and the axis left not enabled."""
 from __future__ import annotations
 
 import pytest
-from conftest import sine
 
+from conftest import sine
 from hil.drives.cia402 import CanOpenDrive
 from hil.errors import DriveCommunicationError, DriveFaultError
 from hil.profile import UnitProfile
@@ -34,7 +34,7 @@ def test_emcy_mid_run(profile: UnitProfile) -> None:
 
 def test_persistent_fault_is_not_reported_as_cleared(profile: UnitProfile) -> None:
     faults = CanFaults(emcy_after_s=0.05, emcy_code=0x4310, fault_persists=True)
-    with canopen_emulator(profile, seed=1, faults=faults) as (emulator, station):
+    with canopen_emulator(profile, seed=1, faults=faults) as (emulator, station):  # noqa: SIM117
         with CanOpenDrive(station, limits=profile.limits) as drive:
             drive.enable()
             with pytest.raises(DriveFaultError):
@@ -47,13 +47,16 @@ def test_persistent_fault_is_not_reported_as_cleared(profile: UnitProfile) -> No
 
 def test_lost_pdos_leave_gaps_not_invented_samples(profile: UnitProfile) -> None:
     faults = CanFaults(drop_tpdo_every=97)
-    station_changes = {"pdo_timeout_s": 0.05}
-    with canopen_emulator(profile, seed=1, faults=faults, station_changes=station_changes) as (
-        _, station
+    station_changes = {"pdo_timeout_s": 0.05, "lost_sample_fraction": 0.05}
+    with (
+        canopen_emulator(profile, seed=1, faults=faults, station_changes=station_changes) as (
+            _,
+            station,
+        ),
+        CanOpenDrive(station, limits=profile.limits) as drive,
     ):
-        with CanOpenDrive(station, limits=profile.limits) as drive:
-            drive.enable()
-            recording = drive.run(sine(0.5, fs_hz=FS, periods=1))
+        drive.enable()
+        recording = drive.run(sine(0.5, fs_hz=FS, periods=1))
     lost = int(recording.metadata["lost_samples"])
     assert 0 < lost == 500 - len(recording)
     steps = recording.time_s[1:] - recording.time_s[:-1]
@@ -62,24 +65,27 @@ def test_lost_pdos_leave_gaps_not_invented_samples(profile: UnitProfile) -> None
 
 def test_all_pdos_lost_is_a_communication_error(profile: UnitProfile) -> None:
     faults = CanFaults(drop_all_tpdo_after_s=0.2)
-    with canopen_emulator(profile, seed=1, faults=faults,
-                          station_changes={"pdo_timeout_s": 0.02}) as (emulator, station):  # fmt: skip
-        with CanOpenDrive(station, limits=profile.limits) as drive:
-            drive.enable()
-            with pytest.raises(DriveCommunicationError, match="no feedback PDOs") as caught:
-                drive.run(sine(0.5, fs_hz=FS))
-            partial = caught.value.partial_recording
-            assert partial is not None and 150 <= len(partial) <= 200
+    with canopen_emulator(
+        profile, seed=1, faults=faults, station_changes={"pdo_timeout_s": 0.02}
+    ) as (emulator, station), CanOpenDrive(station, limits=profile.limits) as drive:
+        drive.enable()
+        with pytest.raises(DriveCommunicationError, match="no feedback PDOs") as caught:
+            drive.run(sine(0.5, fs_hz=FS))
+        partial = caught.value.partial_recording
+        assert partial is not None
+        assert 150 <= len(partial) <= 200
     assert emulator.state != ENABLED
 
 
 def test_slow_sdo_within_timeout_works_beyond_it_fails_cleanly(profile: UnitProfile) -> None:
-    with canopen_emulator(profile, seed=1, faults=CanFaults(sdo_delay_s=0.02)) as (_, station):
+    with canopen_emulator(profile, seed=1, faults=CanFaults(sdo_delay_s=0.02)) as (_, station):  # noqa: SIM117
         with CanOpenDrive(station, limits=profile.limits) as drive:
             assert drive.info.firmware_version == "1.4.0"
     slow = CanFaults(sdo_delay_s=0.5)
-    with canopen_emulator(profile, seed=1, faults=slow,
-                          station_changes={"sdo_timeout_s": 0.1}) as (emulator, station):  # fmt: skip
+    with canopen_emulator(profile, seed=1, faults=slow, station_changes={"sdo_timeout_s": 0.1}) as (
+        emulator,
+        station,
+    ):
         with pytest.raises(DriveCommunicationError, match="0x1017"):
             CanOpenDrive(station, limits=profile.limits)
         assert emulator.state != ENABLED
@@ -88,7 +94,8 @@ def test_slow_sdo_within_timeout_works_beyond_it_fails_cleanly(profile: UnitProf
 @pytest.mark.filterwarnings("ignore::pytest.PytestUnhandledThreadExceptionWarning")
 def test_bus_error_mid_run(profile: UnitProfile) -> None:
     with canopen_emulator(profile, seed=1, faults=CanFaults(bus_error_after_s=0.3)) as (
-        emulator, station
+        emulator,
+        station,
     ):
         with CanOpenDrive(station, limits=profile.limits) as drive:
             drive.enable()
@@ -103,7 +110,8 @@ def test_bus_error_mid_run(profile: UnitProfile) -> None:
 def test_bus_error_between_runs_kills_the_notifier_and_is_noticed(profile: UnitProfile) -> None:
     """The trap: python-can's Notifier thread dies on the error; only network.check() tells."""
     with canopen_emulator(profile, seed=1, faults=CanFaults(bus_error_after_s=0.0)) as (
-        emulator, station
+        emulator,
+        station,
     ):
         drive = CanOpenDrive(station, limits=profile.limits)
         try:

@@ -8,8 +8,8 @@ import time
 import canopen
 import pytest
 from canopen.profiles.p402 import BaseNode402
-from conftest import sine
 
+from conftest import sine
 from hil.drives.base import Mode
 from hil.drives.cia402 import CanOpenDrive
 from hil.errors import DriveFaultError, DriveStateError
@@ -72,7 +72,8 @@ def test_event_tpdo_turns_periodic_and_check_statusword_times_out(profile: UnitP
                 node.sdo[0x6040].raw = word
                 time.sleep(0.05)
             tpdo = node.tpdo_pointers[0x6041].pdo_parent
-            assert tpdo.trans_type == 255 and tpdo.is_periodic  # "period" from 2 receptions
+            assert tpdo.trans_type == 255
+            assert tpdo.is_periodic
             with pytest.raises(RuntimeError, match="Timeout"):
                 node.check_statusword()
         finally:
@@ -82,7 +83,7 @@ def test_event_tpdo_turns_periodic_and_check_statusword_times_out(profile: UnitP
 
 
 def test_op_mode_setter_swallows_a_refused_switch(profile: UnitProfile) -> None:
-    with canopen_emulator(profile, seed=1, lock_mode_while_enabled=True) as (emulator, station):
+    with canopen_emulator(profile, seed=1, lock_mode_while_enabled=True) as (emulator, station):  # noqa: SIM117
         with CanOpenDrive(station, limits=profile.limits) as drive:
             drive.enable()
             network, node = _library_node(station)
@@ -99,7 +100,7 @@ def test_op_mode_setter_swallows_a_refused_switch(profile: UnitProfile) -> None:
 
 def test_reset_from_fault_does_not_guarantee_a_clear(profile: UnitProfile) -> None:
     faults = CanFaults(emcy_after_s=0.02, emcy_code=0x7300, fault_persists=True)
-    with canopen_emulator(profile, seed=1, faults=faults) as (emulator, station):
+    with canopen_emulator(profile, seed=1, faults=faults) as (emulator, station):  # noqa: SIM117
         with CanOpenDrive(station, limits=profile.limits) as drive:
             drive.enable()
             with pytest.raises(DriveFaultError):

@@ -24,7 +24,7 @@ from hil.drives.cia402.protocol import (
     TARGET_OBJECT,
     state_of,
 )
-from hil.errors import DriveCommunicationError, DriveError, DriveFaultError, DriveStateError
+from hil.errors import DriveError, DriveFaultError, DriveStateError
 from hil.recording import Recording
 
 if TYPE_CHECKING:
@@ -42,7 +42,7 @@ RECORDER_SAMPLE = np.dtype([("pos", "<i4"), ("vel", "<i4"), ("torque", "<i2"), (
 _LIMITS = {"h": (-32768, 32767), "i": (-(2**31), 2**31 - 1)}
 
 
-class _Faulted(Exception):
+class _FaultedError(Exception):
     def __init__(self, time_s: float) -> None:
         super().__init__(time_s)
         self.time_s = time_s
@@ -86,17 +86,24 @@ def run_stream(drive: CanOpenDrive, excitation: Excitation) -> Recording:
     cob, _ = link.rpdo_payload(mode, CW_ENABLE_OPERATION, 0)
     packer = struct.Struct("<H" + TARGET_OBJECT[mode][1])
     counts_margin = 0.05 * sc.counts_per_rad  # the drive's own 0x607D acts first
-    travel = (drive.limits.travel_min_rad * sc.counts_per_rad - counts_margin,
-              drive.limits.travel_max_rad * sc.counts_per_rad + counts_margin)  # fmt: skip
+    travel = (
+        drive.limits.travel_min_rad * sc.counts_per_rad - counts_margin,
+        drive.limits.travel_max_rad * sc.counts_per_rad + counts_margin,
+    )
     link.forget()
     first = link.sync_index + 1
     error: DriveError | None = None
-    log.info("node %d: streaming %s (%d samples at %.0f Hz)", st.node_id, excitation.name,
-             len(raw), 1 / st.sync_period_s)  # fmt: skip
+    log.info(
+        "node %d: streaming %s (%d samples at %.0f Hz)",
+        st.node_id,
+        excitation.name,
+        len(raw),
+        1 / st.sync_period_s,
+    )
     try:
         with link.direct_receive():
             done = _stream_loop(drive, excitation, raw, cob, packer, travel)
-    except _Faulted as fault:
+    except _FaultedError as fault:
         # 0x603F by SDO: only now that the Notifier receives again
         code = link.emcy[-1][0] if link.emcy else link.fault_code()
         error = DriveFaultError(
@@ -159,7 +166,7 @@ def _stream_loop(
         lost_in_a_row = 0
         statusword, position, _ = struct.unpack("<Hib", link.rx1[link.sync_index])
         if statusword & SW_FAULT or link.emcy:
-            raise _Faulted(k * period_s)
+            raise _FaultedError(k * period_s)
         if statusword & 0x6F != 0x27:
             raise DriveStateError(
                 f"node {st.node_id} left OPERATION ENABLED ({state_of(statusword)}) at "
@@ -198,10 +205,14 @@ def _stream_recording(
         "current_a": current * sc.rated_current_a / 1e3,
     }
     metadata = _metadata(
-        drive, excitation, acquisition="sync stream", sync_period_s=f"{period:g}",
+        drive,
+        excitation,
+        acquisition="sync stream",
+        sync_period_s=f"{period:g}",
         lost_samples=str(done - len(rows)),
-    )  # fmt: skip
-    return Recording(columns=columns, metadata=metadata, source=f"canopen:{excitation.name}")
+    )
+    floats = {name: np.asarray(values, dtype=np.float64) for name, values in columns.items()}
+    return Recording(columns=floats, metadata=metadata, source=f"canopen:{excitation.name}")
 
 
 def _make_safe(drive: CanOpenDrive, error: DriveError) -> None:
@@ -259,16 +270,19 @@ def run_recorder(drive: CanOpenDrive, excitation: Excitation) -> Recording:
     n = len(samples)
     columns = {
         "time_s": np.arange(n) / excitation.fs_hz,
-        "position_rad": samples["pos"] / sc.counts_per_rad,
-        "velocity_rad_s": samples["vel"] / sc.velocity_units_per_rad_s,
-        "torque_nm": samples["torque"] * sc.rated_torque_nm / 1e3,
+        "position_rad": np.asarray(samples["pos"] / sc.counts_per_rad, dtype=np.float64),
+        "velocity_rad_s": np.asarray(
+            samples["vel"] / sc.velocity_units_per_rad_s, dtype=np.float64
+        ),
+        "torque_nm": np.asarray(samples["torque"] * sc.rated_torque_nm / 1e3, dtype=np.float64),
         COMMAND_COLUMN[excitation.mode]: np.asarray(excitation.command[:n], dtype=np.float64),
-        "current_a": samples["current"] * sc.rated_current_a / 1e3,
+        "current_a": np.asarray(samples["current"] * sc.rated_current_a / 1e3, dtype=np.float64),
     }
     recording = Recording(
         columns=columns,
-        metadata=_metadata(drive, excitation, acquisition="drive recorder",
-                           recorder_divider=str(divider)),  # fmt: skip
+        metadata=_metadata(
+            drive, excitation, acquisition="drive recorder", recorder_divider=str(divider)
+        ),
         source=f"canopen-recorder:{excitation.name}",
     )
     if error is not None:

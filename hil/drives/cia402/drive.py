@@ -107,7 +107,9 @@ class CanOpenDrive(Drive):
             ("rated current 0x6075", rated_current, st.rated_current_a),
             ("encoder increments 0x608F", counts, st.counts_per_rev),
         ):
-            if station_value is not None and not math.isclose(drive_value, station_value, rel_tol=1e-3):
+            if station_value is not None and not math.isclose(
+                drive_value, station_value, rel_tol=1e-3
+            ):
                 raise DriveStateError(
                     f"node {st.node_id}: {name} is {drive_value:g}, the station file "
                     f"{st.source} says {station_value:g}"
@@ -121,9 +123,11 @@ class CanOpenDrive(Drive):
 
     def _write_period(self, period_us: int) -> None:
         mantissa, exponent = period_us, -6
-        while mantissa % 10 == 0 and mantissa > 255 or mantissa > 255:
+        while (mantissa % 10 == 0 and mantissa > 255) or mantissa > 255:
             if mantissa % 10:
-                raise DriveStateError(f"a SYNC period of {period_us} µs cannot be encoded in 0x60C2")
+                raise DriveStateError(
+                    f"a SYNC period of {period_us} µs cannot be encoded in 0x60C2"
+                )
             mantissa, exponent = mantissa // 10, exponent + 1
         self.link.write(0x60C2, 2, exponent)
         self.link.write(0x60C2, 1, mantissa)
@@ -138,7 +142,9 @@ class CanOpenDrive(Drive):
         link.write(0x607D, 1, round(lim.travel_min_rad * sc.counts_per_rad))
         link.write(0x607D, 2, round(lim.travel_max_rad * sc.counts_per_rad))
         link.write(0x605A, 0, self.station.quick_stop_option_code)
-        link.write(0x6085, 0, round(self.station.quick_stop_decel_rad_s2 * sc.velocity_units_per_rad_s))
+        link.write(
+            0x6085, 0, round(self.station.quick_stop_decel_rad_s2 * sc.velocity_units_per_rad_s)
+        )
 
     def _read_info(self, rate_hz: float) -> DriveInfo:
         link, st = self.link, self.station
@@ -241,7 +247,7 @@ class CanOpenDrive(Drive):
     def _select_mode(self, mode: Mode) -> None:
         """Pick the cyclic synchronous mode (else the profile mode) and verify 0x6061."""
         link = self.link
-        for code, name in MODE_CANDIDATES[mode]:
+        for code, name in MODE_CANDIDATES[mode]:  # noqa: B007 (used after the loop)
             if self.supported_modes & MODE_SUPPORT_BIT[code]:
                 break
         else:
@@ -316,9 +322,7 @@ class CanOpenDrive(Drive):
                 break
         try:
             link.write(0x6040, 0, controlword)
-            log.warning(
-                "node %d now %s", self.station.node_id, state_of(int(link.read(0x6041)))
-            )
+            log.warning("node %d now %s", self.station.node_id, state_of(int(link.read(0x6041))))
         except DriveError as exc:
             log.error("node %d: cannot confirm a safe state: %s", self.station.node_id, exc)
 

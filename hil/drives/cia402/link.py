@@ -27,7 +27,7 @@ from typing import Any
 
 import can
 import canopen
-from canopen.sdo import SdoAbortedError, SdoCommunicationError
+from canopen.sdo.exceptions import SdoAbortedError, SdoCommunicationError
 
 from hil.drives.base import Mode
 from hil.drives.cia402.protocol import (
@@ -142,9 +142,7 @@ class CanLink:
             ) from exc
         age = time.monotonic() - self.heartbeat_time
         if self.heartbeat_state is not None and age > self.station.heartbeat_timeout_s:
-            raise DriveCommunicationError(
-                f"no heartbeat from node {self.node_id} for {age:.2f} s"
-            )
+            raise DriveCommunicationError(f"no heartbeat from node {self.node_id} for {age:.2f} s")
 
     def restart_receiver(self) -> bool:
         """After a bus error: start a new Notifier so the drive's state can be verified."""
@@ -320,8 +318,10 @@ class CanLink:
             if last is not None and done(*last):
                 return last
             if time.monotonic() > deadline:
-                seen = "no statusword" if last is None else (
-                    f"statusword 0x{last[0]:04X} ({state_of(last[0])}), mode {last[1]}"
+                seen = (
+                    "no statusword"
+                    if last is None
+                    else (f"statusword 0x{last[0]:04X} ({state_of(last[0])}), mode {last[1]}")
                 )
                 raise DriveStateError(f"node {self.node_id}: {what} not confirmed ({seen})")
 
@@ -340,7 +340,9 @@ class CanLink:
             code = self.emcy[-1][0] if self.emcy else self.fault_code()
             raise DriveFaultError(f"node {self.node_id} faulted {context}", code=code)
 
-    def decode(self, indices: list[int]) -> tuple[list[tuple[int, int, int]], list[tuple[int, int, int]]]:
+    def decode(
+        self, indices: list[int]
+    ) -> tuple[list[tuple[int, int, int]], list[tuple[int, int, int]]]:
         """TPDO1/TPDO2 contents for the given SYNC indices (both must be present)."""
         one = [_TPDO1.unpack(self.rx1[k]) for k in indices]
         two = [_TPDO2.unpack(self.rx2[k]) for k in indices]

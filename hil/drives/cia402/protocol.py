@@ -34,8 +34,11 @@ MODE_CANDIDATES: dict[Mode, tuple[tuple[int, str], ...]] = {
     Mode.POSITION: ((8, "cyclic synchronous position"),),
 }
 MODE_SUPPORT_BIT = {1: 0x01, 3: 0x04, 4: 0x08, 6: 0x20, 7: 0x40, 8: 0x80, 9: 0x100, 10: 0x200}
-TARGET_OBJECT = {Mode.VELOCITY: (0x60FF, "i"), Mode.TORQUE: (0x6071, "h"),
-                 Mode.POSITION: (0x607A, "i")}  # fmt: skip
+TARGET_OBJECT = {
+    Mode.VELOCITY: (0x60FF, "i"),
+    Mode.TORQUE: (0x6071, "h"),
+    Mode.POSITION: (0x607A, "i"),
+}
 
 # The PDO layout the backend writes into the drive (all synchronous, type 1):
 # RPDO n+1 = controlword + the target of one mode; TPDO1/TPDO2 = the feedback.

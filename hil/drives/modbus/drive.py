@@ -36,11 +36,20 @@ from hil.recording import Recording
 
 log = logging.getLogger(__name__)
 
-EXCEPTION_NAMES = {1: "ILLEGAL FUNCTION", 2: "ILLEGAL DATA ADDRESS", 3: "ILLEGAL DATA VALUE",
-                   4: "SERVER DEVICE FAILURE", 5: "ACKNOWLEDGE", 6: "SERVER DEVICE BUSY",
-                   0x0B: "GATEWAY TARGET FAILED TO RESPOND"}  # fmt: skip
-COMMAND_COLUMN = {Mode.TORQUE: "torque_cmd_nm", Mode.VELOCITY: "velocity_cmd_rad_s",
-                  Mode.POSITION: "position_cmd_rad"}  # fmt: skip
+EXCEPTION_NAMES = {
+    1: "ILLEGAL FUNCTION",
+    2: "ILLEGAL DATA ADDRESS",
+    3: "ILLEGAL DATA VALUE",
+    4: "SERVER DEVICE FAILURE",
+    5: "ACKNOWLEDGE",
+    6: "SERVER DEVICE BUSY",
+    0x0B: "GATEWAY TARGET FAILED TO RESPOND",
+}
+COMMAND_COLUMN = {
+    Mode.TORQUE: "torque_cmd_nm",
+    Mode.VELOCITY: "velocity_cmd_rad_s",
+    Mode.POSITION: "position_cmd_rad",
+}
 
 
 def nice_rate(rate_hz: float) -> float:
@@ -73,9 +82,14 @@ class ModbusDrive(Drive):
         if st.transport == "tcp":
             return ModbusTcpClient(st.host, port=st.port, timeout=st.timeout_s, retries=0)
         return ModbusSerialClient(
-            st.serial_port, framer=FramerType.RTU, baudrate=st.baudrate, parity=st.parity,
-            stopbits=st.stopbits, timeout=st.timeout_s, retries=0,
-        )  # fmt: skip
+            st.serial_port,
+            framer=FramerType.RTU,
+            baudrate=st.baudrate,
+            parity=st.parity,
+            stopbits=st.stopbits,
+            timeout=st.timeout_s,
+            retries=0,
+        )
 
     def _where(self) -> str:
         st = self.station
@@ -91,7 +105,9 @@ class ModbusDrive(Drive):
         if gap:
             time.sleep(gap)
         try:
-            response = getattr(self._client, method)(*args, device_id=self.station.unit_id, **kwargs)
+            response = getattr(self._client, method)(
+                *args, device_id=self.station.unit_id, **kwargs
+            )
         except ModbusException as exc:
             raise DriveCommunicationError(f"{self._where()}: {what}: {exc}") from exc
         except OSError as exc:
@@ -106,8 +122,9 @@ class ModbusDrive(Drive):
         return response
 
     def _read_regs(self, address: int, count: int) -> list[int]:
-        response = self._call(f"read {count} registers at {address}", "read_holding_registers",
-                              address, count=count)  # fmt: skip
+        response = self._call(
+            f"read {count} registers at {address}", "read_holding_registers", address, count=count
+        )
         return list(response.registers)
 
     def read_values(self, names: tuple[str, ...]) -> dict[str, float]:
@@ -138,7 +155,9 @@ class ModbusDrive(Drive):
             serial=str(int(ident.get("serial_number", 0))),
             rated_torque_nm=float(ident.get("rated_torque", self.limits.torque_nm)),
             limits=self.limits,
-            modes=tuple(Mode(name) for name in self.map.modes if name in ("torque", "velocity", "position")),
+            modes=tuple(
+                Mode(name) for name in self.map.modes if name in ("torque", "velocity", "position")
+            ),
             max_sample_rate_hz=rate,
             transport=self._where(),
         )
@@ -177,12 +196,23 @@ class ModbusDrive(Drive):
     def status(self) -> DriveStatus:
         _, v = self._feedback()
         fault = self._bit(v, "fault")
-        state = DriveState.FAULT if fault else (
-            DriveState.QUICK_STOPPED if self._bit(v, "quick_stop_active") else
-            DriveState.ENABLED if self._bit(v, "enabled") else DriveState.DISABLED
-        )  # fmt: skip
-        return DriveStatus(state=state, position_rad=v["position"], velocity_rad_s=v["velocity"],
-                           fault_code=int(v["fault_code"]) if fault else None)  # fmt: skip
+        state = (
+            DriveState.FAULT
+            if fault
+            else (
+                DriveState.QUICK_STOPPED
+                if self._bit(v, "quick_stop_active")
+                else DriveState.ENABLED
+                if self._bit(v, "enabled")
+                else DriveState.DISABLED
+            )
+        )
+        return DriveStatus(
+            state=state,
+            position_rad=v["position"],
+            velocity_rad_s=v["velocity"],
+            fault_code=int(v["fault_code"]) if fault else None,
+        )
 
     def _control(self, *bits: str) -> None:
         word = sum(1 << self.map.control_bits[b] for b in bits)
@@ -195,8 +225,10 @@ class ModbusDrive(Drive):
             if done(values):
                 return values
             if time.monotonic() > deadline:
-                raise DriveStateError(f"{self._where()}: {what} not confirmed "
-                                      f"(status word 0x{int(values['status_word']):04X})")  # fmt: skip
+                raise DriveStateError(
+                    f"{self._where()}: {what} not confirmed "
+                    f"(status word 0x{int(values['status_word']):04X})"
+                )
             time.sleep(0.005)
 
     def enable(self, mode: Mode = Mode.VELOCITY) -> None:
@@ -229,8 +261,9 @@ class ModbusDrive(Drive):
         _, values = self._feedback()
         if self._bit(values, "fault"):
             self._state = DriveState.FAULT
-            raise DriveFaultError(f"{self._where()}: drive fault {context}",
-                                  code=int(values["fault_code"]))  # fmt: skip
+            raise DriveFaultError(
+                f"{self._where()}: drive fault {context}", code=int(values["fault_code"])
+            )
 
     def disable(self) -> None:
         if not self._client.connected:
@@ -248,8 +281,11 @@ class ModbusDrive(Drive):
             if not self._client.connected:
                 self._connect()  # the drive's watchdog stops it anyway; try to confirm
             self._control("quick_stop")
-            self._await("quick stop", lambda v: not self._bit(v, "enabled") and
-                        abs(v["velocity"]) < 1e-2, timeout_s=5.0)  # fmt: skip
+            self._await(
+                "quick stop",
+                lambda v: not self._bit(v, "enabled") and abs(v["velocity"]) < 1e-2,
+                timeout_s=5.0,
+            )
         except DriveError as exc:
             log.error("%s: quick stop not confirmed: %s", self._where(), exc)
         self._state = DriveState.QUICK_STOPPED
@@ -293,7 +329,9 @@ class ModbusDrive(Drive):
         self.write_value(f"{excitation.mode.value}_cmd", self._hold_value(excitation.mode))
         return recording
 
-    def _poll(self, excitation: Excitation, rows: list[tuple[float, float, dict[str, float]]]) -> None:
+    def _poll(
+        self, excitation: Excitation, rows: list[tuple[float, float, dict[str, float]]]
+    ) -> None:
         command = np.asarray(excitation.command, dtype=np.float64)
         name = f"{excitation.mode.value}_cmd"
         fs, n = excitation.fs_hz, len(command)
@@ -311,17 +349,21 @@ class ModbusDrive(Drive):
             if self._bit(values, "fault"):
                 raise DriveFaultError(
                     f"{self._where()}: drive fault at t = {stamp - t0:.3f} s of "
-                    f"'{excitation.name}'", code=int(values["fault_code"]))  # fmt: skip
+                    f"'{excitation.name}'",
+                    code=int(values["fault_code"]),
+                )
             if not self._bit(values, "enabled"):
-                raise DriveStateError(f"{self._where()}: drive disabled itself during "
-                                      f"'{excitation.name}'")  # fmt: skip
+                raise DriveStateError(
+                    f"{self._where()}: drive disabled itself during '{excitation.name}'"
+                )
             next_due = t0 + (index + 1) / fs
             delay = next_due - time.monotonic()
             if delay > 0:
                 time.sleep(delay)
 
-    def _recording(self, excitation: Excitation,
-                   rows: list[tuple[float, float, dict[str, float]]]) -> Recording:  # fmt: skip
+    def _recording(
+        self, excitation: Excitation, rows: list[tuple[float, float, dict[str, float]]]
+    ) -> Recording:
         def column(key: str) -> np.ndarray:
             return np.asarray([r[2].get(key, np.nan) for r in rows], dtype=np.float64)
 

@@ -7,14 +7,29 @@ import tomllib
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
 
 from hil.errors import ProfileError
 
-TYPES = {"int16": ("h", 1), "uint16": ("H", 1), "int32": ("i", 2), "uint32": ("I", 2),
-         "float32": ("f", 2)}  # fmt: skip
-REQUIRED = ("status_word", "fault_code", "position", "velocity", "torque", "control_word",
-            "mode", "velocity_cmd", "torque_cmd", "position_cmd")  # fmt: skip
+TYPES = {
+    "int16": ("h", 1),
+    "uint16": ("H", 1),
+    "int32": ("i", 2),
+    "uint32": ("I", 2),
+    "float32": ("f", 2),
+}
+REQUIRED = (
+    "status_word",
+    "fault_code",
+    "position",
+    "velocity",
+    "torque",
+    "control_word",
+    "mode",
+    "velocity_cmd",
+    "torque_cmd",
+    "position_cmd",
+)
 FEEDBACK = ("status_word", "fault_code", "position", "velocity", "torque", "current")
 
 
@@ -39,9 +54,8 @@ class Register:
     def decode(self, words: list[int]) -> float:
         """Registers (16-bit ints as the wire carries them) -> SI value."""
         ordered = list(words) if self.word_order == "big" or self.count == 1 else words[::-1]
-        raw = b"".join(
-            w.to_bytes(2, "big" if self.byte_order == "big" else "little") for w in ordered
-        )
+        order: Literal["big", "little"] = "big" if self.byte_order == "big" else "little"
+        raw = b"".join(w.to_bytes(2, order) for w in ordered)
         return float(struct.unpack(self._format(), raw)[0]) * self.scale
 
     def encode(self, value_si: float) -> list[int]:
@@ -49,7 +63,7 @@ class Register:
         if self.type != "float32":
             raw_value = round(raw_value)
         data = struct.pack(self._format(), raw_value)
-        order = "big" if self.byte_order == "big" else "little"
+        order: Literal["big", "little"] = "big" if self.byte_order == "big" else "little"
         words = [int.from_bytes(data[i : i + 2], order) for i in range(0, len(data), 2)]
         return words if self.word_order == "big" or self.count == 1 else words[::-1]
 
@@ -77,7 +91,8 @@ class RegisterMap:
         )
         blocks: list[list[int]] = []
         for start, stop in spans:
-            if blocks and start <= blocks[-1][1] and stop - blocks[-1][0] <= self.max_registers_per_read:
+            # one read may span unused registers as long as it stays within the limit
+            if blocks and stop - blocks[-1][0] <= self.max_registers_per_read:
                 blocks[-1][1] = max(blocks[-1][1], stop)
             else:
                 blocks.append([start, stop])
@@ -102,7 +117,9 @@ def load_register_map(path: str | Path) -> RegisterMap:
         raise ProfileError(f"register map lacks {', '.join(missing)}", source=source)
     for name in ("control_word", "mode", "velocity_cmd", "torque_cmd", "position_cmd"):
         if not registers[name].writable:
-            raise ProfileError(f"register '{name}' must be writable (access = \"rw\")", source=source)
+            raise ProfileError(
+                f"register '{name}' must be writable (access = \"rw\")", source=source
+            )
     bits = data.get("bits", {})
     return RegisterMap(
         source=source,
@@ -116,8 +133,9 @@ def load_register_map(path: str | Path) -> RegisterMap:
     )
 
 
-def _register(name: str, spec: Mapping[str, Any], byte_order: str, word_order: str,
-              source: str) -> Register:  # fmt: skip
+def _register(
+    name: str, spec: Mapping[str, Any], byte_order: str, word_order: str, source: str
+) -> Register:
     where = f"{source} [registers.{name}]"
     if not isinstance(spec, Mapping) or "address" not in spec or "type" not in spec:
         raise ProfileError("needs 'address' and 'type'", source=where)
@@ -134,7 +152,12 @@ def _register(name: str, spec: Mapping[str, Any], byte_order: str, word_order: s
     if order not in ("big", "little") or byte_order not in ("big", "little"):
         raise ProfileError("byte/word order must be 'big' or 'little'", source=where)
     return Register(
-        name=name, address=int(spec["address"]), type=kind, word_order=order,
-        byte_order=byte_order, scale=scale, unit=str(spec.get("unit", "")),
+        name=name,
+        address=int(spec["address"]),
+        type=kind,
+        word_order=order,
+        byte_order=byte_order,
+        scale=scale,
+        unit=str(spec.get("unit", "")),
         writable=access in ("rw", "w"),
-    )  # fmt: skip
+    )
