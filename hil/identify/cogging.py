@@ -1,0 +1,215 @@
+"""Cogging torque and K_t ripple from constant-velocity passes at two torque levels.
+
+At constant speed the motor delivers ``T_cmd·(1 + r(θ)) = L(θ) ± F + g(θ)``: smooth load
+``L`` (gravity, cable), sliding friction ``F`` (sign of the direction), cogging ``g(θ)``
+and the K_t ripple ``r(θ)``. To first order the commanded torque's position harmonic of
+order ``n`` is ``C_n = G_n − T̄·R_n`` with ``T̄`` the pass's mean torque level: cogging is
+the same in both passes, K_t ripple scales with the torque. Two passes with different
+``T̄`` (up and down: ``T̄± = L̄ ± F``) therefore separate them::
+
+    R_n = −(C₊ − C₋)/(T̄₊ − T̄₋),      G_n = C₊ + T̄₊·R_n
+
+Complex amplitudes ``z = A·e^{iφ}`` stand for ``A·sin(nθ + φ)`` (the simulator's
+convention). Orders are found by a scan over integer orders of the single-harmonic fit
+amplitude (local maxima above ``threshold`` times the median floor), then fitted jointly
+with a polynomial for the smooth part. Orders below ``min_order`` (a few cycles over the
+travel) cannot be told from the smooth load and are not sought.
+
+Compensation table (JSON, written by the protocol next to the certificate)::
+
+    {"format": "gimbal-hil cogging compensation 1",
+     "model": "T_ff(θ) = Σ cogging A_n·sin(n·θ + φ_n);
+               K_t(θ) = K_t·(1 + Σ kt_ripple a_n·sin(n·θ + ψ_n))",
+     "angle": "motor position in rad, encoder zero", "cogging": [{"order", "amplitude_nm",
+     "phase_rad", "amplitude_u_nm"}], "kt_ripple": [{"order", "amplitude", "phase_rad",
+     "amplitude_u"}]}
+
+A drive compensates by adding ``T_ff(θ)`` to its torque command and dividing by
+``1 + r(θ)``.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from hil.errors import IdentificationError
+from hil.identify.estimate import Estimate
+
+FloatArray = NDArray[np.float64]
+COMPENSATION_FORMAT = "gimbal-hil cogging compensation 1"
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class HarmonicEstimate:
+    order: int
+    amplitude: float  # N·m for cogging, relative for K_t ripple
+    phase_rad: float
+    amplitude_u: float
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class CoggingResult:
+    cogging: tuple[HarmonicEstimate, ...]
+    kt_ripple: tuple[HarmonicEstimate, ...]
+    cogging_peak: Estimate  # largest cogging harmonic, N·m
+    kt_ripple_peak: Estimate  # largest K_t ripple harmonic, %
+    torque_levels_nm: tuple[float, float]
+    noise_rms_nm: float
+    orders_scanned: tuple[int, int]
+
+
+def _design(theta: FloatArray, orders: list[int], poly: int, centre: float,
+            scale: float) -> FloatArray:
+    x = (theta - centre) / scale
+    cols = [x**k for k in range(poly + 1)]
+    for n in orders:
+        cols += [np.cos(n * theta), np.sin(n * theta)]
+    return np.column_stack(cols)
+
+
+def _smooth_residual(theta: FloatArray, torque: FloatArray, poly: int, centre: float,
+                     scale: float) -> FloatArray:
+    design = _design(theta, [], poly, centre, scale)
+    coef = np.linalg.lstsq(design, torque, rcond=None)[0]
+    return np.asarray(torque - design @ coef, dtype=np.float64)
+
+
+def scan_orders(
+    passes: list[tuple[FloatArray, FloatArray]], *, min_order: int, max_order: int,
+    threshold: float, poly: int, max_orders: int,
+) -> list[int]:
+    """Integer orders whose single-harmonic amplitude (largest over the passes) is a local
+    maximum (±2 orders) above ``threshold`` × the median over the scan."""
+    lo = min(float(t.min()) for t, _ in passes)
+    hi = max(float(t.max()) for t, _ in passes)
+    centre, scale = (lo + hi) / 2, (hi - lo) / 2
+    orders = np.arange(min_order, max_order + 1)
+    amplitude = np.zeros(orders.size)
+    for theta, torque in passes:
+        residual = _smooth_residual(theta, torque, poly, centre, scale)
+        # correlation amplitude 2/N·|Σ r·e^{−inθ}| (a periodogram over the travel)
+        step = np.exp(-1j * theta)
+        wave = np.exp(-1j * min_order * theta) * residual
+        for i in range(orders.size):
+            amplitude[i] = max(amplitude[i], 2 * abs(wave.sum()) / theta.size)
+            wave *= step
+    floor = float(np.median(amplitude))
+    picks = []
+    for i in range(orders.size):
+        window = amplitude[max(i - 2, 0):i + 3]
+        if amplitude[i] >= window.max() and amplitude[i] > threshold * floor:
+            picks.append((amplitude[i], int(orders[i])))
+    return sorted(n for _, n in sorted(picks, reverse=True)[:max_orders])
+
+
+def identify_cogging(
+    passes: list[tuple[FloatArray, FloatArray, FloatArray]],
+    *,
+    inertia_kg_m2: float,
+    min_order: int,
+    max_order: int,
+    threshold: float = 8.0,
+    poly: int = 6,
+    max_orders: int = 8,
+) -> CoggingResult:
+    """Cogging and K_t ripple harmonics from two constant-velocity passes
+    ``(time_s, θ, T_cmd)`` at different torque levels (e.g. up and down the travel).
+
+    The velocity loop does not reject cogging completely: the rest accelerates the inertia,
+    with a phase that flips with the direction and would pass for K_t ripple. Each order's
+    position ripple ``δθ_n`` (harmonic fit of θ about its linear trend in time) gives the
+    acceleration ``α_n = −(n·v)²·δθ_n``; ``J·α_n`` is removed from the torque harmonic.
+
+    Raises
+    ------
+    IdentificationError
+        Not two passes, torque levels too close to separate ripple from cogging, or no
+        harmonic above the noise.
+    """
+    if len(passes) != 2:
+        raise IdentificationError(f"need two passes at different torque levels, got {len(passes)}")
+    angle_torque = [(theta, torque) for _, theta, torque in passes]
+    orders = scan_orders(angle_torque, min_order=min_order, max_order=max_order,
+                         threshold=threshold, poly=poly, max_orders=max_orders)
+    if not orders:
+        raise IdentificationError(
+            f"no position harmonic of order {min_order}-{max_order} stands "
+            f"{threshold:g}× above the floor"
+        )
+    lo = min(float(t.min()) for t, _ in angle_torque)
+    hi = max(float(t.max()) for t, _ in angle_torque)
+    centre, scale = (lo + hi) / 2, (hi - lo) / 2
+    order_array = np.array(orders, dtype=np.float64)
+    z, zu, levels, noise = [], [], [], []
+    for time_s, theta, torque in passes:
+        design = _design(theta, orders, poly, centre, scale)
+        coef, *_ = np.linalg.lstsq(design, torque, rcond=None)
+        residual = torque - design @ coef
+        dof = len(torque) - design.shape[1]
+        sigma2 = float(residual @ residual) / dof
+        cov = sigma2 * np.linalg.inv(design.T @ design)
+        harmonic = coef[poly + 1:]
+        var = np.diag(cov)[poly + 1:]
+        # position ripple about the trend, in the same θ-harmonic basis
+        trend = np.polyfit(time_s, theta, 1)
+        ripple_design = _design(theta, orders, 2, centre, scale)
+        pos = np.linalg.lstsq(ripple_design, theta - np.polyval(trend, time_s), rcond=None)[0]
+        accel = -((order_array * trend[0]) ** 2)
+        harmonic = harmonic - inertia_kg_m2 * np.repeat(accel, 2) * pos[3:]
+        # α·cos + β·sin = A·sin(nθ + φ):  z = β + iα
+        z.append(harmonic[1::2] + 1j * harmonic[0::2])
+        zu.append(np.sqrt((var[0::2] + var[1::2]) / 2))
+        smooth = design[:, :poly + 1] @ coef[:poly + 1]
+        levels.append(float(smooth.mean()))
+        noise.append(math.sqrt(sigma2))
+    spread = levels[0] - levels[1]
+    if abs(spread) < 5 * max(noise) / math.sqrt(min(len(t) for t, _ in angle_torque)) or abs(
+            spread) < 1e-4:
+        raise IdentificationError(
+            f"torque levels {levels[0]:.4g} and {levels[1]:.4g} N·m are too close to separate "
+            "K_t ripple from cogging"
+        )
+    ripple = -(z[0] - z[1]) / spread
+    ripple_u = np.hypot(zu[0], zu[1]) / abs(spread)
+    cogging = z[0] + levels[0] * ripple
+    cogging_u = np.hypot(zu[0], abs(levels[0]) * ripple_u)
+    cog = tuple(HarmonicEstimate(order=n, amplitude=float(abs(c)), phase_rad=float(np.angle(c)),
+                                 amplitude_u=float(u))
+                for n, c, u in zip(orders, cogging, cogging_u, strict=True))
+    rip = tuple(HarmonicEstimate(order=n, amplitude=float(abs(r)), phase_rad=float(np.angle(r)),
+                                 amplitude_u=float(u))
+                for n, r, u in zip(orders, ripple, ripple_u, strict=True))
+    top_cog = max(cog, key=lambda h: h.amplitude)
+    top_rip = max(rip, key=lambda h: h.amplitude)
+    return CoggingResult(
+        cogging=cog,
+        kt_ripple=rip,
+        cogging_peak=Estimate(name="cogging_peak_nm", value=top_cog.amplitude,
+                              standard_uncertainty=top_cog.amplitude_u, unit="N·m"),
+        kt_ripple_peak=Estimate(name="kt_ripple_peak_pct", value=100 * top_rip.amplitude,
+                                standard_uncertainty=100 * top_rip.amplitude_u, unit="%"),
+        torque_levels_nm=(levels[0], levels[1]),
+        noise_rms_nm=float(max(noise)),
+        orders_scanned=(min_order, max_order),
+    )
+
+
+def compensation_table(result: CoggingResult, *, significance: float = 3.0) -> dict[str, object]:
+    """The documented JSON compensation table (harmonics at least ``significance`` standard
+    uncertainties above zero)."""
+    return {
+        "format": COMPENSATION_FORMAT,
+        "model": "T_ff(θ) = Σ cogging A_n·sin(n·θ + φ_n);  "
+                 "K_t(θ) = K_t·(1 + Σ kt_ripple a_n·sin(n·θ + ψ_n))",
+        "angle": "motor position in rad, encoder zero",
+        "cogging": [{"order": h.order, "amplitude_nm": h.amplitude, "phase_rad": h.phase_rad,
+                     "amplitude_u_nm": h.amplitude_u}
+                    for h in result.cogging if h.amplitude > significance * h.amplitude_u],
+        "kt_ripple": [{"order": h.order, "amplitude": h.amplitude, "phase_rad": h.phase_rad,
+                       "amplitude_u": h.amplitude_u}
+                      for h in result.kt_ripple if h.amplitude > significance * h.amplitude_u],
+    }

@@ -1,0 +1,133 @@
+"""Cogging torque and K_t(θ) ripple from constant-velocity passes up and down the travel.
+
+The two directions are the two torque levels (``L̄ + F`` and ``L̄ − F``): cogging is the
+same in both, K_t ripple scales with the torque. A compensation table (JSON, format in
+:mod:`hil.identify.cogging`) is written next to the certificate.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass
+
+import numpy as np
+import pytest
+
+from hil.calibration import CalibrationRun
+from hil.drives.base import Drive, DriveInfo, Excitation, Mode
+from hil.identify.cogging import CoggingResult, compensation_table, identify_cogging
+from hil.identify.estimate import Estimate
+from hil.identify.moves import position_move
+from hil.profile import UnitProfile
+
+NAME = "cogging"
+MEASUREMENTS = ("cogging_peak_nm", "kt_ripple_peak_pct")
+COMPENSATION_FILE = "cogging_compensation.json"
+pytestmark = pytest.mark.protocol(NAME)
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class Spec:
+    speed_rad_s: float
+    margin_rad: float
+    skip_rad: float
+    min_order: int
+    max_order: int
+    move_speed_rad_s: float
+    fs_hz: float
+    travel_min_rad: float
+    travel_max_rad: float
+
+    @classmethod
+    def from_profile(cls, profile: UnitProfile, info: DriveInfo) -> Spec:
+        settings = profile.protocol(NAME)
+        return cls(
+            speed_rad_s=float(settings.get("speed_rad_s", 0.4)),
+            margin_rad=float(settings.get("margin_rad", 0.1)),
+            skip_rad=float(settings.get("skip_rad", 0.1)),
+            min_order=int(settings.get("min_order", 10)),
+            max_order=int(settings.get("max_order", 200)),
+            move_speed_rad_s=float(settings.get("move_speed_rad_s", 0.5)),
+            fs_hz=min(profile.sample_rate_hz, info.max_sample_rate_hz),
+            travel_min_rad=info.limits.travel_min_rad,
+            travel_max_rad=info.limits.travel_max_rad,
+        )
+
+    @property
+    def start_rad(self) -> float:
+        return self.travel_min_rad + self.margin_rad
+
+    @property
+    def pass_samples(self) -> int:
+        travel = self.travel_max_rad - self.travel_min_rad - 2 * self.margin_rad
+        return round(travel / self.speed_rad_s * self.fs_hz)
+
+
+def excitation(spec: Spec, *, position_rad: float) -> list[Excitation]:
+    """Move to the lower end, then one pass up and one down at constant speed."""
+    n = spec.pass_samples
+    return [
+        Excitation(name="move_to_start", mode=Mode.POSITION, fs_hz=spec.fs_hz,
+                   command=position_move(position_rad, spec.start_rad, fs_hz=spec.fs_hz,
+                                         speed_rad_s=spec.move_speed_rad_s, hold_s=0.2)),
+        Excitation(name="passes", mode=Mode.VELOCITY, fs_hz=spec.fs_hz,
+                   command=np.concatenate([np.full(n, spec.speed_rad_s),
+                                           np.full(n, -spec.speed_rad_s)])),
+    ]
+
+
+def analyse(time_s: np.ndarray, position_rad: np.ndarray, torque_nm: np.ndarray, spec: Spec,
+            *, inertia_kg_m2: float) -> CoggingResult:
+    n = spec.pass_samples
+    skip = math.ceil(spec.skip_rad / spec.speed_rad_s * spec.fs_hz)
+    passes = [(time_s[a:b], position_rad[a:b], torque_nm[a:b])
+              for a, b in ((skip, n), (n + skip, 2 * n))]
+    return identify_cogging(passes, inertia_kg_m2=inertia_kg_m2, min_order=spec.min_order,
+                            max_order=spec.max_order)
+
+
+def inertia_for_correction(calibration: CalibrationRun, profile: UnitProfile) -> tuple[float, str]:
+    """Measured J if the sine protocol ran already, else the unit type's declared nominal."""
+    for m in calibration.measurements:
+        if m.spec.name == "inertia_kg_m2":
+            return m.estimate.value, "measured (inertia_friction)"
+    return profile.measurement("inertia_kg_m2").nominal, "declared nominal"
+
+
+@pytest.fixture(scope="module")
+def result(drive: Drive, calibration: CalibrationRun, profile: UnitProfile) -> CoggingResult:
+    spec = Spec.from_profile(profile, drive.info)
+    move, passes = excitation(spec, position_rad=drive.status().position_rad)
+    calibration.run(drive, move, protocol=NAME)
+    recording = calibration.run(drive, passes, protocol=NAME)
+    inertia, source = inertia_for_correction(calibration, profile)
+    analysed = analyse(recording.time_s, recording.position, recording.effort, spec,
+                       inertia_kg_m2=inertia)
+    table = compensation_table(analysed)
+    path = calibration.unit_dir / COMPENSATION_FILE
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(json.dumps(table, indent=2, ensure_ascii=False) + "\n", encoding="utf-8")
+    calibration.details[NAME] = {
+        "compensation_table": str(path),
+        "orders": [h.order for h in analysed.cogging],
+        "cogging": table["cogging"],
+        "kt_ripple": table["kt_ripple"],
+        "torque_levels_nm": list(analysed.torque_levels_nm),
+        "inertia_for_acceleration_correction_kg_m2": inertia,
+        "inertia_source": source,
+        "noise_rms_nm": analysed.noise_rms_nm,
+    }
+    return analysed
+
+
+@pytest.mark.parametrize("parameter", MEASUREMENTS)
+def test_cogging(parameter: str, result: CoggingResult, calibration: CalibrationRun) -> None:
+    estimates: dict[str, Estimate] = {
+        e.name: e for e in (result.cogging_peak, result.kt_ripple_peak)
+    }
+    measurement = calibration.record(NAME, estimates[parameter])
+    assert measurement.outcome.value in ("PASS", "MARGINAL"), (
+        f"{parameter} = {measurement.estimate.value:.6g} {measurement.spec.unit} outside "
+        f"[{measurement.spec.lower_limit:.6g}, {measurement.spec.upper_limit:.6g}]"
+    )
