@@ -123,6 +123,25 @@ def drive(request: pytest.FixtureRequest, drive_connection: Drive) -> Iterator[D
             drive_connection.disable()
 
 
+@pytest.fixture(autouse=True)
+def _allure_measurements(request: pytest.FixtureRequest) -> Iterator[None]:
+    """With allure-pytest active, attach each protocol test's judged measurements."""
+    run = request.config.stash.get(RUN_KEY, None)
+    before = len(run.measurements) if run else 0
+    yield
+    run = request.config.stash.get(RUN_KEY, None)
+    if run is None or not request.config.pluginmanager.hasplugin("allure_pytest"):
+        return
+    import allure
+
+    for measurement in run.measurements[before:]:
+        allure.attach(
+            json.dumps(measurement.as_dict(), indent=2),
+            name=measurement.spec.name,
+            attachment_type=allure.attachment_type.JSON,
+        )
+
+
 def _protocol_name(item: pytest.Item) -> str | None:
     mark = item.get_closest_marker(PROTOCOL_MARK)
     if mark is None:

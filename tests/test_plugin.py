@@ -115,3 +115,14 @@ def test_bad_profile_is_a_usage_error(pytester: pytest.Pytester, tmp_path: Path)
     result = _run(pytester, tmp_path / "certs", "--profile", str(bad))
     assert result.ret != 0
     assert "missing table [limits]" in "\n".join(result.outlines + result.errlines)
+
+
+def test_allure_report_carries_the_judged_measurements(
+    pytester: pytest.Pytester, tmp_path: Path
+) -> None:
+    allure_dir = tmp_path / "allure"
+    result = _run(pytester, tmp_path / "certs", "--alluredir", str(allure_dir))
+    assert result.ret == 0
+    attached = [json.loads(p.read_text()) for p in allure_dir.glob("*-attachment.json")]
+    assert {a["parameter"] for a in attached} >= {"inertia_kg_m2", "coulomb_nm"}
+    assert all(a["outcome"] == "PASS" for a in attached)
