@@ -32,7 +32,7 @@ log = logging.getLogger(__name__)
 
 NAME = "gravity_cable"
 MEASUREMENTS = ("gravity_mge_nm", "gravity_phase_rad", "eccentricity_mm",
-                "cable_stiffness_nm_rad")
+                "cable_stiffness_nm_rad", "cable_hysteresis_nm")
 pytestmark = pytest.mark.protocol(NAME)
 
 
@@ -116,8 +116,6 @@ def result(drive: Drive, calibration: CalibrationRun, spec: Spec) -> GravityCabl
     analysed = analyse(recording.position, recording.effort, spec)
     calibration.details[NAME] = {
         "offset_nm": analysed.offset_nm,
-        "cable_hysteresis_nm": analysed.hysteresis.value,
-        "cable_hysteresis_u_nm": analysed.hysteresis.standard_uncertainty,
         "cable_hysteresis_angle_rad": analysed.hysteresis_angle_rad,
         "loop_half_width_nm": analysed.loop_half_width_nm,
         "sliding_friction_at_sweep_speed_nm": analysed.friction_nm,
@@ -135,7 +133,7 @@ def result(drive: Drive, calibration: CalibrationRun, spec: Spec) -> GravityCabl
 def test_gravity_cable(parameter: str, result: GravityCableResult, spec: Spec,
                        calibration: CalibrationRun) -> None:
     estimates: dict[str, Estimate] = {
-        e.name: e for e in (result.mge, result.phase, result.stiffness)
+        e.name: e for e in (result.mge, result.phase, result.stiffness, result.hysteresis)
     }
     if parameter == "eccentricity_mm":
         if spec.mass_kg is None:

@@ -143,3 +143,5 @@ def test_hidden_gravity_and_cable_are_recovered_within_the_claimed_accuracy(
     # φ carries no accuracy claim (its error scales with 1/m·g·e): its stated uncertainty
     # must cover the error
     assert abs(result.phase.value - phase) <= 3 * result.phase.standard_uncertainty
+    # the hysteresis is noise-limited (no accuracy claim): its uncertainty must cover it
+    assert abs(result.hysteresis.value - h) <= 3 * result.hysteresis.standard_uncertainty
