@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import logging
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -13,6 +15,8 @@ from hil.identify.estimate import Estimate
 from hil.identify.moves import position_move
 from hil.identify.stribeck import Staircase, StribeckResult, identify_stribeck, staircase
 from hil.profile import UnitProfile
+
+log = logging.getLogger(__name__)
 
 NAME = "stribeck"
 MEASUREMENTS = ("static_friction_nm", "stribeck_velocity_rad_s")
@@ -84,6 +88,11 @@ def analyse(time_s: np.ndarray, position_rad: np.ndarray, torque_nm: np.ndarray,
                              stairs=spec.stairs, settle_s=spec.settle_s)
 
 
+def _finite(value: float) -> float | None:
+    """JSON has no NaN or infinity: a stick-slip speed has no friction value."""
+    return value if math.isfinite(value) else None
+
+
 def cross_check(result: StribeckResult, calibration: CalibrationRun) -> dict[str, object]:
     """Compare T_c and B with the sine protocol's, when it ran: normalised error
     ``|Δ| / √(U₁² + U₂²)`` (≤ 1: consistent within the expanded uncertainties)."""
@@ -95,8 +104,11 @@ def cross_check(result: StribeckResult, calibration: CalibrationRun) -> dict[str
             continue
         a, b = ours[mine], theirs[other]
         expanded = float(np.hypot(a.expanded_uncertainty, b.expanded_uncertainty))
-        checks[other] = {"stribeck": a.value, "sine": b.value,
-                         "normalised_error": abs(a.value - b.value) / expanded}
+        error = abs(a.value - b.value) / expanded
+        checks[other] = {"stribeck": a.value, "sine": b.value, "normalised_error": error}
+        if error > 1:
+            log.warning("%s: staircase %.4g vs sine %.4g differ by %.1f expanded uncertainties",
+                        other, a.value, b.value, error)
     return checks
 
 
@@ -113,8 +125,8 @@ def result(drive: Drive, calibration: CalibrationRun, profile: UnitProfile) -> S
         "residual_rms_nm": analysed.residual_rms_nm,
         "lowest_clean_speed_rad_s": analysed.lowest_clean_speed_rad_s,
         "stick_slip_speeds_rad_s": [p.speed_rad_s for p in analysed.points if p.stick_slip],
-        "points": [{"speed_rad_s": p.speed_rad_s, "friction_nm": p.friction_nm,
-                    "friction_u_nm": p.friction_u_nm, "stick_slip": p.stick_slip}
+        "points": [{"speed_rad_s": p.speed_rad_s, "friction_nm": _finite(p.friction_nm),
+                    "friction_u_nm": _finite(p.friction_u_nm), "stick_slip": p.stick_slip}
                    for p in analysed.points],
         "cross_check_sine": cross_check(analysed, calibration),
         "note": "steady sliding friction includes the cable's hysteresis half-width "
