@@ -1,0 +1,377 @@
+"""The effect library: how each candidate extends a model (columns + 1-D searches).
+
+Each ``propose_*`` function takes the current model fitted on the training rows and
+returns the extended model with its nonlinear parameter(s) already chosen on the
+training rows (separable least squares: for a fixed nonlinear parameter the model is
+linear; the parameter is found by a grid search refined with a bounded scalar search).
+It returns ``None`` when the effect does not apply (already in the model, wrong axis kind,
+nothing periodic found, ...). Judging the gain is :mod:`hil.diagnose.select`'s job.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from collections.abc import Callable
+from dataclasses import dataclass, replace
+
+import numpy as np
+from numba import njit
+from numpy.typing import NDArray
+from scipy.optimize import minimize_scalar
+from scipy.signal import bilinear, lfilter
+
+from hil.diagnose.harmonics import find_orders, order_range
+from hil.diagnose.model import Designer, Fit, IndexArray, Model, Term, friction_direction
+from hil.diagnose.signals import Signals
+
+log = logging.getLogger(__name__)
+
+FloatArray = NDArray[np.float64]
+
+EFFECTS = (
+    "offset",
+    "asymmetric_friction",
+    "stribeck",
+    "cogging",
+    "kt_ripple",
+    "gravity",
+    "cable_spring",
+    "current_lag",
+    "two_mass",
+)
+#: Effects whose searched parameters are kept from the round they were first searched in
+#: (the harmonic orders are searched again: the weight of K_t ripple is the current model).
+REUSABLE = frozenset({"stribeck", "cable_spring", "current_lag", "two_mass"})
+ROTARY_ONLY = frozenset({"cogging", "kt_ripple", "gravity"})
+#: Dahl hysteresis: angle over which the cable's friction loop saturates (rad).
+HYSTERESIS_ANGLES_RAD = (0.005, 0.02, 0.08)
+TWO_MASS_DAMPING = (0.02, 0.05, 0.1)
+#: A resonance is resolved when it lies below this fraction of the analysis bandwidth.
+TWO_MASS_BAND = 0.6
+
+
+class Context:
+    """The training data and the current model fitted on it."""
+
+    def __init__(self, *, designer: Designer, signals: Signals, rows: IndexArray, current: Fit,
+                 counts_per_rev: int | None = None,
+                 memory: dict[str, Model] | None = None) -> None:
+        self.designer = designer
+        #: models proposed in earlier rounds: their searched parameters are reused
+        self.memory: dict[str, Model] = {} if memory is None else memory
+        self.signals = signals
+        self.rows = rows
+        self.current = current
+        self.counts_per_rev = counts_per_rev
+        self._basis: tuple[FloatArray, FloatArray] | None = None
+
+    def basis(self) -> tuple[FloatArray, FloatArray]:
+        """Orthonormal basis of the current design (training rows) and its residual."""
+        if self._basis is None:
+            matrix = self.designer.design(self.current.model, self.signals, self.rows)
+            q, _ = np.linalg.qr(matrix)
+            target = self.signals.effort_filtered[self.rows]
+            self._basis = (q, target - q @ (q.T @ target))
+        return self._basis
+
+
+def propose(effect: str, ctx: Context) -> Model | None:
+    """The current model extended with ``effect`` (searched on the training rows)."""
+    if ctx.current.model.has(effect):
+        return None
+    if effect in ROTARY_ONLY and ctx.signals.axis_kind != "rotary":
+        return None
+    remembered = ctx.memory.get(effect)
+    if remembered is not None and effect in REUSABLE:
+        return _reuse(effect, remembered, ctx.current.model)
+    model = _PROPOSERS[effect](ctx)
+    if model is not None:
+        ctx.memory[effect] = model
+    return model
+
+
+def _reuse(effect: str, earlier: Model, current: Model) -> Model:
+    """``current`` extended with what ``earlier`` added for ``effect`` (no new search)."""
+    if effect == "current_lag":
+        return replace(current, lag_s=earlier.lag_s, shift_s=earlier.shift_s)
+    added = tuple(term for term in earlier.terms if term.effect == effect)
+    return _extend(current, *added)
+
+
+def _extend(model: Model, *terms: Term) -> Model:
+    return replace(model, terms=model.terms + terms)
+
+
+def _has_constant(model: Model) -> bool:
+    return any("offset" in term.labels or "cable_constant" in term.labels for term in model.terms)
+
+
+def _train_rss(ctx: Context, model: Model) -> float:
+    """Training RSS of ``model``; fast when it only adds terms to the current model."""
+    current = ctx.current.model
+    if (
+        model.lag_s == current.lag_s
+        and model.shift_s == current.shift_s
+        and model.terms[: len(current.terms)] == current.terms
+    ):
+        added = replace(model, terms=model.terms[len(current.terms) :])
+        block = ctx.designer.design(added, ctx.signals, ctx.rows)
+        q, residual = ctx.basis()
+        block = block - q @ (q.T @ block)
+        coef, *_ = np.linalg.lstsq(block, residual, rcond=None)
+        left = residual - block @ coef
+        return float(left @ left)
+    matrix = ctx.designer.design(model, ctx.signals, ctx.rows)
+    target = ctx.signals.effort_filtered[ctx.rows]
+    scale = np.sqrt(np.sum(matrix**2, axis=0))
+    scale[scale == 0] = 1.0
+    coef, *_ = np.linalg.lstsq(matrix / scale, target, rcond=None)
+    residual = target - (matrix / scale) @ coef
+    return float(residual @ residual)
+
+
+def _search(
+    ctx: Context, make: Callable[[float], Model], grid: FloatArray, *, log_scale: bool = True
+) -> tuple[float, Model]:
+    """Minimise training RSS over one nonlinear parameter: grid, then bounded refinement."""
+    costs = [_train_rss(ctx, make(float(value))) for value in grid]
+    best = int(np.argmin(costs))
+    low = grid[max(best - 1, 0)]
+    high = grid[min(best + 1, len(grid) - 1)]
+    if high > low:
+        to_x: Callable[[float], float] = math.log if log_scale else float
+        from_x: Callable[[float], float] = math.exp if log_scale else float
+        result = minimize_scalar(
+            lambda x: _train_rss(ctx, make(from_x(x))),
+            bounds=(to_x(float(low)), to_x(float(high))),
+            method="bounded",
+            options={"xatol": 1e-2},
+        )
+        value = from_x(float(result.x))
+        if float(result.fun) <= costs[best]:
+            return value, make(value)
+    value = float(grid[best])
+    return value, make(value)
+
+
+# -- linear-in-parameters effects ----------------------------------------------------------
+def _offset(ctx: Context) -> Model | None:
+    if _has_constant(ctx.current.model):
+        return None
+    term = Term(effect="offset", labels=("offset",), key="offset",
+                build=lambda s: np.ones(len(s)))
+    return _extend(ctx.current.model, term)
+
+
+def _negative(s: Signals) -> FloatArray:
+    return (friction_direction(s) < 0).astype(np.float64)
+
+
+def _asymmetric(ctx: Context) -> Model | None:
+    """Direction-dependent viscous and Coulomb friction.
+
+    While the axis moves, a Coulomb difference between the directions is a constant
+    (``ΔT_c·1(ω<0) = ΔT_c/2 − ΔT_c/2·sgn ω``): with a constant already in the model only
+    the viscous difference is separable, and only it is added.
+    """
+    if _has_constant(ctx.current.model):
+        term = Term(effect="asymmetric_friction", labels=("viscous_neg_delta",),
+                    key="asymmetric:viscous", filtered=True,
+                    build=lambda s: s.velocity * _negative(s))
+    else:
+        term = Term(
+            effect="asymmetric_friction",
+            labels=("viscous_neg_delta", "coulomb_neg_delta"),
+            key="asymmetric",
+            build=lambda s: np.column_stack((s.velocity * _negative(s), -_negative(s))),
+        )
+    return _extend(ctx.current.model, term)
+
+
+def _gravity(ctx: Context) -> Model | None:
+    term = Term(
+        effect="gravity",
+        labels=("gravity_cos", "gravity_sin"),
+        key="gravity",
+        build=lambda s: np.column_stack((np.cos(s.position), np.sin(s.position))),
+    )
+    return _extend(ctx.current.model, term)
+
+
+@njit(cache=True)
+def _dahl(position: FloatArray, angle: float) -> FloatArray:  # pragma: no cover - numba
+    """Normalised Dahl state: relaxes towards the direction of travel over ``angle``."""
+    out = np.empty_like(position)
+    z = 0.0
+    out[0] = 0.0
+    for i in range(1, position.shape[0]):
+        step = position[i] - position[i - 1]
+        if step != 0.0:
+            target = 1.0 if step > 0.0 else -1.0
+            z = target + (z - target) * math.exp(-abs(step) / angle)
+        out[i] = z
+    return out
+
+
+def _cable_term(angle: float | None, constant: bool) -> Term:
+    """Spring ``k·θ`` (+ constant), with a Dahl hysteresis loop when ``angle`` is given."""
+    labels = ("cable_stiffness",)
+    if angle is not None:
+        labels += ("cable_hysteresis",)
+    if constant:
+        labels += ("cable_constant",)
+
+    def build(s: Signals) -> FloatArray:
+        columns = [s.position]
+        if angle is not None:
+            columns.append(_dahl(np.ascontiguousarray(s.position), angle))
+        if constant:
+            columns.append(np.ones(len(s)))
+        return np.column_stack(columns)
+
+    nonlinear = {} if angle is None else {"hysteresis_angle_rad": angle}
+    return Term(effect="cable_spring", labels=labels, key=f"cable:{angle}:{constant}",
+                build=build, nonlinear=nonlinear)
+
+
+def _cable(ctx: Context) -> Model | None:
+    """The spring alone, or with the hysteresis loop that fits best, by training BIC.
+
+    A loop must dissipate (positive half-width); the Dahl state is close to sgn(ω), so
+    its width is only credible when it beats the spring alone on BIC.
+    """
+    constant = not _has_constant(ctx.current.model)
+    best = _extend(ctx.current.model, _cable_term(None, constant))
+    best_bic = ctx.designer.fit(best, ctx.signals, ctx.rows).bic
+    for angle in HYSTERESIS_ANGLES_RAD:
+        model = _extend(ctx.current.model, _cable_term(angle, constant))
+        fit = ctx.designer.fit(model, ctx.signals, ctx.rows)
+        if fit.coef("cable_hysteresis") > 0 and fit.bic < best_bic:
+            best, best_bic = model, fit.bic
+    return best
+
+
+# -- one nonlinear parameter -------------------------------------------------------------
+def stribeck_term(velocity_scale: float) -> Term:
+    def build(s: Signals) -> FloatArray:
+        ratio = s.velocity / velocity_scale
+        return np.exp(-(ratio**2)) * friction_direction(s)
+
+    return Term(effect="stribeck", labels=("stribeck_delta",), key=f"stribeck:{velocity_scale:.9g}",
+                build=build, nonlinear={"stribeck_velocity": velocity_scale})
+
+
+def _stribeck(ctx: Context) -> Model | None:
+    speed = np.abs(ctx.signals.velocity[ctx.rows])
+    top = float(np.percentile(speed, 99))
+    moving = speed[speed > 1e-3 * top]
+    if moving.size < 50 or top <= 0:
+        return None
+    low = max(float(np.percentile(moving, 1)), 1e-3 * top)
+    grid = np.geomspace(low, 0.5 * top, 24)
+    model = ctx.current.model
+    _, best = _search(ctx, lambda v: _extend(model, stribeck_term(v)), grid)
+    return best
+
+
+def search_shift(ctx: Context, model: Model) -> Model:
+    """Best effort/motion alignment within one sample period (training RSS)."""
+    period = 1.0 / ctx.signals.fs_hz
+    grid = np.linspace(-period, period, 9)
+    _, best = _search(ctx, lambda d: replace(model, shift_s=d), grid, log_scale=False)
+    return best
+
+
+def _current_lag(ctx: Context) -> Model | None:
+    fs = ctx.signals.fs_hz
+    grid = np.geomspace(0.5 / fs, min(0.05, 100.0 / fs), 20)
+    model = ctx.current.model
+    _, best = _search(ctx, lambda t: replace(model, lag_s=t), grid)
+    return best
+
+
+def two_mass_term(antiresonance_hz: float, damping: float) -> Term:
+    omega = 2 * math.pi * antiresonance_hz
+
+    def build(s: Signals) -> FloatArray:
+        # load acceleration from motor acceleration through the shaft: (2ζωs + ω²)/(s² + 2ζωs + ω²)
+        num, den = bilinear([2 * damping * omega, omega**2], [1.0, 2 * damping * omega, omega**2],
+                            fs=s.fs_hz)
+        out = np.zeros(len(s))
+        for start, stop in s.segments:
+            segment = s.acceleration[start:stop]
+            out[start:stop] = lfilter(num, den, segment) - segment
+        return out
+
+    return Term(effect="two_mass", labels=("load_inertia",), filtered=True,
+                key=f"two_mass:{antiresonance_hz:.9g}:{damping:g}", build=build,
+                nonlinear={"antiresonance_hz": antiresonance_hz, "damping_ratio": damping})
+
+
+def _two_mass(ctx: Context) -> Model | None:
+    top = TWO_MASS_BAND * ctx.signals.cutoff_hz
+    if top <= 2.0:
+        return None
+    grid = np.geomspace(1.0, top, 30)
+    model = ctx.current.model
+    costs = [
+        (_train_rss(ctx, _extend(model, two_mass_term(float(f), d))), d)
+        for d in TWO_MASS_DAMPING
+        for f in grid
+    ]
+    damping = min(costs)[1]
+    _, best = _search(ctx, lambda f: _extend(model, two_mass_term(f, damping)), grid)
+    return best
+
+
+# -- harmonics of the angle ----------------------------------------------------------------
+def harmonic_term(effect: str, orders: tuple[int, ...],
+                  weight: Callable[[Signals], FloatArray] | None, key: str) -> Term:
+    prefix = "cog" if effect == "cogging" else "kt"
+    labels = tuple(f"{prefix}_{part}{k}" for k in orders for part in ("sin", "cos"))
+
+    def build(s: Signals) -> FloatArray:
+        w = np.ones(len(s)) if weight is None else weight(s)
+        columns = []
+        for k in orders:
+            columns.extend((w * np.sin(k * s.position), w * np.cos(k * s.position)))
+        return np.column_stack(columns)
+
+    return Term(effect=effect, labels=labels, key=f"{effect}:{orders}:{key}", build=build,
+                extra_params=len(orders))
+
+
+def _harmonic(ctx: Context, effect: str) -> Model | None:
+    designer, signals, rows = ctx.designer, ctx.signals, ctx.rows
+    prediction_fit = ctx.current
+    weight: Callable[[Signals], FloatArray] | None = None
+    weight_rows: FloatArray | None = None
+    if effect == "kt_ripple":
+
+        def weight_fn(s: Signals) -> FloatArray:
+            return designer.predict(prediction_fit, s)
+
+        weight = weight_fn
+        weight_rows = weight_fn(signals)[rows]
+    residual = signals.effort_filtered[rows] - designer.predict(ctx.current, signals)[rows]
+    orders = order_range(signals.position[rows], ctx.counts_per_rev)
+    found = find_orders(residual, signals.position[rows], weight=weight_rows, orders=orders,
+                        independence=min(1.0, signals.independence * signals.decimation))
+    if not found:
+        return None
+    key = f"{id(prediction_fit)}" if effect == "kt_ripple" else "1"
+    return _extend(ctx.current.model, harmonic_term(effect, tuple(found), weight, key))
+
+
+_PROPOSERS: dict[str, Callable[[Context], Model | None]] = {
+    "offset": _offset,
+    "asymmetric_friction": _asymmetric,
+    "stribeck": _stribeck,
+    "cogging": lambda ctx: _harmonic(ctx, "cogging"),
+    "kt_ripple": lambda ctx: _harmonic(ctx, "kt_ripple"),
+    "gravity": _gravity,
+    "cable_spring": _cable,
+    "current_lag": _current_lag,
+    "two_mass": _two_mass,
+}

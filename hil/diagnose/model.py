@@ -1,0 +1,296 @@
+"""Models linear in their coefficients: terms (regressor blocks), design matrix, LS fit.
+
+A :class:`Model` is a tuple of :class:`Term` plus an optional current-loop lag. Each term
+contributes named columns computed from :class:`~hil.diagnose.signals.Signals`; the lag
+maps the model's effort ``T`` to what the drive reports, ``(1 + τ·s)·T`` (the reported
+reference leads the actual torque through a first-order current loop). Nonlinear
+parameters (a Stribeck velocity, a resonance, harmonic orders) are fixed inside a term
+after a 1-D search and counted in the BIC penalty.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+from numpy.typing import NDArray
+
+from hil.diagnose.signals import Signals, zero_phase_lowpass
+from hil.errors import IdentificationError
+
+FloatArray = NDArray[np.float64]
+IndexArray = NDArray[np.intp]
+
+#: Velocity below which friction switching treats the axis as standing still (fraction of
+#: the 99th percentile of |velocity|); avoids sign chatter on a quantised position.
+STANDSTILL_FRACTION = 1e-3
+LEAD_CUTOFF_RATIO = 0.5
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class Term:
+    """A block of regressor columns belonging to one effect.
+
+    ``build(signals)`` returns an ``(n, len(labels))`` array. ``nonlinear`` holds the
+    parameters fixed by a search (they count in the BIC penalty); ``key`` identifies the
+    columns for caching (equal keys mean equal columns).
+    """
+
+    effect: str
+    labels: tuple[str, ...]
+    build: Callable[[Signals], FloatArray] = field(compare=False, repr=False)
+    key: str
+    nonlinear: Mapping[str, float] = field(default_factory=dict)
+    extra_params: int = 0  # search dimensions beyond ``nonlinear`` (e.g. chosen orders)
+    filtered: bool = False  # columns already band-limited (built from filtered motion)
+    lagged: bool = True  # passes through the current-loop lag (False: switching friction)
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class Model:
+    """Terms, the current-loop time constant (0: no lag) and the effort's time lead.
+
+    ``shift_s`` aligns effort and motion samples: the model is evaluated at ``t + shift_s``
+    (a drive holds the torque it reports at ``t_k`` over the following period, so the
+    motion it causes is centred up to a period later; how much depends on where the drive
+    samples position). It is a property of the data, bounded to one sample period.
+    """
+
+    terms: tuple[Term, ...]
+    lag_s: float = 0.0
+    shift_s: float = 0.0
+
+    @property
+    def labels(self) -> tuple[str, ...]:
+        return tuple(label for term in self.terms for label in term.labels)
+
+    @property
+    def effects(self) -> tuple[str, ...]:
+        names = [term.effect for term in self.terms]
+        if self.lag_s > 0:
+            names.append("current_lag")
+        return tuple(names)
+
+    @property
+    def n_params(self) -> int:
+        """Coefficients plus searched parameters (the BIC's k)."""
+        searched = sum(len(t.nonlinear) + t.extra_params for t in self.terms)
+        return len(self.labels) + searched + (1 if self.lag_s > 0 else 0) + 1
+
+    def has(self, effect: str) -> bool:
+        return effect in self.effects
+
+    def term(self, effect: str) -> Term | None:
+        for term in self.terms:
+            if term.effect == effect:
+                return term
+        return None
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class Fit:
+    """Least-squares fit of a model on some rows of one recording."""
+
+    model: Model
+    coefficients: FloatArray
+    covariance: FloatArray
+    rss: float
+    n: int
+    sigma2: float
+    n_effective: float
+
+    @property
+    def bic(self) -> float:
+        """BIC on the effective sample count (the filtered residual is band-limited)."""
+        return bic(self.rss * self.n_effective / self.n, self.n_effective, self.model.n_params)
+
+    def coef(self, label: str) -> float:
+        return float(self.coefficients[self.model.labels.index(label)])
+
+    def std(self, label: str) -> float:
+        index = self.model.labels.index(label)
+        return float(math.sqrt(max(self.covariance[index, index], 0.0)))
+
+    def block(self, labels: tuple[str, ...]) -> tuple[FloatArray, FloatArray]:
+        """Coefficients and covariance of ``labels``."""
+        index = [self.model.labels.index(label) for label in labels]
+        return self.coefficients[index], self.covariance[np.ix_(index, index)]
+
+    def as_dict(self) -> dict[str, float]:
+        return {label: float(v) for label, v in zip(self.model.labels, self.coefficients,
+                                                     strict=True)}
+
+
+def bic(rss: float, n: float, k: int) -> float:
+    """Bayesian information criterion of a Gaussian LS fit."""
+    return n * math.log(max(rss, 1e-300) / n) + k * math.log(n)
+
+
+class Designer:
+    """Builds (and caches) design matrices of models on one or more recordings."""
+
+    def __init__(self) -> None:
+        self._cache: dict[tuple[int, str], FloatArray] = {}
+        self._lag_cache: dict[tuple[int, str], FloatArray] = {}
+
+    def columns(self, term: Term, signals: Signals) -> FloatArray:
+        """A term's (low-passed) columns over the whole recording, cached."""
+        key = (id(signals), term.key)
+        if key not in self._cache:
+            block = np.asarray(term.build(signals), dtype=np.float64)
+            if block.ndim == 1:
+                block = block[:, None]
+            if block.shape != (len(signals), len(term.labels)):
+                raise IdentificationError(
+                    f"term {term.key} built {block.shape}, expected "
+                    f"{(len(signals), len(term.labels))}"
+                )
+            if not term.filtered:
+                block = np.column_stack(
+                    [signals.lowpass(block[:, j]) for j in range(block.shape[1])]
+                )
+            self._cache[key] = block
+        return self._cache[key]
+
+    def lag_columns(self, term: Term, signals: Signals) -> FloatArray:
+        """Time derivative of a term's columns, low-passed at ``LEAD_CUTOFF_RATIO·f_c``.
+
+        The extra low-pass keeps the derivative of acceleration (jerk) from amplifying the
+        position's quantisation noise: regressor noise would bias the lag towards zero.
+        """
+        key = (id(signals), term.key)
+        if key not in self._lag_cache:
+            block = self.columns(term, signals)
+            cutoff = LEAD_CUTOFF_RATIO * signals.cutoff_hz
+            self._lag_cache[key] = np.column_stack([
+                signals.derivative(zero_phase_lowpass(block[:, j], fs_hz=signals.fs_hz,
+                                                      cutoff_hz=cutoff, segments=signals.segments))
+                for j in range(block.shape[1])
+            ])
+        return self._lag_cache[key]
+
+    def lead(self, model: Model, signals: Signals, rows: IndexArray) -> FloatArray:
+        """Time derivative of the lagged columns on ``rows`` (zeros where not lagged)."""
+        shifted = replace(model, lag_s=0.0, terms=tuple(
+            replace(term, key=f"lead:{term.key}", build=_lead_builder(self, term), filtered=True)
+            if term.lagged
+            else replace(term, key=f"zero:{len(term.labels)}", build=_zero_builder(term),
+                         filtered=True)
+            for term in model.terms
+        ))
+        return self.design(shifted, signals, rows)
+
+    def design(
+        self, model: Model, signals: Signals, rows: IndexArray | None = None
+    ) -> FloatArray:
+        """The design matrix (lag and shift applied), on ``rows`` or on every sample."""
+        index = np.arange(len(signals)) if rows is None else rows
+        blocks = [self.columns(term, signals) for term in model.terms]
+        if model.lag_s > 0:
+            blocks = [
+                block + model.lag_s * self.lag_columns(term, signals) if term.lagged else block
+                for term, block in zip(model.terms, blocks, strict=True)
+            ]
+        if not blocks:
+            return np.zeros((len(index), 0))
+        if model.shift_s == 0.0:
+            return np.hstack([block[index] for block in blocks])
+        return np.hstack(
+            [fractional_shift(block, model.shift_s * signals.fs_hz, index) for block in blocks]
+        )
+
+    def fit(self, model: Model, signals: Signals, rows: IndexArray) -> Fit:
+        """Least squares on ``rows`` with covariance ``σ²(ΦᵀΦ)⁻¹``."""
+        matrix = self.design(model, signals, rows)
+        target = signals.effort_filtered[rows]
+        return solve(model, matrix, target, n_effective=rows.size * min(1.0, signals.independence * signals.decimation))
+
+    def predict(self, fit: Fit, signals: Signals) -> FloatArray:
+        return self.design(fit.model, signals) @ fit.coefficients
+
+
+def fractional_shift(matrix: FloatArray, samples: float, rows: IndexArray) -> FloatArray:
+    """``matrix`` at ``rows + samples`` (4-point cubic Lagrange interpolation).
+
+    Stencils that leave the array repeat the edge value; those rows lie in the margins
+    that :func:`hil.diagnose.signals.prepare` marks invalid.
+    """
+    whole = math.floor(samples)
+    u = samples - whole
+    weights = (
+        -u * (u - 1) * (u - 2) / 6,
+        (u + 1) * (u - 1) * (u - 2) / 2,
+        -(u + 1) * u * (u - 2) / 2,
+        (u + 1) * u * (u - 1) / 6,
+    )
+    n = matrix.shape[0]
+    out = np.zeros((len(rows), matrix.shape[1]))
+    for offset, weight in zip((-1, 0, 1, 2), weights, strict=True):
+        if weight != 0.0:
+            out += weight * matrix[np.clip(rows + whole + offset, 0, n - 1)]
+    return out
+
+
+def solve(model: Model, matrix: FloatArray, target: FloatArray, *, n_effective: float) -> Fit:
+    """Column-scaled least squares; rank deficiency gives infinite variances."""
+    n, p = matrix.shape
+    if n <= p:
+        raise IdentificationError(f"{n} samples cannot determine {p} coefficients")
+    scale = np.sqrt(np.sum(matrix**2, axis=0))
+    scale[scale == 0.0] = 1.0
+    scaled = matrix / scale
+    coef_scaled, _, rank, singular = np.linalg.lstsq(scaled, target, rcond=None)
+    coefficients = coef_scaled / scale
+    residual = target - matrix @ coefficients
+    rss = float(residual @ residual)
+    sigma2 = rss / (n - p)
+    if rank < p or singular[-1] < 1e-10 * singular[0]:
+        covariance = np.full((p, p), np.inf)
+    else:
+        inverse = np.linalg.inv(scaled.T @ scaled)
+        covariance = sigma2 * inverse / np.outer(scale, scale)
+    return Fit(model=model, coefficients=coefficients, covariance=covariance, rss=rss, n=n,
+               sigma2=sigma2, n_effective=n_effective)
+
+
+def _lead_builder(designer: Designer, term: Term) -> Callable[[Signals], FloatArray]:
+    return lambda s: designer.lag_columns(term, s)
+
+
+def _zero_builder(term: Term) -> Callable[[Signals], FloatArray]:
+    return lambda s: np.zeros((len(s), len(term.labels)))
+
+
+def fit_percent(target: FloatArray, prediction: FloatArray) -> float:
+    """``100·(1 − NRMSE)`` with NRMSE = ‖y − ŷ‖ / ‖y − mean(y)‖."""
+    spread = float(np.linalg.norm(target - target.mean()))
+    if spread == 0.0:
+        return float("nan")
+    return 100.0 * (1.0 - float(np.linalg.norm(target - prediction)) / spread)
+
+
+def rms(values: FloatArray) -> float:
+    return float(np.sqrt(np.mean(values**2)))
+
+
+def friction_direction(signals: Signals) -> FloatArray:
+    """sgn(velocity) with a small standstill band (on the smoothed velocity)."""
+    velocity = signals.velocity
+    band = STANDSTILL_FRACTION * float(np.percentile(np.abs(velocity), 99))
+    out = np.sign(velocity)
+    out[np.abs(velocity) <= band] = 0.0
+    return out
+
+
+def base_terms() -> tuple[Term, ...]:
+    """``J·α + B·ω + T_c·sgn(ω)``."""
+    return (
+        Term(effect="base", labels=("inertia",), key="inertia",
+             build=lambda s: s.acceleration, filtered=True),
+        Term(effect="base", labels=("viscous",), key="viscous", build=lambda s: s.velocity,
+             filtered=True),
+        Term(effect="base", labels=("coulomb",), key="coulomb", build=friction_direction,
+             lagged=True),
+    )

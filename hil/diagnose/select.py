@@ -1,0 +1,314 @@
+"""Forward selection of effects, judged on held-out data.
+
+Decision rule (also written into the JSON report): a candidate effect is *significant*
+when all three hold
+
+1. ``ΔBIC = BIC(extended) − BIC(current) ≤ −10`` on the training rows ("very strong"
+   evidence on the Kass–Raftery scale; searched nonlinear parameters count in ``k``);
+2. on the held-out rows the residual RMS drops by at least 1 %;
+3. the 99 % confidence region of the effect's new parameters excludes zero (a Wald test
+   of the key coefficients, ``cᵀC⁻¹c > χ²₀.₉₉(dim)``; for the current-loop lag the
+   Gauss–Newton standard deviation of τ).
+
+Each round every remaining effect is proposed on top of the current model; of the
+significant ones, the one with the most evidence per added parameter (the most negative
+``ΔBIC / Δk``) is accepted, and the round repeats: when two effects explain the same
+thing, the simpler one is named (a constant offset rather than direction-dependent
+Coulomb friction, which look alike while the axis moves). So
+the causes come out ranked, each gain is incremental (measured against the model with
+the causes ranked before it), and an effect that only explains what an accepted one
+already did is not named.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from dataclasses import dataclass, replace
+
+import numpy as np
+from scipy.special import chdtri
+
+from hil.diagnose.effects import EFFECTS, TWO_MASS_BAND, Context, propose, search_shift
+from hil.diagnose.model import Designer, Fit, IndexArray, Model, fit_percent, rms
+from hil.diagnose.signals import Signals
+
+log = logging.getLogger(__name__)
+
+DELTA_BIC_MAX = -10.0
+MIN_HELDOUT_RMS_REDUCTION = 0.01
+CONFIDENCE = 0.99
+MAX_CAUSES = 5
+#: A current-loop lag shorter than this many sample periods is not named: it cannot be
+#: told apart from the sub-sample skew between effort and position sampling.
+MIN_LAG_SAMPLES = 1.0
+#: A structural resonance is named only when the load is at least this part of the inertia.
+MIN_LOAD_FRACTION = 0.05
+
+KEY_LABELS = {
+    "offset": ("offset",),
+    "stribeck": ("stribeck_delta",),
+    "gravity": ("gravity_cos", "gravity_sin"),
+    "cable_spring": ("cable_stiffness",),
+    "two_mass": ("load_inertia",),
+}
+
+DECISION_RULE = {
+    "delta_bic_max": DELTA_BIC_MAX,
+    "min_heldout_rms_reduction": MIN_HELDOUT_RMS_REDUCTION,
+    "confidence": CONFIDENCE,
+    "text": (
+        "an effect is named when delta_bic = BIC(extended) - BIC(current) <= -10 on the "
+        "training data, the held-out residual RMS drops by >= 1 %, and the 99 % confidence "
+        "region of its new parameters excludes zero; effects are added greedily, most "
+        "evidence per added parameter (most negative delta_bic / added parameters) first, "
+        "each gain measured against the model with the causes ranked before it"
+    ),
+}
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class DataSet:
+    """Rows of one recording's signals."""
+
+    signals: Signals
+    rows: IndexArray
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class Gain:
+    rms_before_nm: float
+    rms_after_nm: float
+    fit_before_pct: float
+    fit_after_pct: float
+    delta_bic: float
+    wald_statistic: float
+    wald_threshold: float
+    plausible: bool = True
+
+    @property
+    def rms_reduction(self) -> float:
+        return 1.0 - self.rms_after_nm / self.rms_before_nm if self.rms_before_nm > 0 else 0.0
+
+    @property
+    def confident(self) -> bool:
+        return self.wald_statistic > self.wald_threshold
+
+    @property
+    def significant(self) -> bool:
+        return (
+            self.plausible
+            and self.delta_bic <= DELTA_BIC_MAX
+            and self.rms_reduction >= MIN_HELDOUT_RMS_REDUCTION
+            and self.confident
+        )
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class Candidate:
+    effect: str
+    fit: Fit  # on the training rows
+    gain: Gain
+    added_params: int
+    lag_std_s: float = math.nan
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class Selection:
+    base: Fit
+    accepted: tuple[Candidate, ...]
+    rounds: tuple[tuple[Candidate, ...], ...]  # every candidate evaluated, per round
+
+    @property
+    def final(self) -> Fit:
+        return self.accepted[-1].fit if self.accepted else self.base
+
+
+class Evaluator:
+    """Fits on the training set, scores on the held-out set."""
+
+    def __init__(self, designer: Designer, train: DataSet, test: DataSet,
+                 counts_per_rev: int | None) -> None:
+        self.designer = designer
+        self.train = train
+        self.test = test
+        self.counts_per_rev = counts_per_rev
+        self.band_hz = TWO_MASS_BAND * train.signals.cutoff_hz
+
+    def fit(self, model: Model) -> Fit:
+        return self.designer.fit(model, self.train.signals, self.train.rows)
+
+    def heldout(self, fit: Fit) -> tuple[float, float]:
+        """Residual RMS and fit % on the held-out rows."""
+        target = self.test.signals.effort_filtered[self.test.rows]
+        prediction = self.designer.predict(fit, self.test.signals)[self.test.rows]
+        return rms(target - prediction), fit_percent(target, prediction)
+
+    def lag_std(self, fit: Fit) -> float:
+        """Gauss–Newton standard deviation of the current-loop time constant."""
+        signals, rows = self.train.signals, self.train.rows
+        matrix = self.designer.design(fit.model, signals, rows)
+        lead = self.designer.lead(fit.model, signals, rows)
+        jacobian = np.column_stack((matrix, lead @ fit.coefficients))
+        scale = np.sqrt(np.sum(jacobian**2, axis=0))
+        scale[scale == 0] = 1.0
+        try:
+            inverse = np.linalg.inv((jacobian / scale).T @ (jacobian / scale))
+        except np.linalg.LinAlgError:
+            return math.inf
+        return float(math.sqrt(max(fit.sigma2 * inverse[-1, -1], 0.0)) / scale[-1])
+
+    def candidate(self, effect: str, model: Model, current: Fit) -> Candidate:
+        fit = self.fit(model)
+        rms_before, fit_before = self.heldout(current)
+        rms_after, fit_after = self.heldout(fit)
+        lag_std = math.nan
+        if effect == "current_lag":
+            lag_std = self.lag_std(fit)
+            statistic = (model.lag_s / lag_std) ** 2 if lag_std > 0 else 0.0
+            threshold = chi2_quantile(CONFIDENCE, 1)
+        else:
+            labels = KEY_LABELS.get(effect) or tuple(
+                label for label in model.labels if label not in current.model.labels
+            )
+            statistic, threshold = wald(fit, labels)
+        gain = Gain(
+            rms_before_nm=rms_before,
+            rms_after_nm=rms_after,
+            fit_before_pct=fit_before,
+            fit_after_pct=fit_after,
+            delta_bic=fit.bic - current.bic,
+            wald_statistic=statistic,
+            wald_threshold=threshold,
+            plausible=plausible(effect, fit, self.train.signals.fs_hz, self.band_hz),
+        )
+        return Candidate(effect=effect, fit=fit, gain=gain, lag_std_s=lag_std,
+                         added_params=max(1, model.n_params - current.model.n_params))
+
+
+def plausible(effect: str, fit: Fit, fs_hz: float, band_hz: float) -> bool:
+    """Physical sign constraints: a fit outside them describes something else."""
+    values = fit.as_dict()
+    if effect == "stribeck":
+        return values["stribeck_delta"] > 0  # static friction above Coulomb
+    if effect == "two_mass":  # a resolved resonance with a load that matters
+        term = fit.model.term("two_mass")
+        if term is None or not (
+            MIN_LOAD_FRACTION * values["inertia"] < values["load_inertia"] < values["inertia"]
+        ):
+            return False
+        ratio = values["load_inertia"] / (values["inertia"] - values["load_inertia"])
+        resonance = term.nonlinear["antiresonance_hz"] * math.sqrt(1 + ratio)
+        return resonance <= band_hz
+    if effect == "cable_spring":  # a spring, and a loop (when there is one) that dissipates
+        return values["cable_stiffness"] > 0 and values.get("cable_hysteresis", 0.0) >= 0
+    if effect == "current_lag":  # a shorter lag is indistinguishable from sampling skew
+        return fit.model.lag_s * fs_hz >= MIN_LAG_SAMPLES
+    return True
+
+
+def chi2_quantile(probability: float, dof: int) -> float:
+    """Quantile of the χ² distribution (``scipy.stats.chi2.ppf`` without its import cost)."""
+    return float(chdtri(dof, 1.0 - probability))
+
+
+def wald(fit: Fit, labels: tuple[str, ...]) -> tuple[float, float]:
+    """Wald statistic of ``labels`` being zero and its χ² threshold at :data:`CONFIDENCE`."""
+    values, covariance = fit.block(labels)
+    threshold = chi2_quantile(CONFIDENCE, len(labels))
+    if not np.all(np.isfinite(covariance)):
+        return 0.0, threshold
+    try:
+        statistic = float(values @ np.linalg.solve(covariance, values))
+    except np.linalg.LinAlgError:
+        return 0.0, threshold
+    return statistic, threshold
+
+
+def select(evaluator: Evaluator, base_model: Model, *,
+           effects: tuple[str, ...] = EFFECTS, hold_samples: float | None = 0.5) -> Selection:
+    """Greedy forward selection (see the module docstring for the rule).
+
+    ``hold_samples`` is the time, in sample periods, by which the effort leads the motion
+    it causes (0.5 for a drive that holds each torque sample over the following period);
+    ``None`` estimates it within ±1 sample (it is then confounded with a current lag).
+    """
+    if hold_samples is None:
+        ctx = Context(designer=evaluator.designer, signals=evaluator.train.signals,
+                      rows=evaluator.train.rows, current=evaluator.fit(base_model))
+        current = evaluator.fit(search_shift(ctx, base_model))
+    else:
+        shift_s = hold_samples / evaluator.train.signals.fs_hz
+        current = evaluator.fit(replace(base_model, shift_s=shift_s))
+    base = current
+    accepted: list[Candidate] = []
+    rounds: list[tuple[Candidate, ...]] = []
+    remaining = list(effects)
+    memory: dict[str, Model] = {}
+    while remaining and len(accepted) < MAX_CAUSES:
+        ctx = Context(designer=evaluator.designer, signals=evaluator.train.signals,
+                      rows=evaluator.train.rows, current=current,
+                      counts_per_rev=evaluator.counts_per_rev, memory=memory)
+        evaluated: list[Candidate] = []
+        for effect in remaining:
+            model = propose(effect, ctx)
+            if model is None:
+                continue
+            candidate = evaluator.candidate(effect, model, current)
+            log.debug("%s: %s", effect, candidate.gain)
+            evaluated.append(candidate)
+        rounds.append(tuple(evaluated))
+        winners = [c for c in evaluated if c.gain.significant]
+        if not winners:
+            break
+        best = min(winners, key=lambda c: c.gain.delta_bic / c.added_params)
+        accepted.append(best)
+        remaining.remove(best.effect)
+        current = best.fit
+    return Selection(base=base, accepted=prune(evaluator, base, tuple(accepted)),
+                     rounds=tuple(rounds))
+
+
+def _without(model: Model, effect: str) -> Model:
+    terms = tuple(term for term in model.terms if term.effect != effect)
+    return replace(model, terms=terms, lag_s=0.0 if effect == "current_lag" else model.lag_s)
+
+
+def prune(evaluator: Evaluator, base: Fit,
+          accepted: tuple[Candidate, ...]) -> tuple[Candidate, ...]:
+    """Backward elimination: drop a cause that the others have explained away.
+
+    A cause accepted early can be explained away by one accepted later (an offset by a
+    gravity term whose cosine is nearly constant over the travel). It is dropped when,
+    on top of all the others, its in-sample evidence is gone (ΔBIC above −10, or its
+    confidence region includes zero); the held-out test is not repeated here, so a cause
+    whose gain was shown when it was accepted stays. The survivors' gains are measured
+    again, in order, each against the model with the causes before it.
+    """
+    kept = list(accepted)
+    changed = True
+    while changed and len(kept) > 1:
+        changed = False
+        final = kept[-1].fit.model
+        for cause in kept:
+            reduced = evaluator.fit(_without(final, cause.effect))
+            gain = evaluator.candidate(cause.effect, final, reduced).gain
+            if not (gain.plausible and gain.delta_bic <= DELTA_BIC_MAX and gain.confident):
+                log.info("dropping %s: explained by the other causes", cause.effect)
+                kept.remove(cause)
+                changed = True
+                break
+    if len(kept) == len(accepted):
+        return accepted
+    final = kept[-1].fit.model if kept else base.model
+    effects = [c.effect for c in kept]
+    rebuilt: list[Candidate] = []
+    current = base
+    for index, effect in enumerate(effects):
+        model = final
+        for later in effects[index + 1 :]:
+            model = _without(model, later)
+        candidate = evaluator.candidate(effect, model, current)
+        rebuilt.append(candidate)
+        current = candidate.fit
+    return tuple(rebuilt)

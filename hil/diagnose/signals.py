@@ -1,0 +1,316 @@
+"""From a Recording to phase-free motion signals on a uniform grid, with the data's problems.
+
+The regressors of every model in :mod:`hil.diagnose` come from here. Velocity and
+acceleration are derivatives of the *measured position* after a zero-phase Butterworth
+low-pass (``sosfiltfilt``), so they carry no phase lag; the drive's own velocity column is
+never used as a regressor (it is only compared with the zero-phase derivative to detect a
+lagging velocity filter, see :mod:`hil.diagnose.data_issues`).
+
+Irregular timestamps and gaps are handled by resampling onto a uniform grid at the median
+sample period; samples inside a gap, next to a gap, next to the ends of a segment (filter
+transients) and at saturated effort are marked invalid and never enter a fit.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy.signal import butter, sosfiltfilt
+
+from hil.errors import IdentificationError
+from hil.recording import GAP_FACTOR, AxisKind, Recording, saturated_mask
+
+log = logging.getLogger(__name__)
+
+FloatArray = NDArray[np.float64]
+BoolArray = NDArray[np.bool_]
+
+#: Default derivative bandwidth as a fraction of the sample rate.
+CUTOFF_FRACTION = 0.125
+#: The friction-switching velocity is smoothed this much more than the main velocity.
+SLOW_CUTOFF_RATIO = 8.0
+#: Relative spread of sample periods above which sampling counts as irregular.
+IRREGULAR_TOLERANCE = 0.01
+MIN_VALID_SAMPLES = 200
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class Signals:
+    """Motion and effort of one recording on a uniform grid (units of the axis kind).
+
+    Attributes
+    ----------
+    time_s : uniform sample times, s.
+    position : measured position (interpolated when resampled), rad or m.
+    velocity, acceleration : zero-phase derivatives of position (rad/s, rad/s² or m/s, m/s²).
+    velocity_slow : velocity smoothed further, for friction switching (sgn, Stribeck).
+    effort : measured torque (N·m) or force (N).
+    effort_filtered : ``effort`` through the same zero-phase low-pass as position; fits
+        compare it with regressors filtered alike ("parallel filtering"), so the filter's
+        passband droop does not bias inertia.
+    velocity_reported : the drive's velocity column on the same grid.
+    valid : samples allowed in fits and metrics.
+    segments : ``(start, stop)`` index ranges without gaps (filters run per segment).
+    """
+
+    source: str
+    axis_kind: AxisKind
+    fs_hz: float
+    cutoff_hz: float
+    time_s: FloatArray
+    position: FloatArray
+    velocity: FloatArray
+    acceleration: FloatArray
+    velocity_slow: FloatArray
+    effort: FloatArray
+    effort_filtered: FloatArray
+    velocity_reported: FloatArray
+    valid: BoolArray
+    segments: tuple[tuple[int, int], ...]
+    resampled: bool
+    gap_count: int
+    saturated_count: int
+    saturation_level: float
+
+    def __len__(self) -> int:
+        return len(self.time_s)
+
+    @property
+    def independence(self) -> float:
+        """Fraction of samples that are independent after the low-pass (2·f_c/f_s)."""
+        return min(1.0, 2.0 * self.cutoff_hz / self.fs_hz)
+
+    @property
+    def decimation(self) -> int:
+        """Row step for fits: band-limited signals need no more than ~2.5 samples per cycle."""
+        return max(1, int(self.fs_hz / (2.5 * self.cutoff_hz)))
+
+    def rows(self, mask: BoolArray | None = None) -> NDArray[np.intp]:
+        """Valid (and ``mask``) sample indices, decimated by :attr:`decimation`."""
+        keep = self.valid.copy()
+        if mask is not None:
+            keep &= mask
+        keep[np.arange(len(keep)) % self.decimation != 0] = False
+        return np.flatnonzero(keep)
+
+    def lowpass(self, values: FloatArray) -> FloatArray:
+        """Zero-phase low-pass of ``values`` at :attr:`cutoff_hz`, segment by segment."""
+        return zero_phase_lowpass(values, fs_hz=self.fs_hz, cutoff_hz=self.cutoff_hz,
+                                  segments=self.segments)
+
+    def derivative(self, values: FloatArray) -> FloatArray:
+        """Five-point central-difference time derivative (zero phase), per segment."""
+        out = np.zeros_like(values)
+        for start, stop in self.segments:
+            out[start:stop] = _first_derivative(values[start:stop], 1.0 / self.fs_hz)
+        return out
+
+
+def zero_phase_lowpass(
+    values: FloatArray,
+    *,
+    fs_hz: float,
+    cutoff_hz: float,
+    segments: tuple[tuple[int, int], ...],
+) -> FloatArray:
+    """4th-order Butterworth applied forward and backward (no phase), per segment."""
+    sos = butter(2, cutoff_hz, fs=fs_hz, output="sos")  # doubled by filtfilt: 4th order
+    out = np.array(values, dtype=np.float64, copy=True)
+    for start, stop in segments:
+        if stop - start > 30:
+            out[start:stop] = sosfiltfilt(sos, values[start:stop])
+    return out
+
+
+def prepare(recording: Recording, *, cutoff_hz: float | None = None) -> Signals:
+    """Resample (if needed), differentiate without phase lag and mark unusable samples.
+
+    Parameters
+    ----------
+    recording : the measured log.
+    cutoff_hz : derivative bandwidth in Hz; default ``fs/8`` (fs: median sample rate).
+
+    Raises
+    ------
+    IdentificationError
+        When fewer than 200 usable samples remain.
+    """
+    time_raw = np.asarray(recording.time_s, dtype=np.float64)
+    steps = np.diff(time_raw)
+    period_s = float(np.median(steps))
+    fs_hz = 1.0 / period_s
+    gap_index = np.flatnonzero(steps > GAP_FACTOR * period_s)
+    irregular = float(np.std(steps) / period_s) > IRREGULAR_TOLERANCE
+    resampled = bool(irregular or gap_index.size)
+    if cutoff_hz is None:
+        cutoff_hz = CUTOFF_FRACTION * fs_hz
+    if not 0.0 < cutoff_hz < 0.5 * fs_hz:
+        raise IdentificationError(
+            f"derivative cutoff {cutoff_hz:g} Hz must lie in (0, {0.5 * fs_hz:g}) Hz"
+        )
+    sat_raw = _saturation_mask(np.asarray(recording.effort, dtype=np.float64))
+
+    if resampled:
+        count = int(math.floor((time_raw[-1] - time_raw[0]) / period_s)) + 1
+        time_s = time_raw[0] + period_s * np.arange(count)
+
+        def on_grid(values: FloatArray) -> FloatArray:
+            return np.interp(time_s, time_raw, values)
+
+        in_gap = np.zeros(count, dtype=bool)
+        for index in gap_index:
+            in_gap |= (time_s > time_raw[index]) & (time_s < time_raw[index + 1])
+        # a grid sample is saturated when its nearest raw sample is
+        nearest = np.clip(np.searchsorted(time_raw, time_s), 0, len(time_raw) - 1)
+        saturated = sat_raw[nearest]
+    else:
+        time_s = time_raw
+
+        def on_grid(values: FloatArray) -> FloatArray:
+            return np.asarray(values, dtype=np.float64)
+
+        in_gap = np.zeros(len(time_s), dtype=bool)
+        saturated = sat_raw
+
+    position = on_grid(recording.position)
+    effort = on_grid(recording.effort)
+    velocity_reported = on_grid(recording.velocity)
+    segments = _segments(in_gap)
+    smooth = zero_phase_lowpass(position, fs_hz=fs_hz, cutoff_hz=cutoff_hz, segments=segments)
+    slow = zero_phase_lowpass(
+        position, fs_hz=fs_hz, cutoff_hz=cutoff_hz / SLOW_CUTOFF_RATIO, segments=segments
+    )
+    velocity = np.zeros_like(position)
+    acceleration = np.zeros_like(position)
+    velocity_slow = np.zeros_like(position)
+    for start, stop in segments:
+        velocity[start:stop] = _first_derivative(smooth[start:stop], period_s)
+        acceleration[start:stop] = _second_derivative(smooth[start:stop], period_s)
+        velocity_slow[start:stop] = _first_derivative(slow[start:stop], period_s)
+
+    margin = max(3, int(math.ceil(2.0 * fs_hz / cutoff_hz)))
+    valid = ~in_gap & ~_dilate(saturated, 2)
+    for start, stop in segments:
+        valid[start : min(stop, start + margin)] = False
+        valid[max(start, stop - margin) : stop] = False
+    if int(valid.sum()) < MIN_VALID_SAMPLES:
+        raise IdentificationError(
+            f"{recording.source}: only {int(valid.sum())} usable samples "
+            f"(at least {MIN_VALID_SAMPLES} are needed after excluding gaps and saturation)"
+        )
+    level = float(np.max(np.abs(effort[saturated]))) if saturated.any() else 0.0
+    return Signals(
+        source=recording.source,
+        axis_kind=recording.axis_kind,
+        fs_hz=fs_hz,
+        cutoff_hz=float(cutoff_hz),
+        time_s=time_s,
+        position=position,
+        velocity=velocity,
+        acceleration=acceleration,
+        velocity_slow=velocity_slow,
+        effort=effort,
+        effort_filtered=zero_phase_lowpass(
+            effort, fs_hz=fs_hz, cutoff_hz=cutoff_hz, segments=segments
+        ),
+        velocity_reported=velocity_reported,
+        valid=valid,
+        segments=segments,
+        resampled=resampled,
+        gap_count=int(gap_index.size),
+        saturated_count=int(sat_raw.sum()),
+        saturation_level=level,
+    )
+
+
+def _first_derivative(x: FloatArray, step_s: float) -> FloatArray:
+    """Five-point central difference (gain error ~(ωh)⁴/30); 2-point at the ends."""
+    out = np.gradient(x, step_s) if len(x) >= 2 else np.zeros_like(x)
+    if len(x) >= 5:
+        out[2:-2] = (-x[4:] + 8.0 * x[3:-1] - 8.0 * x[1:-3] + x[:-4]) / (12.0 * step_s)
+    return out
+
+
+def _second_derivative(x: FloatArray, step_s: float) -> FloatArray:
+    """Five-point central second difference (gain error ~(ωh)⁴/90); 0 at the ends."""
+    out = np.zeros_like(x)
+    if len(x) >= 5:
+        out[2:-2] = (
+            -x[4:] + 16.0 * x[3:-1] - 30.0 * x[2:-2] + 16.0 * x[1:-3] - x[:-4]
+        ) / (12.0 * step_s**2)
+        out[:2] = out[2]
+        out[-2:] = out[-3]
+    return out
+
+
+def _segments(in_gap: BoolArray) -> tuple[tuple[int, int], ...]:
+    """Maximal runs of samples outside gaps."""
+    edges = np.diff(np.concatenate(([1], in_gap.astype(np.int8), [1])))
+    starts = np.flatnonzero(edges == -1)
+    stops = np.flatnonzero(edges == 1)
+    return tuple((int(a), int(b)) for a, b in zip(starts, stops, strict=True))
+
+
+def _dilate(mask: BoolArray, width: int) -> BoolArray:
+    if not mask.any():
+        return mask
+    kernel = np.ones(2 * width + 1)
+    return np.convolve(mask.astype(np.float64), kernel, mode="same") > 0
+
+
+def _saturation_mask(effort: FloatArray) -> BoolArray:
+    """Samples at the effort clip value.
+
+    Two signatures: a value held exactly (a drive reporting its clipped reference, see
+    :func:`hil.recording.saturated_mask`), and a plateau at the extreme: at least five
+    consecutive samples within three noise standard deviations of the maximum magnitude
+    that scatter like noise around a constant (a smooth peak follows a parabola),
+    in at least two separate events (a clip value is hit repeatedly).
+    """
+    mask = saturated_mask(effort)
+    noise = _noise_std(effort)
+    if noise <= 0.0:
+        return mask
+    plateaus: list[tuple[int, int]] = []
+    for sign in (1.0, -1.0):
+        values = sign * effort
+        level = float(np.max(values))
+        if level <= 0.0:
+            continue
+        near = values >= level - 3.0 * noise
+        runs = sorted((r for r in _runs(near) if r[1] - r[0] >= 5), key=lambda r: r[0] - r[1])
+        plateaus.extend(
+            (start, stop) for start, stop in runs[:50] if _is_plateau(values[start:stop], noise)
+        )
+    if len(plateaus) >= 2:  # a clip value is hit repeatedly; one flat peak is not a clip
+        for start, stop in plateaus:
+            mask[start:stop] = True
+    return mask
+
+
+def _is_plateau(values: FloatArray, noise: float) -> bool:
+    """Noise around a constant, not a smooth peak (a parabola explains < half the spread)."""
+    if float(np.std(values)) >= 2.0 * noise:
+        return False
+    index = np.arange(len(values), dtype=np.float64)
+    fitted = np.polyval(np.polyfit(index, values, 2), index)
+    spread = float(np.sum((values - values.mean()) ** 2))
+    return spread == 0.0 or float(np.sum((values - fitted) ** 2)) > 0.5 * spread
+
+
+def _runs(mask: BoolArray) -> list[tuple[int, int]]:
+    edges = np.diff(np.concatenate(([0], mask.astype(np.int8), [0])))
+    return list(zip(np.flatnonzero(edges == 1).tolist(), np.flatnonzero(edges == -1).tolist(),
+                    strict=True))
+
+
+def _noise_std(values: FloatArray) -> float:
+    """Robust white-noise level from the third difference (MAD)."""
+    if len(values) < 10:
+        return 0.0
+    third = np.diff(values, 3) / math.sqrt(20.0)
+    return float(1.4826 * np.median(np.abs(third - np.median(third))))
