@@ -1,0 +1,29 @@
+"""The staircase, sweep and pass protocols stay inside the demo unit's limits from any start
+position (the drive keeps its position between protocols)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from hil.drives.base import DriveInfo, Mode, check_limits
+from hil.profile import load_profile
+from protocols import test_cogging, test_gravity_cable, test_stribeck
+
+PROFILE = load_profile()
+INFO = DriveInfo(vendor="test", model="test", firmware_version="0", serial="0",
+                 rated_torque_nm=0.5, limits=PROFILE.limits, modes=tuple(Mode),
+                 max_sample_rate_hz=PROFILE.sample_rate_hz)
+MODULES = (test_stribeck, test_gravity_cable, test_cogging)
+
+
+@pytest.mark.parametrize("module", MODULES, ids=lambda m: m.NAME)
+@pytest.mark.parametrize("start", [-1.4, -0.7, 0.0, 0.9, 1.4])
+def test_every_excitation_is_inside_the_limits(module: object, start: float) -> None:
+    spec = module.Spec.from_profile(PROFILE, INFO)  # type: ignore[attr-defined]
+    move, main = module.excitation(spec, position_rad=start)  # type: ignore[attr-defined]
+    check_limits(move, PROFILE.limits, start_position_rad=start)
+    assert move.command[-1] == pytest.approx(spec.start_rad)
+    check_limits(main, PROFILE.limits, start_position_rad=spec.start_rad)
+    assert main.mode is Mode.VELOCITY
+    assert np.all(np.isfinite(main.command))
