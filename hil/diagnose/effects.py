@@ -156,8 +156,23 @@ def _search(
 
 
 # -- linear-in-parameters effects ----------------------------------------------------------
+#: Offset and direction-dependent friction need motion in both directions, each in at
+#: least this fraction of the moving training samples (else they equal Coulomb friction).
+MIN_DIRECTION_FRACTION = 0.10
+
+
+def both_directions(ctx: Context) -> bool:
+    """Whether the training rows move both ways enough to tell a constant from friction."""
+    direction = friction_direction(ctx.signals)[ctx.rows]
+    moving = np.count_nonzero(direction)
+    if moving == 0:
+        return False
+    share = min(np.count_nonzero(direction > 0), np.count_nonzero(direction < 0)) / moving
+    return share >= MIN_DIRECTION_FRACTION
+
+
 def _offset(ctx: Context) -> Model | None:
-    if _has_constant(ctx.current.model):
+    if _has_constant(ctx.current.model) or not both_directions(ctx):
         return None
     term = Term(effect="offset", labels=("offset",), key="offset",
                 build=lambda s: np.ones(len(s)))
@@ -175,6 +190,8 @@ def _asymmetric(ctx: Context) -> Model | None:
     (``ΔT_c·1(ω<0) = ΔT_c/2 − ΔT_c/2·sgn ω``): with a constant already in the model only
     the viscous difference is separable, and only it is added.
     """
+    if not both_directions(ctx):
+        return None
     if _has_constant(ctx.current.model):
         term = Term(effect="asymmetric_friction", labels=("viscous_neg_delta",),
                     key="asymmetric:viscous", filtered=True,

@@ -300,7 +300,10 @@ def prune(evaluator: Evaluator, base: Fit,
                 break
     if len(kept) == len(accepted):
         return accepted
-    final = kept[-1].fit.model if kept else base.model
+    final = accepted[-1].fit.model
+    for dropped in accepted:
+        if dropped not in kept:
+            final = _without(final, dropped.effect)
     effects = [c.effect for c in kept]
     rebuilt: list[Candidate] = []
     current = base

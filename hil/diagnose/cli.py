@@ -1,0 +1,69 @@
+"""``gimbal-hil diagnose REC.csv[.gz] [--validate OTHER] --json OUT.json [--plots DIR]``.
+
+Exit code 0 whether or not causes are found; 2 with one clear line on stderr for a bad
+file or data that cannot support the fit.
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import sys
+import time
+
+from hil.errors import HilError
+
+log = logging.getLogger(__name__)
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("recording", help="recording to explain (.csv or .csv.gz)")
+    parser.add_argument("--validate", metavar="OTHER",
+                        help="second recording of the same axis: judge every gain on it")
+    parser.add_argument("--json", metavar="OUT.json", required=True,
+                        help="write the report here")
+    parser.add_argument("--plots", metavar="DIR", help="write PNG plots into this directory")
+    parser.add_argument("--profile-out", metavar="OUT.toml",
+                        help="write the extended model as a unit profile (TOML)")
+    parser.add_argument("--cutoff-hz", type=float, default=None,
+                        help="analysis bandwidth (default: sample rate / 8)")
+
+
+def run(args: argparse.Namespace) -> int:
+    # heavy imports here, so that `gimbal-hil --help` stays fast
+    from hil.diagnose.core import diagnose
+    from hil.diagnose.profile_out import write_profile
+    from hil.diagnose.report import write_json
+    from hil.recording import read_recording
+
+    try:
+        started = time.perf_counter()
+        recording = read_recording(args.recording)
+        validate = read_recording(args.validate) if args.validate else None
+        diagnosis = diagnose(recording, validate=validate, cutoff_hz=args.cutoff_hz)
+        data = write_json(diagnosis, args.json)
+        if args.profile_out:
+            write_profile(diagnosis, args.profile_out)
+        if args.plots:
+            from hil.diagnose.plots import write_plots
+
+            write_plots(diagnosis, args.plots)
+    except HilError as exc:
+        print(f"gimbal-hil diagnose: error: {exc}", file=sys.stderr)
+        return 2
+    causes = data["causes"]
+    named = ", ".join(c["name"] for c in causes) if causes else "none"
+    print(f"{args.recording}: base fit {data['base']['fit_pct']:.1f} % held out; "
+          f"causes: {named} ({time.perf_counter() - started:.1f} s) -> {args.json}")
+    return 0
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="gimbal-hil diagnose", description=__doc__)
+    add_arguments(parser)
+    logging.basicConfig(level=logging.WARNING, format="%(levelname)s %(name)s: %(message)s")
+    return run(parser.parse_args(argv))
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

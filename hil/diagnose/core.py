@@ -1,0 +1,164 @@
+"""``diagnose(recording)``: fit the base model, test the residual, name and rank the causes.
+
+Training and held-out data: with ``validate`` the whole first recording trains and the
+second judges every gain. Without it the recording is split into interleaved blocks of
+0.25 s, every third block held out: a gimbal test run strings different experiments
+together (sines, a staircase, a sweep, a chirp), so a plain first-70 %/last-30 % split
+would judge on an experiment the fit never saw, while interleaved blocks put a part of
+every experiment on both sides.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from hil.diagnose import data_issues, interpret
+from hil.diagnose.data_issues import DataIssue
+from hil.diagnose.model import Designer, Fit, Model, base_terms, fit_percent, rms
+from hil.diagnose.residual import analyse
+from hil.diagnose.select import DECISION_RULE, Candidate, DataSet, Evaluator, Selection, select
+from hil.diagnose.signals import Signals, prepare
+from hil.errors import IdentificationError
+from hil.recording import Recording
+
+log = logging.getLogger(__name__)
+
+BLOCK_S = 0.25
+HELDOUT_EVERY = 3
+#: Effort leads motion by half a sample: the drive holds each torque over the next period.
+HOLD_SAMPLES = 0.5
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class Diagnosis:
+    """Everything ``gimbal-hil diagnose`` reports (see :meth:`to_dict`)."""
+
+    recording: Recording
+    signals: Signals
+    heldout: DataSet
+    train: DataSet
+    selection: Selection
+    issues: tuple[DataIssue, ...]
+    residual: dict[str, Any]
+    split: str
+    designer: Designer
+
+    @property
+    def base(self) -> Fit:
+        return self.selection.base
+
+    @property
+    def causes(self) -> tuple[Candidate, ...]:
+        return self.selection.accepted
+
+    @property
+    def final(self) -> Fit:
+        return self.selection.final
+
+    @property
+    def cause_names(self) -> list[str]:
+        return [c.effect for c in self.causes]
+
+    def heldout_prediction(self, fit: Fit) -> tuple[np.ndarray, np.ndarray]:
+        """Measured (filtered) and predicted effort on the held-out rows."""
+        rows = self.heldout.rows
+        signals = self.heldout.signals
+        return signals.effort_filtered[rows], self.designer.predict(fit, signals)[rows]
+
+    def to_dict(self) -> dict[str, Any]:
+        from hil.diagnose.report import report  # the JSON layout lives in report.py
+
+        return report(self)
+
+
+def block_split(signals: Signals) -> tuple[DataSet, DataSet]:
+    """Interleaved blocks: every third 0.25 s block is held out."""
+    length = max(50, round(BLOCK_S * signals.fs_hz))
+    held = (np.arange(len(signals)) // length) % HELDOUT_EVERY == HELDOUT_EVERY - 1
+    train, test = signals.rows(~held), signals.rows(held)
+    if train.size < 50 or test.size < 50:
+        raise IdentificationError("recording too short to hold out data for judging gains")
+    return DataSet(signals=signals, rows=train), DataSet(signals=signals, rows=test)
+
+
+def diagnose(
+    recording: Recording,
+    *,
+    validate: Recording | None = None,
+    cutoff_hz: float | None = None,
+    hold_samples: float | None = HOLD_SAMPLES,
+) -> Diagnosis:
+    """Diagnose ``recording``; with ``validate``, judge every gain on that recording.
+
+    Parameters
+    ----------
+    recording : the measured log to explain.
+    validate : a second log of the same axis (held out: never fitted).
+    cutoff_hz : analysis bandwidth in Hz (default: an eighth of the sample rate).
+    hold_samples : how many sample periods the effort leads the motion (0.5: zero-order
+        hold); ``None`` estimates it within ±1 sample.
+
+    Raises
+    ------
+    IdentificationError
+        The data cannot support the fit (too short, too few usable samples).
+    """
+    signals = prepare(recording, cutoff_hz=cutoff_hz)
+    if validate is not None:
+        if validate.axis_kind != recording.axis_kind:
+            raise IdentificationError(
+                f"{validate.source} is a {validate.axis_kind} axis, "
+                f"{recording.source} a {recording.axis_kind} one"
+            )
+        other = prepare(validate, cutoff_hz=signals.cutoff_hz)
+        train, test = DataSet(signals=signals, rows=signals.rows()), DataSet(
+            signals=other, rows=other.rows())
+        split = f"fit on {recording.source}, judged on {validate.source}"
+    else:
+        train, test = block_split(signals)
+        split = (f"interleaved {BLOCK_S:g} s blocks, every {HELDOUT_EVERY}rd held out "
+                 f"({test.rows.size} of {train.rows.size + test.rows.size} rows)")
+    issues = data_issues.find_issues(recording, signals)
+    counts = next((i.values.get("counts_per_rev") for i in issues if i.kind == "quantisation"),
+                  None)
+    designer = Designer()
+    evaluator = Evaluator(designer, train, test, counts if isinstance(counts, int) else None)
+    selection = select(evaluator, Model(terms=base_terms()), hold_samples=hold_samples)
+    prediction = designer.predict(selection.base, signals)
+    command = recording.velocity_cmd
+    if command is not None and len(command) != len(signals):
+        command = np.interp(signals.time_s, recording.time_s, command)
+    residual = analyse(signals, prediction, velocity_cmd=command)
+    log.info("%s: causes %s", recording.source, [c.effect for c in selection.accepted])
+    return Diagnosis(recording=recording, signals=signals, heldout=test, train=train,
+                     selection=selection, issues=tuple(issues), residual=residual,
+                     split=split, designer=designer)
+
+
+def summary_metrics(diagnosis: Diagnosis, fit: Fit) -> dict[str, float]:
+    """Residual RMS and fit % of ``fit`` on the training and the held-out rows."""
+    out: dict[str, float] = {}
+    for name, data in (("train", diagnosis.train), ("heldout", diagnosis.heldout)):
+        target = data.signals.effort_filtered[data.rows]
+        prediction = diagnosis.designer.predict(fit, data.signals)[data.rows]
+        out[f"{name}_rms_nm"] = rms(target - prediction)
+        out[f"{name}_fit_pct"] = fit_percent(target, prediction)
+    return out
+
+
+def base_parameters(diagnosis: Diagnosis) -> dict[str, Any]:
+    estimates = interpret.base_parameters(diagnosis.base)
+    return {
+        "parameters": {name: e.value for name, e in estimates.items()},
+        "uncertainty": {name: e.as_dict() for name, e in estimates.items()},
+        "hold_samples": diagnosis.base.model.shift_s * diagnosis.signals.fs_hz,
+    }
+
+
+def finite_or_none(value: float) -> float | None:
+    return value if math.isfinite(value) else None

@@ -1,0 +1,133 @@
+"""Problems of the data itself: reported as such, never as physics.
+
+Saturation and gaps are excluded from every fit (see :mod:`hil.diagnose.signals`);
+quantisation and a lagging velocity filter are measured and reported, and feed the data
+fields of the extended profile (``encoder_counts_per_rev``, ``velocity_filter_hz``).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from hil.diagnose.signals import Signals, _noise_std
+from hil.recording import Recording
+
+FloatArray = NDArray[np.float64]
+
+#: The reported velocity lags when it trails the zero-phase derivative by more than this
+#: many samples (a backward difference alone trails by half a sample).
+VELOCITY_LAG_SAMPLES = 1.0
+MAX_LAG_SAMPLES = 60
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class DataIssue:
+    kind: str  # saturation, gaps, irregular_sampling, quantisation, velocity_filter_lag, ...
+    severity: str  # "warning" (affects the data used) or "info"
+    message: str
+    values: dict[str, Any] = field(default_factory=dict)
+
+    def as_dict(self) -> dict[str, Any]:
+        return {"kind": self.kind, "severity": self.severity, "message": self.message,
+                **self.values}
+
+
+def quantisation_step(position: FloatArray) -> float:
+    """Smallest common position step (0 when the position looks continuous)."""
+    steps = np.abs(np.diff(position))
+    steps = steps[steps > 0]
+    if steps.size < 10:
+        return 0.0
+    candidate = float(np.percentile(steps, 1))
+    if candidate <= 0:
+        return 0.0
+    ratio = steps / candidate
+    on_grid = np.abs(ratio - np.round(ratio)) < 0.05
+    return candidate if float(np.mean(on_grid)) > 0.9 else 0.0
+
+
+def velocity_delay_samples(signals: Signals) -> float:
+    """Delay of the reported velocity behind the zero-phase derivative (samples)."""
+    reported = signals.velocity_reported
+    reference = signals.velocity
+    valid = signals.valid
+    lags = np.arange(-MAX_LAG_SAMPLES, MAX_LAG_SAMPLES + 1)
+    n = len(reference)
+    core = np.flatnonzero(valid)
+    core = core[(core >= MAX_LAG_SAMPLES) & (core < n - MAX_LAG_SAMPLES)]
+    if core.size < 100 or float(np.std(reported[core])) == 0.0:
+        return 0.0
+    scores = np.array([float(np.dot(reported[core], reference[core - lag])) for lag in lags])
+    best = int(np.argmax(scores))
+    if 0 < best < len(lags) - 1:
+        left, centre, right = scores[best - 1 : best + 2]
+        curvature = left - 2 * centre + right
+        shift = 0.5 * (left - right) / curvature if curvature != 0 else 0.0
+        return float(lags[best] + shift)
+    return float(lags[best])
+
+
+def find_issues(recording: Recording, signals: Signals) -> list[DataIssue]:
+    """Every data problem of ``recording`` (as prepared into ``signals``)."""
+    issues: list[DataIssue] = []
+    if signals.saturated_count:
+        issues.append(DataIssue(
+            kind="saturation", severity="warning",
+            message=(f"{signals.saturated_count} samples at the effort clip value "
+                     f"{signals.saturation_level:.6g}: excluded from every fit"),
+            values={"samples": signals.saturated_count, "level": signals.saturation_level},
+        ))
+    if signals.gap_count:
+        issues.append(DataIssue(
+            kind="gaps", severity="warning",
+            message=(f"{signals.gap_count} gap(s) longer than 5 sample periods: samples in "
+                     "and next to them are excluded"),
+            values={"count": signals.gap_count},
+        ))
+    steps = np.diff(recording.time_s)
+    spread = float(np.std(steps) / np.median(steps))
+    if signals.resampled and spread > 0.01:
+        issues.append(DataIssue(
+            kind="irregular_sampling", severity="info",
+            message=(f"timestamps are irregular (period spread {100 * spread:.0f} %): "
+                     f"resampled to a uniform {signals.fs_hz:.6g} Hz grid"),
+            values={"period_spread": spread, "resampled_hz": signals.fs_hz},
+        ))
+    step = quantisation_step(np.asarray(recording.position))
+    if step > 0:
+        rotary = signals.axis_kind == "rotary"
+        counts = round(2 * math.pi / step) if rotary else None
+        noise = step / math.sqrt(12) * (2 * math.pi * signals.cutoff_hz) ** 2 * math.sqrt(
+            2 * signals.cutoff_hz / signals.fs_hz / 5)
+        where = f" ({counts} counts/rev)" if counts else ""
+        issues.append(DataIssue(
+            kind="quantisation", severity="info",
+            message=(f"position is quantised in steps of {step:.4g}{where}; after the "
+                     f"{signals.cutoff_hz:.4g} Hz low-pass it adds about {noise:.3g} "
+                     "(position units)/s² of noise to the acceleration"),
+            values={"step": step, "counts_per_rev": counts, "acceleration_noise": noise},
+        ))
+    delay = velocity_delay_samples(signals)
+    if delay > VELOCITY_LAG_SAMPLES:
+        # a first-order filter on a backward difference trails by 1/(2π f_c) + T/2
+        lag_s = (delay - 0.5) / signals.fs_hz
+        cutoff = 1.0 / (2 * math.pi * lag_s) if lag_s > 0 else math.inf
+        issues.append(DataIssue(
+            kind="velocity_filter_lag", severity="info",
+            message=(f"the recorded velocity trails the derivative of position by "
+                     f"{delay:.2f} samples ({1e3 * delay / signals.fs_hz:.3g} ms), like a "
+                     f"first-order filter at {cutoff:.4g} Hz; it is not used as a regressor"),
+            values={"delay_samples": delay, "equivalent_cutoff_hz": cutoff},
+        ))
+    noise_std = _noise_std(np.asarray(recording.effort))
+    issues.append(DataIssue(
+        kind="effort_noise", severity="info",
+        message=f"white effort noise ≈ {noise_std:.3g} (from the third difference)",
+        values={"std": noise_std},
+    ))
+    return issues

@@ -1,0 +1,188 @@
+"""From fitted coefficients to named physical parameters (with uncertainty) and plant fields.
+
+Parameter names follow the report contract (``offset_nm``, ``coulomb_pos_nm``, ...). On a
+linear axis the same names hold linear units (``offset_nm`` in N, ``inertia_kg_m2`` in
+kg, ``viscous_nm_s_rad`` in N·s/m); :func:`units` gives the map the report carries.
+Uncertainties are standard deviations from ``σ²(ΦᵀΦ)⁻¹`` (delta method for derived
+values) and 99 % intervals ``value ± 2.576·std``.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from hil.diagnose.model import Fit
+from hil.recording import AxisKind
+
+Z99 = 2.5758293035489004
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class Estimate:
+    value: float
+    std: float
+
+    def as_dict(self) -> dict[str, float | list[float] | None]:
+        finite = math.isfinite(self.std)
+        return {
+            "value": self.value,
+            "std": self.std if finite else None,
+            "ci99": [self.value - Z99 * self.std, self.value + Z99 * self.std] if finite else None,
+        }
+
+
+def _linear(fit: Fit, weights: dict[str, float], offset: float = 0.0) -> Estimate:
+    """``offset + Σ w·coef`` with its standard deviation."""
+    labels = tuple(weights)
+    values, covariance = fit.block(labels)
+    w = np.array([weights[label] for label in labels])
+    variance = float(w @ covariance @ w) if np.all(np.isfinite(covariance)) else math.inf
+    return Estimate(value=offset + float(w @ values), std=math.sqrt(max(variance, 0.0)))
+
+
+def _amplitude(fit: Fit, sin_label: str, cos_label: str) -> tuple[Estimate, float]:
+    """Amplitude (delta method) and phase of ``a·sin + b·cos = A·sin(x + φ)``."""
+    (a, b), covariance = fit.block((sin_label, cos_label))
+    amplitude = math.hypot(a, b)
+    phase = math.atan2(b, a)
+    if amplitude == 0.0 or not np.all(np.isfinite(covariance)):
+        return Estimate(value=amplitude, std=math.inf), phase
+    gradient = np.array([a, b]) / amplitude
+    std = math.sqrt(max(float(gradient @ covariance @ gradient), 0.0))
+    return Estimate(value=amplitude, std=std), phase
+
+
+def units(axis_kind: AxisKind) -> dict[str, str]:
+    """Unit of every reported quantity for this kind of axis."""
+    rotary = axis_kind == "rotary"
+    effort = "N·m" if rotary else "N"
+    position = "rad" if rotary else "m"
+    return {
+        "effort (every *_nm)": effort,
+        "inertia_kg_m2": "kg·m²" if rotary else "kg",
+        "viscous_nm_s_rad, viscous_pos, viscous_neg": f"{effort}·s/{position}",
+        "stribeck_velocity_rad_s": f"{position}/s",
+        "stiffness_nm_per_rad": f"{effort}/{position}",
+        "zero_rad": position,
+        "relative_amplitude": "1",
+        "periods_per_rev": "1/rev",
+        "time_constant_s": "s",
+        "resonance_hz": "Hz",
+    }
+
+
+def base_parameters(fit: Fit) -> dict[str, Estimate]:
+    return {
+        "inertia_kg_m2": _linear(fit, {"inertia": 1.0}),
+        "viscous_nm_s_rad": _linear(fit, {"viscous": 1.0}),
+        "coulomb_nm": _linear(fit, {"coulomb": 1.0}),
+    }
+
+
+def _harmonics(fit: Fit, effect: str) -> list[dict[str, float]]:
+    term = fit.model.term(effect)
+    if term is None:
+        return []
+    prefix = "cog" if effect == "cogging" else "kt"
+    rows = []
+    for label in term.labels[::2]:
+        order = int(label.removeprefix(f"{prefix}_sin"))
+        amplitude, phase = _amplitude(fit, f"{prefix}_sin{order}", f"{prefix}_cos{order}")
+        if effect == "kt_ripple":  # the drive reports T/(1 + r(θ)) ≈ T·(1 − r(θ))
+            phase = math.remainder(phase + math.pi, 2 * math.pi)
+        rows.append({"order": order, "amplitude": amplitude.value,
+                     "amplitude_std": amplitude.std, "phase_rad": phase})
+    rows.sort(key=lambda row: -row["amplitude"])
+    return rows
+
+
+def effect_parameters(effect: str, fit: Fit, *, lag_std_s: float = math.nan) -> dict[str, Any]:
+    """Named parameters of ``effect`` in ``fit``: ``{name: value}`` and ``{name: Estimate}``."""
+    estimates: dict[str, Estimate] = {}
+    extra: dict[str, Any] = {}
+    values = fit.as_dict()
+    if effect == "offset":
+        estimates["offset_nm"] = _linear(fit, {"offset": 1.0})
+    elif effect == "asymmetric_friction":
+        estimates["coulomb_pos_nm"] = _linear(fit, {"coulomb": 1.0})
+        if "coulomb_neg_delta" in values:
+            estimates["coulomb_neg_nm"] = _linear(fit, {"coulomb": 1.0, "coulomb_neg_delta": 1.0})
+        else:  # not separable from the offset already in the model
+            estimates["coulomb_neg_nm"] = estimates["coulomb_pos_nm"]
+            extra["note"] = "Coulomb asymmetry is not separable from the offset while moving"
+        estimates["viscous_pos"] = _linear(fit, {"viscous": 1.0})
+        estimates["viscous_neg"] = _linear(fit, {"viscous": 1.0, "viscous_neg_delta": 1.0})
+    elif effect == "stribeck":
+        term = fit.model.term("stribeck")
+        estimates["static_torque_nm"] = _linear(fit, {"coulomb": 1.0, "stribeck_delta": 1.0})
+        velocity = term.nonlinear["stribeck_velocity"] if term else math.nan
+        estimates["stribeck_velocity_rad_s"] = Estimate(value=velocity, std=math.nan)
+    elif effect in ("cogging", "kt_ripple"):
+        rows = _harmonics(fit, effect)
+        name = "amplitude_nm" if effect == "cogging" else "relative_amplitude"
+        extra["periods_per_rev"] = rows[0]["order"] if rows else 0
+        estimates[name] = Estimate(value=rows[0]["amplitude"], std=rows[0]["amplitude_std"])
+        extra["orders"] = [
+            {"periods_per_rev": r["order"], name: r["amplitude"], "phase_rad": r["phase_rad"]}
+            for r in rows
+        ]
+    elif effect == "gravity":
+        mge, phase = _amplitude(fit, "gravity_sin", "gravity_cos")
+        # a·cos θ + b·sin θ = mge·cos(θ + φ): a = mge·cos φ, b = −mge·sin φ
+        a, b = values["gravity_cos"], values["gravity_sin"]
+        estimates["mge_nm"] = mge
+        extra["phase_rad"] = math.atan2(-b, a)
+        del phase
+    elif effect == "cable_spring":
+        stiffness = _linear(fit, {"cable_stiffness": 1.0})
+        estimates["stiffness_nm_per_rad"] = stiffness
+        if "cable_constant" in values and stiffness.value != 0:
+            extra["zero_rad"] = -values["cable_constant"] / stiffness.value
+        else:
+            extra["zero_rad"] = 0.0
+        if "cable_hysteresis" in values:
+            estimates["hysteresis_nm"] = _linear(fit, {"cable_hysteresis": 1.0})
+            term = fit.model.term("cable_spring")
+            if term is not None:
+                extra["hysteresis_angle_rad"] = term.nonlinear["hysteresis_angle_rad"]
+        else:
+            extra["hysteresis_nm"] = 0.0
+    elif effect == "current_lag":
+        estimates["time_constant_s"] = Estimate(value=fit.model.lag_s, std=lag_std_s)
+    elif effect == "two_mass":
+        extra.update(two_mass_parameters(fit))
+        estimates["load_inertia_kg_m2"] = _linear(fit, {"load_inertia": 1.0})
+    parameters: dict[str, Any] = {name: e.value for name, e in estimates.items()}
+    parameters.update({k: v for k, v in extra.items() if k != "note"})
+    result: dict[str, Any] = {
+        "parameters": parameters,
+        "uncertainty": {name: e.as_dict() for name, e in estimates.items()},
+    }
+    if "note" in extra:
+        result["note"] = extra["note"]
+    return result
+
+
+def two_mass_parameters(fit: Fit) -> dict[str, float]:
+    term = fit.model.term("two_mass")
+    if term is None:
+        return {}
+    values = fit.as_dict()
+    load = values["load_inertia"]
+    motor = values["inertia"] - load
+    antiresonance = term.nonlinear["antiresonance_hz"]
+    damping = term.nonlinear["damping_ratio"]
+    ratio = load / motor if motor > 0 else math.inf
+    omega = 2 * math.pi * antiresonance
+    return {
+        "resonance_hz": antiresonance * math.sqrt(1 + ratio) if motor > 0 else math.nan,
+        "antiresonance_hz": antiresonance,
+        "motor_inertia_kg_m2": motor,
+        "shaft_stiffness_nm_rad": omega**2 * load,
+        "shaft_damping_nm_s_rad": 2 * damping * omega * load,
+        "damping_ratio": damping,
+    }

@@ -1,0 +1,138 @@
+"""The JSON report of ``gimbal-hil diagnose`` (layout documented in ``docs/diagnose.md``)."""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+from hil.diagnose import interpret
+from hil.diagnose.model import Fit
+from hil.diagnose.profile_out import extended_plant
+from hil.diagnose.select import DECISION_RULE, Candidate
+
+if TYPE_CHECKING:
+    from hil.diagnose.core import Diagnosis
+
+FORMAT = "gimbal-hil-diagnose/1"
+
+
+def model_parameters(fit: Fit, lag_std_s: float = math.nan) -> dict[str, Any]:
+    """Every named parameter of a fitted model (base and each effect)."""
+    out: dict[str, Any] = {n: e.value for n, e in interpret.base_parameters(fit).items()}
+    for effect in fit.model.effects:
+        if effect == "base":
+            continue
+        named = interpret.effect_parameters(effect, fit, lag_std_s=lag_std_s)["parameters"]
+        out.update({f"{effect}.{k}": v for k, v in named.items()})
+    return out
+
+
+def _gain(candidate: Candidate) -> dict[str, Any]:
+    g = candidate.gain
+    return {
+        "rms_before_nm": g.rms_before_nm,
+        "rms_after_nm": g.rms_after_nm,
+        "fit_before_pct": g.fit_before_pct,
+        "fit_after_pct": g.fit_after_pct,
+        "delta_bic": g.delta_bic,
+        "rms_reduction": g.rms_reduction,
+        "wald_statistic": g.wald_statistic,
+        "wald_threshold_99": g.wald_threshold,
+        "physically_plausible": g.plausible,
+        "significant": g.significant,
+    }
+
+
+def _cause(rank: int, candidate: Candidate) -> dict[str, Any]:
+    named = interpret.effect_parameters(candidate.effect, candidate.fit,
+                                        lag_std_s=candidate.lag_std_s)
+    out: dict[str, Any] = {
+        "rank": rank,
+        "name": candidate.effect,
+        "parameters": named["parameters"],
+        "uncertainty": named["uncertainty"],
+        "gain": _gain(candidate),
+        "model_parameters": model_parameters(candidate.fit, candidate.lag_std_s),
+    }
+    if "note" in named:
+        out["note"] = named["note"]
+    return out
+
+
+def report(diagnosis: Diagnosis) -> dict[str, Any]:
+    """The report as plain JSON-able data (NaN and infinities become ``null``)."""
+    from hil.diagnose.core import base_parameters, summary_metrics
+
+    signals = diagnosis.signals
+    base_metrics = summary_metrics(diagnosis, diagnosis.base)
+    final_metrics = summary_metrics(diagnosis, diagnosis.final)
+    tests = dict(diagnosis.residual["tests"])
+    tests["spectrum_peaks_hz"] = diagnosis.residual["spectrum"]["peaks_hz"]
+    rounds = [
+        [{"name": c.effect, "gain": _gain(c)} for c in candidates]
+        for candidates in diagnosis.selection.rounds
+    ]
+    data = {
+        "format": FORMAT,
+        "source": diagnosis.recording.source,
+        "validate": diagnosis.heldout.signals.source
+        if diagnosis.heldout.signals is not signals else None,
+        "axis_kind": signals.axis_kind,
+        "units": interpret.units(signals.axis_kind),
+        "analysis": {
+            "sample_rate_hz": signals.fs_hz,
+            "cutoff_hz": signals.cutoff_hz,
+            "decimation": signals.decimation,
+            "resampled": signals.resampled,
+            "split": diagnosis.split,
+            "train_rows": int(diagnosis.train.rows.size),
+            "heldout_rows": int(diagnosis.heldout.rows.size),
+            "effort": "effort low-passed zero-phase at cutoff_hz, like every regressor",
+        },
+        "base": {
+            **base_parameters(diagnosis),
+            "rms_nm": base_metrics["heldout_rms_nm"],
+            "fit_pct": base_metrics["heldout_fit_pct"],
+            "metrics": base_metrics,
+        },
+        "residual_tests": tests,
+        "residual": {
+            "against_position": diagnosis.residual["against_position"],
+            "against_velocity": diagnosis.residual["against_velocity"],
+        },
+        "data_issues": [issue.as_dict() for issue in diagnosis.issues],
+        "decision_rule": DECISION_RULE,
+        "causes": [_cause(rank, c) for rank, c in enumerate(diagnosis.causes, start=1)],
+        "candidates_by_round": rounds,
+        "extended_model": {
+            "effects": diagnosis.cause_names,
+            "metrics": final_metrics,
+            "parameters": model_parameters(diagnosis.final),
+            "plant": extended_plant(diagnosis),
+        },
+    }
+    result = _clean(data)
+    assert isinstance(result, dict)
+    return result
+
+
+def _clean(value: Any) -> Any:
+    if isinstance(value, float):
+        return value if math.isfinite(value) else None
+    if isinstance(value, dict):
+        return {str(k): _clean(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [_clean(v) for v in value]
+    if hasattr(value, "item"):  # numpy scalar
+        return _clean(value.item())
+    return value
+
+
+def write_json(diagnosis: Diagnosis, path: str | Path) -> dict[str, Any]:
+    data = report(diagnosis)
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(json.dumps(data, indent=1, ensure_ascii=False) + "\n", encoding="utf-8")
+    return data
