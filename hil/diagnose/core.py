@@ -21,7 +21,7 @@ from hil.diagnose import data_issues, interpret
 from hil.diagnose.data_issues import DataIssue
 from hil.diagnose.model import Designer, Fit, Model, base_terms, fit_percent, rms
 from hil.diagnose.residual import analyse
-from hil.diagnose.select import DECISION_RULE, Candidate, DataSet, Evaluator, Selection, select
+from hil.diagnose.select import Candidate, DataSet, Evaluator, Selection, select
 from hil.diagnose.signals import Signals, prepare
 from hil.errors import IdentificationError
 from hil.recording import Recording

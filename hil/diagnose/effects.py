@@ -13,7 +13,7 @@ from __future__ import annotations
 import logging
 import math
 from collections.abc import Callable
-from dataclasses import dataclass, replace
+from dataclasses import replace
 
 import numpy as np
 from numba import njit
@@ -168,7 +168,7 @@ def both_directions(ctx: Context) -> bool:
     if moving == 0:
         return False
     share = min(np.count_nonzero(direction > 0), np.count_nonzero(direction < 0)) / moving
-    return share >= MIN_DIRECTION_FRACTION
+    return bool(share >= MIN_DIRECTION_FRACTION)
 
 
 def _offset(ctx: Context) -> Model | None:
@@ -233,7 +233,7 @@ def _dahl(position: FloatArray, angle: float) -> FloatArray:  # pragma: no cover
 
 def _cable_term(angle: float | None, constant: bool) -> Term:
     """Spring ``k·θ`` (+ constant), with a Dahl hysteresis loop when ``angle`` is given."""
-    labels = ("cable_stiffness",)
+    labels: tuple[str, ...] = ("cable_stiffness",)
     if angle is not None:
         labels += ("cable_hysteresis",)
     if constant:
@@ -350,7 +350,7 @@ def harmonic_term(effect: str, orders: tuple[int, ...],
 
     def build(s: Signals) -> FloatArray:
         w = np.ones(len(s)) if weight is None else weight(s)
-        columns = []
+        columns: list[FloatArray] = []
         for k in orders:
             columns.extend((w * np.sin(k * s.position), w * np.cos(k * s.position)))
         return np.column_stack(columns)

@@ -28,7 +28,7 @@ BINS_PER_REV = 8192
 #: Per-order χ²(2) threshold on the effective F statistic: p = 0.01 over 200 orders.
 ORDER_MIN_CHI2 = -2.0 * math.log(0.01 / 200)
 #: ... and the order must stand out of the periodogram (power over median power).
-ORDER_PROMINENCE = 8.0
+ORDER_PROMINENCE = 4.5
 #: An order enters only when its power is at least this fraction of the first one's.
 ORDER_RELATIVE_POWER = 0.02
 MAX_ORDERS = 6
@@ -55,7 +55,7 @@ def order_range(position_rad: FloatArray, counts_per_rev: int | None) -> tuple[i
 
 
 def _binned(values: FloatArray, index: NDArray[np.intp], size: int) -> FloatArray:
-    return np.bincount(index, weights=values, minlength=size)
+    return np.bincount(index, weights=values, minlength=size).astype(np.float64)
 
 
 def periodogram(
@@ -112,7 +112,8 @@ def find_orders(
 ) -> list[int]:
     """Significant orders, strongest first, by greedy matching pursuit.
 
-    An order is taken while it is prominent (power ≥ 8 × the periodogram's median),
+    An order is taken while it is prominent (power ≥ 4.5 × the periodogram's median away
+    from the order's leakage),
     significant (effective χ²(2) above the Bonferroni threshold for 200 orders at 1 %),
     at least 2 % of the first order's power, and at most six orders in all.
     """
@@ -129,7 +130,11 @@ def find_orders(
             power[gram.orders == k] = 0.0
         best = int(np.argmax(power))
         order = int(gram.orders[best])
-        floor = float(np.median(gram.power))
+        # noise floor away from the peak: over part of a revolution an order leaks into
+        # its neighbours within a few times the resolution 2π/travel
+        resolution = 2 * math.pi / max(float(np.ptp(position_rad)), 1e-12)
+        away = np.abs(gram.orders - order) > 3 * resolution
+        floor = float(np.median(gram.power[away] if np.count_nonzero(away) > 10 else gram.power))
         if (
             power[best] < ORDER_PROMINENCE * floor
             or gram.chi2[best] < ORDER_MIN_CHI2

@@ -205,7 +205,8 @@ class Designer:
         """Least squares on ``rows`` with covariance ``σ²(ΦᵀΦ)⁻¹``."""
         matrix = self.design(model, signals, rows)
         target = signals.effort_filtered[rows]
-        return solve(model, matrix, target, n_effective=rows.size * min(1.0, signals.independence * signals.decimation))
+        independent = min(1.0, signals.independence * signals.decimation)
+        return solve(model, matrix, target, n_effective=rows.size * independent)
 
     def predict(self, fit: Fit, signals: Signals) -> FloatArray:
         return self.design(fit.model, signals) @ fit.coefficients

@@ -28,7 +28,7 @@ BINS = 40
 
 
 def _normalised(values: FloatArray) -> FloatArray:
-    centred = values - values.mean()
+    centred: FloatArray = values - values.mean()
     norm = float(np.sqrt(centred @ centred))
     return centred / norm if norm > 0 else centred
 

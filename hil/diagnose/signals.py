@@ -155,11 +155,11 @@ def prepare(recording: Recording, *, cutoff_hz: float | None = None) -> Signals:
     sat_raw = _saturation_mask(np.asarray(recording.effort, dtype=np.float64))
 
     if resampled:
-        count = int(math.floor((time_raw[-1] - time_raw[0]) / period_s)) + 1
+        count = math.floor((time_raw[-1] - time_raw[0]) / period_s) + 1
         time_s = time_raw[0] + period_s * np.arange(count)
 
         def on_grid(values: FloatArray) -> FloatArray:
-            return np.interp(time_s, time_raw, values)
+            return np.asarray(np.interp(time_s, time_raw, values), dtype=np.float64)
 
         in_gap = np.zeros(count, dtype=bool)
         for index in gap_index:
@@ -192,7 +192,7 @@ def prepare(recording: Recording, *, cutoff_hz: float | None = None) -> Signals:
         acceleration[start:stop] = _second_derivative(smooth[start:stop], period_s)
         velocity_slow[start:stop] = _first_derivative(slow[start:stop], period_s)
 
-    margin = max(3, int(math.ceil(2.0 * fs_hz / cutoff_hz)))
+    margin = max(3, math.ceil(2.0 * fs_hz / cutoff_hz))
     valid = ~in_gap & ~_dilate(saturated, 2)
     for start, stop in segments:
         valid[start : min(stop, start + margin)] = False

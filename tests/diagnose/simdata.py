@@ -1,0 +1,108 @@
+"""Recordings from the project's simulator with (at most) one hidden effect."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from hil.drives.base import Mode
+from hil.recording import Recording
+from plant_sim.model import simulate
+from plant_sim.params import Harmonic, PlantParams
+
+FS_HZ = 2000.0
+FloatArray = NDArray[np.float64]
+
+
+def excitation(fs_hz: float = FS_HZ, *, scale: float = 1.0) -> FloatArray:
+    """Gimbal test run: two 2 Hz sines, a slow staircase, a full sweep, a log chirp."""
+    parts: list[FloatArray] = []
+    t = np.arange(int(2.0 * fs_hz)) / fs_hz
+    parts.extend(a * scale * np.sin(2 * np.pi * 2.0 * t) for a in (0.5, 1.0))
+    parts.extend(np.full(int(0.75 * fs_hz), v) for v in (0.01, -0.01, 0.03, -0.03, 0.1, -0.1))
+    n = int(6.0 * fs_hz)
+    sweep = np.full(n, 0.4)
+    sweep[n // 4 : 3 * n // 4] = -0.4
+    parts.append(sweep)
+    duration = 4.0
+    t = np.arange(int(duration * fs_hz)) / fs_hz
+    rate = math.log(150.0) / duration
+    parts.append(0.2 * np.sin(2 * np.pi * (np.exp(rate * t) - 1) / rate))
+    return np.concatenate(parts)
+
+
+BASE: dict[str, Any] = {
+    "encoder_counts_per_rev": 2**20,
+    "torque_noise_nm": 0.002,
+    "velocity_filter_hz": 300.0,
+    "velocity_kp_nm_s_rad": 0.45,
+    "velocity_ki_nm_rad": 12.0,
+}
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class Hidden:
+    """What was hidden (never shown to the diagnoser) and its key parameter's truth."""
+
+    effect: str | None
+    key: str | None
+    truth: float
+    params: PlantParams
+
+
+def plant(inertia: float, viscous: float, coulomb: float, effect: str | None,
+          size: float, detail: float, order: int) -> Hidden:
+    """A plant with ``effect`` (sized by ``size`` in [0, 1], shaped by ``detail``)."""
+    base = dict(BASE, inertia_kg_m2=inertia, viscous_nm_s_rad=viscous, coulomb_nm=coulomb)
+    key: str | None = None
+    truth = math.nan
+    if effect == "offset":
+        truth = math.copysign(0.006 + 0.024 * size, detail - 0.5)
+        base["torque_offset_nm"], key = truth, "offset_nm"
+    elif effect == "asymmetric_friction":
+        truth = viscous * (2.5 + 2.0 * size)
+        base["viscous_neg_nm_s_rad"], key = truth, "viscous_neg"
+    elif effect == "stribeck":
+        truth = coulomb * (1.4 + 0.6 * size)
+        base.update(static_friction_nm=truth, stribeck_velocity_rad_s=0.012 + 0.03 * detail)
+        key = "static_torque_nm"
+    elif effect == "cogging":
+        truth = 0.002 + 0.006 * size
+        base["cogging"] = (Harmonic(order=order, amplitude=truth, phase_rad=6 * detail),)
+        key = "amplitude_nm"
+    elif effect == "kt_ripple":
+        truth = 0.1 + 0.1 * size
+        base["kt_ripple"] = (Harmonic(order=order // 2, amplitude=truth, phase_rad=6 * detail),)
+        key = "relative_amplitude"
+    elif effect == "gravity":
+        truth = 0.01 + 0.04 * size
+        base.update(gravity_mge_nm=truth, gravity_phase_rad=detail - 0.5)
+        key = "mge_nm"
+    elif effect == "cable_spring":
+        truth = 0.01 + 0.03 * size
+        base.update(cable_stiffness_nm_rad=truth, cable_zero_rad=0.4 * (detail - 0.5))
+        key = "stiffness_nm_per_rad"
+    elif effect == "current_lag":
+        truth = 0.0015 + 0.0025 * size
+        base["current_loop_time_constant_s"], key = truth, "time_constant_s"
+    elif effect == "two_mass":
+        ratio = 2.0 + 4.0 * detail
+        truth = 30.0 + 50.0 * size
+        motor = inertia / (1 + ratio)
+        load = inertia - motor
+        reduced = motor * load / inertia
+        stiffness = (2 * math.pi * truth) ** 2 * reduced
+        damping = 2 * 0.03 * math.sqrt(stiffness * reduced)
+        base.update(inertia_kg_m2=motor, load_inertia_kg_m2=load,
+                    shaft_stiffness_nm_rad=stiffness, shaft_damping_nm_s_rad=damping)
+        key = "resonance_hz"
+    return Hidden(effect=effect, key=key, truth=truth, params=PlantParams(**base))
+
+
+def record(params: PlantParams, *, seed: int, scale: float = 1.0) -> Recording:
+    return simulate(params, mode=Mode.VELOCITY, command=excitation(scale=scale), fs_hz=FS_HZ,
+                    seed=seed)
