@@ -5,6 +5,7 @@ Independent of pytest: the plugin creates one per session and hands it to protoc
 
 from __future__ import annotations
 
+import hashlib
 import logging
 import re
 import shutil
@@ -32,6 +33,16 @@ class RawFile:
     samples: int
     motion_time_s: float
     complete: bool
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class Artifact:
+    """A file derived from the calibration (compensation table, controller parameters)."""
+
+    protocol: str
+    path: Path
+    sha256: str
+    description: str
 
 
 @dataclass(slots=True)
@@ -66,6 +77,7 @@ class CalibrationRun:
         self.started = datetime.now(UTC)
         self.drive_info: DriveInfo | None = None
         self.raw_files: list[RawFile] = []
+        self.artifacts: list[Artifact] = []
         self.measurements: list[Measurement] = []
         self.protocols: dict[str, ProtocolRecord] = {}
         self.details: dict[str, dict[str, object]] = {}
@@ -111,6 +123,24 @@ class CalibrationRun:
             measurement.outcome.value,
         )
         return measurement
+
+    def write_artifact(self, protocol: str, name: str, text: str, *, description: str) -> Path:
+        """Write a derived file next to the certificate; the certificate lists its SHA-256."""
+        self.archive_previous()
+        path = self.unit_dir / name
+        path.parent.mkdir(parents=True, exist_ok=True)
+        payload = text.encode("utf-8")
+        path.write_bytes(payload)
+        self.artifacts = [a for a in self.artifacts if a.path != path]
+        self.artifacts.append(
+            Artifact(
+                protocol=protocol,
+                path=path,
+                sha256=hashlib.sha256(payload).hexdigest(),
+                description=description,
+            )
+        )
+        return path
 
     # -- used by the plugin ---------------------------------------------------------------
     def report_protocol(self, name: str, outcome: Outcome, message: str = "") -> None:

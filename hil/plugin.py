@@ -149,6 +149,24 @@ def _protocol_name(item: pytest.Item) -> str | None:
     return str(mark.args[0]) if mark.args else item.name
 
 
+def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    """Run protocols in the order of the profile's ``[protocols.*]`` tables (later protocols
+    may use earlier results, e.g. J for an acceleration correction); others keep their place."""
+    try:
+        order = list(load_profile(config.getoption("--profile")).protocols)
+    except HilError:
+        return  # the profile fixture reports the problem
+    slots = [i for i, item in enumerate(items) if _protocol_name(item) is not None]
+
+    def rank(item: pytest.Item) -> int:
+        name = _protocol_name(item)
+        return order.index(name) if name in order else len(order)
+
+    ordered = sorted((items[i] for i in slots), key=rank)
+    for slot, item in zip(slots, ordered, strict=True):
+        items[slot] = item
+
+
 @pytest.hookimpl(wrapper=True)
 def pytest_runtest_makereport(
     item: pytest.Item, call: pytest.CallInfo[None]

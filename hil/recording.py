@@ -353,11 +353,11 @@ def write_recording(recording: Recording, path: str | Path) -> str:
     names = _ordered(recording.columns)
     lines = [f"# {key}: {value}" for key, value in recording.metadata.items()]
     lines.append(",".join(names))
-    table = np.column_stack([recording.columns[name] for name in names])
-    lines.extend(",".join(f"{value:.9g}" for value in row) for row in table)
+    formatted = [map("{:.9g}".format, recording.columns[name].tolist()) for name in names]
+    lines.extend(map(",".join, zip(*formatted, strict=True)))
     payload = ("\n".join(lines) + "\n").encode("utf-8")
     if path.suffix == ".gz":
-        payload = gzip.compress(payload, compresslevel=6, mtime=0)
+        payload = gzip.compress(payload, compresslevel=3, mtime=0)
     path.write_bytes(payload)
     return hashlib.sha256(payload).hexdigest()
 

@@ -109,7 +109,10 @@ def run_kernel(
     counts = params[P_COUNTS]
     h = dt_s / substeps
     tau_i = params[P_TAU_I]
-    lag_gain = 1.0 if tau_i <= 0.0 else 1.0 - math.exp(-h / tau_i)
+    # exact first-order lag under a held command: state decay over one physics step, and the
+    # mean of the lagged torque over that step (what the mechanics integrate)
+    decay = 0.0 if tau_i <= 0.0 else math.exp(-h / tau_i)
+    mean_fraction = 0.0 if tau_i <= 0.0 else tau_i / h * (1.0 - decay)
     fc = params[P_VEL_FILTER_HZ]
     filter_gain = 1.0 if fc <= 0.0 else 1.0 - math.exp(-2.0 * math.pi * fc * dt_s)
     hyst_nm = params[P_HYST_NM]
@@ -155,8 +158,9 @@ def run_kernel(
 
         # --- mechanics ---
         for _ in range(substeps):
-            torque_act += lag_gain * (torque_cmd - torque_act)
-            t_motor = torque_act * (1.0 + _periodic(theta_m, kt_ripple))
+            t_applied = torque_cmd + mean_fraction * (torque_act - torque_cmd)
+            torque_act = torque_cmd + decay * (torque_act - torque_cmd)
+            t_motor = t_applied * (1.0 + _periodic(theta_m, kt_ripple))
             t_motor -= _periodic(theta_m, cogging)
             theta_out = theta_l if two_mass else theta_m
             omega_out = omega_l if two_mass else omega_m

@@ -105,9 +105,12 @@ def result(drive: Drive, calibration: CalibrationRun, profile: UnitProfile) -> C
     analysed = analyse(recording.time_s, recording.position, recording.effort, spec,
                        inertia_kg_m2=inertia)
     table = compensation_table(analysed)
-    path = calibration.unit_dir / COMPENSATION_FILE
-    path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(json.dumps(table, indent=2, ensure_ascii=False) + "\n", encoding="utf-8")
+    path = calibration.write_artifact(
+        NAME,
+        COMPENSATION_FILE,
+        json.dumps(table, indent=2, ensure_ascii=False) + "\n",
+        description="cogging and K_t ripple compensation table (format: hil/identify/cogging.py)",
+    )
     calibration.details[NAME] = {
         "compensation_table": str(path),
         "orders": [h.order for h in analysed.cogging],

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import hashlib
 import json
 import re
 from pathlib import Path
@@ -62,10 +63,15 @@ def test_calibration_writes_a_passing_certificate(
     for raw in cert["raw_data"]:
         path = out / "GMB-0042" / raw["file"]
         assert path.is_file()
-        import hashlib
-
         assert hashlib.sha256(path.read_bytes()).hexdigest() == raw["sha256"]
     assert (out / "GMB-0042" / "certificate.txt").read_text().count("OUTCOME: PASS") == 1
+    controller = json.loads((out / "GMB-0042" / "controller.json").read_text())
+    assert controller["certificate_id"] == cert["certificate_id"]
+    assert controller["friction_feedforward"]["coulomb_nm"] == params["coulomb_nm"]["value"]
+    listed = {a["file"]: a["sha256"] for a in cert["artifacts"]}
+    assert listed["controller.json"] == hashlib.sha256(
+        (out / "GMB-0042" / "controller.json").read_bytes()
+    ).hexdigest()
     assert cert["machine_time"]["motion_time_s"] > 0
 
 

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import hashlib
 import json
 import logging
 import platform
@@ -14,6 +15,7 @@ from typing import Any
 
 from hil import __version__
 from hil.calibration import CalibrationRun
+from hil.certificate.controller import controller_outputs
 from hil.certificate.render import render_text
 from hil.measurement import DECISION_RULE
 
@@ -109,6 +111,15 @@ def build_certificate(
             }
             for f in run.raw_files
         ],
+        "artifacts": [
+            {
+                "protocol": a.protocol,
+                "file": str(a.path.relative_to(run.unit_dir)),
+                "sha256": a.sha256,
+                "description": a.description,
+            }
+            for a in run.artifacts
+        ],
         "results": [m.as_dict() for m in run.measurements],
         "decision_rule": DECISION_RULE,
         "outcome": outcome.value,
@@ -139,6 +150,18 @@ def write_certificate(run: CalibrationRun, *, aborted: bool) -> Path:
     run.archive_previous()
     certificate = build_certificate(run, aborted=aborted)
     run.unit_dir.mkdir(parents=True, exist_ok=True)
+    outputs = controller_outputs(certificate)
+    if outputs is not None:
+        text = json.dumps(outputs, indent=2) + "\n"
+        (run.unit_dir / "controller.json").write_text(text, encoding="utf-8")
+        certificate["artifacts"].append(
+            {
+                "protocol": "certificate",
+                "file": "controller.json",
+                "sha256": hashlib.sha256(text.encode("utf-8")).hexdigest(),
+                "description": "feedforward parameters (format: hil/certificate/controller.py)",
+            }
+        )
     path = run.unit_dir / "certificate.json"
     path.write_text(json.dumps(certificate, indent=2, default=str) + "\n", encoding="utf-8")
     (run.unit_dir / "certificate.txt").write_text(render_text(certificate), encoding="utf-8")

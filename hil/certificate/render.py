@@ -36,6 +36,9 @@ def render_text(cert: dict[str, Any]) -> str:
         lines += [f"      {message}" for message in p["messages"]]
     lines += ["", "Raw data (SHA-256):"]
     lines += [f"  {f['file']}  {f['sha256']}" for f in cert["raw_data"]]
+    if cert["artifacts"]:
+        lines += ["", "Derived files (SHA-256):"]
+        lines += [f"  {a['file']}  {a['sha256']}  {a['description']}" for a in cert["artifacts"]]
     lines += [
         "",
         f"Decision rule: {cert['decision_rule']}",
