@@ -38,17 +38,21 @@ class DataIssue:
 
 
 def quantisation_step(position: FloatArray) -> float:
-    """Smallest common position step (0 when the position looks continuous)."""
+    """Position resolution: the largest step of which (nearly) every step is a multiple.
+
+    Candidates are low percentiles of the nonzero steps, largest first; a few tiny steps
+    (rounding in a file) do not hide the encoder's count. 0 when none fits (continuous).
+    """
     steps = np.abs(np.diff(position))
     steps = steps[steps > 0]
     if steps.size < 10:
         return 0.0
-    candidate = float(np.percentile(steps, 1))
-    if candidate <= 0:
-        return 0.0
-    ratio = steps / candidate
-    on_grid = np.abs(ratio - np.round(ratio)) < 0.05
-    return candidate if float(np.mean(on_grid)) > 0.9 else 0.0
+    for percentile in (25, 10, 5, 1):
+        candidate = float(np.percentile(steps, percentile))
+        ratio = steps / candidate
+        if float(np.mean(np.abs(ratio - np.round(ratio)) < 0.1)) > 0.95:
+            return candidate
+    return 0.0
 
 
 def velocity_delay_samples(signals: Signals) -> float:

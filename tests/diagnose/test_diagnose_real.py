@@ -1,0 +1,66 @@
+"""Measured data nobody here produced: EMPS (linear axis) and an ODrive cogging run."""
+
+from __future__ import annotations
+
+import math
+from functools import cache
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from hil.diagnose.core import diagnose
+from hil.diagnose.report import report
+from hil.recording import read_recording
+
+REAL = Path(__file__).resolve().parents[3] / "shared" / "real-data"
+EMPS_TRAIN = REAL / "emps_train.csv.gz"
+EMPS_PULSES = REAL / "emps_pulses.csv.gz"
+ODRIVE = REAL / "odrive_slow003_nocomp.csv.gz"
+
+# Janot, Gautier, Brunot (2019): IDIM-LS fit of F = M·a + Fv·v + Fc·sgn(v) + offset
+PUBLISHED = {"inertia_kg_m2": 95.1089, "viscous_nm_s_rad": 203.5034, "coulomb_nm": 20.3935,
+             "offset.offset_nm": -3.1648}
+
+
+@cache
+def _emps() -> dict[str, Any]:
+    return report(diagnose(read_recording(EMPS_TRAIN), validate=read_recording(EMPS_PULSES)))
+
+
+@pytest.mark.skipif(not EMPS_PULSES.is_file(), reason="EMPS data not present")
+def test_emps_names_offset_and_reproduces_published_model() -> None:
+    data = _emps()
+    assert data["axis_kind"] == "linear"
+    assert data["units"]["effort (every *_nm)"] == "N"
+    names = [cause["name"] for cause in data["causes"]]
+    assert "offset" in names
+    offset = next(cause for cause in data["causes"] if cause["name"] == "offset")
+    model = offset["model_parameters"]
+    if names[0] != "offset":  # the base model extended with the offset alone
+        pytest.fail(f"offset should be the first cause, got {names}")
+    for name, published in PUBLISHED.items():
+        assert math.isclose(model[name], published, rel_tol=0.02), (name, model[name])
+
+
+@pytest.mark.skipif(not EMPS_PULSES.is_file(), reason="EMPS data not present")
+def test_emps_every_named_cause_shows_heldout_gain() -> None:
+    data = _emps()
+    assert data["validate"] is not None
+    for cause in data["causes"]:
+        gain = cause["gain"]
+        assert gain["rms_reduction"] >= 0.01, cause["name"]
+        assert gain["fit_after_pct"] > gain["fit_before_pct"]
+
+
+@pytest.mark.skipif(not ODRIVE.is_file(), reason="ODrive data not present")
+def test_odrive_names_cogging_with_its_orders() -> None:
+    data = report(diagnose(read_recording(ODRIVE)))
+    assert data["causes"][0]["name"] == "cogging"
+    parameters = data["causes"][0]["parameters"]
+    orders = [row["periods_per_rev"] for row in parameters["orders"]]
+    assert parameters["periods_per_rev"] == orders[0]
+    assert len(orders) >= 3
+    assert any(i["kind"] == "irregular_sampling" for i in data["data_issues"])
+    # the logged position is the drive's interpolated estimate, finer than the 8192 counts
+    assert any(i["kind"] == "quantisation" for i in data["data_issues"])
