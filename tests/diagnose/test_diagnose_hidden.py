@@ -37,7 +37,8 @@ def test_hidden_effect_is_named_and_recovered(effect: str, inertia: float, visco
     hidden = plant(inertia, viscous, coulomb, effect, size, detail, order)
     data = report(diagnose(record(hidden.params, seed=seed)))
     names = [cause["name"] for cause in data["causes"]]
-    assert names and names[0] == effect, names
+    assert names, "nothing named"
+    assert names[0] == effect, names
     parameters = data["causes"][0]["parameters"]
     assert hidden.key is not None
     assert math.isclose(parameters[hidden.key], hidden.truth, rel_tol=0.15), (
