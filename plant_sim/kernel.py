@@ -38,8 +38,11 @@ from numba import njit
     P_KI_VEL,
     P_KP_POS,
     P_KT,
+    P_EXACT_HOLD,
+    P_KT_SCALE,
+    P_LOCKED,
     N_PARAMS,
-) = range(26)
+) = range(29)
 
 # state vector layout
 (
@@ -97,8 +100,12 @@ def run_kernel(
     out_torque: np.ndarray,
     out_current: np.ndarray,
     out_torque_actual: np.ndarray,
+    out_load_torque: np.ndarray,
 ) -> None:
-    """Advance ``len(command)`` control periods. Outputs are sampled at each period start."""
+    """Advance ``len(command)`` control periods. Outputs are sampled at each period start.
+
+    ``out_load_torque`` is the shaft torque sensor of a locked rotor (0 when not locked).
+    """
     j_m = params[P_J_MOTOR]
     j_l = params[P_J_LOAD]
     two_mass = j_l > 0.0
@@ -113,6 +120,14 @@ def run_kernel(
     # mean of the lagged torque over that step (what the mechanics integrate)
     decay = 0.0 if tau_i <= 0.0 else math.exp(-h / tau_i)
     mean_fraction = 0.0 if tau_i <= 0.0 else tau_i / h * (1.0 - decay)
+    # the same for position: ∫₀ʰ (h − t)·T(t) dt = h²/2·[T_cmd + pos_fraction·(T_act − T_cmd)];
+    # the motor torque is a held input, so its position effect uses the exact double integral
+    # (half weight) instead of the symplectic step's full weight: no half-step time advance
+    pos_fraction = 0.0 if tau_i <= 0.0 else 2.0 * tau_i / h * (1.0 - mean_fraction)
+    exact_hold = params[P_EXACT_HOLD] != 0.0
+    half_h2 = 0.5 * h * h
+    kt_scale = params[P_KT_SCALE]  # true K_t over the nominal the drive converts with
+    locked = params[P_LOCKED] != 0.0
     fc = params[P_VEL_FILTER_HZ]
     filter_gain = 1.0 if fc <= 0.0 else 1.0 - math.exp(-2.0 * math.pi * fc * dt_s)
     hyst_nm = params[P_HYST_NM]
@@ -155,12 +170,28 @@ def run_kernel(
         out_torque[k] = torque_cmd + torque_noise[k]
         out_current[k] = torque_act / kt
         out_torque_actual[k] = torque_act
+        if locked:
+            # the clamp's torque sensor holds everything acting on the (still) rotor
+            held = kt_scale * torque_act * (1.0 + _periodic(theta_m, kt_ripple))
+            held -= _periodic(theta_m, cogging) + params[P_OFFSET] + hyst
+            held -= mge * math.cos(theta_m + grav_phase)
+            held -= params[P_K_CABLE] * (theta_m - params[P_CABLE_ZERO])
+            out_load_torque[k] = held
+            torque_act = torque_cmd + decay**substeps * (torque_act - torque_cmd)
+            continue
+        out_load_torque[k] = 0.0
 
         # --- mechanics ---
         for _ in range(substeps):
             t_applied = torque_cmd + mean_fraction * (torque_act - torque_cmd)
+            t_position = torque_cmd + pos_fraction * (torque_act - torque_cmd)
             torque_act = torque_cmd + decay * (torque_act - torque_cmd)
-            t_motor = t_applied * (1.0 + _periodic(theta_m, kt_ripple))
+            ripple_gain = kt_scale * (1.0 + _periodic(theta_m, kt_ripple))
+            # exact hold: the symplectic step's position weight h² of the held torque → h²/2
+            hold_shift = 0.0
+            if exact_hold:
+                hold_shift = half_h2 * inv_j_m * ripple_gain * (t_position - 2.0 * t_applied)
+            t_motor = t_applied * ripple_gain
             t_motor -= _periodic(theta_m, cogging)
             theta_out = theta_l if two_mass else theta_m
             omega_out = omega_l if two_mass else omega_m
@@ -197,6 +228,8 @@ def run_kernel(
                 omega_new = omega_m + h * (t_drive - t_fric) * inv_j_m
                 omega_m = 0.0 if omega_new * omega_m < 0.0 else omega_new
             theta_m += h * omega_m
+            if omega_m != 0.0 and exact_hold:
+                theta_m += hold_shift
 
     state[S_THETA_M] = theta_m
     state[S_OMEGA_M] = omega_m

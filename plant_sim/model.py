@@ -39,6 +39,7 @@ class PlantTrace:
     torque_nm: FloatArray  # commanded torque as reported, with measurement noise
     current_a: FloatArray  # actual q-axis current (after the current-loop lag)
     torque_actual_nm: FloatArray  # ground truth motor torque before K_t ripple
+    load_torque_nm: FloatArray | None = None  # locked rotor: shaft torque sensor
 
 
 PERIODIC_TABLE_SIZE = 1 << 16  # points per revolution for cogging and K_t ripple
@@ -92,6 +93,9 @@ def pack_params(params: PlantParams) -> FloatArray:
     vector[kernel.P_KI_VEL] = params.velocity_ki_nm_rad
     vector[kernel.P_KP_POS] = params.position_kp_1_s
     vector[kernel.P_KT] = params.torque_constant_nm_a
+    vector[kernel.P_EXACT_HOLD] = float(params.exact_torque_hold)
+    vector[kernel.P_KT_SCALE] = 1.0 + params.torque_constant_error_rel
+    vector[kernel.P_LOCKED] = float(params.locked_rotor)
     return vector
 
 
@@ -149,6 +153,14 @@ class Plant:
     def velocity_rad_s(self) -> float:
         return float(self._state[kernel.S_OMEGA_M])
 
+    def set_locked_rotor(self, locked: bool) -> None:
+        """Clamp (or release) the rotor through the shaft torque sensor; clamping stops it."""
+        self.params = self.params.with_changes(locked_rotor=locked)
+        self._packed[kernel.P_LOCKED] = float(locked)
+        if locked:
+            self._state[kernel.S_OMEGA_M] = 0.0
+            self._state[kernel.S_OMEGA_L] = 0.0
+
     def hold(self) -> None:
         """Reset the velocity integrator (what a drive does on disable/enable)."""
         self._state[kernel.S_INTEGRATOR] = 0.0
@@ -158,7 +170,7 @@ class Plant:
         command = np.ascontiguousarray(command, dtype=np.float64)
         n = command.shape[0]
         noise = self._rng.normal(0.0, 1.0, n) * self.params.torque_noise_nm
-        outputs = [np.empty(n) for _ in range(5)]
+        outputs = [np.empty(n) for _ in range(6)]
         run_kernel: Callable[..., None] = kernel.run_kernel
         run_kernel(
             self._packed,
@@ -174,7 +186,11 @@ class Plant:
         )
         time_s = (self._samples_done + np.arange(n)) / self.fs_hz
         self._samples_done += n
-        position, velocity, torque, current, actual = outputs
+        position, velocity, torque, current, actual, sensor = outputs
+        load_torque = None
+        if self.params.locked_rotor:
+            noise_sensor = self._rng.normal(0.0, 1.0, n) * self.params.load_torque_noise_nm
+            load_torque = sensor + noise_sensor
         return PlantTrace(
             time_s=time_s,
             position_rad=position,
@@ -182,6 +198,7 @@ class Plant:
             torque_nm=torque,
             current_a=current,
             torque_actual_nm=actual,
+            load_torque_nm=load_torque,
         )
 
 
@@ -201,6 +218,8 @@ def trace_to_recording(
         _COMMAND_COLUMN[mode]: np.asarray(command, dtype=np.float64),
         "current_a": trace.current_a,
     }
+    if trace.load_torque_nm is not None:
+        columns["load_torque_nm"] = trace.load_torque_nm
     return Recording(columns=columns, metadata=dict(metadata or {}), source="plant_sim")
 
 

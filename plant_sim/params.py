@@ -59,6 +59,15 @@ class PlantParams:
     velocity_ki_nm_rad: float = 1.0
     position_kp_1_s: float = 30.0
     substeps: int = 0  # physics steps per control period; 0: chosen from the dynamics
+    # True: the held (zero-order hold) motor torque moves the position by its exact double
+    # integral over each physics step; False: the symplectic step's full weight (a half-step
+    # time advance of the motion against the torque, kept as the default for old results)
+    exact_torque_hold: bool = False
+    # true K_t = torque_constant_nm_a·(1 + error): the drive converts current with the nominal,
+    # so the reported torque is off by this factor against the shaft's torque
+    torque_constant_error_rel: float = 0.0
+    locked_rotor: bool = False  # rotor clamped through a shaft torque sensor (load_torque_nm)
+    load_torque_noise_nm: float = 0.0  # std of white noise on the torque sensor
 
     def __post_init__(self) -> None:
         if not self.inertia_kg_m2 > 0:
@@ -75,6 +84,7 @@ class PlantParams:
             "current_loop_time_constant_s",
             "torque_noise_nm",
             "velocity_filter_hz",
+            "load_torque_noise_nm",
         ):
             value = getattr(self, name)
             if not (math.isfinite(value) and value >= 0):
@@ -85,6 +95,8 @@ class PlantParams:
             raise ProfileError("cable_hysteresis_angle_rad must be > 0")
         if self.load_inertia_kg_m2 > 0 and self.shaft_stiffness_nm_rad <= 0:
             raise ProfileError("a two-mass plant needs shaft_stiffness_nm_rad > 0")
+        if not self.torque_constant_error_rel > -1.0:
+            raise ProfileError("torque_constant_error_rel must be > -1")
         if not self.torque_limit_nm > 0:
             raise ProfileError("torque_limit_nm must be > 0")
 

@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import contextlib
 import logging
+from collections.abc import Iterator
 
 from hil import __version__
 from hil.drives.base import (
@@ -35,7 +37,10 @@ class SimDrive(Drive):
         seed: int,
         serial: str = "SIM-0001",
         has_torque_sensor: bool = True,
+        exact_torque_hold: bool = True,
     ) -> None:
+        if exact_torque_hold and not plant.exact_torque_hold:
+            plant = plant.with_changes(exact_torque_hold=True)
         self._plant_params = plant
         self._plant = Plant(plant, fs_hz=fs_hz, seed=seed)
         self._state = DriveState.DISABLED
@@ -59,6 +64,18 @@ class SimDrive(Drive):
     @property
     def plant(self) -> Plant:
         return self._plant
+
+    @contextlib.contextmanager
+    def locked_rotor(self) -> Iterator[None]:
+        """The rotor clamped through the shaft torque sensor (``load_torque_nm``) inside the
+        block, released afterwards (the simulated station's locked-rotor fixture)."""
+        if not self._info.has_torque_sensor:
+            raise DriveStateError("no shaft torque sensor on this station")
+        self._plant.set_locked_rotor(True)
+        try:
+            yield
+        finally:
+            self._plant.set_locked_rotor(False)
 
     def enable(self) -> None:
         self._plant.hold()

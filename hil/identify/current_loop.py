@@ -1,0 +1,239 @@
+"""Current-loop lag from the phase of the motion against the reported torque at 20–150 Hz.
+
+The drive reports the torque it *commands* (``K_t,nom · i_q,ref``); the shaft moves with the
+torque the current loop actually delivers, a first-order lag ``1/(τ·s + 1)`` behind it. At
+a few frequencies well above the velocity loop the per-frequency orthogonal correlation of
+the encoder position and the reported torque gives the sampled response ``P(ω)/T(ω)``;
+its phase, after the exact sampled-data model of the rigid axis, is the current loop's.
+
+Sampled data, exactly: the reported torque at sample ``k`` is held over ``[k, k+1]`` (zero
+-order hold) and the position is sampled at the period starts, so the measured ratio is
+
+    G_d(ω) = (1 − e^{−jωT_s})/T_s · Σ_m G(j·ω_m)/(j·ω_m),   ω_m = ω + m·2π/T_s,
+
+with ``G(s) = 1 / (s·(J·s + B)·(τ·s + 1))``. For the double integrator this is the familiar
+half-sample delay; τ is what is left. Sines are superimposed on a constant speed so the axis
+never reverses: friction is then a constant plus ``B·ω``, and B (as ``B/J``, a phase lead
+falling as ``1/ω``) is fitted with τ (a lag rising as ``ω``), the two being separable over
+the band. Gravity, cable and cogging vary slowly and go into a per-block polynomial trend.
+
+Per frequency the run is cut into blocks of whole periods; the phase uncertainty is the
+scatter of the block phases (Type A). τ and B/J are a weighted least-squares fit of the
+phases; the standard uncertainty of τ is from the fit's covariance, scaled by
+``√(χ²/ν)`` when the scatter about the model exceeds the block estimate.
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy.optimize import least_squares
+
+from hil.errors import IdentificationError
+from hil.identify.estimate import Estimate
+
+FloatArray = NDArray[np.float64]
+ComplexArray = NDArray[np.complex128]
+IMAGES = 200  # aliases summed on each side in the sampled-data response
+TREND_ORDER = 3  # polynomial in time removed with each block's sine fit
+
+
+def sampled_response(
+    frequency_hz: FloatArray | float,
+    *,
+    fs_hz: float,
+    inertia_kg_m2: float,
+    viscous_over_inertia_1_s: float,
+    time_constant_s: float,
+) -> ComplexArray:
+    """Sampled position over held torque, ``G_d(ω)`` above, in rad/N·m.
+
+    Parameters
+    ----------
+    frequency_hz
+        Excitation frequencies (Hz), below ``fs_hz/2``.
+    fs_hz
+        Sample rate of the drive (Hz): the hold period is ``1/fs_hz``.
+    inertia_kg_m2, viscous_over_inertia_1_s, time_constant_s
+        J (kg·m²), B/J (1/s) and the current-loop time constant τ (s).
+    """
+    omega = 2 * math.pi * np.atleast_1d(np.asarray(frequency_hz, dtype=np.float64))
+    step_s = 1.0 / fs_hz
+    images = 2 * math.pi * fs_hz * np.arange(-IMAGES, IMAGES + 1)
+    s = 1j * (omega[:, None] + images[None, :])
+    plant = 1.0 / (s * (s + viscous_over_inertia_1_s) * (time_constant_s * s + 1.0))
+    total = np.sum(plant / s, axis=1)
+    hold = (1.0 - np.exp(-1j * omega * step_s)) / step_s
+    return np.asarray(hold * total / inertia_kg_m2, dtype=np.complex128)
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class FrequencyPoint:
+    """One frequency: the measured sampled response and the phase the current loop adds."""
+
+    frequency_hz: float
+    response_rad_nm: complex  # mean over blocks of P/T
+    lag_phase_rad: float  # phase of the response after the rigid, lag-free model (< 0: lag)
+    lag_phase_u_rad: float  # standard uncertainty from the block scatter
+    inertia_kg_m2: float  # from the magnitude against the rigid, lag-free model
+    torque_amplitude_nm: float
+    blocks: int
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class CurrentLoopResult:
+    points: tuple[FrequencyPoint, ...]
+    time_constant: Estimate  # current_loop_time_constant_ms
+    viscous_over_inertia_1_s: float
+    inertia_kg_m2: float  # from the magnitudes against the fitted model (informational)
+    chi2_per_dof: float
+
+
+def _block_phasors(
+    time_s: FloatArray, signals: Sequence[FloatArray], *, omega: float
+) -> list[complex]:
+    """Complex amplitude ``c − j·s`` of each signal at ``omega`` (plus a polynomial trend)."""
+    centred = time_s - time_s.mean()
+    scale = max(float(np.ptp(centred)), 1e-12)
+    columns = [np.cos(omega * time_s), np.sin(omega * time_s)]
+    columns += [(centred / scale) ** p for p in range(TREND_ORDER + 1)]
+    design = np.column_stack(columns)
+    coefficients = np.linalg.lstsq(design, np.column_stack(signals), rcond=None)[0]
+    return [complex(coefficients[0, i], -coefficients[1, i]) for i in range(len(signals))]
+
+
+def analyse_frequency(
+    time_s: FloatArray,
+    position_rad: FloatArray,
+    torque_nm: FloatArray,
+    *,
+    frequency_hz: float,
+    fs_hz: float,
+    blocks: int,
+) -> FrequencyPoint:
+    """Reduce one sine segment (settled, whole periods) to a :class:`FrequencyPoint`.
+
+    Parameters
+    ----------
+    time_s, position_rad, torque_nm
+        Samples of the segment: time (s), encoder position (rad), reported torque (N·m).
+    frequency_hz
+        The sine's frequency (Hz).
+    fs_hz
+        The drive's sample (hold) rate (Hz).
+    blocks
+        Number of blocks of whole periods the segment is cut into (≥ 2).
+    """
+    periods = math.floor((time_s[-1] - time_s[0] + 1.0 / fs_hz) * frequency_hz + 1e-6)
+    blocks = min(blocks, periods)
+    if blocks < 2:
+        raise IdentificationError(
+            f"{frequency_hz:g} Hz: {periods} whole periods, need at least 2 blocks"
+        )
+    omega = 2 * math.pi * frequency_hz
+    per_block = periods // blocks
+    edges = np.searchsorted(
+        time_s - time_s[0], np.arange(blocks + 1) * per_block / frequency_hz - 0.5 / fs_hz
+    )
+    ratios, amplitudes = [], []
+    for a, b in itertools.pairwise(edges):
+        p_hat, t_hat = _block_phasors(
+            time_s[a:b], [position_rad[a:b], torque_nm[a:b]], omega=omega
+        )
+        if t_hat == 0:
+            raise IdentificationError(f"{frequency_hz:g} Hz: no torque at the frequency")
+        ratios.append(p_hat / t_hat)
+        amplitudes.append(abs(t_hat))
+    ratio = np.asarray(ratios)
+    rigid = complex(
+        sampled_response(
+            frequency_hz,
+            fs_hz=fs_hz,
+            inertia_kg_m2=1.0,
+            viscous_over_inertia_1_s=0.0,
+            time_constant_s=0.0,
+        )[0]
+    )
+    phases = np.angle(ratio / rigid)
+    mean = complex(ratio.mean())
+    return FrequencyPoint(
+        frequency_hz=frequency_hz,
+        response_rad_nm=mean,
+        lag_phase_rad=float(np.angle(mean / rigid)),
+        lag_phase_u_rad=float(np.std(phases, ddof=1) / math.sqrt(blocks)),
+        inertia_kg_m2=abs(rigid) / abs(mean),
+        torque_amplitude_nm=float(np.mean(amplitudes)),
+        blocks=blocks,
+    )
+
+
+def fit_current_loop_lag(
+    points: Sequence[FrequencyPoint], *, fs_hz: float
+) -> CurrentLoopResult:
+    """Weighted least-squares fit of τ and B/J to the lag phases of ``points`` (≥ 3).
+
+    Returns τ as ``current_loop_time_constant_ms`` (Estimate in ms).
+    """
+    if len(points) < 3:
+        raise IdentificationError(f"{len(points)} frequencies, need at least 3 for τ and B/J")
+    freqs = np.array([p.frequency_hz for p in points])
+    phases = np.array([p.lag_phase_rad for p in points])
+    sigma = np.array([max(p.lag_phase_u_rad, 1e-6) for p in points])
+    rigid = sampled_response(
+        freqs, fs_hz=fs_hz, inertia_kg_m2=1.0, viscous_over_inertia_1_s=0.0, time_constant_s=0.0
+    )
+
+    def residual(x: FloatArray) -> FloatArray:
+        model = sampled_response(
+            freqs,
+            fs_hz=fs_hz,
+            inertia_kg_m2=1.0,
+            viscous_over_inertia_1_s=float(x[1]),
+            time_constant_s=float(x[0]) * 1e-3,
+        )
+        return np.asarray((np.angle(model / rigid) - phases) / sigma, dtype=np.float64)
+
+    omega = 2 * math.pi * freqs
+    start_ms = max(float(np.median(-phases / omega)) * 1e3, 1e-3)
+    fit = least_squares(residual, x0=np.array([start_ms, 1.0]), bounds=([0.0, 0.0], [1e3, 1e4]))
+    if not fit.success:
+        raise IdentificationError(f"current-loop lag fit did not converge: {fit.message}")
+    dof = len(points) - 2
+    chi2 = float(np.sum(fit.fun**2))
+    chi2_per_dof = chi2 / dof if dof > 0 else math.nan
+    jacobian = np.asarray(fit.jac, dtype=np.float64)
+    try:
+        covariance = np.linalg.inv(jacobian.T @ jacobian)
+    except np.linalg.LinAlgError as exc:
+        raise IdentificationError("τ and B/J are not separable over these frequencies") from exc
+    inflation = max(1.0, chi2_per_dof) if dof > 0 else 1.0
+    u_ms = math.sqrt(float(covariance[0, 0]) * inflation)
+    blocks = sum(p.blocks for p in points)
+    estimate = Estimate(
+        name="current_loop_time_constant_ms",
+        value=float(fit.x[0]),
+        standard_uncertainty=u_ms,
+        unit="ms",
+        dof=float(dof) if chi2_per_dof > 1.0 else float(blocks - len(points)),
+        cramer_rao_std=math.sqrt(float(covariance[0, 0])),
+    )
+    fitted = sampled_response(
+        freqs,
+        fs_hz=fs_hz,
+        inertia_kg_m2=1.0,
+        viscous_over_inertia_1_s=float(fit.x[1]),
+        time_constant_s=float(fit.x[0]) * 1e-3,
+    )
+    measured = np.abs([p.response_rad_nm for p in points])
+    return CurrentLoopResult(
+        points=tuple(points),
+        time_constant=estimate,
+        viscous_over_inertia_1_s=float(fit.x[1]),
+        inertia_kg_m2=float(np.median(np.abs(fitted) / measured)),
+        chi2_per_dof=chi2_per_dof,
+    )

@@ -1,0 +1,140 @@
+"""Current-loop lag τ from the phase of the motion against the reported torque, 20–150 Hz.
+
+Velocity-mode sines on top of a constant speed (the axis never reverses, so friction stays
+linear); numerics and the sampled-data model in :mod:`hil.identify.current_loop`.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+import pytest
+
+from hil.calibration import CalibrationRun
+from hil.drives.base import Drive, DriveInfo, Excitation, Mode
+from hil.errors import ProfileError
+from hil.identify.current_loop import CurrentLoopResult, analyse_frequency, fit_current_loop_lag
+from hil.identify.moves import position_move
+from hil.profile import UnitProfile
+from hil.recording import Recording
+
+NAME = "current_loop"
+MEASUREMENTS = ("current_loop_time_constant_ms",)
+pytestmark = pytest.mark.protocol(NAME)
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class Spec:
+    frequencies_hz: tuple[float, ...]
+    speed_rad_s: float  # constant carrier speed
+    amplitude_rad_s: float  # velocity command sine amplitude
+    segment_s: float  # analysed time per frequency
+    settle_s: float  # discarded at the start of each frequency
+    ramp_s: float
+    blocks: int
+    margin_rad: float
+    move_speed_rad_s: float
+    fs_hz: float
+    travel_min_rad: float
+    travel_max_rad: float
+
+    @classmethod
+    def from_profile(cls, profile: UnitProfile, info: DriveInfo) -> Spec:
+        settings = profile.protocol(NAME)
+        spec = cls(
+            frequencies_hz=tuple(float(f) for f in settings["frequencies_hz"]),
+            speed_rad_s=float(settings.get("speed_rad_s", 0.6)),
+            amplitude_rad_s=float(settings.get("amplitude_rad_s", 0.3)),
+            segment_s=float(settings.get("segment_s", 0.25)),
+            settle_s=float(settings.get("settle_s", 0.05)),
+            ramp_s=float(settings.get("ramp_s", 0.1)),
+            blocks=int(settings.get("blocks", 5)),
+            margin_rad=float(settings.get("margin_rad", 0.1)),
+            move_speed_rad_s=float(settings.get("move_speed_rad_s", 0.5)),
+            fs_hz=min(profile.sample_rate_hz, info.max_sample_rate_hz),
+            travel_min_rad=info.limits.travel_min_rad,
+            travel_max_rad=info.limits.travel_max_rad,
+        )
+        travel = spec.speed_rad_s * (spec.ramp_s + sum(spec.segment_samples(f) for f in
+                                                      spec.frequencies_hz) / spec.fs_hz)
+        room = spec.travel_max_rad - spec.travel_min_rad - 2 * spec.margin_rad
+        if travel > room:
+            raise ProfileError(f"[protocols.{NAME}] needs {travel:.3g} rad of travel, the "
+                               f"limits leave {room:.3g} rad", source=profile.source)
+        return spec
+
+    @property
+    def start_rad(self) -> float:
+        return self.travel_min_rad + self.margin_rad
+
+    def settle_samples(self, frequency_hz: float) -> int:
+        return round(math.ceil(self.settle_s * frequency_hz) * self.fs_hz / frequency_hz)
+
+    def segment_samples(self, frequency_hz: float) -> int:
+        """Settling plus analysed samples: whole periods of ``frequency_hz``."""
+        periods = math.ceil(self.settle_s * frequency_hz) + round(self.segment_s * frequency_hz)
+        return round(periods * self.fs_hz / frequency_hz)
+
+
+def _ramp(spec: Spec, up: bool) -> np.ndarray:
+    n = max(round(spec.ramp_s * spec.fs_hz), 1)
+    x = (np.arange(n) + 1) / n if up else 1 - (np.arange(n) + 1) / n
+    return spec.speed_rad_s * 0.5 * (1 - np.cos(math.pi * x))
+
+
+def excitation(spec: Spec, *, position_rad: float) -> list[Excitation]:
+    """Move to the lower end; ramp to the carrier speed; one sine segment per frequency."""
+    segments = []
+    for f in spec.frequencies_hz:
+        t = np.arange(spec.segment_samples(f)) / spec.fs_hz
+        segments.append(spec.speed_rad_s + spec.amplitude_rad_s * np.sin(2 * math.pi * f * t))
+    command = np.concatenate([_ramp(spec, True), *segments, _ramp(spec, False)])
+    return [
+        Excitation(name="move_to_start", mode=Mode.POSITION, fs_hz=spec.fs_hz,
+                   command=position_move(position_rad, spec.start_rad, fs_hz=spec.fs_hz,
+                                         speed_rad_s=spec.move_speed_rad_s, hold_s=0.1)),
+        Excitation(name="sines", mode=Mode.VELOCITY, fs_hz=spec.fs_hz, command=command),
+    ]
+
+
+def analyse(recording: Recording, spec: Spec) -> CurrentLoopResult:
+    start = round(spec.ramp_s * spec.fs_hz)
+    points = []
+    for f in spec.frequencies_hz:
+        a, b = start + spec.settle_samples(f), start + spec.segment_samples(f)
+        points.append(analyse_frequency(recording.time_s[a:b], recording.position[a:b],
+                                        recording.effort[a:b], frequency_hz=f,
+                                        fs_hz=spec.fs_hz, blocks=spec.blocks))
+        start += spec.segment_samples(f)
+    return fit_current_loop_lag(points, fs_hz=spec.fs_hz)
+
+
+@pytest.fixture(scope="module")
+def result(drive: Drive, calibration: CalibrationRun, profile: UnitProfile) -> CurrentLoopResult:
+    spec = Spec.from_profile(profile, drive.info)
+    move, sines = excitation(spec, position_rad=drive.status().position_rad)
+    calibration.run(drive, move, protocol=NAME)
+    analysed = analyse(calibration.run(drive, sines, protocol=NAME), spec)
+    calibration.details[NAME] = {
+        "viscous_over_inertia_1_s": analysed.viscous_over_inertia_1_s,
+        "chi2_per_dof": analysed.chi2_per_dof,
+        "points": [
+            {"frequency_hz": p.frequency_hz, "lag_phase_rad": p.lag_phase_rad,
+             "lag_phase_u_rad": p.lag_phase_u_rad, "inertia_kg_m2": p.inertia_kg_m2,
+             "torque_amplitude_nm": p.torque_amplitude_nm}
+            for p in analysed.points
+        ],
+    }
+    return analysed
+
+
+@pytest.mark.parametrize("parameter", MEASUREMENTS)
+def test_current_loop(parameter: str, result: CurrentLoopResult,
+                      calibration: CalibrationRun) -> None:
+    measurement = calibration.record(NAME, {MEASUREMENTS[0]: result.time_constant}[parameter])
+    assert measurement.outcome.value in ("PASS", "MARGINAL"), (
+        f"{parameter} = {measurement.estimate.value:.6g} {measurement.spec.unit} outside "
+        f"[{measurement.spec.lower_limit:.6g}, {measurement.spec.upper_limit:.6g}]"
+    )

@@ -1,0 +1,159 @@
+"""Current-loop lag: the sampled-data model, synthetic recovery, the simulator's hold, and
+recovery of a hidden τ from the demo plant (effects on)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from scipy.linalg import expm
+
+from hil.drives.base import DriveInfo, Mode, check_limits
+from hil.drives.sim import SimDrive
+from hil.errors import IdentificationError
+from hil.identify.current_loop import (
+    FrequencyPoint,
+    analyse_frequency,
+    fit_current_loop_lag,
+    sampled_response,
+)
+from hil.profile import load_profile
+from plant_sim.model import Plant
+from plant_sim.params import PlantParams
+from protocols import test_current_loop as protocol
+
+PROFILE = load_profile()
+FS = 4000.0
+INFO = DriveInfo(vendor="test", model="test", firmware_version="0", serial="0",
+                 rated_torque_nm=0.5, limits=PROFILE.limits, modes=tuple(Mode),
+                 max_sample_rate_hz=FS)
+SPEC = protocol.Spec.from_profile(PROFILE, INFO)
+ACCURACY = PROFILE.measurement("current_loop_time_constant_ms").accuracy_rel
+
+
+def test_rigid_response_is_the_half_sample_delayed_double_integrator() -> None:
+    for f in (20.0, 150.0, 900.0):
+        theta = 2 * math.pi * f / FS
+        closed = -math.cos(theta / 2) / (4 * math.sin(theta / 2) ** 2) / FS**2
+        closed_form = closed * np.exp(-0.5j * theta)
+        model = sampled_response(f, fs_hz=FS, inertia_kg_m2=1.0, viscous_over_inertia_1_s=0.0,
+                                 time_constant_s=0.0)[0]
+        assert model == pytest.approx(closed_form, rel=1e-6)
+
+
+@pytest.mark.parametrize("tau_s", [1e-4, 5e-4])
+def test_response_matches_an_exact_zoh_simulation(tau_s: float) -> None:
+    """Σ over images equals a state-space simulation of 1/(s(Js+B)(τs+1)) under a held input
+    (matrix exponential: exact for piecewise-constant torque)."""
+    j, b = 0.004, 0.01
+    a = np.array([[0.0, 1.0, 0.0], [0.0, -b / j, 1 / j], [0.0, 0.0, -1 / tau_s]])
+    augmented = np.zeros((4, 4))
+    augmented[:3, :3] = a
+    augmented[2, 3] = 1 / tau_s
+    phi = expm(augmented / FS)
+    for f in (30.0, 120.0):
+        t = np.arange(round(FS / f * 40)) / FS
+        u = np.cos(2 * math.pi * f * t)
+        state = np.zeros(4)
+        position = np.empty(t.size)
+        for k in range(t.size):
+            position[k] = state[0]
+            state[3] = u[k]
+            state = phi @ state
+        tail = t >= 20 / f
+        design = np.column_stack([np.cos(2 * math.pi * f * t[tail]),
+                                  np.sin(2 * math.pi * f * t[tail]), np.ones(tail.sum()),
+                                  t[tail]])
+        coef = np.linalg.lstsq(design, position[tail], rcond=None)[0]
+        model = sampled_response(f, fs_hz=FS, inertia_kg_m2=j, viscous_over_inertia_1_s=b / j,
+                                 time_constant_s=tau_s)[0]
+        assert complex(coef[0], -coef[1]) == pytest.approx(model, rel=1e-3)
+
+
+def _synthetic_points(tau_s: float, *, noise_nm: float, seed: int) -> list[FrequencyPoint]:
+    """Exact sampled responses of a lagged rigid axis with white torque-measurement noise."""
+    rng = np.random.default_rng(seed)
+    points = []
+    for f in SPEC.frequencies_hz:
+        t = np.arange(round(FS / f * round(0.25 * f))) / FS
+        torque = 0.15 * np.cos(2 * math.pi * f * t)
+        g = sampled_response(f, fs_hz=FS, inertia_kg_m2=0.0036, viscous_over_inertia_1_s=1.4,
+                             time_constant_s=tau_s)[0]
+        position = 0.15 * abs(g) * np.cos(2 * math.pi * f * t + np.angle(g)) + 0.3 * t
+        points.append(analyse_frequency(t, position, torque + rng.normal(0, noise_nm, t.size),
+                                        frequency_hz=f, fs_hz=FS, blocks=5))
+    return points
+
+
+def test_noise_free_lag_is_recovered_exactly() -> None:
+    result = fit_current_loop_lag(_synthetic_points(4e-4, noise_nm=1e-9, seed=0),
+                                  fs_hz=FS)
+    assert result.time_constant.value == pytest.approx(0.4, rel=1e-4)
+    assert result.viscous_over_inertia_1_s == pytest.approx(1.4, rel=0.02)
+    assert result.inertia_kg_m2 == pytest.approx(0.0036, rel=1e-4)
+
+
+def test_reported_uncertainty_matches_the_scatter() -> None:
+    values, uncertainties = [], []
+    for seed in range(40):
+        result = fit_current_loop_lag(_synthetic_points(3e-4, noise_nm=0.01, seed=seed),
+                                      fs_hz=FS)
+        values.append(result.time_constant.value)
+        uncertainties.append(result.time_constant.standard_uncertainty)
+    scatter = float(np.std(values, ddof=1))
+    assert np.mean(values) == pytest.approx(0.3, abs=2 * scatter / math.sqrt(40))
+    assert 0.6 < float(np.median(uncertainties)) / scatter < 1.6
+
+
+def test_two_frequencies_are_refused() -> None:
+    points = _synthetic_points(3e-4, noise_nm=1e-3, seed=0)[:2]
+    with pytest.raises(IdentificationError, match="at least 3"):
+        fit_current_loop_lag(points, fs_hz=FS)
+
+
+def test_simulator_holds_the_torque_over_the_period() -> None:
+    """Torque mode, no effects but the lag, exact hold (as SimDrive runs it): the sim's
+    sampled response is the model's (a constant-torque kick first: no reversal)."""
+    for tau_s in (0.0, 3e-4):
+        plant = Plant(PlantParams(inertia_kg_m2=0.0036, current_loop_time_constant_s=tau_s,
+                                  exact_torque_hold=True), fs_hz=FS, seed=0)
+        f = 110.0
+        t = np.arange(round(FS / f * 44)) / FS
+        plant.run(Mode.TORQUE, np.full(40, 0.1))
+        trace = plant.run(Mode.TORQUE, 0.2 * np.cos(2 * math.pi * f * (t + 0.5 / FS)))
+        tail = t >= 11 / f
+        point = analyse_frequency(t[tail], trace.position_rad[tail], trace.torque_nm[tail],
+                                  frequency_hz=f, fs_hz=FS, blocks=4)
+        model = sampled_response(f, fs_hz=FS, inertia_kg_m2=0.0036,
+                                 viscous_over_inertia_1_s=0.0, time_constant_s=tau_s)[0]
+        assert point.response_rad_nm == pytest.approx(model, rel=2e-3)
+
+
+@pytest.mark.parametrize("start", [-1.4, 0.0, 1.4])
+def test_excitation_is_inside_the_limits(start: float) -> None:
+    move, sines = protocol.excitation(SPEC, position_rad=start)
+    check_limits(move, PROFILE.limits, start_position_rad=start)
+    check_limits(sines, PROFILE.limits, start_position_rad=SPEC.start_rad)
+    assert sines.command.min() >= 0.0  # the carrier keeps the axis moving one way
+
+
+@settings(max_examples=10, deadline=None)
+@given(tau_ms=st.floats(0.1, 1.0), inertia=st.floats(0.0025, 0.006),
+       coulomb=st.floats(0.01, 0.04), seed=st.integers(0, 2**16))
+def test_hidden_lag_is_recovered_within_the_claimed_accuracy(
+    tau_ms: float, inertia: float, coulomb: float, seed: int
+) -> None:
+    assert PROFILE.plant is not None
+    assert ACCURACY is not None
+    plant = PROFILE.plant.with_changes(current_loop_time_constant_s=tau_ms * 1e-3,
+                                       inertia_kg_m2=inertia, coulomb_nm=coulomb,
+                                       static_friction_nm=1.3 * coulomb)
+    with SimDrive(plant, limits=PROFILE.limits, fs_hz=FS, seed=seed) as drive:
+        drive.enable()
+        move, sines = protocol.excitation(SPEC, position_rad=drive.status().position_rad)
+        drive.run(move)
+        result = protocol.analyse(drive.run(sines), SPEC)
+    assert result.time_constant.value == pytest.approx(tau_ms, rel=ACCURACY)
