@@ -284,7 +284,7 @@ def _saturation_mask(effort: FloatArray) -> BoolArray:
         near = values >= level - 3.0 * noise
         runs = sorted((r for r in _runs(near) if r[1] - r[0] >= 5), key=lambda r: r[0] - r[1])
         plateaus.extend(
-            (start, stop) for start, stop in runs[:50] if _is_plateau(values[start:stop], noise)
+            (start, stop) for start, stop in runs[:20] if _is_plateau(values[start:stop], noise)
         )
     if len(plateaus) >= 2:  # a clip value is hit repeatedly; one flat peak is not a clip
         for start, stop in plateaus:
