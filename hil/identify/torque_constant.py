@@ -1,0 +1,170 @@
+"""Torque constant K_t from a locked rotor: shaft torque sensor against the measured current.
+
+At each locked angle a torque-mode staircase sweeps the current up and down through zero;
+the mean of each settled level gives one point ``(i_q, T_sensor)`` (and the drive's reported
+torque ``T_rep = K_t,nom·i_q,ref``). Per angle a straight line ``T_sensor = K·i_q + c`` —
+the intercept holds whatever the clamp carries at that angle (gravity, cable, cogging).
+K_t is the mean of the per-angle slopes: locking at several angles averages the K_t(θ)
+ripple, whose spread is the Type A uncertainty (``angles − 1`` degrees of freedom). When a
+K_t ripple table is known (the cogging protocol's ``K_t(θ) = K_t·(1 + Σ a_n·sin(n·θ + ψ_n))``)
+each slope is first divided by its angle's ripple factor.
+
+Also reported: linearity (largest level deviation from its angle's line, in % of the full
+-scale sensor torque; both sweep directions, so hysteresis counts), the reported-torque gain
+error ``slope(T_sensor vs T_rep) − 1`` (the scale error every torque-based identification
+inherits), and the deviation from a datasheet ``K_t = 60/(2π·KV) = 9.5493/KV``.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from hil.errors import IdentificationError
+from hil.identify.estimate import Estimate
+
+FloatArray = NDArray[np.float64]
+KV_TO_KT = 60.0 / (2.0 * math.pi)  # K_t [N·m/A] = 9.5493 / KV [rpm/V]
+
+
+def datasheet_torque_constant_nm_a(kv_rpm_per_v: float) -> float:
+    """K_t of an ideal sine-commutated motor from its speed constant KV (rpm/V)."""
+    if not kv_rpm_per_v > 0:
+        raise ValueError(f"kv_rpm_per_v must be > 0, got {kv_rpm_per_v}")
+    return KV_TO_KT / kv_rpm_per_v
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class LockedSweep:
+    """Level means of one locked-angle sweep."""
+
+    angle_rad: float
+    current_a: FloatArray
+    sensor_torque_nm: FloatArray
+    reported_torque_nm: FloatArray
+    slope_nm_a: float
+    slope_u_nm_a: float
+    intercept_nm: float
+    gain: float  # slope of sensor torque over reported torque
+    max_residual_nm: float
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class TorqueConstantResult:
+    sweeps: tuple[LockedSweep, ...]
+    torque_constant: Estimate  # torque_constant_nm_a
+    linearity: Estimate  # torque_linearity_pct
+    gain_error: Estimate  # reported_torque_gain_error_pct
+
+
+def level_means(
+    signal: FloatArray, *, level_samples: int, settle_samples: int, levels: int
+) -> FloatArray:
+    """Mean of ``signal`` over each level after its first ``settle_samples``."""
+    if settle_samples >= level_samples:
+        raise ValueError("settle_samples must be below level_samples")
+    if signal.size < levels * level_samples:
+        raise IdentificationError(
+            f"{signal.size} samples, the sweep needs {levels * level_samples}"
+        )
+    blocks = signal[: levels * level_samples].reshape(levels, level_samples)
+    return np.asarray(blocks[:, settle_samples:].mean(axis=1), dtype=np.float64)
+
+
+def _line(x: FloatArray, y: FloatArray) -> tuple[float, float, float, FloatArray]:
+    """Slope, its standard error, intercept and residuals of a least-squares line."""
+    design = np.column_stack([x, np.ones_like(x)])
+    coefficients, *_ = np.linalg.lstsq(design, y, rcond=None)
+    residual = y - design @ coefficients
+    dof = x.size - 2
+    sigma2 = float(residual @ residual) / dof
+    sxx = float(np.sum((x - x.mean()) ** 2))
+    return float(coefficients[0]), math.sqrt(sigma2 / sxx), float(coefficients[1]), residual
+
+
+def analyse_locked_sweep(
+    current_a: FloatArray,
+    sensor_torque_nm: FloatArray,
+    reported_torque_nm: FloatArray,
+    *,
+    angle_rad: float,
+    level_samples: int,
+    settle_samples: int,
+    levels: int,
+) -> LockedSweep:
+    """Level means and the line of one sweep (arrays start at the first level)."""
+    i = level_means(current_a, level_samples=level_samples, settle_samples=settle_samples,
+                    levels=levels)
+    t = level_means(sensor_torque_nm, level_samples=level_samples,
+                    settle_samples=settle_samples, levels=levels)
+    r = level_means(reported_torque_nm, level_samples=level_samples,
+                    settle_samples=settle_samples, levels=levels)
+    if levels < 4 or float(np.ptp(i)) <= 0:
+        raise IdentificationError("the sweep needs at least 4 levels of different current")
+    slope, slope_u, intercept, residual = _line(i, t)
+    gain = _line(r, t)[0]
+    return LockedSweep(angle_rad=angle_rad, current_a=i, sensor_torque_nm=t,
+                       reported_torque_nm=r, slope_nm_a=slope, slope_u_nm_a=slope_u,
+                       intercept_nm=intercept, gain=gain,
+                       max_residual_nm=float(np.max(np.abs(residual))))
+
+
+def ripple_factor(angle_rad: float, ripple: Sequence[tuple[int, float, float]]) -> float:
+    """``1 + Σ a_n·sin(n·θ + ψ_n)`` for ``ripple`` = ``(order, amplitude, phase_rad)``."""
+    return 1.0 + sum(a * math.sin(n * angle_rad + psi) for n, a, psi in ripple)
+
+
+def identify_torque_constant(
+    sweeps: Sequence[LockedSweep], *, ripple: Sequence[tuple[int, float, float]] = ()
+) -> TorqueConstantResult:
+    """K_t, linearity and reported-torque gain error over the locked angles (≥ 2).
+
+    Parameters
+    ----------
+    sweeps
+        One analysed sweep per locked angle.
+    ripple
+        Known K_t ripple harmonics ``(order, relative amplitude, phase_rad)`` in motor
+        position; each angle's slope is divided by its ripple factor. Empty: none known.
+    """
+    if len(sweeps) < 2:
+        raise IdentificationError(f"{len(sweeps)} locked angle(s), need at least 2")
+    n = len(sweeps)
+    factors = np.array([ripple_factor(s.angle_rad, ripple) for s in sweeps])
+    slopes = np.array([s.slope_nm_a for s in sweeps]) / factors
+    gains = np.array([s.gain for s in sweeps]) / factors
+    within = np.array([s.slope_u_nm_a for s in sweeps])
+    # between-angle scatter (K_t ripple) and within-fit noise; the larger decides
+    u_slope = max(float(np.std(slopes, ddof=1)), float(np.sqrt(np.mean(within**2)))) / math.sqrt(n)
+    u_gain = float(np.std(gains, ddof=1)) / math.sqrt(n)
+    full_scale = max(float(np.max(np.abs(s.sensor_torque_nm - s.intercept_nm))) for s in sweeps)
+    linearity_pct = 100.0 * max(s.max_residual_nm for s in sweeps) / full_scale
+    level_noise = float(np.sqrt(np.mean(within**2))) * max(
+        float(np.max(np.abs(s.current_a))) for s in sweeps
+    )
+    return TorqueConstantResult(
+        sweeps=tuple(sweeps),
+        torque_constant=Estimate(name="torque_constant_nm_a", value=float(slopes.mean()),
+                                 standard_uncertainty=u_slope, unit="N·m/A", dof=n - 1),
+        linearity=Estimate(name="torque_linearity_pct", value=linearity_pct,
+                           standard_uncertainty=100.0 * level_noise / full_scale, unit="%"),
+        gain_error=Estimate(name="reported_torque_gain_error_pct",
+                            value=100.0 * (float(gains.mean()) - 1.0),
+                            standard_uncertainty=100.0 * u_gain, unit="%", dof=n - 1),
+    )
+
+
+def datasheet_deviation(torque_constant: Estimate, *, kv_rpm_per_v: float) -> Estimate:
+    """``100·(K_t / K_t,datasheet − 1)`` in %, K_t,datasheet = 9.5493/KV (KV exact)."""
+    reference = datasheet_torque_constant_nm_a(kv_rpm_per_v)
+    return Estimate(
+        name="torque_constant_vs_datasheet_pct",
+        value=100.0 * (torque_constant.value / reference - 1.0),
+        standard_uncertainty=100.0 * torque_constant.standard_uncertainty / reference,
+        unit="%",
+        dof=torque_constant.dof,
+    )
