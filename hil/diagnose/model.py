@@ -26,7 +26,7 @@ IndexArray = NDArray[np.intp]
 #: Velocity below which friction switching treats the axis as standing still (fraction of
 #: the 99th percentile of |velocity|); avoids sign chatter on a quantised position.
 STANDSTILL_FRACTION = 1e-3
-LEAD_CUTOFF_RATIO = 0.5
+LEAD_CUTOFF_RATIO = 0.8
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
