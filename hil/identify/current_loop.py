@@ -94,7 +94,7 @@ class CurrentLoopResult:
     chi2_per_dof: float
 
 
-def _block_phasors(
+def block_phasors(
     time_s: FloatArray, signals: Sequence[FloatArray], *, omega: float
 ) -> list[complex]:
     """Complex amplitude ``c − j·s`` of each signal at ``omega`` (plus a polynomial trend)."""
@@ -142,7 +142,7 @@ def analyse_frequency(
     )
     ratios, amplitudes = [], []
     for a, b in itertools.pairwise(edges):
-        p_hat, t_hat = _block_phasors(
+        p_hat, t_hat = block_phasors(
             time_s[a:b], [position_rad[a:b], torque_nm[a:b]], omega=omega
         )
         if t_hat == 0:

@@ -1,0 +1,177 @@
+"""Two-mass resonance f_r, anti-resonance f_a, damping and f_r / velocity-loop bandwidth from a
+stepped-sine FRF (numerics in :mod:`hil.identify.resonance`).
+
+Velocity-mode sines over the profile's band, on a constant-speed carrier (no reversal, so
+friction stays linear). Skips on a unit whose profile has no ``[protocols.resonance]``
+(a rigid axis: nothing to find).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+import pytest
+
+from hil.calibration import CalibrationRun
+from hil.drives.base import Drive, DriveInfo, Excitation, Mode
+from hil.errors import ProfileError
+from hil.identify.estimate import Estimate
+from hil.identify.moves import position_move
+from hil.identify.resonance import ResonanceResult, frf_point, identify_resonance
+from hil.profile import UnitProfile
+from hil.recording import Recording
+
+NAME = "resonance"
+MEASUREMENTS = ("resonance_frequency_hz", "antiresonance_frequency_hz", "resonance_damping_ratio",
+                "resonance_to_bandwidth_ratio")
+pytestmark = pytest.mark.protocol(NAME)
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class Spec:
+    frequencies_hz: tuple[float, ...]
+    speed_rad_s: float  # carrier
+    amplitude_rad_s: float  # velocity sine amplitude up to amplitude_knee_hz
+    amplitude_knee_hz: float  # above: amplitude ∝ f (the motor responds ∝ 1/f)
+    max_amplitude_rad_s: float
+    segment_s: float
+    min_periods: int
+    settle_s: float
+    blocks: int
+    ramp_s: float
+    margin_rad: float
+    move_speed_rad_s: float
+    fs_hz: float
+    travel_min_rad: float
+    travel_max_rad: float
+
+    @classmethod
+    def from_profile(cls, profile: UnitProfile, info: DriveInfo) -> Spec:
+        settings = profile.protocol(NAME)
+        low, high = (float(f) for f in settings["band_hz"])
+        points = int(settings.get("points", 28))
+        spec = cls(
+            frequencies_hz=tuple(float(f) for f in np.geomspace(low, high, points)),
+            speed_rad_s=float(settings.get("speed_rad_s", 0.5)),
+            amplitude_rad_s=float(settings.get("amplitude_rad_s", 0.25)),
+            amplitude_knee_hz=float(settings.get("amplitude_knee_hz", 15.0)),
+            max_amplitude_rad_s=float(settings.get("max_amplitude_rad_s", 0.8)),
+            segment_s=float(settings.get("segment_s", 0.12)),
+            min_periods=int(settings.get("min_periods", 6)),
+            settle_s=float(settings.get("settle_s", 0.03)),
+            blocks=int(settings.get("blocks", 6)),
+            ramp_s=float(settings.get("ramp_s", 0.1)),
+            margin_rad=float(settings.get("margin_rad", 0.1)),
+            move_speed_rad_s=float(settings.get("move_speed_rad_s", 0.5)),
+            fs_hz=min(profile.sample_rate_hz, info.max_sample_rate_hz),
+            travel_min_rad=info.limits.travel_min_rad,
+            travel_max_rad=info.limits.travel_max_rad,
+        )
+        travel = spec.speed_rad_s * (spec.ramp_s + sum(spec.segment_samples(f) for f in
+                                                      spec.frequencies_hz) / spec.fs_hz)
+        room = spec.travel_max_rad - spec.travel_min_rad - 2 * spec.margin_rad
+        if travel > room:
+            raise ProfileError(f"[protocols.{NAME}] needs {travel:.3g} rad of travel, the "
+                               f"limits leave {room:.3g} rad", source=profile.source)
+        return spec
+
+    @property
+    def start_rad(self) -> float:
+        return self.travel_min_rad + self.margin_rad
+
+    def amplitude(self, frequency_hz: float) -> float:
+        scaled = self.amplitude_rad_s * max(1.0, frequency_hz / self.amplitude_knee_hz)
+        return min(scaled, self.max_amplitude_rad_s)
+
+    def settle_samples(self, frequency_hz: float) -> int:
+        periods = max(2, math.ceil(self.settle_s * frequency_hz))
+        return round(periods * self.fs_hz / frequency_hz)
+
+    def segment_samples(self, frequency_hz: float) -> int:
+        """Settling plus analysed whole periods of ``frequency_hz``."""
+        periods = max(self.min_periods, round(self.segment_s * frequency_hz))
+        return self.settle_samples(frequency_hz) + round(periods * self.fs_hz / frequency_hz)
+
+
+def _ramp(spec: Spec, up: bool) -> np.ndarray:
+    n = max(round(spec.ramp_s * spec.fs_hz), 1)
+    x = (np.arange(n) + 1) / n if up else 1 - (np.arange(n) + 1) / n
+    return spec.speed_rad_s * 0.5 * (1 - np.cos(math.pi * x))
+
+
+def excitation(spec: Spec, *, position_rad: float) -> list[Excitation]:
+    """Move to the lower end; ramp to the carrier speed; the stepped sine; ramp down."""
+    segments = []
+    for f in spec.frequencies_hz:
+        t = np.arange(spec.segment_samples(f)) / spec.fs_hz
+        segments.append(spec.speed_rad_s + spec.amplitude(f) * np.sin(2 * math.pi * f * t))
+    return [
+        Excitation(name="move_to_start", mode=Mode.POSITION, fs_hz=spec.fs_hz,
+                   command=position_move(position_rad, spec.start_rad, fs_hz=spec.fs_hz,
+                                         speed_rad_s=spec.move_speed_rad_s, hold_s=0.1)),
+        Excitation(name="stepped_sine", mode=Mode.VELOCITY, fs_hz=spec.fs_hz,
+                   command=np.concatenate([_ramp(spec, True), *segments, _ramp(spec, False)])),
+    ]
+
+
+def analyse(recording: Recording, spec: Spec, *, time_constant_s: float = 2e-4
+            ) -> ResonanceResult:
+    command = recording.velocity_cmd
+    if command is None:
+        raise ValueError("the stepped-sine recording lacks its velocity command")
+    start = round(spec.ramp_s * spec.fs_hz)
+    points = []
+    for f in spec.frequencies_hz:
+        a, b = start + spec.settle_samples(f), start + spec.segment_samples(f)
+        points.append(frf_point(recording.time_s[a:b], recording.position[a:b],
+                                recording.effort[a:b], command[a:b] - spec.speed_rad_s,
+                                frequency_hz=f, fs_hz=spec.fs_hz, blocks=spec.blocks))
+        start = b
+    return identify_resonance(points, fs_hz=spec.fs_hz, time_constant_s=time_constant_s)
+
+
+def measured_time_constant_s(calibration: CalibrationRun) -> float:
+    """The current-loop protocol's τ when it ran already (a start value only)."""
+    for m in calibration.measurements:
+        if m.spec.name == "current_loop_time_constant_ms":
+            return m.estimate.value * 1e-3
+    return 2e-4
+
+
+@pytest.fixture(scope="module")
+def result(drive: Drive, calibration: CalibrationRun, profile: UnitProfile) -> ResonanceResult:
+    if NAME not in profile.protocols:
+        pytest.skip(f"the profile has no [protocols.{NAME}] table: a rigid axis, no shaft "
+                    "resonance to identify")
+    spec = Spec.from_profile(profile, drive.info)
+    move, sine = excitation(spec, position_rad=drive.status().position_rad)
+    calibration.run(drive, move, protocol=NAME)
+    recording = calibration.run(drive, sine, protocol=NAME)
+    analysed = analyse(recording, spec, time_constant_s=measured_time_constant_s(calibration))
+    m = analysed.model
+    calibration.details[NAME] = {
+        "model": "P/T = (s²/ωa² + 2ζa s/ωa + 1)/(s²/ωr² + 2ζr s/ωr + 1) / (J s (s + B/J)(τ s + 1))",
+        "inertia_total_kg_m2": m.inertia_kg_m2,
+        "antiresonance_damping_ratio": m.antiresonance_damping,
+        "current_loop_time_constant_s": m.time_constant_s,
+        "velocity_loop_bandwidth_hz": analysed.bandwidth_hz,
+        "chi2_per_dof": analysed.chi2_per_dof,
+        "frf": [{"frequency_hz": p.frequency_hz, "magnitude_rad_nm": abs(p.frf_rad_nm),
+                 "phase_rad": math.atan2(p.frf_rad_nm.imag, p.frf_rad_nm.real),
+                 "relative_u": p.relative_u, "coherence": p.coherence}
+                for p in analysed.points],
+    }
+    return analysed
+
+
+@pytest.mark.parametrize("parameter", MEASUREMENTS)
+def test_resonance(parameter: str, result: ResonanceResult, calibration: CalibrationRun) -> None:
+    found: dict[str, Estimate] = {e.name: e for e in (result.resonance, result.antiresonance,
+                                                      result.damping, result.ratio)}
+    measurement = calibration.record(NAME, found[parameter])
+    assert measurement.outcome.value in ("PASS", "MARGINAL"), (
+        f"{parameter} = {measurement.estimate.value:.6g} {measurement.spec.unit} outside "
+        f"[{measurement.spec.lower_limit:.6g}, {measurement.spec.upper_limit:.6g}]"
+    )
