@@ -330,7 +330,7 @@ def _two_mass(ctx: Context) -> Model | None:
     top = TWO_MASS_BAND * ctx.signals.cutoff_hz
     if top <= 2.0:
         return None
-    grid = np.geomspace(1.0, top, 30)
+    grid = np.geomspace(1.0, top, 24)
     model = ctx.current.model
     costs = [
         (_train_rss(ctx, _extend(model, two_mass_term(float(f), d))), d)

@@ -58,6 +58,53 @@ def _binned(values: FloatArray, index: NDArray[np.intp], size: int) -> FloatArra
     return np.bincount(index, weights=values, minlength=size).astype(np.float64)
 
 
+@dataclass(frozen=True, slots=True, kw_only=True)
+class _Basis:
+    """Binned angle grid with the per-order normal equations (weight only)."""
+
+    index: NDArray[np.intp]
+    size: int
+    used: NDArray[np.bool_]
+    orders: IntArray
+    sin: FloatArray
+    cos: FloatArray
+    a11: FloatArray
+    a12: FloatArray
+    a22: FloatArray
+
+
+def _basis(position_rad: FloatArray, weight: FloatArray, orders: tuple[int, int]) -> _Basis:
+    low, high = orders
+    step = 2.0 * math.pi / BINS_PER_REV
+    origin = float(np.min(position_rad))
+    index = np.floor((position_rad - origin) / step).astype(np.intp)
+    size = int(index.max()) + 1
+    s_ww = _binned(weight * weight, index, size)
+    used = s_ww > 0
+    centres = origin + (np.arange(size)[used] + 0.5) * step
+    ks = np.arange(low, high + 1, dtype=np.int64)
+    phase = np.outer(ks, centres)
+    sin, cos = np.sin(phase), np.cos(phase)
+    s_ww = s_ww[used]
+    return _Basis(index=index, size=size, used=used, orders=ks, sin=sin, cos=cos,
+                  a11=(sin * sin) @ s_ww, a12=(sin * cos) @ s_ww, a22=(cos * cos) @ s_ww)
+
+
+def _power(basis: _Basis, residual: FloatArray, weight: FloatArray,
+           independence: float) -> Periodogram:
+    s_wr = _binned(weight * residual, basis.index, basis.size)[basis.used]
+    b1 = basis.sin @ s_wr
+    b2 = basis.cos @ s_wr
+    a11, a12, a22 = basis.a11, basis.a12, basis.a22
+    det = a11 * a22 - a12 * a12
+    ok = det > 1e-12 * np.maximum(a11 * a22, 1e-300)
+    power = np.zeros(len(basis.orders))
+    power[ok] = (a22 * b1 * b1 - 2 * a12 * b1 * b2 + a11 * b2 * b2)[ok] / det[ok]
+    sigma2 = float(residual @ residual) / max(len(residual) - 2, 1)
+    chi2 = power * independence / sigma2 if sigma2 > 0 else np.zeros_like(power)
+    return Periodogram(orders=basis.orders, power=power, chi2=chi2)
+
+
 def periodogram(
     residual: FloatArray,
     position_rad: FloatArray,
@@ -71,35 +118,11 @@ def periodogram(
     ``independence`` is the fraction of samples that are statistically independent; it
     scales the χ² statistic.
     """
-    low, high = orders
-    if high < low:
+    if orders[1] < orders[0]:
         empty = np.zeros(0)
         return Periodogram(orders=np.zeros(0, dtype=np.int64), power=empty, chi2=empty)
     w = np.ones_like(residual) if weight is None else weight
-    step = 2.0 * math.pi / BINS_PER_REV
-    origin = float(np.min(position_rad))
-    index = np.floor((position_rad - origin) / step).astype(np.intp)
-    size = int(index.max()) + 1
-    centres = origin + (np.arange(size) + 0.5) * step
-    s_ww = _binned(w * w, index, size)
-    s_wr = _binned(w * residual, index, size)
-    used = s_ww > 0
-    centres, s_ww, s_wr = centres[used], s_ww[used], s_wr[used]
-    ks = np.arange(low, high + 1, dtype=np.int64)
-    phase = np.outer(ks, centres)
-    sin, cos = np.sin(phase), np.cos(phase)
-    a11 = (sin * sin) @ s_ww
-    a12 = (sin * cos) @ s_ww
-    a22 = (cos * cos) @ s_ww
-    b1 = sin @ s_wr
-    b2 = cos @ s_wr
-    det = a11 * a22 - a12 * a12
-    ok = det > 1e-12 * np.maximum(a11 * a22, 1e-300)
-    power = np.zeros(len(ks))
-    power[ok] = (a22 * b1 * b1 - 2 * a12 * b1 * b2 + a11 * b2 * b2)[ok] / det[ok]
-    sigma2 = float(residual @ residual) / max(len(residual) - 2, 1)
-    chi2 = power * independence / sigma2 if sigma2 > 0 else np.zeros_like(power)
-    return Periodogram(orders=ks, power=power, chi2=chi2)
+    return _power(_basis(position_rad, w, orders), residual, w, independence)
 
 
 def find_orders(
@@ -117,14 +140,15 @@ def find_orders(
     significant (effective χ²(2) above the Bonferroni threshold for 200 orders at 1 %),
     at least 2 % of the first order's power, and at most six orders in all.
     """
+    if orders[1] < orders[0]:
+        return []
     w = np.ones_like(residual) if weight is None else weight
+    basis = _basis(position_rad, w, orders)
     left = residual.copy()
     chosen: list[int] = []
     first_power = 0.0
     while len(chosen) < MAX_ORDERS:
-        gram = periodogram(left, position_rad, weight=w, orders=orders, independence=independence)
-        if gram.orders.size == 0:
-            break
+        gram = _power(basis, left, w, independence)
         power = gram.power.copy()
         for k in chosen:
             power[gram.orders == k] = 0.0

@@ -134,6 +134,7 @@ class Designer:
     def __init__(self) -> None:
         self._cache: dict[tuple[int, str], FloatArray] = {}
         self._lag_cache: dict[tuple[int, str], FloatArray] = {}
+        self._shift_cache: dict[tuple[int, str, bool, float], FloatArray] = {}
 
     def columns(self, term: Term, signals: Signals) -> FloatArray:
         """A term's (low-passed) columns over the whole recording, cached."""
@@ -182,24 +183,36 @@ class Designer:
         ))
         return self.design(shifted, signals, rows)
 
+    def _shifted(self, term: Term, signals: Signals, shift_s: float, lead: bool) -> FloatArray:
+        """A term's columns (or their lead) at ``t + shift_s``, over the whole recording."""
+        key = (id(signals), term.key, lead, shift_s)
+        if key not in self._shift_cache:
+            block = self.lag_columns(term, signals) if lead else self.columns(term, signals)
+            if shift_s != 0.0:
+                block = fractional_shift(block, shift_s * signals.fs_hz,
+                                         np.arange(len(signals)))
+            self._shift_cache[key] = block
+        return self._shift_cache[key]
+
     def design(
         self, model: Model, signals: Signals, rows: IndexArray | None = None
     ) -> FloatArray:
-        """The design matrix (lag and shift applied), on ``rows`` or on every sample."""
+        """The design matrix (lag and shift applied), on ``rows`` or on every sample.
+
+        The shift is linear, so shifted columns and shifted leads are cached separately
+        and combined as ``X(t + δ) + τ·Ẋ(t + δ)``.
+        """
         index = np.arange(len(signals)) if rows is None else rows
-        blocks = [self.columns(term, signals) for term in model.terms]
-        if model.lag_s > 0:
-            blocks = [
-                block + model.lag_s * self.lag_columns(term, signals) if term.lagged else block
-                for term, block in zip(model.terms, blocks, strict=True)
-            ]
-        if not blocks:
+        if not model.terms:
             return np.zeros((len(index), 0))
-        if model.shift_s == 0.0:
-            return np.hstack([block[index] for block in blocks])
-        return np.hstack(
-            [fractional_shift(block, model.shift_s * signals.fs_hz, index) for block in blocks]
-        )
+        blocks = []
+        for term in model.terms:
+            block = self._shifted(term, signals, model.shift_s, lead=False)[index]
+            if model.lag_s > 0 and term.lagged:
+                block = block + model.lag_s * self._shifted(term, signals, model.shift_s,
+                                                            lead=True)[index]
+            blocks.append(block)
+        return np.hstack(blocks)
 
     def fit(self, model: Model, signals: Signals, rows: IndexArray) -> Fit:
         """Least squares on ``rows`` with covariance ``σ²(ΦᵀΦ)⁻¹``."""
