@@ -40,7 +40,8 @@ from hil.identify.estimate import Estimate
 FloatArray = NDArray[np.float64]
 ComplexArray = NDArray[np.complex128]
 IMAGES = 200  # aliases summed on each side in the sampled-data response
-TREND_ORDER = 3  # polynomial in time removed with each block's sine fit
+TREND_ORDER = 1  # constant + linear (the carrier) with each block's sine: higher orders are
+# nearly collinear with a one-period sine and inflate the variance (benchmarks/bench_frf.py)
 
 
 def sampled_response(
@@ -77,7 +78,7 @@ class FrequencyPoint:
     """One frequency: the measured sampled response and the phase the current loop adds."""
 
     frequency_hz: float
-    response_rad_nm: complex  # mean over blocks of P/T
+    response_rad_nm: complex  # H1 over the blocks: Σ P·T* / Σ |T|²
     lag_phase_rad: float  # phase of the response after the rigid, lag-free model (< 0: lag)
     lag_phase_u_rad: float  # standard uncertainty from the block scatter
     inertia_kg_m2: float  # from the magnitude against the rigid, lag-free model
@@ -140,16 +141,17 @@ def analyse_frequency(
     edges = np.searchsorted(
         time_s - time_s[0], np.arange(blocks + 1) * per_block / frequency_hz - 0.5 / fs_hz
     )
-    ratios, amplitudes = [], []
+    p_list, t_list = [], []
     for a, b in itertools.pairwise(edges):
         p_hat, t_hat = block_phasors(
             time_s[a:b], [position_rad[a:b], torque_nm[a:b]], omega=omega
         )
         if t_hat == 0:
             raise IdentificationError(f"{frequency_hz:g} Hz: no torque at the frequency")
-        ratios.append(p_hat / t_hat)
-        amplitudes.append(abs(t_hat))
-    ratio = np.asarray(ratios)
+        p_list.append(p_hat)
+        t_list.append(t_hat)
+    p_arr, t_arr = np.asarray(p_list), np.asarray(t_list)
+    ratio = p_arr / t_arr
     rigid = complex(
         sampled_response(
             frequency_hz,
@@ -160,14 +162,14 @@ def analyse_frequency(
         )[0]
     )
     phases = np.angle(ratio / rigid)
-    mean = complex(ratio.mean())
+    mean = complex(np.sum(p_arr * np.conj(t_arr)) / np.sum(np.abs(t_arr) ** 2))  # H1
     return FrequencyPoint(
         frequency_hz=frequency_hz,
         response_rad_nm=mean,
         lag_phase_rad=float(np.angle(mean / rigid)),
         lag_phase_u_rad=float(np.std(phases, ddof=1) / math.sqrt(blocks)),
         inertia_kg_m2=abs(rigid) / abs(mean),
-        torque_amplitude_nm=float(np.mean(amplitudes)),
+        torque_amplitude_nm=float(np.mean(np.abs(t_arr))),
         blocks=blocks,
     )
 
