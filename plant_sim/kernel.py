@@ -226,7 +226,9 @@ def run_kernel(
                     tc += (ts - tc) * math.exp(-ratio * ratio)
                 t_fric = math.copysign(tc, omega_m) + b * omega_m
                 omega_new = omega_m + h * (t_drive - t_fric) * inv_j_m
-                omega_m = 0.0 if omega_new * omega_m < 0.0 else omega_new
+                # through zero: stick only if friction can hold the applied torque there
+                crossed = omega_new * omega_m < 0.0
+                omega_m = 0.0 if crossed and abs(t_drive) <= ts else omega_new
             theta_m += h * omega_m
             if omega_m != 0.0 and exact_hold:
                 theta_m += hold_shift
