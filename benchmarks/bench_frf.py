@@ -66,17 +66,18 @@ def main() -> None:
     spec = protocol.Spec.from_profile(profile, info)
     freqs = np.array(spec.frequencies_hz)
     j_total = plant.total_inertia_kg_m2
-    wa = math.sqrt(plant.shaft_stiffness_nm_rad / plant.load_inertia_kg_m2)
-    reduced = plant.inertia_kg_m2 * plant.load_inertia_kg_m2 / j_total
+    j_load = plant.load_at_elevation_kg_m2
+    wa = math.sqrt(plant.shaft_stiffness_nm_rad / j_load)
+    reduced = plant.inertia_kg_m2 * j_load / j_total
     wr = math.sqrt(plant.shaft_stiffness_nm_rad / reduced)
     c = plant.shaft_damping_nm_s_rad
     truth_model = TwoMassModel(  # torque as the drive reports it: K_t error scales J
         inertia_kg_m2=j_total / (1 + plant.torque_constant_error_rel),
         antiresonance_hz=wa / (2 * math.pi), antiresonance_damping=c / (2 * math.sqrt(
-            plant.shaft_stiffness_nm_rad * plant.load_inertia_kg_m2)),
+            plant.shaft_stiffness_nm_rad * j_load)),
         resonance_hz=wr / (2 * math.pi), resonance_damping=c / (2 * math.sqrt(
             plant.shaft_stiffness_nm_rad * reduced)) + plant.viscous_nm_s_rad / (
-            2 * plant.inertia_kg_m2 * wr) * plant.load_inertia_kg_m2 / j_total,
+            2 * plant.inertia_kg_m2 * wr) * j_load / j_total,
         viscous_over_inertia_1_s=plant.viscous_nm_s_rad / j_total,
         time_constant_s=plant.current_loop_time_constant_s)
     truth = two_mass_response(truth_model, freqs, fs_hz=fs)

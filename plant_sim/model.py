@@ -60,8 +60,8 @@ def periodic_table(harmonics: tuple[Harmonic, ...]) -> FloatArray:
 def pack_params(params: PlantParams) -> FloatArray:
     """The kernel's parameter vector."""
     vector = np.zeros(kernel.N_PARAMS)
-    vector[kernel.P_J_MOTOR] = params.inertia_kg_m2
-    vector[kernel.P_J_LOAD] = params.load_inertia_kg_m2
+    vector[kernel.P_J_MOTOR] = params.motor_inertia_kg_m2
+    vector[kernel.P_J_LOAD] = params.load_at_elevation_kg_m2
     vector[kernel.P_K_SHAFT] = params.shaft_stiffness_nm_rad
     vector[kernel.P_C_SHAFT] = params.shaft_damping_nm_s_rad
     vector[kernel.P_B_POS] = params.viscous_nm_s_rad
@@ -160,6 +160,13 @@ class Plant:
         if locked:
             self._state[kernel.S_OMEGA_M] = 0.0
             self._state[kernel.S_OMEGA_L] = 0.0
+
+    def set_elevation(self, elevation_rad: float) -> None:
+        """Move the other axis (elevation) of the station: the inertia about this axis
+        follows ``inertia_elevation_kg_m2``."""
+        self.params = self.params.with_changes(elevation_rad=elevation_rad)
+        self._packed = pack_params(self.params)
+        self._substeps = substeps_for(self.params, self.fs_hz)
 
     def hold(self) -> None:
         """Reset the velocity integrator (what a drive does on disable/enable)."""

@@ -68,6 +68,10 @@ class PlantParams:
     torque_constant_error_rel: float = 0.0
     locked_rotor: bool = False  # rotor clamped through a shaft torque sensor (load_torque_nm)
     load_torque_noise_nm: float = 0.0  # std of white noise on the torque sensor
+    # azimuth axis carrying the elevation stage: the payload's inertia about this axis is
+    # J + inertia_elevation_kg_m2·cos²(elevation_rad) (on the load of a two-mass axis)
+    inertia_elevation_kg_m2: float = 0.0
+    elevation_rad: float = 0.0  # the other axis' angle (station state)
 
     def __post_init__(self) -> None:
         if not self.inertia_kg_m2 > 0:
@@ -95,21 +99,49 @@ class PlantParams:
             raise ProfileError("cable_hysteresis_angle_rad must be > 0")
         if self.load_inertia_kg_m2 > 0 and self.shaft_stiffness_nm_rad <= 0:
             raise ProfileError("a two-mass plant needs shaft_stiffness_nm_rad > 0")
+        if self.effective_inertias_kg_m2(elevation_rad=math.pi / 2)[0] <= 0 or (
+            self.effective_inertias_kg_m2(elevation_rad=0.0)[0] <= 0
+        ):
+            raise ProfileError("inertia_elevation_kg_m2 leaves no positive inertia")
         if not self.torque_constant_error_rel > -1.0:
             raise ProfileError("torque_constant_error_rel must be > -1")
         if not self.torque_limit_nm > 0:
             raise ProfileError("torque_limit_nm must be > 0")
 
+    def effective_inertias_kg_m2(self, *, elevation_rad: float) -> tuple[float, float]:
+        """(motor, load) inertia with the elevation-dependent part at ``elevation_rad`` (the
+        part that depends on elevation sits on the load of a two-mass axis, else on the
+        motor; the first element is that part's carrier for the positivity check)."""
+        extra = self.inertia_elevation_kg_m2 * math.cos(elevation_rad) ** 2
+        if self.load_inertia_kg_m2 > 0:
+            return self.load_inertia_kg_m2 + extra, self.inertia_kg_m2
+        return self.inertia_kg_m2 + extra, 0.0
+
+    @property
+    def motor_inertia_kg_m2(self) -> float:
+        """Motor-side inertia at ``elevation_rad``."""
+        if self.load_inertia_kg_m2 > 0:
+            return self.inertia_kg_m2
+        return self.effective_inertias_kg_m2(elevation_rad=self.elevation_rad)[0]
+
+    @property
+    def load_at_elevation_kg_m2(self) -> float:
+        """Load inertia at ``elevation_rad`` (0 for a rigid axis)."""
+        if self.load_inertia_kg_m2 <= 0:
+            return 0.0
+        return self.effective_inertias_kg_m2(elevation_rad=self.elevation_rad)[0]
+
     @property
     def total_inertia_kg_m2(self) -> float:
-        return self.inertia_kg_m2 + self.load_inertia_kg_m2
+        return self.motor_inertia_kg_m2 + self.load_at_elevation_kg_m2
 
     @property
     def resonance_hz(self) -> float:
         """Two-mass resonance (0 for a rigid axis)."""
-        if self.load_inertia_kg_m2 <= 0:
+        load = self.load_at_elevation_kg_m2
+        if load <= 0:
             return 0.0
-        reduced = self.inertia_kg_m2 * self.load_inertia_kg_m2 / self.total_inertia_kg_m2
+        reduced = self.motor_inertia_kg_m2 * load / self.total_inertia_kg_m2
         return math.sqrt(self.shaft_stiffness_nm_rad / reduced) / (2 * math.pi)
 
     def with_changes(self, **changes: Any) -> PlantParams:

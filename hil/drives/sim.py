@@ -77,6 +77,10 @@ class SimDrive(Drive):
         finally:
             self._plant.set_locked_rotor(False)
 
+    def set_elevation(self, elevation_rad: float) -> None:
+        """Put the station's other (elevation) axis at ``elevation_rad`` (simulated)."""
+        self._plant.set_elevation(elevation_rad)
+
     def enable(self) -> None:
         self._plant.hold()
         self._state = DriveState.ENABLED

@@ -1,0 +1,109 @@
+"""Azimuth inertia across elevation: the J/B/T_c sine at several elevations of the other axis,
+then ``J(el) = J_zenith + ΔJ·cos²(el)`` (numerics in :mod:`hil.identify.inertia_elevation`).
+
+Skips without a ``[protocols.inertia_elevation]`` table (not an azimuth axis) and on a
+station whose drive cannot move the elevation axis (``drive.set_elevation``). When the
+torque-constant protocol ran first, J is scaled by its reported-torque gain (shaft torque
+over reported torque): the result is in shaft-torque units.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import cast
+
+import pytest
+
+from hil.calibration import CalibrationRun
+from hil.drives.base import Drive, DriveInfo
+from hil.identify.estimate import Estimate
+from hil.identify.inertia_elevation import (
+    InertiaElevationResult,
+    fit_inertia_elevation,
+    scale_by_gain,
+)
+from hil.profile import UnitProfile
+from protocols import test_inertia_friction as sine
+
+NAME = "inertia_elevation"
+MEASUREMENTS = ("azimuth_inertia_level_kg_m2", "azimuth_inertia_zenith_kg_m2")
+pytestmark = pytest.mark.protocol(NAME)
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class Spec:
+    elevations_rad: tuple[float, ...]
+    park_elevation_rad: float  # where the elevation axis is left afterwards
+    sine: sine.Spec
+
+    @classmethod
+    def from_profile(cls, profile: UnitProfile, info: DriveInfo) -> Spec:
+        settings = profile.protocol(NAME)
+        return cls(
+            elevations_rad=tuple(float(e) for e in settings["elevations_rad"]),
+            park_elevation_rad=float(settings.get("park_elevation_rad", 0.0)),
+            sine=sine.Spec(
+                frequency_hz=float(settings.get("frequency_hz", 2.0)),
+                amplitudes_rad_s=tuple(float(a) for a in settings["amplitudes_rad_s"]),
+                settle_periods=int(settings.get("settle_periods", 2)),
+                periods=int(settings.get("periods", 8)),
+                fs_hz=min(profile.sample_rate_hz, info.max_sample_rate_hz),
+            ),
+        )
+
+
+def reported_torque_gain(calibration: CalibrationRun) -> tuple[float, float] | None:
+    """Shaft over reported torque (and its standard uncertainty) from the K_t protocol."""
+    for m in calibration.measurements:
+        if m.spec.name == "reported_torque_gain_error_pct":
+            return 1.0 + m.estimate.value / 100.0, m.estimate.standard_uncertainty / 100.0
+    return None
+
+
+@pytest.fixture(scope="module")
+def result(drive: Drive, calibration: CalibrationRun,
+           profile: UnitProfile) -> InertiaElevationResult:
+    if NAME not in profile.protocols:
+        pytest.skip(f"the profile has no [protocols.{NAME}] table (not an azimuth axis)")
+    set_elevation = getattr(drive, "set_elevation", None)
+    if set_elevation is None:
+        pytest.skip(f"{type(drive).__name__} cannot move the station's elevation axis "
+                    "(set_elevation())")
+    spec = Spec.from_profile(profile, drive.info)
+    gain = reported_torque_gain(calibration)
+    move_elevation = cast(Callable[[float], None], set_elevation)
+    inertias: list[Estimate] = []
+    try:
+        for elevation in spec.elevations_rad:
+            move_elevation(elevation)
+            recordings = [calibration.run(drive, e, protocol=NAME)
+                          for e in sine.excitation(spec.sine)]
+            inertia = sine.analyse(recordings, spec.sine).inertia
+            if gain is not None:
+                inertia = scale_by_gain(inertia, gain=gain[0], gain_u=gain[1])
+            inertias.append(inertia)
+    finally:
+        move_elevation(spec.park_elevation_rad)
+    analysed = fit_inertia_elevation(spec.elevations_rad, inertias)
+    calibration.details[NAME] = {
+        "model": "J(el) = J_zenith + ΔJ·cos²(el)",
+        "per_elevation": [{"elevation_rad": el, "inertia_kg_m2": j.value,
+                           "standard_uncertainty": j.standard_uncertainty}
+                          for el, j in zip(spec.elevations_rad, inertias, strict=True)],
+        "torque_scale": ("shaft torque (K_t protocol's gain applied)" if gain is not None
+                         else "reported torque (no K_t result)"),
+        "chi2_per_dof": analysed.chi2_per_dof,
+    }
+    return analysed
+
+
+@pytest.mark.parametrize("parameter", MEASUREMENTS)
+def test_inertia_elevation(parameter: str, result: InertiaElevationResult,
+                           calibration: CalibrationRun) -> None:
+    found = {e.name: e for e in (result.level, result.zenith)}
+    measurement = calibration.record(NAME, found[parameter])
+    assert measurement.outcome.value in ("PASS", "MARGINAL"), (
+        f"{parameter} = {measurement.estimate.value:.6g} {measurement.spec.unit} outside "
+        f"[{measurement.spec.lower_limit:.6g}, {measurement.spec.upper_limit:.6g}]"
+    )
