@@ -44,6 +44,9 @@ EFFECTS = (
 #: (the harmonic orders are searched again: the weight of K_t ripple is the current model).
 REUSABLE = frozenset({"stribeck", "cable_spring", "current_lag", "two_mass"})
 ROTARY_ONLY = frozenset({"cogging", "kt_ripple", "gravity"})
+#: BIC margin a Dahl loop must win by over the spring alone ("very strong", Kass–Raftery):
+#: the loop state is close to sgn(ω) and otherwise soaks up friction misfit.
+LOOP_EVIDENCE_BIC = 10.0
 #: Dahl hysteresis: angle over which the cable's friction loop saturates (rad).
 HYSTERESIS_ANGLES_RAD = (0.005, 0.02, 0.08)
 TWO_MASS_DAMPING = (0.02, 0.05, 0.1)
@@ -264,7 +267,7 @@ def _cable(ctx: Context) -> Model | None:
     for angle in HYSTERESIS_ANGLES_RAD:
         model = _extend(ctx.current.model, _cable_term(angle, constant))
         fit = ctx.designer.fit(model, ctx.signals, ctx.rows)
-        if fit.coef("cable_hysteresis") > 0 and fit.bic < best_bic:
+        if fit.coef("cable_hysteresis") > 0 and fit.bic < best_bic - LOOP_EVIDENCE_BIC:
             best, best_bic = model, fit.bic
     return best
 
