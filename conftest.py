@@ -1,16 +1,4 @@
-"""Repo-level pytest wiring: hypothesis profiles (the plugin loads via its entry point)."""
+"""Repo-level pytest wiring only: what is not collected. The gimbal-hil plugin loads through
+its ``pytest11`` entry point; test-only settings (hypothesis profiles) live in tests/."""
 
-from __future__ import annotations
-
-import os
-
-from hypothesis import HealthCheck, settings
-
-settings.register_profile(
-    "ci",
-    deadline=None,
-    derandomize=True,
-    suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture],
-)
-settings.register_profile("dev", deadline=None, max_examples=10)
-settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "ci"))
+collect_ignore = ["benchmarks", "docs", "build"]
