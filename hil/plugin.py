@@ -23,6 +23,7 @@ from hil.profile import UnitProfile, load_profile
 log = logging.getLogger(__name__)
 
 RUN_KEY = pytest.StashKey[CalibrationRun]()
+PROFILE_KEY = pytest.StashKey[UnitProfile]()
 CERTIFICATE_KEY = pytest.StashKey[Path]()
 PROTOCOL_MARK = "protocol"
 
@@ -63,11 +64,18 @@ def pytest_configure(config: pytest.Config) -> None:
     config.addinivalue_line("markers", f"{PROTOCOL_MARK}: a calibration protocol")
 
 
+def _load_profile(config: pytest.Config) -> UnitProfile:
+    """The unit profile named by ``--profile``, read once per session."""
+    if PROFILE_KEY not in config.stash:
+        config.stash[PROFILE_KEY] = load_profile(config.getoption("--profile"))
+    return config.stash[PROFILE_KEY]
+
+
 @pytest.fixture(scope="session")
 def profile(pytestconfig: pytest.Config) -> UnitProfile:
     """The unit profile named by ``--profile`` (default: the built-in demo unit)."""
     try:
-        return load_profile(pytestconfig.getoption("--profile"))
+        return _load_profile(pytestconfig)
     except HilError as exc:
         raise pytest.UsageError(str(exc)) from exc
 
@@ -153,7 +161,7 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
     """Run protocols in the order of the profile's ``[protocols.*]`` tables (later protocols
     may use earlier results, e.g. J for an acceleration correction); others keep their place."""
     try:
-        order = list(load_profile(config.getoption("--profile")).protocols)
+        order = list(_load_profile(config).protocols)
     except HilError:
         return  # the profile fixture reports the problem
     slots = [i for i, item in enumerate(items) if _protocol_name(item) is not None]
@@ -165,6 +173,19 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
     ordered = sorted((items[i] for i in slots), key=rank)
     for slot, item in zip(slots, ordered, strict=True):
         items[slot] = item
+
+
+def pytest_runtest_setup(item: pytest.Item) -> None:
+    """A protocol the unit's profile does not configure is skipped, with the reason."""
+    name = _protocol_name(item)
+    if name is None:
+        return
+    try:
+        configured = name in _load_profile(item.config).protocols
+    except HilError:
+        return  # the profile fixture reports the problem
+    if not configured:
+        pytest.skip(f"the unit profile has no [protocols.{name}] table: not calibrated here")
 
 
 @pytest.hookimpl(wrapper=True)
