@@ -10,6 +10,8 @@ from pathlib import Path
 
 import numpy as np
 
+from hil.diagnose.cli import add_arguments as add_diagnose_arguments
+from hil.diagnose.cli import run as run_diagnose
 from hil.drives import DRIVE_KINDS
 from hil.drives.base import Excitation, Mode
 from hil.errors import HilError, InputError
@@ -47,12 +49,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     cal.add_argument("pytest_args", nargs="*", help="extra pytest arguments (after --)")
 
     diag = commands.add_parser("diagnose", help="what does the model get wrong on a recording?")
-    try:
-        from hil.diagnose import cli as diagnose_cli
-    except ImportError:  # pragma: no cover - the diagnose package is optional at build time
-        diagnose_cli = None
-    else:
-        diagnose_cli.add_arguments(diag)
+    add_diagnose_arguments(diag)
 
     args = parser.parse_args(argv)
     logging.basicConfig(
@@ -64,10 +61,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             return _simulate(args)
         if args.subcommand == "calibrate":
             return _calibrate(args)
-        if diagnose_cli is None:
-            print("gimbal-hil: diagnose is not available in this build", file=sys.stderr)
-            return 2
-        return int(diagnose_cli.run(args))
+        return run_diagnose(args)
     except HilError as exc:
         print(f"gimbal-hil: error: {exc}", file=sys.stderr)
         return 2
