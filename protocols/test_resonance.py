@@ -18,7 +18,7 @@ from hil.calibration import CalibrationRun
 from hil.drives.base import Drive, DriveInfo, Excitation, Mode
 from hil.errors import ProfileError
 from hil.identify.estimate import Estimate
-from hil.identify.moves import position_move
+from hil.identify.moves import position_move, travel_shortfall_rad
 from hil.identify.resonance import ResonanceResult, frf_point, identify_resonance
 from hil.profile import UnitProfile
 from hil.recording import Recording
@@ -69,12 +69,14 @@ class Spec:
             travel_min_rad=info.limits.travel_min_rad,
             travel_max_rad=info.limits.travel_max_rad,
         )
-        travel = spec.speed_rad_s * (spec.ramp_s + sum(spec.segment_samples(f) for f in
-                                                      spec.frequencies_hz) / spec.fs_hz)
-        room = spec.travel_max_rad - spec.travel_min_rad - 2 * spec.margin_rad
-        if travel > room:
-            raise ProfileError(f"[protocols.{NAME}] needs {travel:.3g} rad of travel, the "
-                               f"limits leave {room:.3g} rad", source=profile.source)
+        samples = sum(spec.segment_samples(f) for f in spec.frequencies_hz)
+        shortfall = travel_shortfall_rad(
+            needed_rad=spec.speed_rad_s * (spec.ramp_s + samples / spec.fs_hz),
+            travel_min_rad=spec.travel_min_rad, travel_max_rad=spec.travel_max_rad,
+            margin_rad=spec.margin_rad)
+        if shortfall > 0:
+            raise ProfileError(f"[protocols.{NAME}] needs {shortfall:.3g} rad more travel "
+                               "than the limits leave", source=profile.source)
         return spec
 
     @property

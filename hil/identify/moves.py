@@ -21,3 +21,11 @@ def position_move(
     phase = np.arange(1, n_move + 1) / n_move
     path = start_rad + distance * (phase - np.sin(2 * math.pi * phase) / (2 * math.pi))
     return np.concatenate([path, np.full(max(round(hold_s * fs_hz), 1), stop_rad)])
+
+
+def travel_shortfall_rad(
+    *, needed_rad: float, travel_min_rad: float, travel_max_rad: float, margin_rad: float
+) -> float:
+    """How much more travel a one-way excitation needs than the limits leave (≤ 0: fits),
+    keeping ``margin_rad`` clear of each end."""
+    return needed_rad - (travel_max_rad - travel_min_rad - 2 * margin_rad)
