@@ -27,7 +27,8 @@ from hil.profile import UnitProfile
 from protocols import test_inertia_friction as sine
 
 NAME = "inertia_elevation"
-MEASUREMENTS = ("azimuth_inertia_level_kg_m2", "azimuth_inertia_zenith_kg_m2")
+MEASUREMENTS = ("azimuth_inertia_level_kg_m2", "azimuth_inertia_zenith_kg_m2",
+                "azimuth_inertia_ratio")
 pytestmark = pytest.mark.protocol(NAME)
 
 
@@ -101,7 +102,7 @@ def result(drive: Drive, calibration: CalibrationRun,
 @pytest.mark.parametrize("parameter", MEASUREMENTS)
 def test_inertia_elevation(parameter: str, result: InertiaElevationResult,
                            calibration: CalibrationRun) -> None:
-    found = {e.name: e for e in (result.level, result.zenith)}
+    found = {e.name: e for e in (result.level, result.zenith, result.ratio)}
     measurement = calibration.record(NAME, found[parameter])
     assert measurement.outcome.value in ("PASS", "MARGINAL"), (
         f"{parameter} = {measurement.estimate.value:.6g} {measurement.spec.unit} outside "

@@ -16,6 +16,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
+from numpy.typing import NDArray
 
 from hil.errors import IdentificationError
 from hil.identify.estimate import Estimate
@@ -27,6 +28,7 @@ class InertiaElevationResult:
     inertias_kg_m2: tuple[float, ...]
     level: Estimate  # azimuth_inertia_level_kg_m2
     zenith: Estimate  # azimuth_inertia_zenith_kg_m2
+    ratio: Estimate  # azimuth_inertia_ratio: J level / J zenith (max/min over elevation)
     chi2_per_dof: float
 
 
@@ -61,8 +63,18 @@ def fit_inertia_elevation(
         zenith=Estimate(name="azimuth_inertia_zenith_kg_m2", value=zenith_value,
                         standard_uncertainty=math.sqrt(float(covariance[0, 0])), unit="kg·m²",
                         dof=effective_dof),
+        ratio=_ratio(zenith_value, delta, covariance, effective_dof),
         chi2_per_dof=chi2_per_dof,
     )
+
+
+def _ratio(zenith: float, delta: float, covariance: NDArray[np.float64], dof: float) -> Estimate:
+    """``(J_zenith + ΔJ) / J_zenith``, the max/min inertia a fixed velocity-loop gain sees
+    (the loop's crossover moves by the same factor); first-order propagation."""
+    gradient = np.array([-delta / zenith**2, 1.0 / zenith])
+    return Estimate(name="azimuth_inertia_ratio", value=1.0 + delta / zenith,
+                    standard_uncertainty=math.sqrt(float(gradient @ covariance @ gradient)),
+                    unit="1", dof=dof)
 
 
 def scale_by_gain(estimate: Estimate, *, gain: float, gain_u: float) -> Estimate:

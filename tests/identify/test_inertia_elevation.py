@@ -120,3 +120,20 @@ def test_hidden_payload_inertia_is_recovered_within_the_claimed_accuracy(
         j_motor + zenith_load + delta, rel=_accuracy("azimuth_inertia_level_kg_m2"))
     assert result.zenith.value == pytest.approx(
         j_motor + zenith_load, rel=_accuracy("azimuth_inertia_zenith_kg_m2"))
+
+
+def test_max_min_ratio_and_its_uncertainty() -> None:
+    """J level / J zenith from the fit; its scatter over noisy inputs matches the reported u."""
+    elevations = (-1.2, -0.6, 0.0, 0.6, 1.2)
+    zenith, delta, u = 0.0065, 0.0015, 2e-5
+    rng = np.random.default_rng(3)
+    ratios, reported = [], []
+    for _ in range(300):
+        inertias = [Estimate(name="j", value=zenith + delta * math.cos(el) ** 2
+                             + rng.normal(0, u), standard_uncertainty=u, unit="kg·m²")
+                    for el in elevations]
+        result = fit_inertia_elevation(elevations, inertias)
+        ratios.append(result.ratio.value)
+        reported.append(result.ratio.standard_uncertainty)
+    assert np.mean(ratios) == pytest.approx((zenith + delta) / zenith, rel=1e-3)
+    assert np.std(ratios) == pytest.approx(np.mean(reported), rel=0.15)
