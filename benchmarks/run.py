@@ -21,6 +21,7 @@ import numpy as np
 import protocols.test_inertia_friction as protocol
 from hil.drives.sim import SimDrive
 from hil.identify.inertia_friction import (
+    HOLD_SAMPLES,
     FloatArray,
     Method,
     analyse_sine_run,
@@ -57,8 +58,15 @@ def efficiency(plant: PlantParams, runs: int) -> dict[str, dict[str, float]]:
             drive.enable()
             spec = protocol.Spec.from_profile(profile, drive.info)
             recordings = [drive.run(e) for e in protocol.excitation(spec)]
+        # as the protocol does after the current-loop protocol measured the lag
+        hold = HOLD_SAMPLES + plant.current_loop_time_constant_s * spec.fs_hz
         sine_runs = [
-            analyse_sine_run(r, frequency_hz=spec.frequency_hz, settle_periods=spec.settle_periods)
+            analyse_sine_run(
+                r,
+                frequency_hz=spec.frequency_hz,
+                settle_periods=spec.settle_periods,
+                hold_samples=hold,
+            )
             for r in recordings
         ]
         for method in methods:

@@ -15,7 +15,8 @@ from hil.profile import MeasurementSpec
 DECISION_RULE = (
     "Simple acceptance with the expanded uncertainty U (k≈2, ~95 %) stated (ILAC-G8:09/2019 "
     "4.2.1). PASS: value inside the limits, value ± U inside the limits and the value outside "
-    "the marginal band next to either limit. MARGINAL: value inside the limits but within the "
+    "the marginal band next to either limit (a fraction of the distance from the nominal to "
+    "that limit). MARGINAL: value inside the limits but within the "
     "marginal band or with a limit inside value ± U. FAIL: value outside the limits. The unit "
     "conforms when every result is PASS or MARGINAL and every protocol ran to completion."
 )
@@ -59,8 +60,11 @@ def judge(estimate: Estimate, spec: MeasurementSpec) -> Outcome:
     value, expanded = estimate.value, estimate.expanded_uncertainty
     if not math.isfinite(value) or not spec.lower_limit <= value <= spec.upper_limit:
         return Outcome.FAIL
-    band = spec.marginal_fraction * (spec.upper_limit - spec.lower_limit) / 2
-    near_limit = value < spec.lower_limit + band or value > spec.upper_limit - band
+    # the marginal band is a fraction of the distance from the nominal to each limit, so a
+    # one-sided quantity (nominal at its lower limit, smaller is better) has none below
+    low_band = spec.marginal_fraction * max(spec.nominal - spec.lower_limit, 0.0)
+    high_band = spec.marginal_fraction * max(spec.upper_limit - spec.nominal, 0.0)
+    near_limit = value < spec.lower_limit + low_band or value > spec.upper_limit - high_band
     straddles = value - expanded < spec.lower_limit or value + expanded > spec.upper_limit
     return Outcome.MARGINAL if near_limit or straddles else Outcome.PASS
 

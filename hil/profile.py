@@ -23,8 +23,9 @@ FIXTURES_DIR = Path(fixtures.__file__).parent
 class MeasurementSpec:
     """A declared measurement: acceptance limits around a nominal value.
 
-    ``marginal_fraction`` is the part of each half-tolerance next to a limit in which a
-    value is MARGINAL; ``accuracy_rel`` is what the method claims (tests hold it to it).
+    ``marginal_fraction``: the part of the distance from the nominal to each limit, next to
+    that limit, in which a value is MARGINAL; ``accuracy_rel`` is what the method claims
+    (tests hold it to it).
     """
 
     name: str

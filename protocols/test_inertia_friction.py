@@ -11,6 +11,7 @@ import pytest
 from hil.calibration import CalibrationRun
 from hil.drives.base import Drive, DriveInfo, Excitation, Mode
 from hil.identify.inertia_friction import (
+    HOLD_SAMPLES,
     InertiaFrictionResult,
     Method,
     analyse_sine_run,
@@ -63,12 +64,27 @@ def excitation(spec: Spec) -> list[Excitation]:
     ]
 
 
-def analyse(recordings: list[Recording], spec: Spec) -> InertiaFrictionResult:
+def analyse(
+    recordings: list[Recording], spec: Spec, *, current_loop_lag_s: float = 0.0
+) -> InertiaFrictionResult:
+    """J, B, T_c; the reported torque reaches the shaft half a sample (zero-order hold) plus
+    the current loop's lag later, which would otherwise leak into B as ``c·2πf·τ``."""
+    hold = HOLD_SAMPLES + current_loop_lag_s * spec.fs_hz
     runs = [
-        analyse_sine_run(r, frequency_hz=spec.frequency_hz, settle_periods=spec.settle_periods)
+        analyse_sine_run(
+            r, frequency_hz=spec.frequency_hz, settle_periods=spec.settle_periods, hold_samples=hold
+        )
         for r in recordings
     ]
     return identify_inertia_friction(runs, method=spec.method)
+
+
+def measured_current_loop_lag_s(calibration: CalibrationRun) -> float:
+    """The current-loop time constant if that protocol ran earlier, else 0."""
+    for measurement in calibration.measurements:
+        if measurement.spec.name == "current_loop_time_constant_ms":
+            return measurement.estimate.value / 1000.0
+    return 0.0
 
 
 @pytest.fixture(scope="module")
@@ -77,8 +93,10 @@ def result(
 ) -> InertiaFrictionResult:
     spec = Spec.from_profile(profile, drive.info)
     recordings = [calibration.run(drive, e, protocol=NAME) for e in excitation(spec)]
-    analysed = analyse(recordings, spec)
+    lag_s = measured_current_loop_lag_s(calibration)
+    analysed = analyse(recordings, spec, current_loop_lag_s=lag_s)
     calibration.details[NAME] = {
+        "current_loop_lag_compensated_s": lag_s,
         "fit_pct": round(analysed.fit_pct, 2),
         "noise_rms_nm": analysed.noise_rms_nm,
         "components": [

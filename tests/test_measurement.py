@@ -12,8 +12,15 @@ from hil.identify.estimate import Estimate, coverage_factor
 from hil.measurement import Outcome, judge, with_method_accuracy
 from hil.profile import MeasurementSpec, builtin_profile_path, load_profile
 
-SPEC = MeasurementSpec(name="x", unit="N·m", nominal=1.0, lower_limit=0.9, upper_limit=1.1,
-                       marginal_fraction=0.2, accuracy_rel=0.03)
+SPEC = MeasurementSpec(
+    name="x",
+    unit="N·m",
+    nominal=1.0,
+    lower_limit=0.9,
+    upper_limit=1.1,
+    marginal_fraction=0.2,
+    accuracy_rel=0.03,
+)
 
 
 @pytest.mark.parametrize(
@@ -30,6 +37,24 @@ SPEC = MeasurementSpec(name="x", unit="N·m", nominal=1.0, lower_limit=0.9, uppe
 def test_decision_rule(value: float, u: float, expected: Outcome) -> None:
     estimate = Estimate(name="x", value=value, standard_uncertainty=u, unit="N·m")
     assert judge(estimate, SPEC) is expected
+
+
+def test_one_sided_quantity_has_no_marginal_band_at_its_nominal() -> None:
+    spread = MeasurementSpec(
+        name="spread",
+        unit="%",
+        nominal=0.0,
+        lower_limit=-0.001,
+        upper_limit=5.0,
+        marginal_fraction=0.2,
+    )
+
+    def outcome(value: float) -> Outcome:
+        return judge(Estimate(name="s", value=value, standard_uncertainty=0.0, unit="%"), spread)
+
+    assert outcome(0.3) is Outcome.PASS
+    assert outcome(4.5) is Outcome.MARGINAL
+    assert outcome(5.1) is Outcome.FAIL
 
 
 def test_coverage_factor_follows_student_t_for_few_degrees_of_freedom() -> None:

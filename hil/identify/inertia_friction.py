@@ -38,6 +38,7 @@ COULOMB_FUNDAMENTAL = 4.0 / math.pi  # fundamental of sgn(sin)
 REVERSAL_BAND = 0.15  # fraction of the velocity amplitude
 DERIVATIVE_WINDOW_PERIODS = 0.02  # Savitzky–Golay window, in periods of the sine
 PHASE_BINS = 200
+HOLD_SAMPLES = 0.5  # the drive holds each reported torque over the following period
 
 
 def orthogonal_components(
@@ -92,10 +93,19 @@ def synchronous_average(signal: FloatArray, phase_bin: NDArray[np.intp]) -> Floa
     return means[phase_bin]
 
 
-def analyse_sine_run(recording: Recording, *, frequency_hz: float, settle_periods: int) -> SineRun:
+def analyse_sine_run(
+    recording: Recording,
+    *,
+    frequency_hz: float,
+    settle_periods: int,
+    hold_samples: float = HOLD_SAMPLES,
+) -> SineRun:
     """Reduce one sinusoidal-velocity run (phase zero at the recording's first sample).
 
     The first ``settle_periods`` are discarded; every following whole period is used.
+    ``hold_samples``: the torque reported at sample k is held by the drive over the next
+    period, so the motion it causes is centred that many samples later; the kinematics are
+    taken there (0.5 for a zero-order hold; 0 for torque already time-aligned with motion).
     """
     time_s = recording.time_s - recording.time_s[0]
     dt = float(np.median(np.diff(time_s)))
@@ -109,6 +119,10 @@ def analyse_sine_run(recording: Recording, *, frequency_hz: float, settle_period
     velocity, acceleration = phase_free_derivatives(
         recording.position, time_s=time_s, window_s=DERIVATIVE_WINDOW_PERIODS / frequency_hz
     )
+    if hold_samples:
+        shifted = time_s + hold_samples * dt
+        velocity = np.interp(shifted, time_s, velocity)
+        acceleration = np.interp(shifted, time_s, acceleration)
     cycles = time_s * frequency_hz
     window = (cycles >= settle_periods - 1e-9) & (cycles < total - 1e-9)
     t, torque = time_s[window], recording.effort[window]

@@ -3,6 +3,7 @@ and the axis left not enabled."""
 
 from __future__ import annotations
 
+import numpy as np
 import pytest
 
 from conftest import sine
@@ -59,8 +60,13 @@ def test_lost_pdos_leave_gaps_not_invented_samples(profile: UnitProfile) -> None
         recording = drive.run(sine(0.5, fs_hz=FS, periods=1))
     lost = int(recording.metadata["lost_samples"])
     assert 0 < lost == 500 - len(recording)
-    steps = recording.time_s[1:] - recording.time_s[:-1]
-    assert steps.max() == pytest.approx(2e-3)  # a gap of one SYNC where a sample was lost
+    steps = (recording.time_s[1:] - recording.time_s[:-1]) / 1e-3  # in SYNC periods
+    # no invented samples: every sample sits on a SYNC count, gaps only where one was lost.
+    # Under load a TPDO that arrives after the PDO timeout next to a dropped one is counted
+    # lost too (seen: 2 of 9 runs), so a gap may span two SYNCs.
+    np.testing.assert_allclose(steps, np.round(steps), atol=1e-6)
+    assert 2 <= steps.max() <= 3
+    assert int(np.sum(np.round(steps) - 1)) == lost
 
 
 def test_all_pdos_lost_is_a_communication_error(profile: UnitProfile) -> None:

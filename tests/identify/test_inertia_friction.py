@@ -40,6 +40,7 @@ def test_noise_free_model_is_recovered_exactly() -> None:
             ),
             frequency_hz=2.0,
             settle_periods=2,
+            hold_samples=0.0,
         )
         for a in (0.5, 1.0, 1.5)
     ]
@@ -69,6 +70,7 @@ def test_reported_uncertainty_matches_the_scatter_and_the_cramer_rao_bound() -> 
                 ),
                 frequency_hz=2.0,
                 settle_periods=2,
+                hold_samples=0.0,
             )
             for i, a in enumerate((0.5, 1.0))
         ]
@@ -93,6 +95,7 @@ def test_single_amplitude_is_refused() -> None:
         sine_model_recording(**ARTICLE, amplitude=0.5, frequency_hz=2.0, periods=6, fs_hz=2000.0),
         frequency_hz=2.0,
         settle_periods=2,
+        hold_samples=0.0,
     )
     with pytest.raises(IdentificationError, match="two or more amplitudes"):
         identify_inertia_friction([run])
@@ -103,4 +106,4 @@ def test_single_amplitude_is_refused() -> None:
 def test_too_few_periods_is_refused() -> None:
     rec = sine_model_recording(**ARTICLE, amplitude=0.5, frequency_hz=2.0, periods=3, fs_hz=2000.0)
     with pytest.raises(IdentificationError, match="whole periods"):
-        analyse_sine_run(rec, frequency_hz=2.0, settle_periods=2)
+        analyse_sine_run(rec, frequency_hz=2.0, settle_periods=2, hold_samples=0.0)
