@@ -59,11 +59,81 @@ class UnitProfile:
         except KeyError:
             raise ProfileError(f"no [protocols.{name}] table", source=self.source) from None
 
+    def settings(self, name: str) -> ProtocolSettings:
+        """Typed reader of one protocol's settings (see :class:`ProtocolSettings`)."""
+        return ProtocolSettings(self.protocol(name), table=f"[protocols.{name}]",
+                                source=self.source)
+
     def measurement(self, name: str) -> MeasurementSpec:
         try:
             return self.measurements[name]
         except KeyError:
             raise ProfileError(f"no [measurements.{name}] table", source=self.source) from None
+
+
+class ProtocolSettings:
+    """Reads a ``[protocols.NAME]`` table: values converted with a :class:`ProfileError` that
+    names file, table and key; :meth:`done` refuses keys nobody read (a typo would otherwise
+    silently fall back to a default)."""
+
+    def __init__(self, values: Mapping[str, Any], *, table: str, source: str) -> None:
+        self._values = values
+        self._table = table
+        self._source = source
+        self._read: set[str] = set()
+
+    def _get(self, key: str, default: Any) -> Any:
+        self._read.add(key)
+        if key in self._values:
+            return self._values[key]
+        if default is None:
+            raise ProfileError(f"{self._table} lacks '{key}'", source=self._source)
+        return default
+
+    def _error(self, key: str, what: str) -> ProfileError:
+        value = self._values.get(key)
+        return ProfileError(f"{self._table} '{key}' must be {what}, got {value!r}",
+                            source=self._source)
+
+    def number(self, key: str, default: float | None = None) -> float:
+        value = self._get(key, default)
+        if isinstance(value, bool) or not isinstance(value, int | float):
+            raise self._error(key, "a number")
+        if not math.isfinite(value):
+            raise self._error(key, "finite")
+        return float(value)
+
+    def integer(self, key: str, default: int | None = None) -> int:
+        value = self._get(key, default)
+        if isinstance(value, bool) or not isinstance(value, int):
+            raise self._error(key, "an integer")
+        return value
+
+    def numbers(self, key: str, *, count: int | None = None) -> tuple[float, ...]:
+        value = self._get(key, None)
+        if not isinstance(value, list) or not value or any(
+            isinstance(v, bool) or not isinstance(v, int | float) for v in value
+        ):
+            raise self._error(key, "a non-empty list of numbers")
+        if count is not None and len(value) != count:
+            raise self._error(key, f"a list of {count} numbers")
+        return tuple(float(v) for v in value)
+
+    def choice(self, key: str, options: tuple[str, ...], default: str) -> str:
+        value = self._get(key, default)
+        if value not in options:
+            raise self._error(key, f"one of {', '.join(options)}")
+        return str(value)
+
+    def done(self) -> None:
+        """Refuse keys that no reader asked for."""
+        unknown = sorted(set(self._values) - self._read)
+        if unknown:
+            raise ProfileError(
+                f"{self._table} has unknown setting(s) {', '.join(map(repr, unknown))} "
+                f"(known: {', '.join(sorted(self._read))})",
+                source=self._source,
+            )
 
 
 def builtin_profile_path(name: str = DEFAULT_PROFILE) -> Path:

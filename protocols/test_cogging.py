@@ -41,18 +41,20 @@ class Spec:
 
     @classmethod
     def from_profile(cls, profile: UnitProfile, info: DriveInfo) -> Spec:
-        settings = profile.protocol(NAME)
-        return cls(
-            speed_rad_s=float(settings.get("speed_rad_s", 0.4)),
-            margin_rad=float(settings.get("margin_rad", 0.1)),
-            skip_rad=float(settings.get("skip_rad", 0.1)),
-            min_order=int(settings.get("min_order", 10)),
-            max_order=int(settings.get("max_order", 200)),
-            move_speed_rad_s=float(settings.get("move_speed_rad_s", 0.5)),
+        settings = profile.settings(NAME)
+        spec = cls(
+            speed_rad_s=settings.number("speed_rad_s", 0.4),
+            margin_rad=settings.number("margin_rad", 0.1),
+            skip_rad=settings.number("skip_rad", 0.1),
+            min_order=settings.integer("min_order", 10),
+            max_order=settings.integer("max_order", 200),
+            move_speed_rad_s=settings.number("move_speed_rad_s", 0.5),
             fs_hz=min(profile.sample_rate_hz, info.max_sample_rate_hz),
             travel_min_rad=info.limits.travel_min_rad,
             travel_max_rad=info.limits.travel_max_rad,
         )
+        settings.done()
+        return spec
 
     @property
     def start_rad(self) -> float:
@@ -68,23 +70,43 @@ def excitation(spec: Spec, *, position_rad: float) -> list[Excitation]:
     """Move to the lower end, then one pass up and one down at constant speed."""
     n = spec.pass_samples
     return [
-        Excitation(name="move_to_start", mode=Mode.POSITION, fs_hz=spec.fs_hz,
-                   command=position_move(position_rad, spec.start_rad, fs_hz=spec.fs_hz,
-                                         speed_rad_s=spec.move_speed_rad_s, hold_s=0.2)),
-        Excitation(name="passes", mode=Mode.VELOCITY, fs_hz=spec.fs_hz,
-                   command=np.concatenate([np.full(n, spec.speed_rad_s),
-                                           np.full(n, -spec.speed_rad_s)])),
+        Excitation(
+            name="move_to_start",
+            mode=Mode.POSITION,
+            fs_hz=spec.fs_hz,
+            command=position_move(
+                position_rad,
+                spec.start_rad,
+                fs_hz=spec.fs_hz,
+                speed_rad_s=spec.move_speed_rad_s,
+                hold_s=0.2,
+            ),
+        ),
+        Excitation(
+            name="passes",
+            mode=Mode.VELOCITY,
+            fs_hz=spec.fs_hz,
+            command=np.concatenate([np.full(n, spec.speed_rad_s), np.full(n, -spec.speed_rad_s)]),
+        ),
     ]
 
 
-def analyse(time_s: np.ndarray, position_rad: np.ndarray, torque_nm: np.ndarray, spec: Spec,
-            *, inertia_kg_m2: float) -> CoggingResult:
+def analyse(
+    time_s: np.ndarray,
+    position_rad: np.ndarray,
+    torque_nm: np.ndarray,
+    spec: Spec,
+    *,
+    inertia_kg_m2: float,
+) -> CoggingResult:
     n = spec.pass_samples
     skip = math.ceil(spec.skip_rad / spec.speed_rad_s * spec.fs_hz)
-    passes = [(time_s[a:b], position_rad[a:b], torque_nm[a:b])
-              for a, b in ((skip, n), (n + skip, 2 * n))]
-    return identify_cogging(passes, inertia_kg_m2=inertia_kg_m2, min_order=spec.min_order,
-                            max_order=spec.max_order)
+    passes = [
+        (time_s[a:b], position_rad[a:b], torque_nm[a:b]) for a, b in ((skip, n), (n + skip, 2 * n))
+    ]
+    return identify_cogging(
+        passes, inertia_kg_m2=inertia_kg_m2, min_order=spec.min_order, max_order=spec.max_order
+    )
 
 
 def inertia_for_correction(calibration: CalibrationRun, profile: UnitProfile) -> tuple[float, str]:
@@ -102,8 +124,9 @@ def result(drive: Drive, calibration: CalibrationRun, profile: UnitProfile) -> C
     calibration.run(drive, move, protocol=NAME)
     recording = calibration.run(drive, passes, protocol=NAME)
     inertia, source = inertia_for_correction(calibration, profile)
-    analysed = analyse(recording.time_s, recording.position, recording.effort, spec,
-                       inertia_kg_m2=inertia)
+    analysed = analyse(
+        recording.time_s, recording.position, recording.effort, spec, inertia_kg_m2=inertia
+    )
     table = compensation_table(analysed)
     path = calibration.write_artifact(
         NAME,

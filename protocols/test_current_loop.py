@@ -42,17 +42,17 @@ class Spec:
 
     @classmethod
     def from_profile(cls, profile: UnitProfile, info: DriveInfo) -> Spec:
-        settings = profile.protocol(NAME)
+        settings = profile.settings(NAME)
         spec = cls(
-            frequencies_hz=tuple(float(f) for f in settings["frequencies_hz"]),
-            speed_rad_s=float(settings.get("speed_rad_s", 0.6)),
-            amplitude_rad_s=float(settings.get("amplitude_rad_s", 0.3)),
-            segment_s=float(settings.get("segment_s", 0.25)),
-            settle_s=float(settings.get("settle_s", 0.05)),
-            ramp_s=float(settings.get("ramp_s", 0.1)),
-            blocks=int(settings.get("blocks", 5)),
-            margin_rad=float(settings.get("margin_rad", 0.1)),
-            move_speed_rad_s=float(settings.get("move_speed_rad_s", 0.5)),
+            frequencies_hz=settings.numbers("frequencies_hz"),
+            speed_rad_s=settings.number("speed_rad_s", 0.6),
+            amplitude_rad_s=settings.number("amplitude_rad_s", 0.3),
+            segment_s=settings.number("segment_s", 0.25),
+            settle_s=settings.number("settle_s", 0.05),
+            ramp_s=settings.number("ramp_s", 0.1),
+            blocks=settings.integer("blocks", 5),
+            margin_rad=settings.number("margin_rad", 0.1),
+            move_speed_rad_s=settings.number("move_speed_rad_s", 0.5),
             fs_hz=min(profile.sample_rate_hz, info.max_sample_rate_hz),
             travel_min_rad=info.limits.travel_min_rad,
             travel_max_rad=info.limits.travel_max_rad,
@@ -60,11 +60,16 @@ class Spec:
         samples = sum(spec.segment_samples(f) for f in spec.frequencies_hz)
         shortfall = travel_shortfall_rad(
             needed_rad=spec.speed_rad_s * (spec.ramp_s + samples / spec.fs_hz),
-            travel_min_rad=spec.travel_min_rad, travel_max_rad=spec.travel_max_rad,
-            margin_rad=spec.margin_rad)
+            travel_min_rad=spec.travel_min_rad,
+            travel_max_rad=spec.travel_max_rad,
+            margin_rad=spec.margin_rad,
+        )
         if shortfall > 0:
-            raise ProfileError(f"[protocols.{NAME}] needs {shortfall:.3g} rad more travel "
-                               "than the limits leave", source=profile.source)
+            raise ProfileError(
+                f"[protocols.{NAME}] needs {shortfall:.3g} rad more travel than the limits leave",
+                source=profile.source,
+            )
+        settings.done()
         return spec
 
     @property
@@ -94,9 +99,18 @@ def excitation(spec: Spec, *, position_rad: float) -> list[Excitation]:
         segments.append(spec.speed_rad_s + spec.amplitude_rad_s * np.sin(2 * math.pi * f * t))
     command = np.concatenate([_ramp(spec, True), *segments, _ramp(spec, False)])
     return [
-        Excitation(name="move_to_start", mode=Mode.POSITION, fs_hz=spec.fs_hz,
-                   command=position_move(position_rad, spec.start_rad, fs_hz=spec.fs_hz,
-                                         speed_rad_s=spec.move_speed_rad_s, hold_s=0.1)),
+        Excitation(
+            name="move_to_start",
+            mode=Mode.POSITION,
+            fs_hz=spec.fs_hz,
+            command=position_move(
+                position_rad,
+                spec.start_rad,
+                fs_hz=spec.fs_hz,
+                speed_rad_s=spec.move_speed_rad_s,
+                hold_s=0.1,
+            ),
+        ),
         Excitation(name="sines", mode=Mode.VELOCITY, fs_hz=spec.fs_hz, command=command),
     ]
 
@@ -106,9 +120,16 @@ def analyse(recording: Recording, spec: Spec) -> CurrentLoopResult:
     points = []
     for f in spec.frequencies_hz:
         a, b = start + spec.settle_samples(f), start + spec.segment_samples(f)
-        points.append(analyse_frequency(recording.time_s[a:b], recording.position[a:b],
-                                        recording.effort[a:b], frequency_hz=f,
-                                        fs_hz=spec.fs_hz, blocks=spec.blocks))
+        points.append(
+            analyse_frequency(
+                recording.time_s[a:b],
+                recording.position[a:b],
+                recording.effort[a:b],
+                frequency_hz=f,
+                fs_hz=spec.fs_hz,
+                blocks=spec.blocks,
+            )
+        )
         start += spec.segment_samples(f)
     return fit_current_loop_lag(points, fs_hz=spec.fs_hz)
 
@@ -123,9 +144,13 @@ def result(drive: Drive, calibration: CalibrationRun, profile: UnitProfile) -> C
         "viscous_over_inertia_1_s": analysed.viscous_over_inertia_1_s,
         "chi2_per_dof": analysed.chi2_per_dof,
         "points": [
-            {"frequency_hz": p.frequency_hz, "lag_phase_rad": p.lag_phase_rad,
-             "lag_phase_u_rad": p.lag_phase_u_rad, "inertia_kg_m2": p.inertia_kg_m2,
-             "torque_amplitude_nm": p.torque_amplitude_nm}
+            {
+                "frequency_hz": p.frequency_hz,
+                "lag_phase_rad": p.lag_phase_rad,
+                "lag_phase_u_rad": p.lag_phase_u_rad,
+                "inertia_kg_m2": p.inertia_kg_m2,
+                "torque_amplitude_nm": p.torque_amplitude_nm,
+            }
             for p in analysed.points
         ],
     }
@@ -133,8 +158,9 @@ def result(drive: Drive, calibration: CalibrationRun, profile: UnitProfile) -> C
 
 
 @pytest.mark.parametrize("parameter", MEASUREMENTS)
-def test_current_loop(parameter: str, result: CurrentLoopResult,
-                      calibration: CalibrationRun) -> None:
+def test_current_loop(
+    parameter: str, result: CurrentLoopResult, calibration: CalibrationRun
+) -> None:
     measurement = calibration.record(NAME, {MEASUREMENTS[0]: result.time_constant}[parameter])
     assert measurement.outcome.value in ("PASS", "MARGINAL"), (
         f"{parameter} = {measurement.estimate.value:.6g} {measurement.spec.unit} outside "

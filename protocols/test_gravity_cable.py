@@ -31,8 +31,13 @@ from hil.profile import UnitProfile
 log = logging.getLogger(__name__)
 
 NAME = "gravity_cable"
-MEASUREMENTS = ("gravity_mge_nm", "gravity_phase_rad", "eccentricity_mm",
-                "cable_stiffness_nm_rad", "cable_hysteresis_nm")
+MEASUREMENTS = (
+    "gravity_mge_nm",
+    "gravity_phase_rad",
+    "eccentricity_mm",
+    "cable_stiffness_nm_rad",
+    "cable_hysteresis_nm",
+)
 pytestmark = pytest.mark.protocol(NAME)
 
 
@@ -54,23 +59,25 @@ class Spec:
 
     @classmethod
     def from_profile(cls, profile: UnitProfile, info: DriveInfo) -> Spec:
-        settings = profile.protocol(NAME)
+        settings = profile.settings(NAME)
         mass = profile.unit.get("mass_kg")
-        return cls(
-            margin_rad=float(settings.get("margin_rad", 0.1)),
-            speed_rad_s=float(settings.get("speed_rad_s", 0.15)),
-            rewind_speed_rad_s=float(settings.get("rewind_speed_rad_s", 0.6)),
-            probe_rad=float(settings.get("probe_rad", 0.2)),
-            probe_speed_rad_s=float(settings.get("probe_speed_rad_s", 0.05)),
-            probe_settle_s=float(settings.get("probe_settle_s", 0.12)),
-            exclude_rad=float(settings.get("exclude_rad", 0.1)),
-            bins=int(settings.get("bins", 48)),
-            move_speed_rad_s=float(settings.get("move_speed_rad_s", 0.5)),
+        spec = cls(
+            margin_rad=settings.number("margin_rad", 0.1),
+            speed_rad_s=settings.number("speed_rad_s", 0.15),
+            rewind_speed_rad_s=settings.number("rewind_speed_rad_s", 0.6),
+            probe_rad=settings.number("probe_rad", 0.2),
+            probe_speed_rad_s=settings.number("probe_speed_rad_s", 0.05),
+            probe_settle_s=settings.number("probe_settle_s", 0.12),
+            exclude_rad=settings.number("exclude_rad", 0.1),
+            bins=settings.integer("bins", 48),
+            move_speed_rad_s=settings.number("move_speed_rad_s", 0.5),
             fs_hz=min(profile.sample_rate_hz, info.max_sample_rate_hz),
             travel_min_rad=info.limits.travel_min_rad,
             travel_max_rad=info.limits.travel_max_rad,
             mass_kg=None if mass is None else float(mass),
         )
+        settings.done()
+        return spec
 
     @property
     def start_rad(self) -> float:
@@ -78,29 +85,47 @@ class Spec:
 
     @property
     def plan(self) -> SweepPlan:
-        return sweep_plan(start_rad=self.start_rad,
-                          stop_rad=self.travel_max_rad - self.margin_rad,
-                          speed_rad_s=self.speed_rad_s,
-                          rewind_speed_rad_s=self.rewind_speed_rad_s,
-                          probe_rad=self.probe_rad, probe_speed_rad_s=self.probe_speed_rad_s,
-                          fs_hz=self.fs_hz)
+        return sweep_plan(
+            start_rad=self.start_rad,
+            stop_rad=self.travel_max_rad - self.margin_rad,
+            speed_rad_s=self.speed_rad_s,
+            rewind_speed_rad_s=self.rewind_speed_rad_s,
+            probe_rad=self.probe_rad,
+            probe_speed_rad_s=self.probe_speed_rad_s,
+            fs_hz=self.fs_hz,
+        )
 
 
 def excitation(spec: Spec, *, position_rad: float) -> list[Excitation]:
     """A position move to the lower end of the travel, then the sweep."""
     return [
-        Excitation(name="move_to_start", mode=Mode.POSITION, fs_hz=spec.fs_hz,
-                   command=position_move(position_rad, spec.start_rad, fs_hz=spec.fs_hz,
-                                         speed_rad_s=spec.move_speed_rad_s, hold_s=0.2)),
-        Excitation(name="sweep", mode=Mode.VELOCITY, fs_hz=spec.fs_hz,
-                   command=spec.plan.command_rad_s),
+        Excitation(
+            name="move_to_start",
+            mode=Mode.POSITION,
+            fs_hz=spec.fs_hz,
+            command=position_move(
+                position_rad,
+                spec.start_rad,
+                fs_hz=spec.fs_hz,
+                speed_rad_s=spec.move_speed_rad_s,
+                hold_s=0.2,
+            ),
+        ),
+        Excitation(
+            name="sweep", mode=Mode.VELOCITY, fs_hz=spec.fs_hz, command=spec.plan.command_rad_s
+        ),
     ]
 
 
 def analyse(position_rad: np.ndarray, torque_nm: np.ndarray, spec: Spec) -> GravityCableResult:
-    return identify_gravity_cable(position_rad=position_rad, torque_nm=torque_nm,
-                                  plan=spec.plan, exclude_rad=spec.exclude_rad, bins=spec.bins,
-                                  settle_rad=spec.probe_settle_s * spec.probe_speed_rad_s)
+    return identify_gravity_cable(
+        position_rad=position_rad,
+        torque_nm=torque_nm,
+        plan=spec.plan,
+        exclude_rad=spec.exclude_rad,
+        bins=spec.bins,
+        settle_rad=spec.probe_settle_s * spec.probe_speed_rad_s,
+    )
 
 
 @pytest.fixture(scope="module")
@@ -122,16 +147,17 @@ def result(drive: Drive, calibration: CalibrationRun, spec: Spec) -> GravityCabl
         "bins": analysed.bins,
         "residual_rms_nm": analysed.residual_rms_nm,
         "load_nm_by_elevation_rad": [
-            [float(c), float(v)] for c, v in zip(analysed.bin_centres_rad, analysed.load_nm,
-                                                 strict=True)
+            [float(c), float(v)]
+            for c, v in zip(analysed.bin_centres_rad, analysed.load_nm, strict=True)
         ],
     }
     return analysed
 
 
 @pytest.mark.parametrize("parameter", MEASUREMENTS)
-def test_gravity_cable(parameter: str, result: GravityCableResult, spec: Spec,
-                       calibration: CalibrationRun) -> None:
+def test_gravity_cable(
+    parameter: str, result: GravityCableResult, spec: Spec, calibration: CalibrationRun
+) -> None:
     estimates: dict[str, Estimate] = {
         e.name: e for e in (result.mge, result.phase, result.stiffness, result.hysteresis)
     }

@@ -27,8 +27,11 @@ from hil.profile import UnitProfile
 from protocols import test_inertia_friction as sine
 
 NAME = "inertia_elevation"
-MEASUREMENTS = ("azimuth_inertia_level_kg_m2", "azimuth_inertia_zenith_kg_m2",
-                "azimuth_inertia_ratio")
+MEASUREMENTS = (
+    "azimuth_inertia_level_kg_m2",
+    "azimuth_inertia_zenith_kg_m2",
+    "azimuth_inertia_ratio",
+)
 pytestmark = pytest.mark.protocol(NAME)
 
 
@@ -40,18 +43,20 @@ class Spec:
 
     @classmethod
     def from_profile(cls, profile: UnitProfile, info: DriveInfo) -> Spec:
-        settings = profile.protocol(NAME)
-        return cls(
-            elevations_rad=tuple(float(e) for e in settings["elevations_rad"]),
-            park_elevation_rad=float(settings.get("park_elevation_rad", 0.0)),
+        settings = profile.settings(NAME)
+        spec = cls(
+            elevations_rad=settings.numbers("elevations_rad"),
+            park_elevation_rad=settings.number("park_elevation_rad", 0.0),
             sine=sine.Spec(
-                frequency_hz=float(settings.get("frequency_hz", 2.0)),
-                amplitudes_rad_s=tuple(float(a) for a in settings["amplitudes_rad_s"]),
-                settle_periods=int(settings.get("settle_periods", 2)),
-                periods=int(settings.get("periods", 8)),
+                frequency_hz=settings.number("frequency_hz", 2.0),
+                amplitudes_rad_s=settings.numbers("amplitudes_rad_s"),
+                settle_periods=settings.integer("settle_periods", 2),
+                periods=settings.integer("periods", 8),
                 fs_hz=min(profile.sample_rate_hz, info.max_sample_rate_hz),
             ),
         )
+        settings.done()
+        return spec
 
 
 def reported_torque_gain(calibration: CalibrationRun) -> tuple[float, float] | None:
@@ -63,14 +68,16 @@ def reported_torque_gain(calibration: CalibrationRun) -> tuple[float, float] | N
 
 
 @pytest.fixture(scope="module")
-def result(drive: Drive, calibration: CalibrationRun,
-           profile: UnitProfile) -> InertiaElevationResult:
+def result(
+    drive: Drive, calibration: CalibrationRun, profile: UnitProfile
+) -> InertiaElevationResult:
     if NAME not in profile.protocols:
         pytest.skip(f"the profile has no [protocols.{NAME}] table (not an azimuth axis)")
     set_elevation = getattr(drive, "set_elevation", None)
     if set_elevation is None:
-        pytest.skip(f"{type(drive).__name__} cannot move the station's elevation axis "
-                    "(set_elevation())")
+        pytest.skip(
+            f"{type(drive).__name__} cannot move the station's elevation axis (set_elevation())"
+        )
     spec = Spec.from_profile(profile, drive.info)
     gain = reported_torque_gain(calibration)
     move_elevation = cast(Callable[[float], None], set_elevation)
@@ -78,8 +85,9 @@ def result(drive: Drive, calibration: CalibrationRun,
     try:
         for elevation in spec.elevations_rad:
             move_elevation(elevation)
-            recordings = [calibration.run(drive, e, protocol=NAME)
-                          for e in sine.excitation(spec.sine)]
+            recordings = [
+                calibration.run(drive, e, protocol=NAME) for e in sine.excitation(spec.sine)
+            ]
             inertia = sine.analyse(recordings, spec.sine).inertia
             if gain is not None:
                 inertia = scale_by_gain(inertia, gain=gain[0], gain_u=gain[1])
@@ -89,19 +97,28 @@ def result(drive: Drive, calibration: CalibrationRun,
     analysed = fit_inertia_elevation(spec.elevations_rad, inertias)
     calibration.details[NAME] = {
         "model": "J(el) = J_zenith + ΔJ·cos²(el)",
-        "per_elevation": [{"elevation_rad": el, "inertia_kg_m2": j.value,
-                           "standard_uncertainty": j.standard_uncertainty}
-                          for el, j in zip(spec.elevations_rad, inertias, strict=True)],
-        "torque_scale": ("shaft torque (K_t protocol's gain applied)" if gain is not None
-                         else "reported torque (no K_t result)"),
+        "per_elevation": [
+            {
+                "elevation_rad": el,
+                "inertia_kg_m2": j.value,
+                "standard_uncertainty": j.standard_uncertainty,
+            }
+            for el, j in zip(spec.elevations_rad, inertias, strict=True)
+        ],
+        "torque_scale": (
+            "shaft torque (K_t protocol's gain applied)"
+            if gain is not None
+            else "reported torque (no K_t result)"
+        ),
         "chi2_per_dof": analysed.chi2_per_dof,
     }
     return analysed
 
 
 @pytest.mark.parametrize("parameter", MEASUREMENTS)
-def test_inertia_elevation(parameter: str, result: InertiaElevationResult,
-                           calibration: CalibrationRun) -> None:
+def test_inertia_elevation(
+    parameter: str, result: InertiaElevationResult, calibration: CalibrationRun
+) -> None:
     found = {e.name: e for e in (result.level, result.zenith, result.ratio)}
     measurement = calibration.record(NAME, found[parameter])
     assert measurement.outcome.value in ("PASS", "MARGINAL"), (

@@ -37,15 +37,23 @@ class Spec:
 
     @classmethod
     def from_profile(cls, profile: UnitProfile, info: DriveInfo) -> Spec:
-        settings = profile.protocol(NAME)
-        return cls(
-            frequency_hz=float(settings["frequency_hz"]),
-            amplitudes_rad_s=tuple(float(a) for a in settings["amplitudes_rad_s"]),
-            settle_periods=int(settings.get("settle_periods", 2)),
-            periods=int(settings.get("periods", 8)),
-            fs_hz=min(profile.sample_rate_hz, info.max_sample_rate_hz),
-            method="least_squares" if settings.get("method") == "least_squares" else "orthogonal",
+        settings = profile.settings(NAME)
+        method: Method = (
+            "least_squares"
+            if settings.choice("method", ("orthogonal", "least_squares"), "orthogonal")
+            == "least_squares"
+            else "orthogonal"
         )
+        spec = cls(
+            frequency_hz=settings.number("frequency_hz"),
+            amplitudes_rad_s=settings.numbers("amplitudes_rad_s"),
+            settle_periods=settings.integer("settle_periods", 2),
+            periods=settings.integer("periods", 8),
+            fs_hz=min(profile.sample_rate_hz, info.max_sample_rate_hz),
+            method=method,
+        )
+        settings.done()
+        return spec
 
 
 def excitation(spec: Spec) -> list[Excitation]:

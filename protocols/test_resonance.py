@@ -24,8 +24,12 @@ from hil.profile import UnitProfile
 from hil.recording import Recording
 
 NAME = "resonance"
-MEASUREMENTS = ("resonance_frequency_hz", "antiresonance_frequency_hz", "resonance_damping_ratio",
-                "resonance_to_bandwidth_ratio")
+MEASUREMENTS = (
+    "resonance_frequency_hz",
+    "antiresonance_frequency_hz",
+    "resonance_damping_ratio",
+    "resonance_to_bandwidth_ratio",
+)
 pytestmark = pytest.mark.protocol(NAME)
 
 
@@ -49,22 +53,22 @@ class Spec:
 
     @classmethod
     def from_profile(cls, profile: UnitProfile, info: DriveInfo) -> Spec:
-        settings = profile.protocol(NAME)
-        low, high = (float(f) for f in settings["band_hz"])
-        points = int(settings.get("points", 28))
+        settings = profile.settings(NAME)
+        low, high = settings.numbers("band_hz", count=2)
+        points = settings.integer("points", 28)
         spec = cls(
             frequencies_hz=tuple(float(f) for f in np.geomspace(low, high, points)),
-            speed_rad_s=float(settings.get("speed_rad_s", 0.5)),
-            amplitude_rad_s=float(settings.get("amplitude_rad_s", 0.25)),
-            amplitude_knee_hz=float(settings.get("amplitude_knee_hz", 15.0)),
-            max_amplitude_rad_s=float(settings.get("max_amplitude_rad_s", 0.8)),
-            segment_s=float(settings.get("segment_s", 0.12)),
-            min_periods=int(settings.get("min_periods", 6)),
-            settle_s=float(settings.get("settle_s", 0.03)),
-            blocks=int(settings.get("blocks", 6)),
-            ramp_s=float(settings.get("ramp_s", 0.1)),
-            margin_rad=float(settings.get("margin_rad", 0.1)),
-            move_speed_rad_s=float(settings.get("move_speed_rad_s", 0.5)),
+            speed_rad_s=settings.number("speed_rad_s", 0.5),
+            amplitude_rad_s=settings.number("amplitude_rad_s", 0.25),
+            amplitude_knee_hz=settings.number("amplitude_knee_hz", 15.0),
+            max_amplitude_rad_s=settings.number("max_amplitude_rad_s", 0.8),
+            segment_s=settings.number("segment_s", 0.12),
+            min_periods=settings.integer("min_periods", 6),
+            settle_s=settings.number("settle_s", 0.03),
+            blocks=settings.integer("blocks", 6),
+            ramp_s=settings.number("ramp_s", 0.1),
+            margin_rad=settings.number("margin_rad", 0.1),
+            move_speed_rad_s=settings.number("move_speed_rad_s", 0.5),
             fs_hz=min(profile.sample_rate_hz, info.max_sample_rate_hz),
             travel_min_rad=info.limits.travel_min_rad,
             travel_max_rad=info.limits.travel_max_rad,
@@ -72,11 +76,16 @@ class Spec:
         samples = sum(spec.segment_samples(f) for f in spec.frequencies_hz)
         shortfall = travel_shortfall_rad(
             needed_rad=spec.speed_rad_s * (spec.ramp_s + samples / spec.fs_hz),
-            travel_min_rad=spec.travel_min_rad, travel_max_rad=spec.travel_max_rad,
-            margin_rad=spec.margin_rad)
+            travel_min_rad=spec.travel_min_rad,
+            travel_max_rad=spec.travel_max_rad,
+            margin_rad=spec.margin_rad,
+        )
         if shortfall > 0:
-            raise ProfileError(f"[protocols.{NAME}] needs {shortfall:.3g} rad more travel "
-                               "than the limits leave", source=profile.source)
+            raise ProfileError(
+                f"[protocols.{NAME}] needs {shortfall:.3g} rad more travel than the limits leave",
+                source=profile.source,
+            )
+        settings.done()
         return spec
 
     @property
@@ -110,16 +119,28 @@ def excitation(spec: Spec, *, position_rad: float) -> list[Excitation]:
         t = np.arange(spec.segment_samples(f)) / spec.fs_hz
         segments.append(spec.speed_rad_s + spec.amplitude(f) * np.sin(2 * math.pi * f * t))
     return [
-        Excitation(name="move_to_start", mode=Mode.POSITION, fs_hz=spec.fs_hz,
-                   command=position_move(position_rad, spec.start_rad, fs_hz=spec.fs_hz,
-                                         speed_rad_s=spec.move_speed_rad_s, hold_s=0.1)),
-        Excitation(name="stepped_sine", mode=Mode.VELOCITY, fs_hz=spec.fs_hz,
-                   command=np.concatenate([_ramp(spec, True), *segments, _ramp(spec, False)])),
+        Excitation(
+            name="move_to_start",
+            mode=Mode.POSITION,
+            fs_hz=spec.fs_hz,
+            command=position_move(
+                position_rad,
+                spec.start_rad,
+                fs_hz=spec.fs_hz,
+                speed_rad_s=spec.move_speed_rad_s,
+                hold_s=0.1,
+            ),
+        ),
+        Excitation(
+            name="stepped_sine",
+            mode=Mode.VELOCITY,
+            fs_hz=spec.fs_hz,
+            command=np.concatenate([_ramp(spec, True), *segments, _ramp(spec, False)]),
+        ),
     ]
 
 
-def analyse(recording: Recording, spec: Spec, *, time_constant_s: float = 2e-4
-            ) -> ResonanceResult:
+def analyse(recording: Recording, spec: Spec, *, time_constant_s: float = 2e-4) -> ResonanceResult:
     command = recording.velocity_cmd
     if command is None:
         raise ValueError("the stepped-sine recording lacks its velocity command")
@@ -127,9 +148,17 @@ def analyse(recording: Recording, spec: Spec, *, time_constant_s: float = 2e-4
     points = []
     for f in spec.frequencies_hz:
         a, b = start + spec.settle_samples(f), start + spec.segment_samples(f)
-        points.append(frf_point(recording.time_s[a:b], recording.position[a:b],
-                                recording.effort[a:b], command[a:b] - spec.speed_rad_s,
-                                frequency_hz=f, fs_hz=spec.fs_hz, blocks=spec.blocks))
+        points.append(
+            frf_point(
+                recording.time_s[a:b],
+                recording.position[a:b],
+                recording.effort[a:b],
+                command[a:b] - spec.speed_rad_s,
+                frequency_hz=f,
+                fs_hz=spec.fs_hz,
+                blocks=spec.blocks,
+            )
+        )
         start = b
     return identify_resonance(points, fs_hz=spec.fs_hz, time_constant_s=time_constant_s)
 
@@ -145,8 +174,10 @@ def measured_time_constant_s(calibration: CalibrationRun) -> float:
 @pytest.fixture(scope="module")
 def result(drive: Drive, calibration: CalibrationRun, profile: UnitProfile) -> ResonanceResult:
     if NAME not in profile.protocols:
-        pytest.skip(f"the profile has no [protocols.{NAME}] table: a rigid axis, no shaft "
-                    "resonance to identify")
+        pytest.skip(
+            f"the profile has no [protocols.{NAME}] table: a rigid axis, no shaft "
+            "resonance to identify"
+        )
     spec = Spec.from_profile(profile, drive.info)
     move, sine = excitation(spec, position_rad=drive.status().position_rad)
     calibration.run(drive, move, protocol=NAME)
@@ -160,18 +191,25 @@ def result(drive: Drive, calibration: CalibrationRun, profile: UnitProfile) -> R
         "current_loop_time_constant_s": m.time_constant_s,
         "velocity_loop_bandwidth_hz": analysed.bandwidth_hz,
         "chi2_per_dof": analysed.chi2_per_dof,
-        "frf": [{"frequency_hz": p.frequency_hz, "magnitude_rad_nm": abs(p.frf_rad_nm),
-                 "phase_rad": math.atan2(p.frf_rad_nm.imag, p.frf_rad_nm.real),
-                 "relative_u": p.relative_u, "coherence": p.coherence}
-                for p in analysed.points],
+        "frf": [
+            {
+                "frequency_hz": p.frequency_hz,
+                "magnitude_rad_nm": abs(p.frf_rad_nm),
+                "phase_rad": math.atan2(p.frf_rad_nm.imag, p.frf_rad_nm.real),
+                "relative_u": p.relative_u,
+                "coherence": p.coherence,
+            }
+            for p in analysed.points
+        ],
     }
     return analysed
 
 
 @pytest.mark.parametrize("parameter", MEASUREMENTS)
 def test_resonance(parameter: str, result: ResonanceResult, calibration: CalibrationRun) -> None:
-    found: dict[str, Estimate] = {e.name: e for e in (result.resonance, result.antiresonance,
-                                                      result.damping, result.ratio)}
+    found: dict[str, Estimate] = {
+        e.name: e for e in (result.resonance, result.antiresonance, result.damping, result.ratio)
+    }
     measurement = calibration.record(NAME, found[parameter])
     assert measurement.outcome.value in ("PASS", "MARGINAL"), (
         f"{parameter} = {measurement.estimate.value:.6g} {measurement.spec.unit} outside "

@@ -22,8 +22,10 @@ NAME = "stribeck"
 MEASUREMENTS = ("static_friction_nm", "stribeck_velocity_rad_s")
 pytestmark = pytest.mark.protocol(NAME)
 # the sine protocol's results that this one cross-checks: (its name, ours)
-CROSS_CHECK = (("coulomb_nm", "stribeck_coulomb_nm"), ("viscous_nm_s_rad",
-                                                       "stribeck_viscous_nm_s_rad"))
+CROSS_CHECK = (
+    ("coulomb_nm", "stribeck_coulomb_nm"),
+    ("viscous_nm_s_rad", "stribeck_viscous_nm_s_rad"),
+)
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -40,25 +42,31 @@ class Spec:
 
     @classmethod
     def from_profile(cls, profile: UnitProfile, info: DriveInfo) -> Spec:
-        settings = profile.protocol(NAME)
-        return cls(
-            speeds_rad_s=tuple(float(v) for v in settings["speeds_rad_s"]),
-            step_travel_rad=float(settings.get("step_travel_rad", 0.03)),
-            settle_s=float(settings.get("settle_s", 0.3)),
-            turnaround_rad=float(settings.get("turnaround_rad", 0.08)),
-            turnaround_speed_rad_s=float(settings.get("turnaround_speed_rad_s", 0.1)),
-            move_speed_rad_s=float(settings.get("move_speed_rad_s", 0.5)),
+        settings = profile.settings(NAME)
+        spec = cls(
+            speeds_rad_s=settings.numbers("speeds_rad_s"),
+            step_travel_rad=settings.number("step_travel_rad", 0.03),
+            settle_s=settings.number("settle_s", 0.3),
+            turnaround_rad=settings.number("turnaround_rad", 0.08),
+            turnaround_speed_rad_s=settings.number("turnaround_speed_rad_s", 0.1),
+            move_speed_rad_s=settings.number("move_speed_rad_s", 0.5),
             fs_hz=min(profile.sample_rate_hz, info.max_sample_rate_hz),
             travel_min_rad=info.limits.travel_min_rad,
             travel_max_rad=info.limits.travel_max_rad,
         )
+        settings.done()
+        return spec
 
     @property
     def stairs(self) -> Staircase:
-        return staircase(self.speeds_rad_s, fs_hz=self.fs_hz,
-                         step_travel_rad=self.step_travel_rad, settle_s=self.settle_s,
-                         turnaround_rad=self.turnaround_rad,
-                         turnaround_speed_rad_s=self.turnaround_speed_rad_s)
+        return staircase(
+            self.speeds_rad_s,
+            fs_hz=self.fs_hz,
+            step_travel_rad=self.step_travel_rad,
+            settle_s=self.settle_s,
+            turnaround_rad=self.turnaround_rad,
+            turnaround_speed_rad_s=self.turnaround_speed_rad_s,
+        )
 
     @property
     def start_rad(self) -> float:
@@ -74,18 +82,37 @@ class Spec:
 def excitation(spec: Spec, *, position_rad: float) -> list[Excitation]:
     """A position move from ``position_rad`` to the start, then the velocity staircase."""
     return [
-        Excitation(name="move_to_start", mode=Mode.POSITION, fs_hz=spec.fs_hz,
-                   command=position_move(position_rad, spec.start_rad, fs_hz=spec.fs_hz,
-                                         speed_rad_s=spec.move_speed_rad_s, hold_s=0.2)),
-        Excitation(name="staircase", mode=Mode.VELOCITY, fs_hz=spec.fs_hz,
-                   command=spec.stairs.command_rad_s),
+        Excitation(
+            name="move_to_start",
+            mode=Mode.POSITION,
+            fs_hz=spec.fs_hz,
+            command=position_move(
+                position_rad,
+                spec.start_rad,
+                fs_hz=spec.fs_hz,
+                speed_rad_s=spec.move_speed_rad_s,
+                hold_s=0.2,
+            ),
+        ),
+        Excitation(
+            name="staircase",
+            mode=Mode.VELOCITY,
+            fs_hz=spec.fs_hz,
+            command=spec.stairs.command_rad_s,
+        ),
     ]
 
 
-def analyse(time_s: np.ndarray, position_rad: np.ndarray, torque_nm: np.ndarray,
-            spec: Spec) -> StribeckResult:
-    return identify_stribeck(time_s=time_s, position_rad=position_rad, torque_nm=torque_nm,
-                             stairs=spec.stairs, settle_s=spec.settle_s)
+def analyse(
+    time_s: np.ndarray, position_rad: np.ndarray, torque_nm: np.ndarray, spec: Spec
+) -> StribeckResult:
+    return identify_stribeck(
+        time_s=time_s,
+        position_rad=position_rad,
+        torque_nm=torque_nm,
+        stairs=spec.stairs,
+        settle_s=spec.settle_s,
+    )
 
 
 def _finite(value: float) -> float | None:
@@ -107,8 +134,13 @@ def cross_check(result: StribeckResult, calibration: CalibrationRun) -> dict[str
         error = abs(a.value - b.value) / expanded
         checks[other] = {"stribeck": a.value, "sine": b.value, "normalised_error": error}
         if error > 1:
-            log.warning("%s: staircase %.4g vs sine %.4g differ by %.1f expanded uncertainties",
-                        other, a.value, b.value, error)
+            log.warning(
+                "%s: staircase %.4g vs sine %.4g differ by %.1f expanded uncertainties",
+                other,
+                a.value,
+                b.value,
+                error,
+            )
     return checks
 
 
@@ -125,21 +157,25 @@ def result(drive: Drive, calibration: CalibrationRun, profile: UnitProfile) -> S
         "residual_rms_nm": analysed.residual_rms_nm,
         "lowest_clean_speed_rad_s": analysed.lowest_clean_speed_rad_s,
         "stick_slip_speeds_rad_s": [p.speed_rad_s for p in analysed.points if p.stick_slip],
-        "points": [{"speed_rad_s": p.speed_rad_s, "friction_nm": _finite(p.friction_nm),
-                    "friction_u_nm": _finite(p.friction_u_nm), "stick_slip": p.stick_slip}
-                   for p in analysed.points],
+        "points": [
+            {
+                "speed_rad_s": p.speed_rad_s,
+                "friction_nm": _finite(p.friction_nm),
+                "friction_u_nm": _finite(p.friction_u_nm),
+                "stick_slip": p.stick_slip,
+            }
+            for p in analysed.points
+        ],
         "cross_check_sine": cross_check(analysed, calibration),
         "note": "steady sliding friction includes the cable's hysteresis half-width "
-                "(direction-dependent, not separable at constant speed)",
+        "(direction-dependent, not separable at constant speed)",
     }
     return analysed
 
 
 @pytest.mark.parametrize("parameter", MEASUREMENTS)
 def test_stribeck(parameter: str, result: StribeckResult, calibration: CalibrationRun) -> None:
-    estimates: dict[str, Estimate] = {
-        e.name: e for e in (result.static, result.stribeck_velocity)
-    }
+    estimates: dict[str, Estimate] = {e.name: e for e in (result.static, result.stribeck_velocity)}
     measurement = calibration.record(NAME, estimates[parameter])
     assert measurement.outcome.value in ("PASS", "MARGINAL"), (
         f"{parameter} = {measurement.estimate.value:.6g} {measurement.spec.unit} outside "

@@ -31,8 +31,12 @@ from hil.profile import UnitProfile
 from hil.recording import Recording
 
 NAME = "torque_constant"
-MEASUREMENTS = ("torque_constant_nm_a", "torque_linearity_pct", "reported_torque_gain_error_pct",
-                "torque_constant_vs_datasheet_pct")
+MEASUREMENTS = (
+    "torque_constant_nm_a",
+    "torque_linearity_pct",
+    "reported_torque_gain_error_pct",
+    "torque_constant_vs_datasheet_pct",
+)
 pytestmark = pytest.mark.protocol(NAME)
 
 
@@ -49,19 +53,21 @@ class Spec:
 
     @classmethod
     def from_profile(cls, profile: UnitProfile, info: DriveInfo) -> Spec:
-        settings = profile.protocol(NAME)
+        settings = profile.settings(NAME)
         kv = profile.unit.get("kv_rpm_per_v")
         limit = min(info.limits.torque_nm, info.rated_torque_nm)
-        return cls(
-            angles_rad=tuple(float(a) for a in settings["angles_rad"]),
-            peak_torque_nm=float(settings.get("peak_torque_fraction", 0.8)) * limit,
-            levels=int(settings.get("levels", 9)),
-            level_s=float(settings.get("level_s", 0.05)),
-            settle_s=float(settings.get("settle_s", 0.01)),
-            move_speed_rad_s=float(settings.get("move_speed_rad_s", 0.5)),
+        spec = cls(
+            angles_rad=settings.numbers("angles_rad"),
+            peak_torque_nm=settings.number("peak_torque_fraction", 0.8) * limit,
+            levels=settings.integer("levels", 9),
+            level_s=settings.number("level_s", 0.05),
+            settle_s=settings.number("settle_s", 0.01),
+            move_speed_rad_s=settings.number("move_speed_rad_s", 0.5),
             fs_hz=min(profile.sample_rate_hz, info.max_sample_rate_hz),
             kv_rpm_per_v=None if kv is None else float(kv),
         )
+        settings.done()
+        return spec
 
     @property
     def level_samples(self) -> int:
@@ -79,39 +85,55 @@ class Spec:
 
 
 def move(spec: Spec, *, position_rad: float, angle_rad: float) -> Excitation:
-    return Excitation(name=f"move_to_{angle_rad:+.3f}rad", mode=Mode.POSITION, fs_hz=spec.fs_hz,
-                      command=position_move(position_rad, angle_rad, fs_hz=spec.fs_hz,
-                                            speed_rad_s=spec.move_speed_rad_s, hold_s=0.1))
+    return Excitation(
+        name=f"move_to_{angle_rad:+.3f}rad",
+        mode=Mode.POSITION,
+        fs_hz=spec.fs_hz,
+        command=position_move(
+            position_rad, angle_rad, fs_hz=spec.fs_hz, speed_rad_s=spec.move_speed_rad_s, hold_s=0.1
+        ),
+    )
 
 
 def sweep(spec: Spec, *, angle_rad: float) -> Excitation:
     """Torque staircase for a locked rotor, ending with a short zero level (not analysed)."""
-    command = np.concatenate([np.repeat(spec.torque_levels_nm, spec.level_samples),
-                              np.zeros(spec.settle_samples)])
-    return Excitation(name=f"locked_sweep_{angle_rad:+.3f}rad", mode=Mode.TORQUE,
-                      fs_hz=spec.fs_hz, command=command)
+    command = np.concatenate(
+        [np.repeat(spec.torque_levels_nm, spec.level_samples), np.zeros(spec.settle_samples)]
+    )
+    return Excitation(
+        name=f"locked_sweep_{angle_rad:+.3f}rad",
+        mode=Mode.TORQUE,
+        fs_hz=spec.fs_hz,
+        command=command,
+    )
 
 
 def analyse_sweep(recording: Recording, spec: Spec, *, angle_rad: float) -> LockedSweep:
     columns = recording.columns
-    return analyse_locked_sweep(columns["current_a"], columns["load_torque_nm"],
-                                recording.effort, angle_rad=angle_rad,
-                                level_samples=spec.level_samples,
-                                settle_samples=spec.settle_samples,
-                                levels=spec.torque_levels_nm.size)
+    return analyse_locked_sweep(
+        columns["current_a"],
+        columns["load_torque_nm"],
+        recording.effort,
+        angle_rad=angle_rad,
+        level_samples=spec.level_samples,
+        settle_samples=spec.settle_samples,
+        levels=spec.torque_levels_nm.size,
+    )
 
 
 def estimates(result: TorqueConstantResult, spec: Spec) -> dict[str, Estimate]:
     found = {e.name: e for e in (result.torque_constant, result.linearity, result.gain_error)}
     if spec.kv_rpm_per_v is not None:
         found["torque_constant_vs_datasheet_pct"] = datasheet_deviation(
-            result.torque_constant, kv_rpm_per_v=spec.kv_rpm_per_v)
+            result.torque_constant, kv_rpm_per_v=spec.kv_rpm_per_v
+        )
     return found
 
 
 @pytest.fixture(scope="module")
-def result(drive: Drive, calibration: CalibrationRun,
-           profile: UnitProfile) -> tuple[TorqueConstantResult, Spec]:
+def result(
+    drive: Drive, calibration: CalibrationRun, profile: UnitProfile
+) -> tuple[TorqueConstantResult, Spec]:
     if not drive.info.has_torque_sensor:
         pytest.skip("the station has no shaft torque sensor (drive.info.has_torque_sensor)")
     locked_rotor = getattr(drive, "locked_rotor", None)
@@ -120,29 +142,44 @@ def result(drive: Drive, calibration: CalibrationRun,
     spec = Spec.from_profile(profile, drive.info)
     sweeps = []
     for angle in spec.angles_rad:
-        calibration.run(drive, move(spec, position_rad=drive.status().position_rad,
-                                    angle_rad=angle), protocol=NAME)
+        calibration.run(
+            drive,
+            move(spec, position_rad=drive.status().position_rad, angle_rad=angle),
+            protocol=NAME,
+        )
         with cast(AbstractContextManager[Any], locked_rotor()):
             recording = calibration.run(drive, sweep(spec, angle_rad=angle), protocol=NAME)
         sweeps.append(analyse_sweep(recording, spec, angle_rad=angle))
-    ripple = [(int(h["order"]), float(h["amplitude"]), float(h["phase_rad"]))
-              for h in cast(list[dict[str, Any]],
-                            calibration.details.get("cogging", {}).get("kt_ripple", []))]
+    ripple = [
+        (int(h["order"]), float(h["amplitude"]), float(h["phase_rad"]))
+        for h in cast(
+            list[dict[str, Any]], calibration.details.get("cogging", {}).get("kt_ripple", [])
+        )
+    ]
     analysed = identify_torque_constant(sweeps, ripple=ripple)
     calibration.details[NAME] = {
         "kt_ripple_correction": "cogging protocol's table" if ripple else "none",
-        "per_angle": [{"angle_rad": s.angle_rad, "slope_nm_a": s.slope_nm_a,
-                       "intercept_nm": s.intercept_nm, "gain": s.gain,
-                       "max_residual_nm": s.max_residual_nm} for s in sweeps],
-        "datasheet_torque_constant_nm_a": (None if spec.kv_rpm_per_v is None else
-                                           datasheet_torque_constant_nm_a(spec.kv_rpm_per_v)),
+        "per_angle": [
+            {
+                "angle_rad": s.angle_rad,
+                "slope_nm_a": s.slope_nm_a,
+                "intercept_nm": s.intercept_nm,
+                "gain": s.gain,
+                "max_residual_nm": s.max_residual_nm,
+            }
+            for s in sweeps
+        ],
+        "datasheet_torque_constant_nm_a": (
+            None if spec.kv_rpm_per_v is None else datasheet_torque_constant_nm_a(spec.kv_rpm_per_v)
+        ),
     }
     return analysed, spec
 
 
 @pytest.mark.parametrize("parameter", MEASUREMENTS)
-def test_torque_constant(parameter: str, result: tuple[TorqueConstantResult, Spec],
-                         calibration: CalibrationRun) -> None:
+def test_torque_constant(
+    parameter: str, result: tuple[TorqueConstantResult, Spec], calibration: CalibrationRun
+) -> None:
     found = estimates(*result)
     if parameter not in found:
         pytest.skip("the profile's [unit] has no kv_rpm_per_v (datasheet KV)")

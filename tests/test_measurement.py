@@ -99,3 +99,34 @@ def test_missing_profile_and_unknown_builtin(tmp_path: Path) -> None:
         load_profile(tmp_path / "nope.toml")
     with pytest.raises(ProfileError, match="no built-in profile"):
         load_profile("no_such_unit")
+
+
+@pytest.mark.parametrize(
+    ("table", "read", "message"),
+    [
+        ({"speed_rad_s": "fast"}, lambda s: s.number("speed_rad_s", 0.1), "must be a number"),
+        ({"blocks": 2.5}, lambda s: s.integer("blocks", 3), "must be an integer"),
+        ({"band_hz": [1.0]}, lambda s: s.numbers("band_hz", count=2), "a list of 2 numbers"),
+        ({}, lambda s: s.numbers("speeds_rad_s"), "lacks 'speeds_rad_s'"),
+        ({"method": "magic"}, lambda s: s.choice("method", ("a", "b"), "a"), "one of a, b"),
+    ],
+)
+def test_protocol_settings_name_table_and_key(table, read, message: str) -> None:  # type: ignore[no-untyped-def]
+    from hil.profile import ProtocolSettings
+
+    settings = ProtocolSettings(table, table="[protocols.x]", source="unit.toml")
+    with pytest.raises(ProfileError, match=message) as caught:
+        read(settings)
+    assert "unit.toml" in str(caught.value)
+    assert "[protocols.x]" in str(caught.value)
+
+
+def test_protocol_settings_refuse_unread_keys() -> None:
+    from hil.profile import ProtocolSettings
+
+    settings = ProtocolSettings(
+        {"speed_rad_s": 0.2, "sped_rad_s": 0.3}, table="[protocols.x]", source="unit.toml"
+    )
+    assert settings.number("speed_rad_s", 0.1) == 0.2
+    with pytest.raises(ProfileError, match="unknown setting\\(s\\) 'sped_rad_s'"):
+        settings.done()

@@ -73,9 +73,10 @@ def test_calibration_writes_a_passing_certificate(
     assert controller["certificate_id"] == cert["certificate_id"]
     assert controller["friction_feedforward"]["coulomb_nm"] == params["coulomb_nm"]["value"]
     listed = {a["file"]: a["sha256"] for a in cert["artifacts"]}
-    assert listed["controller.json"] == hashlib.sha256(
-        (out / "GMB-0042" / "controller.json").read_bytes()
-    ).hexdigest()
+    assert (
+        listed["controller.json"]
+        == hashlib.sha256((out / "GMB-0042" / "controller.json").read_bytes()).hexdigest()
+    )
     assert cert["machine_time"]["motion_time_s"] > 0
 
 
@@ -136,3 +137,19 @@ def test_allure_report_carries_the_judged_measurements(
     attached = [json.loads(p.read_text()) for p in allure_dir.glob("*-attachment.json")]
     assert {a["parameter"] for a in attached} >= {"inertia_kg_m2", "coulomb_nm"}
     assert all(a["outcome"] == "PASS" for a in attached)
+
+
+def test_a_typo_in_protocol_settings_is_an_error_not_a_default(
+    pytester: pytest.Pytester, tmp_path: Path
+) -> None:
+    profile = _profile_with(
+        tmp_path, "settle_periods = 2\nperiods = 8", "settle_period = 2\nperiods = 8"
+    )
+    out = tmp_path / "certs"
+    result = _run(pytester, out, "--profile", str(profile))
+    assert result.ret != 0
+    cert = json.loads((out / "SIM-0001" / "certificate.json").read_text())
+    assert cert["outcome"] == "ERROR"
+    messages = " ".join(cert["method"]["protocols"]["inertia_friction"]["messages"])
+    assert "unknown setting(s) 'settle_period'" in messages
+    assert str(profile) in messages
