@@ -18,8 +18,8 @@ from hil.calibration import CalibrationRun
 from hil.drives.base import Drive, DriveInfo, Excitation, Mode
 from hil.identify.cogging import CoggingResult, compensation_table, identify_cogging
 from hil.identify.estimate import Estimate
-from hil.identify.moves import position_move
 from hil.profile import UnitProfile
+from protocols._travel import TravelSpec
 
 NAME = "cogging"
 MEASUREMENTS = ("cogging_peak_nm", "kt_ripple_peak_pct")
@@ -28,37 +28,24 @@ pytestmark = pytest.mark.protocol(NAME)
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
-class Spec:
+class Spec(TravelSpec):
     speed_rad_s: float
-    margin_rad: float
     skip_rad: float
     min_order: int
     max_order: int
-    move_speed_rad_s: float
-    fs_hz: float
-    travel_min_rad: float
-    travel_max_rad: float
 
     @classmethod
     def from_profile(cls, profile: UnitProfile, info: DriveInfo) -> Spec:
         settings = profile.settings(NAME)
         spec = cls(
+            **TravelSpec.envelope(settings, profile, info),
             speed_rad_s=settings.number("speed_rad_s", 0.4),
-            margin_rad=settings.number("margin_rad", 0.1),
             skip_rad=settings.number("skip_rad", 0.1),
             min_order=settings.integer("min_order", 10),
             max_order=settings.integer("max_order", 200),
-            move_speed_rad_s=settings.number("move_speed_rad_s", 0.5),
-            fs_hz=min(profile.sample_rate_hz, info.max_sample_rate_hz),
-            travel_min_rad=info.limits.travel_min_rad,
-            travel_max_rad=info.limits.travel_max_rad,
         )
         settings.done()
         return spec
-
-    @property
-    def start_rad(self) -> float:
-        return self.travel_min_rad + self.margin_rad
 
     @property
     def pass_samples(self) -> int:
@@ -70,18 +57,7 @@ def excitation(spec: Spec, *, position_rad: float) -> list[Excitation]:
     """Move to the lower end, then one pass up and one down at constant speed."""
     n = spec.pass_samples
     return [
-        Excitation(
-            name="move_to_start",
-            mode=Mode.POSITION,
-            fs_hz=spec.fs_hz,
-            command=position_move(
-                position_rad,
-                spec.start_rad,
-                fs_hz=spec.fs_hz,
-                speed_rad_s=spec.move_speed_rad_s,
-                hold_s=0.2,
-            ),
-        ),
+        spec.move_to_start(position_rad, hold_s=0.2),
         Excitation(
             name="passes",
             mode=Mode.VELOCITY,

@@ -16,9 +16,10 @@ from hil.calibration import CalibrationRun
 from hil.drives.base import Drive, DriveInfo, Excitation, Mode
 from hil.errors import ProfileError
 from hil.identify.current_loop import CurrentLoopResult, analyse_frequency, fit_current_loop_lag
-from hil.identify.moves import position_move, travel_shortfall_rad
+from hil.identify.moves import travel_shortfall_rad
 from hil.profile import UnitProfile
 from hil.recording import Recording
+from protocols._travel import TravelSpec, speed_ramp
 
 NAME = "current_loop"
 MEASUREMENTS = ("current_loop_time_constant_ms",)
@@ -26,7 +27,7 @@ pytestmark = pytest.mark.protocol(NAME)
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
-class Spec:
+class Spec(TravelSpec):
     frequencies_hz: tuple[float, ...]
     speed_rad_s: float  # constant carrier speed
     amplitude_rad_s: float  # velocity command sine amplitude
@@ -34,16 +35,12 @@ class Spec:
     settle_s: float  # discarded at the start of each frequency
     ramp_s: float
     blocks: int
-    margin_rad: float
-    move_speed_rad_s: float
-    fs_hz: float
-    travel_min_rad: float
-    travel_max_rad: float
 
     @classmethod
     def from_profile(cls, profile: UnitProfile, info: DriveInfo) -> Spec:
         settings = profile.settings(NAME)
         spec = cls(
+            **TravelSpec.envelope(settings, profile, info),
             frequencies_hz=settings.numbers("frequencies_hz"),
             speed_rad_s=settings.number("speed_rad_s", 0.6),
             amplitude_rad_s=settings.number("amplitude_rad_s", 0.3),
@@ -51,11 +48,6 @@ class Spec:
             settle_s=settings.number("settle_s", 0.05),
             ramp_s=settings.number("ramp_s", 0.1),
             blocks=settings.integer("blocks", 5),
-            margin_rad=settings.number("margin_rad", 0.1),
-            move_speed_rad_s=settings.number("move_speed_rad_s", 0.5),
-            fs_hz=min(profile.sample_rate_hz, info.max_sample_rate_hz),
-            travel_min_rad=info.limits.travel_min_rad,
-            travel_max_rad=info.limits.travel_max_rad,
         )
         samples = sum(spec.segment_samples(f) for f in spec.frequencies_hz)
         shortfall = travel_shortfall_rad(
@@ -72,10 +64,6 @@ class Spec:
         settings.done()
         return spec
 
-    @property
-    def start_rad(self) -> float:
-        return self.travel_min_rad + self.margin_rad
-
     def settle_samples(self, frequency_hz: float) -> int:
         return round(math.ceil(self.settle_s * frequency_hz) * self.fs_hz / frequency_hz)
 
@@ -85,32 +73,24 @@ class Spec:
         return round(periods * self.fs_hz / frequency_hz)
 
 
-def _ramp(spec: Spec, up: bool) -> np.ndarray:
-    n = max(round(spec.ramp_s * spec.fs_hz), 1)
-    x = (np.arange(n) + 1) / n if up else 1 - (np.arange(n) + 1) / n
-    return spec.speed_rad_s * 0.5 * (1 - np.cos(math.pi * x))
-
-
 def excitation(spec: Spec, *, position_rad: float) -> list[Excitation]:
+    def ramp(*, up: bool) -> np.ndarray:
+        return speed_ramp(spec.speed_rad_s, ramp_s=spec.ramp_s, fs_hz=spec.fs_hz, up=up)
+
     """Move to the lower end; ramp to the carrier speed; one sine segment per frequency."""
     segments = []
     for f in spec.frequencies_hz:
         t = np.arange(spec.segment_samples(f)) / spec.fs_hz
         segments.append(spec.speed_rad_s + spec.amplitude_rad_s * np.sin(2 * math.pi * f * t))
-    command = np.concatenate([_ramp(spec, True), *segments, _ramp(spec, False)])
+    command = np.concatenate(
+        [
+            ramp(up=True),
+            *segments,
+            ramp(up=False),
+        ]
+    )
     return [
-        Excitation(
-            name="move_to_start",
-            mode=Mode.POSITION,
-            fs_hz=spec.fs_hz,
-            command=position_move(
-                position_rad,
-                spec.start_rad,
-                fs_hz=spec.fs_hz,
-                speed_rad_s=spec.move_speed_rad_s,
-                hold_s=0.1,
-            ),
-        ),
+        spec.move_to_start(position_rad, hold_s=0.1),
         Excitation(name="sines", mode=Mode.VELOCITY, fs_hz=spec.fs_hz, command=command),
     ]
 

@@ -25,8 +25,8 @@ from hil.identify.gravity_cable import (
     identify_gravity_cable,
     sweep_plan,
 )
-from hil.identify.moves import position_move
 from hil.profile import UnitProfile
+from protocols._travel import TravelSpec
 
 log = logging.getLogger(__name__)
 
@@ -42,8 +42,7 @@ pytestmark = pytest.mark.protocol(NAME)
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
-class Spec:
-    margin_rad: float
+class Spec(TravelSpec):
     speed_rad_s: float
     rewind_speed_rad_s: float
     probe_rad: float
@@ -51,10 +50,6 @@ class Spec:
     probe_settle_s: float
     exclude_rad: float
     bins: int
-    move_speed_rad_s: float
-    fs_hz: float
-    travel_min_rad: float
-    travel_max_rad: float
     mass_kg: float | None
 
     @classmethod
@@ -62,7 +57,7 @@ class Spec:
         settings = profile.settings(NAME)
         mass = profile.unit.get("mass_kg")
         spec = cls(
-            margin_rad=settings.number("margin_rad", 0.1),
+            **TravelSpec.envelope(settings, profile, info),
             speed_rad_s=settings.number("speed_rad_s", 0.15),
             rewind_speed_rad_s=settings.number("rewind_speed_rad_s", 0.6),
             probe_rad=settings.number("probe_rad", 0.2),
@@ -70,18 +65,10 @@ class Spec:
             probe_settle_s=settings.number("probe_settle_s", 0.12),
             exclude_rad=settings.number("exclude_rad", 0.1),
             bins=settings.integer("bins", 48),
-            move_speed_rad_s=settings.number("move_speed_rad_s", 0.5),
-            fs_hz=min(profile.sample_rate_hz, info.max_sample_rate_hz),
-            travel_min_rad=info.limits.travel_min_rad,
-            travel_max_rad=info.limits.travel_max_rad,
             mass_kg=None if mass is None else float(mass),
         )
         settings.done()
         return spec
-
-    @property
-    def start_rad(self) -> float:
-        return self.travel_min_rad + self.margin_rad
 
     @property
     def plan(self) -> SweepPlan:
@@ -99,18 +86,7 @@ class Spec:
 def excitation(spec: Spec, *, position_rad: float) -> list[Excitation]:
     """A position move to the lower end of the travel, then the sweep."""
     return [
-        Excitation(
-            name="move_to_start",
-            mode=Mode.POSITION,
-            fs_hz=spec.fs_hz,
-            command=position_move(
-                position_rad,
-                spec.start_rad,
-                fs_hz=spec.fs_hz,
-                speed_rad_s=spec.move_speed_rad_s,
-                hold_s=0.2,
-            ),
-        ),
+        spec.move_to_start(position_rad, hold_s=0.2),
         Excitation(
             name="sweep", mode=Mode.VELOCITY, fs_hz=spec.fs_hz, command=spec.plan.command_rad_s
         ),

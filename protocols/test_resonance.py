@@ -18,10 +18,11 @@ from hil.calibration import CalibrationRun
 from hil.drives.base import Drive, DriveInfo, Excitation, Mode
 from hil.errors import ProfileError
 from hil.identify.estimate import Estimate
-from hil.identify.moves import position_move, travel_shortfall_rad
+from hil.identify.moves import travel_shortfall_rad
 from hil.identify.resonance import ResonanceResult, frf_point, identify_resonance
 from hil.profile import UnitProfile
 from hil.recording import Recording
+from protocols._travel import TravelSpec, speed_ramp
 
 NAME = "resonance"
 MEASUREMENTS = (
@@ -34,7 +35,7 @@ pytestmark = pytest.mark.protocol(NAME)
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
-class Spec:
+class Spec(TravelSpec):
     frequencies_hz: tuple[float, ...]
     speed_rad_s: float  # carrier
     amplitude_rad_s: float  # velocity sine amplitude up to amplitude_knee_hz
@@ -45,11 +46,6 @@ class Spec:
     settle_s: float
     blocks: int
     ramp_s: float
-    margin_rad: float
-    move_speed_rad_s: float
-    fs_hz: float
-    travel_min_rad: float
-    travel_max_rad: float
 
     @classmethod
     def from_profile(cls, profile: UnitProfile, info: DriveInfo) -> Spec:
@@ -57,6 +53,7 @@ class Spec:
         low, high = settings.numbers("band_hz", count=2)
         points = settings.integer("points", 28)
         spec = cls(
+            **TravelSpec.envelope(settings, profile, info),
             frequencies_hz=tuple(float(f) for f in np.geomspace(low, high, points)),
             speed_rad_s=settings.number("speed_rad_s", 0.5),
             amplitude_rad_s=settings.number("amplitude_rad_s", 0.25),
@@ -67,11 +64,6 @@ class Spec:
             settle_s=settings.number("settle_s", 0.03),
             blocks=settings.integer("blocks", 6),
             ramp_s=settings.number("ramp_s", 0.1),
-            margin_rad=settings.number("margin_rad", 0.1),
-            move_speed_rad_s=settings.number("move_speed_rad_s", 0.5),
-            fs_hz=min(profile.sample_rate_hz, info.max_sample_rate_hz),
-            travel_min_rad=info.limits.travel_min_rad,
-            travel_max_rad=info.limits.travel_max_rad,
         )
         samples = sum(spec.segment_samples(f) for f in spec.frequencies_hz)
         shortfall = travel_shortfall_rad(
@@ -88,10 +80,6 @@ class Spec:
         settings.done()
         return spec
 
-    @property
-    def start_rad(self) -> float:
-        return self.travel_min_rad + self.margin_rad
-
     def amplitude(self, frequency_hz: float) -> float:
         scaled = self.amplitude_rad_s * max(1.0, frequency_hz / self.amplitude_knee_hz)
         return min(scaled, self.max_amplitude_rad_s)
@@ -106,36 +94,28 @@ class Spec:
         return self.settle_samples(frequency_hz) + round(periods * self.fs_hz / frequency_hz)
 
 
-def _ramp(spec: Spec, up: bool) -> np.ndarray:
-    n = max(round(spec.ramp_s * spec.fs_hz), 1)
-    x = (np.arange(n) + 1) / n if up else 1 - (np.arange(n) + 1) / n
-    return spec.speed_rad_s * 0.5 * (1 - np.cos(math.pi * x))
-
-
 def excitation(spec: Spec, *, position_rad: float) -> list[Excitation]:
+    def ramp(*, up: bool) -> np.ndarray:
+        return speed_ramp(spec.speed_rad_s, ramp_s=spec.ramp_s, fs_hz=spec.fs_hz, up=up)
+
     """Move to the lower end; ramp to the carrier speed; the stepped sine; ramp down."""
     segments = []
     for f in spec.frequencies_hz:
         t = np.arange(spec.segment_samples(f)) / spec.fs_hz
         segments.append(spec.speed_rad_s + spec.amplitude(f) * np.sin(2 * math.pi * f * t))
     return [
-        Excitation(
-            name="move_to_start",
-            mode=Mode.POSITION,
-            fs_hz=spec.fs_hz,
-            command=position_move(
-                position_rad,
-                spec.start_rad,
-                fs_hz=spec.fs_hz,
-                speed_rad_s=spec.move_speed_rad_s,
-                hold_s=0.1,
-            ),
-        ),
+        spec.move_to_start(position_rad, hold_s=0.1),
         Excitation(
             name="stepped_sine",
             mode=Mode.VELOCITY,
             fs_hz=spec.fs_hz,
-            command=np.concatenate([_ramp(spec, True), *segments, _ramp(spec, False)]),
+            command=np.concatenate(
+                [
+                    ramp(up=True),
+                    *segments,
+                    ramp(up=False),
+                ]
+            ),
         ),
     ]
 

@@ -12,9 +12,9 @@ import pytest
 from hil.calibration import CalibrationRun
 from hil.drives.base import Drive, DriveInfo, Excitation, Mode
 from hil.identify.estimate import Estimate
-from hil.identify.moves import position_move
 from hil.identify.stribeck import Staircase, StribeckResult, identify_stribeck, staircase
 from hil.profile import UnitProfile
+from protocols._travel import TravelSpec
 
 log = logging.getLogger(__name__)
 
@@ -29,30 +29,23 @@ CROSS_CHECK = (
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
-class Spec:
+class Spec(TravelSpec):
     speeds_rad_s: tuple[float, ...]
     step_travel_rad: float
     settle_s: float
     turnaround_rad: float
     turnaround_speed_rad_s: float
-    move_speed_rad_s: float
-    fs_hz: float
-    travel_min_rad: float
-    travel_max_rad: float
 
     @classmethod
     def from_profile(cls, profile: UnitProfile, info: DriveInfo) -> Spec:
         settings = profile.settings(NAME)
         spec = cls(
+            **TravelSpec.envelope(settings, profile, info),
             speeds_rad_s=settings.numbers("speeds_rad_s"),
             step_travel_rad=settings.number("step_travel_rad", 0.03),
             settle_s=settings.number("settle_s", 0.3),
             turnaround_rad=settings.number("turnaround_rad", 0.08),
             turnaround_speed_rad_s=settings.number("turnaround_speed_rad_s", 0.1),
-            move_speed_rad_s=settings.number("move_speed_rad_s", 0.5),
-            fs_hz=min(profile.sample_rate_hz, info.max_sample_rate_hz),
-            travel_min_rad=info.limits.travel_min_rad,
-            travel_max_rad=info.limits.travel_max_rad,
         )
         settings.done()
         return spec
@@ -82,18 +75,7 @@ class Spec:
 def excitation(spec: Spec, *, position_rad: float) -> list[Excitation]:
     """A position move from ``position_rad`` to the start, then the velocity staircase."""
     return [
-        Excitation(
-            name="move_to_start",
-            mode=Mode.POSITION,
-            fs_hz=spec.fs_hz,
-            command=position_move(
-                position_rad,
-                spec.start_rad,
-                fs_hz=spec.fs_hz,
-                speed_rad_s=spec.move_speed_rad_s,
-                hold_s=0.2,
-            ),
-        ),
+        spec.move_to_start(position_rad, hold_s=0.2),
         Excitation(
             name="staircase",
             mode=Mode.VELOCITY,

@@ -18,7 +18,6 @@ import pytest
 from hil.calibration import CalibrationRun
 from hil.drives.base import Drive, DriveInfo, Excitation, Mode
 from hil.identify.estimate import Estimate
-from hil.identify.moves import position_move
 from hil.identify.torque_constant import (
     LockedSweep,
     TorqueConstantResult,
@@ -29,6 +28,7 @@ from hil.identify.torque_constant import (
 )
 from hil.profile import UnitProfile
 from hil.recording import Recording
+from protocols._travel import move_excitation
 
 NAME = "torque_constant"
 MEASUREMENTS = (
@@ -85,13 +85,13 @@ class Spec:
 
 
 def move(spec: Spec, *, position_rad: float, angle_rad: float) -> Excitation:
-    return Excitation(
-        name=f"move_to_{angle_rad:+.3f}rad",
-        mode=Mode.POSITION,
+    return move_excitation(
+        f"move_to_{angle_rad:+.3f}rad",
+        position_rad,
+        angle_rad,
         fs_hz=spec.fs_hz,
-        command=position_move(
-            position_rad, angle_rad, fs_hz=spec.fs_hz, speed_rad_s=spec.move_speed_rad_s, hold_s=0.1
-        ),
+        speed_rad_s=spec.move_speed_rad_s,
+        hold_s=0.1,
     )
 
 

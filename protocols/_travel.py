@@ -1,0 +1,75 @@
+"""What protocols that move over the travel share: the envelope, the start, the move there."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from hil.drives.base import DriveInfo, Excitation, Mode
+from hil.identify.moves import position_move
+from hil.profile import ProtocolSettings, UnitProfile
+
+
+def move_excitation(
+    name: str,
+    position_rad: float,
+    target_rad: float,
+    *,
+    fs_hz: float,
+    speed_rad_s: float,
+    hold_s: float,
+) -> Excitation:
+    """A smooth position-mode move from ``position_rad`` to ``target_rad``, then a hold."""
+    command = position_move(
+        position_rad, target_rad, fs_hz=fs_hz, speed_rad_s=speed_rad_s, hold_s=hold_s
+    )
+    return Excitation(name=name, mode=Mode.POSITION, fs_hz=fs_hz, command=command)
+
+
+def speed_ramp(speed_rad_s: float, *, ramp_s: float, fs_hz: float, up: bool) -> NDArray[np.float64]:
+    """Raised-cosine velocity ramp from rest to ``speed_rad_s`` (or back down)."""
+    n = max(round(ramp_s * fs_hz), 1)
+    x = (np.arange(n) + 1) / n if up else 1 - (np.arange(n) + 1) / n
+    return speed_rad_s * 0.5 * (1 - np.cos(math.pi * x))
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class TravelSpec:
+    """Base of a protocol Spec that plans motion inside the unit's travel limits."""
+
+    fs_hz: float
+    travel_min_rad: float
+    travel_max_rad: float
+    margin_rad: float  # kept clear of each travel limit
+    move_speed_rad_s: float  # peak speed of repositioning moves
+
+    @staticmethod
+    def envelope(
+        settings: ProtocolSettings, profile: UnitProfile, info: DriveInfo
+    ) -> dict[str, float]:
+        """The TravelSpec fields: rate and limits from profile and drive, margins from the
+        settings (``margin_rad`` 0.1, ``move_speed_rad_s`` 0.5 by default)."""
+        return {
+            "fs_hz": min(profile.sample_rate_hz, info.max_sample_rate_hz),
+            "travel_min_rad": info.limits.travel_min_rad,
+            "travel_max_rad": info.limits.travel_max_rad,
+            "margin_rad": settings.number("margin_rad", 0.1),
+            "move_speed_rad_s": settings.number("move_speed_rad_s", 0.5),
+        }
+
+    @property
+    def start_rad(self) -> float:
+        return self.travel_min_rad + self.margin_rad
+
+    def move_to_start(self, position_rad: float, *, hold_s: float) -> Excitation:
+        return move_excitation(
+            "move_to_start",
+            position_rad,
+            self.start_rad,
+            fs_hz=self.fs_hz,
+            speed_rad_s=self.move_speed_rad_s,
+            hold_s=hold_s,
+        )
