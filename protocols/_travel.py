@@ -9,7 +9,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from hil.drives.base import DriveInfo, Excitation, Mode
-from hil.identify.moves import position_move
+from hil.errors import ProfileError
+from hil.identify.moves import position_move, travel_shortfall_rad
 from hil.profile import ProtocolSettings, UnitProfile
 
 
@@ -63,6 +64,21 @@ class TravelSpec:
     @property
     def start_rad(self) -> float:
         return self.travel_min_rad + self.margin_rad
+
+    def require_travel(self, needed_rad: float, *, protocol: str, source: str) -> None:
+        """Refuse a profile whose one-way excitation needs more travel than the limits leave."""
+        shortfall = travel_shortfall_rad(
+            needed_rad=needed_rad,
+            travel_min_rad=self.travel_min_rad,
+            travel_max_rad=self.travel_max_rad,
+            margin_rad=self.margin_rad,
+        )
+        if shortfall > 0:
+            raise ProfileError(
+                f"[protocols.{protocol}] needs {shortfall:.3g} rad more travel than the "
+                "limits leave",
+                source=source,
+            )
 
     def move_to_start(self, position_rad: float, *, hold_s: float) -> Excitation:
         return move_excitation(

@@ -14,9 +14,7 @@ import pytest
 
 from hil.calibration import CalibrationRun
 from hil.drives.base import Drive, DriveInfo, Excitation, Mode
-from hil.errors import ProfileError
 from hil.identify.current_loop import CurrentLoopResult, analyse_frequency, fit_current_loop_lag
-from hil.identify.moves import travel_shortfall_rad
 from hil.profile import UnitProfile
 from hil.recording import Recording
 from protocols._travel import TravelSpec, speed_ramp
@@ -50,17 +48,11 @@ class Spec(TravelSpec):
             blocks=settings.integer("blocks", 5),
         )
         samples = sum(spec.segment_samples(f) for f in spec.frequencies_hz)
-        shortfall = travel_shortfall_rad(
-            needed_rad=spec.speed_rad_s * (spec.ramp_s + samples / spec.fs_hz),
-            travel_min_rad=spec.travel_min_rad,
-            travel_max_rad=spec.travel_max_rad,
-            margin_rad=spec.margin_rad,
+        spec.require_travel(
+            spec.speed_rad_s * (spec.ramp_s + samples / spec.fs_hz),
+            protocol=NAME,
+            source=profile.source,
         )
-        if shortfall > 0:
-            raise ProfileError(
-                f"[protocols.{NAME}] needs {shortfall:.3g} rad more travel than the limits leave",
-                source=profile.source,
-            )
         settings.done()
         return spec
 

@@ -16,9 +16,7 @@ import pytest
 
 from hil.calibration import CalibrationRun
 from hil.drives.base import Drive, DriveInfo, Excitation, Mode
-from hil.errors import ProfileError
 from hil.identify.estimate import Estimate
-from hil.identify.moves import travel_shortfall_rad
 from hil.identify.resonance import ResonanceResult, frf_point, identify_resonance
 from hil.profile import UnitProfile
 from hil.recording import Recording
@@ -66,17 +64,11 @@ class Spec(TravelSpec):
             ramp_s=settings.number("ramp_s", 0.1),
         )
         samples = sum(spec.segment_samples(f) for f in spec.frequencies_hz)
-        shortfall = travel_shortfall_rad(
-            needed_rad=spec.speed_rad_s * (spec.ramp_s + samples / spec.fs_hz),
-            travel_min_rad=spec.travel_min_rad,
-            travel_max_rad=spec.travel_max_rad,
-            margin_rad=spec.margin_rad,
+        spec.require_travel(
+            spec.speed_rad_s * (spec.ramp_s + samples / spec.fs_hz),
+            protocol=NAME,
+            source=profile.source,
         )
-        if shortfall > 0:
-            raise ProfileError(
-                f"[protocols.{NAME}] needs {shortfall:.3g} rad more travel than the limits leave",
-                source=profile.source,
-            )
         settings.done()
         return spec
 
