@@ -1,0 +1,227 @@
+"""Stepped-sine experiments against their Cramér–Rao bounds: current-loop lag and two-mass
+resonance (bounds explained in ``bench_crb.py``)."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+
+import numpy as np
+from crb_common import (
+    ComplexArray,
+    FloatArray,
+    FrfBlocks,
+    MonteCarlo,
+    Parameter,
+    bare_plant,
+    bound,
+    frf_blocks,
+    frf_information,
+    monte_carlo,
+    reported_scale,
+    sim_drive,
+)
+
+import protocols.test_current_loop as current_protocol
+import protocols.test_resonance as resonance_protocol
+from hil.errors import IdentificationError
+from hil.identify.current_loop import sampled_response
+from hil.identify.resonance import TwoMassModel, two_mass_response
+from hil.profile import UnitProfile
+from hil.recording import Recording
+from plant_sim.params import PlantParams
+
+SegmentSamples = Callable[[float], int]
+
+
+def _blocks(
+    recording: Recording,
+    frequencies_hz: tuple[float, ...],
+    *,
+    start: int,
+    settle: SegmentSamples,
+    segment: SegmentSamples,
+    fs_hz: float,
+    blocks: int,
+    sigma: float,
+) -> list[FrfBlocks]:
+    """Per frequency the samples the protocol's ``analyse`` hands to the estimator."""
+    out = []
+    for f in frequencies_hz:
+        a, b = start + settle(f), start + segment(f)
+        out.append(
+            frf_blocks(
+                recording.time_s[a:b],
+                recording.position[a:b],
+                frequency_hz=f,
+                fs_hz=fs_hz,
+                blocks=blocks,
+                sigma=sigma,
+            )
+        )
+        start += segment(f)
+    return out
+
+
+# -------------------------------------------------------------------------- current loop
+
+
+def current_loop(profile: UnitProfile, plant: PlantParams, runs: int, case: str) -> MonteCarlo:
+    """τ against two bounds: from the complex FRF points (J, B/J, τ free) and from their
+    phases only (a free magnitude per frequency: what the phase fit can use)."""
+    tau_ms = plant.current_loop_time_constant_s * 1e3
+    inertia = plant.total_inertia_kg_m2 * reported_scale(plant)
+    b_over_j = plant.viscous_nm_s_rad / plant.total_inertia_kg_m2
+    result = MonteCarlo(
+        estimator="current_loop",
+        case=case,
+        parameters=(
+            Parameter(name="τ (bound: complex FRF)", truth=tau_ms),
+            Parameter(name="τ (bound: FRF phases only)", truth=tau_ms),
+        ),
+    )
+    sigma = plant.torque_noise_nm
+    fs = profile.sample_rate_hz
+
+    def one(seed: int) -> tuple[list[float], list[float]] | None:
+        drive = sim_drive(plant, limits=profile.limits, fs_hz=fs, seed=seed)
+        spec = current_protocol.Spec.from_profile(profile, drive.info)
+        move, sines = current_protocol.excitation(spec, position_rad=drive.status().position_rad)
+        drive.run(move)
+        rec = drive.run(sines)
+        try:
+            found = current_protocol.analyse(rec, spec)
+        except IdentificationError:
+            return None
+        points = _blocks(
+            rec,
+            spec.frequencies_hz,
+            start=round(spec.ramp_s * fs),
+            settle=spec.settle_samples,
+            segment=spec.segment_samples,
+            fs_hz=fs,
+            blocks=spec.blocks,
+            sigma=sigma,
+        )
+        freqs = np.array(spec.frequencies_hz)
+
+        def model(x: FloatArray) -> ComplexArray:
+            return sampled_response(
+                freqs,
+                fs_hz=fs,
+                inertia_kg_m2=math.exp(x[2]),
+                viscous_over_inertia_1_s=float(x[1]),
+                time_constant_s=float(x[0]) * 1e-3,
+            )
+
+        def phases(x: FloatArray) -> ComplexArray:
+            h = model(np.array([x[0], x[1], 0.0]))
+            return np.asarray(np.exp(x[2:]) * h / np.abs(h), dtype=np.complex128)
+
+        full = np.array([tau_ms, b_over_j, math.log(inertia)])
+        steps = np.array([1e-4, 1e-3, 1e-5])
+        crb_full = bound(frf_information(points, model, full, steps), np.eye(3)[0])[0]
+        h0 = model(full)
+        phase_only = np.concatenate([[tau_ms, b_over_j], np.log(np.abs(h0))])
+        steps_phase = np.concatenate([[1e-4, 1e-3], np.full(len(freqs), 1e-5)])
+        info = frf_information(points, phases, phase_only, steps_phase)
+        crb_phase = bound(info, np.eye(info.shape[0])[0])[0]
+        value = found.time_constant.value
+        return [value, value], [float(crb_full), float(crb_phase)]
+
+    return monte_carlo(result, runs, one)
+
+
+def current_loop_white(plant: PlantParams) -> PlantParams:
+    """Rigid axis, Coulomb + viscous friction, the current-loop lag, torque noise."""
+    return bare_plant(plant).with_changes(
+        current_loop_time_constant_s=plant.current_loop_time_constant_s
+    )
+
+
+# ----------------------------------------------------------------------------- resonance
+
+
+def two_mass_truth(plant: PlantParams) -> TwoMassModel:
+    """The fitted model's parameters for the simulated plant (as ``bench_frf.py`` derives
+    them; torque in reported units: the K_t error scales J)."""
+    j_total = plant.total_inertia_kg_m2
+    j_load = plant.load_at_elevation_kg_m2
+    k, c = plant.shaft_stiffness_nm_rad, plant.shaft_damping_nm_s_rad
+    reduced = plant.motor_inertia_kg_m2 * j_load / j_total
+    wa, wr = math.sqrt(k / j_load), math.sqrt(k / reduced)
+    return TwoMassModel(
+        inertia_kg_m2=j_total * reported_scale(plant),
+        antiresonance_hz=wa / (2 * math.pi),
+        antiresonance_damping=c / (2 * math.sqrt(k * j_load)),
+        resonance_hz=wr / (2 * math.pi),
+        resonance_damping=c / (2 * math.sqrt(k * reduced))
+        + plant.viscous_nm_s_rad / (2 * plant.motor_inertia_kg_m2 * wr) * j_load / j_total,
+        viscous_over_inertia_1_s=plant.viscous_nm_s_rad / j_total,
+        time_constant_s=plant.current_loop_time_constant_s,
+    )
+
+
+def resonance(profile: UnitProfile, plant: PlantParams, runs: int, case: str) -> MonteCarlo:
+    truth = two_mass_truth(plant)
+    result = MonteCarlo(
+        estimator="resonance",
+        case=case,
+        parameters=(
+            Parameter(name="f_res", truth=truth.resonance_hz),
+            Parameter(name="f_anti", truth=truth.antiresonance_hz),
+            Parameter(name="ζ_res", truth=truth.resonance_damping),
+        ),
+    )
+    sigma = plant.torque_noise_nm
+    fs = profile.sample_rate_hz
+    theta = truth.as_vector()
+
+    def one(seed: int) -> tuple[list[float], list[float]] | None:
+        drive = sim_drive(plant, limits=profile.limits, fs_hz=fs, seed=seed)
+        spec = resonance_protocol.Spec.from_profile(profile, drive.info)
+        move, sine = resonance_protocol.excitation(spec, position_rad=drive.status().position_rad)
+        drive.run(move)
+        rec = drive.run(sine)
+        try:
+            found = resonance_protocol.analyse(rec, spec)
+        except IdentificationError:
+            return None
+        points = _blocks(
+            rec,
+            spec.frequencies_hz,
+            start=round(spec.ramp_s * fs),
+            settle=spec.settle_samples,
+            segment=spec.segment_samples,
+            fs_hz=fs,
+            blocks=spec.blocks,
+            sigma=sigma,
+        )
+        freqs = np.array(spec.frequencies_hz)
+
+        def model(x: FloatArray) -> ComplexArray:
+            return two_mass_response(TwoMassModel.from_vector(x), freqs, fs_hz=fs)
+
+        info = frf_information(points, model, theta, np.full(theta.size, 1e-5))
+        values = np.exp(theta)
+        grads = np.zeros((3, theta.size))
+        for row, index in enumerate((3, 1, 4)):  # log f_r, log f_a, log ζ_r
+            grads[row, index] = values[index]
+        crb = bound(info, grads)
+        m = found.model
+        return [m.resonance_hz, m.antiresonance_hz, m.resonance_damping], list(crb)
+
+    return monte_carlo(result, runs, one)
+
+
+def resonance_white(plant: PlantParams, *, substeps: int) -> PlantParams:
+    """Two-mass load, Coulomb + viscous friction, current-loop lag, torque noise; the
+    simulator's physics step refined ``substeps`` times per control period."""
+    return bare_plant(plant).with_changes(
+        load_inertia_kg_m2=plant.load_inertia_kg_m2,
+        shaft_stiffness_nm_rad=plant.shaft_stiffness_nm_rad,
+        shaft_damping_nm_s_rad=plant.shaft_damping_nm_s_rad,
+        inertia_elevation_kg_m2=plant.inertia_elevation_kg_m2,
+        current_loop_time_constant_s=plant.current_loop_time_constant_s,
+        substeps=substeps,
+    )
