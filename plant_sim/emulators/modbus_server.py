@@ -2,10 +2,14 @@
 
 A pymodbus server on 127.0.0.1 serves the holding registers of the register map it is
 given (``fixtures/regmap_*.toml``). Unlike the CANopen emulator, the plant steps in real
-time: every request first advances it to the wall clock with the last command held, and
-a background task keeps it going between requests (and runs the drive's communication
-watchdog). Faults: line delay, exception responses, a drive trip, a dropped connection,
-a drive that stops answering.
+time, one control period (``1/fs_hz``) at a time: every request first brings it up to the
+wall clock with the last command held (so a read returns a state at most one control
+period old, like a real drive's registers), and a background task keeps it going between
+requests (and runs the drive's communication watchdog). With a ``timestamp`` register the
+drive's clock (the plant time of the latched feedback, in control periods) is served with
+the feedback; with a ``setpoint_interpolation_time`` register a written setpoint is reached
+by a linear ramp over that time instead of a step. Faults: line delay, exception responses,
+a drive trip, a dropped connection, a drive that stops answering.
 """
 
 from __future__ import annotations
@@ -15,6 +19,7 @@ import logging
 import math
 import threading
 import time
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -26,7 +31,12 @@ from pymodbus.datastore.context import ModbusBaseDeviceContext
 from pymodbus.server import ModbusTcpServer
 
 from hil.drives.base import Mode
-from hil.drives.modbus.regmap import FEEDBACK, load_register_map
+from hil.drives.modbus.regmap import (
+    FEEDBACK,
+    SETPOINT_INTERPOLATION,
+    TIMESTAMP,
+    load_register_map,
+)
 from plant_sim.emulators.faults import ModbusFaults
 from plant_sim.model import Plant
 from plant_sim.params import PlantParams
@@ -36,6 +46,25 @@ log = logging.getLogger(__name__)
 WATCHDOG_FAULT = 0x8130  # CiA-style "life guard / heartbeat error"
 QUICK_STOP_DECEL_RAD_S2 = 20.0
 REGISTERS = 128
+
+
+@dataclass(slots=True)
+class _Setpoint:
+    """The setpoint the drive's loops see: ``start`` → ``target`` linearly over ``steps``
+    control periods from plant step ``begin`` (``steps`` = 0: the target at once)."""
+
+    mode: str | None = None
+    start: float = 0.0
+    target: float = 0.0
+    begin: int = 0
+    steps: int = 0
+
+    def values(self, first: int, count: int) -> np.ndarray:
+        """The setpoint at plant steps ``first`` … ``first + count - 1``."""
+        if self.steps <= 0:
+            return np.full(count, self.target)
+        done = (first + np.arange(count) - self.begin + 1) / self.steps
+        return self.start + (self.target - self.start) * np.clip(done, 0.0, 1.0)
 
 
 class _Context(ModbusBaseDeviceContext):  # type: ignore[misc]
@@ -86,6 +115,7 @@ class ModbusEmulator:
         self.requests = 0
         self._ramp = 0.0
         self._control = 0
+        self._setpoint = _Setpoint()
         self._last_request = time.monotonic()
         self._clock = time.monotonic()
         self._lock = threading.Lock()
@@ -194,6 +224,31 @@ class ModbusEmulator:
         control = self.map["control_word"]
         if address <= control.address < address + len(values):
             self._apply_control(int(self._get("control_word")))
+        name = self._mode_name()
+        command = self.map[f"{name}_cmd"]
+        if address < command.address + command.count and command.address < address + len(values):
+            self._retarget(name)
+
+    def _mode_name(self) -> str:
+        modes = {v: k for k, v in self.map.modes.items()}
+        return modes.get(int(self._get("mode")), "velocity")
+
+    def _step(self) -> int:
+        """Index of the plant's next control period."""
+        return round(self.plant.time_s * self.fs_hz)
+
+    def _retarget(self, mode: str) -> None:
+        """A new setpoint for the active mode: ramp to it from the one in effect now."""
+        target = self._get(f"{mode}_cmd")
+        step = self._step()
+        steps = 0
+        if SETPOINT_INTERPOLATION in self.map.registers:
+            steps = round(self._get(SETPOINT_INTERPOLATION) * self.fs_hz)
+        if self._setpoint.mode == mode and self.enabled and not self.quick_stopping:
+            start = float(self._setpoint.values(step - 1, 1)[0])
+        else:
+            start = target
+        self._setpoint = _Setpoint(mode=mode, start=start, target=target, begin=step, steps=steps)
 
     def _apply_control(self, word: int) -> None:
         bits = self.map.control_bits
@@ -213,6 +268,7 @@ class ModbusEmulator:
         if want and not self.enabled:
             self.plant.hold()
             self.quick_stopping = False
+            self._setpoint = _Setpoint()  # a fresh enable starts from the register, no ramp
         self.enabled = want
 
     # -- registers -----------------------------------------------------------------------
@@ -267,10 +323,10 @@ class ModbusEmulator:
             return Mode.VELOCITY, np.full(steps, self._ramp)
         if not self.enabled:
             return Mode.TORQUE, np.zeros(steps)
-        modes = {v: k for k, v in self.map.modes.items()}
-        name = modes.get(int(self._get("mode")), "velocity")
-        mode = Mode(name)
-        return mode, np.full(steps, self._get(f"{name}_cmd"))
+        name = self._mode_name()
+        if self._setpoint.mode != name:  # mode changed: the register's setpoint, at once
+            self._setpoint = _Setpoint(mode=name, start=0.0, target=self._get(f"{name}_cmd"))
+        return Mode(name), self._setpoint.values(self._step(), steps)
 
     def _hold_trace(self) -> Any:
         return self.plant.run(Mode.TORQUE, np.zeros(1))
@@ -287,6 +343,11 @@ class ModbusEmulator:
             ),
         )
         self._put("current", float(trace.current_a[-1]))
+        if TIMESTAMP in self.map.registers:
+            # the drive's clock at the latched state, wrapping like the counter it is
+            register = self.map[TIMESTAMP]
+            raw = round(float(trace.time_s[-1]) / register.scale) % register.modulus
+            self._put(TIMESTAMP, raw * register.scale)
         for name in FEEDBACK:
             if name not in self.map.registers:
                 raise KeyError(name)

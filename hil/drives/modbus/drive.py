@@ -1,10 +1,15 @@
 """ModbusDrive: the Drive contract over Modbus TCP or RTU (pymodbus), by polling.
 
-Each poll writes the command sample due at that moment and reads the feedback block;
-the recording's ``time_s`` is the host's monotonic clock at the middle of each read
-transaction, so sampling is irregular and says so. ``info.max_sample_rate_hz`` is measured
-at connection (70 % of the sustained poll rate, rounded down to 1-2-5) and capped by the
-station's ``max_poll_rate_hz``.
+Sample ``k`` of a run: the command sample ``k`` is written at ``k/fs`` and the feedback
+block read half a period later (away from the loop's response to the new setpoint).
+Timing: if the register map has a ``timestamp`` register (the drive's free-running clock,
+latched with the feedback and read in the same request) the recording's ``time_s`` is that
+clock, unwrapped; otherwise it is the host's monotonic clock at the middle of the read
+transaction, which carries the link's jitter. If the map has a
+``setpoint_interpolation_time`` register it is set to the sample period, so the drive
+ramps between setpoints instead of stepping. ``metadata["acquisition"]`` says which.
+``info.max_sample_rate_hz`` is measured at connection (70 % of the sustained rate of a
+write and a read, rounded down to 1-2-5) and capped by the station's ``max_poll_rate_hz``.
 """
 
 from __future__ import annotations
@@ -29,9 +34,21 @@ from hil.drives.base import (
     Mode,
     check_limits,
 )
-from hil.drives.modbus.regmap import FEEDBACK, RegisterMap, load_register_map
+from hil.drives.modbus.regmap import (
+    FEEDBACK,
+    SETPOINT_INTERPOLATION,
+    TIMESTAMP,
+    RegisterMap,
+    load_register_map,
+)
 from hil.drives.station import ModbusStation
-from hil.errors import DriveCommunicationError, DriveError, DriveFaultError, DriveStateError
+from hil.errors import (
+    DriveCommunicationError,
+    DriveError,
+    DriveFaultError,
+    DriveStateError,
+    ProfileError,
+)
 from hil.recording import Recording
 
 log = logging.getLogger(__name__)
@@ -67,7 +84,16 @@ class ModbusDrive(Drive):
         self.limits = limits
         self.map: RegisterMap = load_register_map(station.register_map_path)
         self._state = DriveState.DISABLED
-        self._blocks = self.map.blocks(FEEDBACK)
+        self._has_timestamp = TIMESTAMP in self.map.registers
+        self._feedback_names = FEEDBACK + ((TIMESTAMP,) if self._has_timestamp else ())
+        self._blocks = self.map.blocks(self._feedback_names)
+        if self._has_timestamp and len(self._blocks) > 1:
+            raise ProfileError(
+                f"register '{TIMESTAMP}' must be read in one request with the feedback "
+                f"({', '.join(FEEDBACK)}); they span {len(self._blocks)} reads of at most "
+                f"{self.map.max_registers_per_read} registers",
+                source=self.map.source,
+            )
         self._client = self._make_client()
         self._connect()
         try:
@@ -163,11 +189,13 @@ class ModbusDrive(Drive):
         )
 
     def _measure_poll_rate(self, polls: int = 20) -> float:
+        """A sample costs a command write and a feedback read; a read is timed (it moves
+        nothing) and the write taken to cost as much."""
         start = time.monotonic()
         for _ in range(polls):
             self._feedback()
-        per_poll = (time.monotonic() - start) / polls
-        achievable = 0.7 / per_poll
+        per_sample = 2 * (time.monotonic() - start) / polls
+        achievable = 0.7 / per_sample
         return nice_rate(min(self.station.max_poll_rate_hz, achievable))
 
     @property
@@ -184,7 +212,7 @@ class ModbusDrive(Drive):
                 words[address + offset] = value
         t1 = time.monotonic()
         values = {}
-        for name in FEEDBACK:
+        for name in self._feedback_names:
             if name in self.map.registers:
                 r = self.map[name]
                 values[name] = r.decode([words[r.address + i] for i in range(r.count)])
@@ -309,6 +337,7 @@ class ModbusDrive(Drive):
         check_limits(excitation, self.limits, start_position_rad=start.position_rad)
         if excitation.mode is not getattr(self, "_mode", None):
             self._select(excitation.mode)
+        self._set_interpolation(1.0 / excitation.fs_hz)
         rows: list[tuple[float, float, dict[str, float]]] = []
         error: DriveError | None = None
         try:
@@ -329,6 +358,18 @@ class ModbusDrive(Drive):
         self.write_value(f"{excitation.mode.value}_cmd", self._hold_value(excitation.mode))
         return recording
 
+    def _set_interpolation(self, period_s: float) -> None:
+        """Let the drive ramp over one sample period to each new setpoint (if it can)."""
+        if SETPOINT_INTERPOLATION not in self.map.registers:
+            return
+        register = self.map[SETPOINT_INTERPOLATION]
+        if round(period_s / register.scale) >= register.modulus:
+            raise DriveStateError(
+                f"{self._where()}: sample period {period_s:g} s exceeds the range of "
+                f"'{SETPOINT_INTERPOLATION}' ({(register.modulus - 1) * register.scale:g} s)"
+            )
+        self.write_value(SETPOINT_INTERPOLATION, period_s)
+
     def _poll(
         self, excitation: Excitation, rows: list[tuple[float, float, dict[str, float]]]
     ) -> None:
@@ -344,6 +385,11 @@ class ModbusDrive(Drive):
             if index != last_index:
                 self.write_value(name, float(command[index]))
                 last_index = index
+            # read half a period after the setpoint changed: a drive that steps to it
+            # answers with a torque transient whose start would be sampled every time
+            delay = t0 + (index + 0.5) / fs - time.monotonic()
+            if delay > 0:
+                time.sleep(delay)
             stamp, values = self._feedback()
             rows.append((stamp - t0, float(command[index]), values))
             if self._bit(values, "fault"):
@@ -364,11 +410,31 @@ class ModbusDrive(Drive):
     def _recording(
         self, excitation: Excitation, rows: list[tuple[float, float, dict[str, float]]]
     ) -> Recording:
+        host_s = np.asarray([r[0] for r in rows], dtype=np.float64)
+        duplicates = 0
+        if self._has_timestamp and rows:
+            time_s = self._drive_time(host_s, [r[2][TIMESTAMP] for r in rows])
+            fresh = np.concatenate([[True], np.diff(time_s) > 0])
+            duplicates = int(np.sum(~fresh))  # read twice within one drive cycle
+            rows = [r for r, keep in zip(rows, fresh, strict=True) if keep]
+            time_s = time_s[fresh]
+            acquisition = (
+                f"polled; time_s = the drive's clock (register '{TIMESTAMP}', latched with "
+                "the feedback)"
+            )
+        else:
+            time_s = host_s
+            acquisition = "polled; time_s = host clock at mid-read (irregular, link jitter)"
+        if SETPOINT_INTERPOLATION in self.map.registers:
+            acquisition += f"; setpoint interpolated over {1.0 / excitation.fs_hz:g} s"
+        else:
+            acquisition += "; setpoint stepped at each write"
+
         def column(key: str) -> np.ndarray:
             return np.asarray([r[2].get(key, np.nan) for r in rows], dtype=np.float64)
 
         columns = {
-            "time_s": np.asarray([r[0] for r in rows], dtype=np.float64),
+            "time_s": time_s,
             "position_rad": column("position"),
             "velocity_rad_s": column("velocity"),
             "torque_nm": column("torque"),
@@ -385,8 +451,25 @@ class ModbusDrive(Drive):
             "transport": self._info.transport,
             "excitation": excitation.name,
             "control_mode": excitation.mode.value,
-            "acquisition": "polled (host timestamps, irregular)",
+            "acquisition": acquisition,
             "poll_rate_hz": f"{len(rows) / max(excitation.duration_s, 1e-9):.1f}",
+            "duplicate_reads_dropped": str(duplicates),
+            **(
+                {"drive_control_period_s": f"{self.map.control_period_s:g}"}
+                if self.map.control_period_s is not None
+                else {}
+            ),
             **excitation.metadata,
         }
         return Recording(columns=columns, metadata=metadata, source=f"modbus:{excitation.name}")
+
+    def _drive_time(self, host_s: np.ndarray, clock_s: list[float]) -> np.ndarray:
+        """The drive's wrapping clock unwrapped (each step's wrap count chosen to match the
+        host's elapsed time), offset to start at the first sample's host time."""
+        register = self.map[TIMESTAMP]
+        wrap_s = register.modulus * register.scale
+        clock = np.asarray(clock_s, dtype=np.float64)
+        step = np.diff(clock)
+        wraps = np.round((np.diff(host_s) - step) / wrap_s)
+        elapsed = np.concatenate([[0.0], np.cumsum(step + wraps * wrap_s)])
+        return np.asarray(host_s[0] + elapsed, dtype=np.float64)

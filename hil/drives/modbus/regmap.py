@@ -31,6 +31,12 @@ REQUIRED = (
     "position_cmd",
 )
 FEEDBACK = ("status_word", "fault_code", "position", "velocity", "torque", "current")
+# optional: the drive's free-running clock, latched with the feedback (unsigned, read-only,
+# scale = seconds per count); the backend then times samples by the drive, not the host
+TIMESTAMP = "timestamp"
+# optional: the drive ramps linearly from the setpoint in effect to each newly written one
+# over this time (writable, scale = seconds per count); the backend sets it to its period
+SETPOINT_INTERPOLATION = "setpoint_interpolation_time"
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -47,6 +53,11 @@ class Register:
     @property
     def count(self) -> int:
         return TYPES[self.type][1]
+
+    @property
+    def modulus(self) -> int:
+        """Raw counts after which an unsigned register wraps to 0."""
+        return 1 << (16 * self.count)
 
     def _format(self) -> str:
         return (">" if self.byte_order == "big" else "<") + TYPES[self.type][0]
@@ -75,6 +86,7 @@ class RegisterMap:
     registers: Mapping[str, Register]
     max_registers_per_read: int
     frame_gap_s: float
+    control_period_s: float | None  # the drive's loop period: the torque register holds one
     control_bits: Mapping[str, int]
     status_bits: Mapping[str, int]
     modes: Mapping[str, int]
@@ -120,6 +132,31 @@ def load_register_map(path: str | Path) -> RegisterMap:
             raise ProfileError(
                 f"register '{name}' must be writable (access = \"rw\")", source=source
             )
+    for name in (TIMESTAMP, SETPOINT_INTERPOLATION):
+        register = registers.get(name)
+        if register is not None and register.type not in ("uint16", "uint32"):
+            raise ProfileError(
+                f"register '{name}' must be uint16 or uint32, got '{register.type}'",
+                source=f"{source} [registers.{name}]",
+            )
+        if register is not None and register.scale <= 0:
+            raise ProfileError(
+                f"register '{name}' needs a positive scale (seconds per count)",
+                source=f"{source} [registers.{name}]",
+            )
+    if SETPOINT_INTERPOLATION in registers and not registers[SETPOINT_INTERPOLATION].writable:
+        raise ProfileError(
+            f"register '{SETPOINT_INTERPOLATION}' must be writable (access = \"rw\")",
+            source=f"{source} [registers.{SETPOINT_INTERPOLATION}]",
+        )
+    control_period = device.get("control_period_s")
+    if control_period is not None and not (
+        isinstance(control_period, int | float) and control_period > 0
+    ):
+        raise ProfileError(
+            f"[device] control_period_s must be a positive number, got {control_period!r}",
+            source=source,
+        )
     bits = data.get("bits", {})
     return RegisterMap(
         source=source,
@@ -127,6 +164,7 @@ def load_register_map(path: str | Path) -> RegisterMap:
         registers=registers,
         max_registers_per_read=int(device.get("max_registers_per_read", 125)),
         frame_gap_s=float(device.get("frame_gap_s", 0.0)),
+        control_period_s=None if control_period is None else float(control_period),
         control_bits={"enable": 0, "quick_stop": 1, "fault_reset": 2, **bits.get("control", {})},
         status_bits={"enabled": 0, "fault": 1, "quick_stop_active": 2, **bits.get("status", {})},
         modes={"torque": 1, "velocity": 2, "position": 3, **data.get("modes", {})},

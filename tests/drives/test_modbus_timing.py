@@ -1,0 +1,166 @@
+"""Acquisition timing of the Modbus backend against the Modbus emulator (real time).
+
+A polled sample is only as good as its time stamp: the host's clock around a request
+carries the link's jitter (≈ 1 ms here, ±3 ms tails under load), which turned J, B and T_c
+over Modbus into noise. With the drive's ``timestamp`` register the recording is timed by
+the drive's control-cycle clock, latched with the feedback it belongs to.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from conftest import sine
+from hil.drives.modbus import ModbusDrive
+from hil.drives.modbus.regmap import load_register_map
+from hil.drives.station import ModbusStation
+from hil.errors import ProfileError
+from hil.profile import UnitProfile
+from hil.recording import Recording
+from plant_sim.emulators.modbus_server import ModbusEmulator
+from plant_sim.emulators.sessions import builtin_station, modbus_emulator, rated_torque_nm
+
+REGMAP = builtin_station("regmap_gimbal_hil_servo.toml")
+CONTROL_PERIOD_S = 1 / 4000.0  # the demo unit's drive loop
+ERROR_RAD_S = 0.015  # see test_samples_are_timed_by_the_drive_clock
+
+
+def _regmap_with(tmp_path: Path, old: str, new: str) -> Path:
+    text = REGMAP.read_text(encoding="utf-8")
+    assert old in text
+    path = tmp_path / "regmap.toml"
+    path.write_text(text.replace(old, new), encoding="utf-8")
+    return path
+
+
+def _station(regmap: Path, port: int = 1) -> ModbusStation:
+    return ModbusStation(
+        source="test", transport="tcp", register_map_path=regmap, port=port, timeout_s=1.0
+    )
+
+
+def test_timing_registers_are_checked(tmp_path: Path, profile: UnitProfile) -> None:
+    signed = _regmap_with(tmp_path, 'type = "uint32"                 # wraps', 'type = "int32" #')
+    with pytest.raises(ProfileError, match=r"\[registers\.timestamp\].*uint16 or uint32"):
+        load_register_map(signed)
+    read_only = _regmap_with(tmp_path, 'scale = 1e-5\nunit = "s"\naccess = "rw"', "scale = 1e-5")
+    with pytest.raises(ProfileError, match="'setpoint_interpolation_time' must be writable"):
+        load_register_map(read_only)
+    period = _regmap_with(tmp_path, "control_period_s = 0.00025", "control_period_s = -1")
+    with pytest.raises(ProfileError, match=r"regmap\.toml.*control_period_s must be a positive"):
+        load_register_map(period)
+    apart = _regmap_with(tmp_path, "address = 8 ", "address = 40 ")
+    with pytest.raises(ProfileError, match=r"regmap\.toml.*'timestamp' must be read in one"):
+        ModbusDrive(_station(apart), limits=profile.limits)
+
+
+def _derivative_error(recording: Recording) -> float:
+    """RMS of Δposition/Δt against the drive's own velocity register between the samples:
+    small only if each time stamp is the time of the position it is stored with."""
+    t, p = recording.time_s, recording.position
+    v = recording.columns["velocity_rad_s"]
+    slope = np.diff(p) / np.diff(t)
+    lag = 1 / (2 * math.pi * 300.0)  # the drive's velocity filter (300 Hz) lags ≈ 0.5 ms
+    middle = 0.5 * (t[1:] + t[:-1]) + lag
+    return float(np.sqrt(np.mean((slope - np.interp(middle, t, v)) ** 2)))
+
+
+def test_samples_are_timed_by_the_drive_clock(profile: UnitProfile) -> None:
+    """Regression (issue 4): each time stamp is the time of the state stored with it."""
+    with (
+        modbus_emulator(profile, seed=3) as (_, station),
+        ModbusDrive(station, limits=profile.limits) as drive,
+    ):
+        fs = drive.info.max_sample_rate_hz
+        drive.enable()
+        recording = drive.run(sine(1.0, fs_hz=fs, periods=3))
+    assert "the drive's clock" in recording.metadata["acquisition"]
+    assert "setpoint interpolated" in recording.metadata["acquisition"]
+    steps = np.diff(recording.time_s) / CONTROL_PERIOD_S
+    assert np.all(steps > 0.5)  # one row per drive sample, never the same one twice
+    np.testing.assert_allclose(steps, np.round(steps), atol=1e-6)  # on the drive's clock
+    # host stamps left 0.03-0.09 rad/s here: a millisecond of stamp error on a 1 rad/s
+    # sine is a milliradian of position; the drive's clock leaves encoder and filter residue
+    assert _derivative_error(recording) < ERROR_RAD_S
+
+
+def test_wrapping_drive_clock_is_unwrapped(tmp_path: Path, profile: UnitProfile) -> None:
+    """A 16-bit µs counter wraps every 65.5 ms, many times within one run."""
+    regmap = _regmap_with(tmp_path, 'type = "uint32"                 # wraps', 'type = "uint16" #')
+    assert profile.plant is not None
+    emulator = ModbusEmulator(
+        profile.plant,
+        fs_hz=profile.sample_rate_hz,
+        seed=1,
+        register_map=regmap,
+        rated_torque_nm=rated_torque_nm(profile),
+    )
+    with emulator, ModbusDrive(_station(regmap, emulator.port), limits=profile.limits) as drive:
+        assert drive.map["timestamp"].modulus == 1 << 16
+        fs = min(drive.info.max_sample_rate_hz, 100.0)
+        drive.enable()
+        recording = drive.run(sine(0.5, fs_hz=fs, periods=1))
+    duration = recording.time_s[-1] - recording.time_s[0]
+    assert duration == pytest.approx(0.5, abs=0.05)  # 7 wraps: drive and host agree
+    assert _derivative_error(recording) < ERROR_RAD_S
+
+
+def test_setpoint_is_interpolated_by_the_drive(profile: UnitProfile) -> None:
+    """A velocity step written with a 0.2 s interpolation time is reached by a 0.2 s ramp
+    (the velocity loop alone follows a step within ≈ 20 ms)."""
+    with (
+        modbus_emulator(profile, seed=1) as (_, station),
+        ModbusDrive(station, limits=profile.limits) as drive,
+    ):
+        drive.enable()
+        drive.write_value("setpoint_interpolation_time", 0.2)
+        t0 = drive.read_values(("timestamp",))["timestamp"]
+        drive.write_value("velocity_cmd", 0.4)
+        trace = []
+        deadline = time.monotonic() + 0.35
+        while time.monotonic() < deadline:
+            values = drive.read_values(("timestamp", "velocity"))
+            trace.append((values["timestamp"] - t0, values["velocity"]))
+            time.sleep(0.005)
+        drive.write_value("velocity_cmd", 0.0)
+    t, v = np.array(trace).T
+    early = v[(t > 0.08) & (t < 0.12)]
+    assert early.size > 0
+    assert np.all((early > 0.12) & (early < 0.28))  # the ramp: 0.2 rad/s at 0.1 s
+    assert v[t > 0.3].mean() == pytest.approx(0.4, abs=0.03)
+
+
+def test_inertia_friction_over_modbus_within_tolerance(profile: UnitProfile) -> None:
+    """J and T_c from the calibration protocol over the emulator, twice, each within the
+    profile's tolerance (before the fix: J −17 … −30 %, T_c off by up to 70 %).
+
+    The station caps polling at 100 Hz so that a loaded runner still keeps the rate (a
+    loop that falls behind leaves gaps, which the derivative estimator does not yet take
+    well). B is not judged here: the protocol shifts the kinematics by half a *recording*
+    period for the torque's hold, right for ``--drive sim`` but 5 ms off at 100 Hz for a
+    drive whose torque register holds one 0.25 ms loop period (B +60 %; see
+    ``metadata["drive_control_period_s"]``)."""
+    from protocols.test_inertia_friction import Spec, analyse, excitation
+
+    with (
+        modbus_emulator(profile, seed=5, station_changes={"max_poll_rate_hz": 100.0}) as (
+            _,
+            station,
+        ),
+        ModbusDrive(station, limits=profile.limits) as drive,
+    ):
+        spec = Spec.from_profile(profile, drive.info)
+        drive.enable()
+        results = [analyse([drive.run(e) for e in excitation(spec)], spec) for _ in range(2)]
+    for result in results:
+        for estimate in (result.inertia, result.coulomb):
+            declared = profile.measurement(estimate.name)
+            assert declared.lower_limit < estimate.value < declared.upper_limit, (
+                f"{estimate.name} = {estimate.value:.6g} outside "
+                f"[{declared.lower_limit:.6g}, {declared.upper_limit:.6g}] at {spec.fs_hz:g} Hz"
+            )
