@@ -211,6 +211,20 @@ class MonteCarlo:
         out: list[dict[str, float | str | int]] = []
         for i, p in enumerate(self.parameters):
             ok = np.isfinite(est[:, i]) & np.isfinite(crb[:, i])
+            if not ok.any():
+                out.append(
+                    {
+                        "parameter": p.name,
+                        "bias": math.nan,
+                        "bias_unit": "",
+                        "rmse": math.nan,
+                        "crb": math.nan,
+                        "rmse_over_crb": math.nan,
+                        "std_over_crb": math.nan,
+                        "runs": 0,
+                    }
+                )
+                continue
             err = est[ok, i] - p.truth
             rmse = float(np.sqrt(np.mean(err**2)))
             b = float(np.sqrt(np.mean(crb[ok, i] ** 2)))
@@ -257,9 +271,15 @@ def markdown(results: Sequence[MonteCarlo]) -> str:
     ]
     for r in results:
         for row in r.rows():
+            failed = f" ({r.failures} failed)" if r.failures else ""
+            if row["runs"] == 0:
+                lines.append(
+                    f"| {r.estimator} | {r.case} | {row['parameter']} | not found in any run "
+                    f"| – | – | 0{failed} | {r.wall_s:.0f} |"
+                )
+                continue
             unit = row["bias_unit"]
             bias = f"{row['bias']:+.2f} %" if unit == "%" else f"{row['bias']:+.2g} {unit}"
-            failed = f" ({r.failures} failed)" if r.failures else ""
             lines.append(
                 f"| {r.estimator} | {r.case} | {row['parameter']} | {bias} | "
                 f"{row['rmse_over_crb']:.2f} | {row['std_over_crb']:.2f} | "

@@ -3,6 +3,7 @@ resonance (bounds explained in ``bench_crb.py``)."""
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Callable
 
@@ -162,7 +163,17 @@ def two_mass_truth(plant: PlantParams) -> TwoMassModel:
     )
 
 
-def resonance(profile: UnitProfile, plant: PlantParams, runs: int, case: str) -> MonteCarlo:
+def resonance(
+    profile: UnitProfile,
+    plant: PlantParams,
+    runs: int,
+    case: str,
+    *,
+    settle_s: float | None = None,
+) -> MonteCarlo:
+    """f_res, f_anti, ζ_res. ``settle_s``: a diagnostic that overrides the profile's
+    settling time per frequency (the travel limits widened to make room: the simulator has
+    no end stops); ``None`` runs the protocol as the profile sets it."""
     truth = two_mass_truth(plant)
     result = MonteCarlo(
         estimator="resonance",
@@ -178,8 +189,13 @@ def resonance(profile: UnitProfile, plant: PlantParams, runs: int, case: str) ->
     theta = truth.as_vector()
 
     def one(seed: int) -> tuple[list[float], list[float]] | None:
-        drive = sim_drive(plant, limits=profile.limits, fs_hz=fs, seed=seed)
+        limits = profile.limits
+        if settle_s is not None:
+            limits = dataclasses.replace(limits, travel_min_rad=-30.0, travel_max_rad=30.0)
+        drive = sim_drive(plant, limits=limits, fs_hz=fs, seed=seed)
         spec = resonance_protocol.Spec.from_profile(profile, drive.info)
+        if settle_s is not None:
+            spec = dataclasses.replace(spec, settle_s=settle_s)
         move, sine = resonance_protocol.excitation(spec, position_rad=drive.status().position_rad)
         drive.run(move)
         rec = drive.run(sine)
