@@ -14,7 +14,12 @@ import pytest
 
 from hil.calibration import CalibrationRun
 from hil.drives.base import Drive, DriveInfo, Excitation, Mode
-from hil.identify.current_loop import CurrentLoopResult, analyse_frequency, fit_current_loop_lag
+from hil.identify.current_loop import (
+    CurrentLoopResult,
+    analyse_frequency,
+    fit_current_loop_lag,
+    torque_hold_s,
+)
 from hil.profile import UnitProfile
 from hil.recording import Recording
 from protocols._travel import TravelSpec, speed_ramp
@@ -88,6 +93,7 @@ def excitation(spec: Spec, *, position_rad: float) -> list[Excitation]:
 
 
 def analyse(recording: Recording, spec: Spec) -> CurrentLoopResult:
+    hold_s = torque_hold_s(recording.metadata, fs_hz=spec.fs_hz)
     start = round(spec.ramp_s * spec.fs_hz)
     points = []
     for f in spec.frequencies_hz:
@@ -100,10 +106,11 @@ def analyse(recording: Recording, spec: Spec) -> CurrentLoopResult:
                 frequency_hz=f,
                 fs_hz=spec.fs_hz,
                 blocks=spec.blocks,
+                hold_s=hold_s,
             )
         )
         start += spec.segment_samples(f)
-    return fit_current_loop_lag(points, fs_hz=spec.fs_hz)
+    return fit_current_loop_lag(points, fs_hz=spec.fs_hz, hold_s=hold_s)
 
 
 @pytest.fixture(scope="module")
@@ -111,8 +118,10 @@ def result(drive: Drive, calibration: CalibrationRun, profile: UnitProfile) -> C
     spec = Spec.from_profile(profile, drive.info)
     move, sines = excitation(spec, position_rad=drive.status().position_rad)
     calibration.run(drive, move, protocol=NAME)
-    analysed = analyse(calibration.run(drive, sines, protocol=NAME), spec)
+    recording = calibration.run(drive, sines, protocol=NAME)
+    analysed = analyse(recording, spec)
     calibration.details[NAME] = {
+        "torque_hold_s": torque_hold_s(recording.metadata, fs_hz=spec.fs_hz),
         "viscous_over_inertia_1_s": analysed.viscous_over_inertia_1_s,
         "chi2_per_dof": analysed.chi2_per_dof,
         "points": [

@@ -17,6 +17,20 @@ never reverses: friction is then a constant plus ``B·ω``, and B (as ``B/J``, a
 falling as ``1/ω``) is fitted with τ (a lag rising as ``ω``), the two being separable over
 the band. Gravity, cable and cogging vary slowly and go into a per-block polynomial trend.
 
+Which hold: the torque is held over the drive's *control* period, which the recording's rows
+need not share. A SYNC-streamed CiA 402 drive reports, once per SYNC, its last control-loop
+sample (the position measured at that sample's start, the torque commanded over it): the
+pair is the control-rate pair, decimated, so the model is the one above at the control
+period (``torque_hold_s``), not at the row spacing (a 1 ms hold instead of 0.25 ms puts a
+0.375 ms delay into the model: more than τ). Decimation also aliases the torque's content
+near multiples of the row rate onto the band; a drive that *holds* each target over the
+SYNC period puts steps there (the velocity loop passes them to the torque) and biases the
+phase by as much as τ's own; linear interpolation of the targets (CiA 402 0x60C0 = 0)
+leaves a bias of about −0.005 ms (−1.5 % at τ = 0.3 ms; measured on the emulator at 1 kHz
+SYNC, 4 kHz loop: it depends on the drive's velocity loop, which the estimator does not
+know, so it is not modelled). :func:`torque_hold_s` reads the recording's
+metadata and refuses the cases it cannot model.
+
 Per frequency the run is cut into blocks of whole periods; the phase uncertainty is the
 scatter of the block phases (Type A). τ and B/J are a weighted least-squares fit of the
 phases; the standard uncertainty of τ is from the fit's covariance, scaled by
@@ -27,7 +41,7 @@ from __future__ import annotations
 
 import itertools
 import math
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -42,6 +56,52 @@ ComplexArray = NDArray[np.complex128]
 IMAGES = 200  # aliases summed on each side in the sampled-data response
 TREND_ORDER = 1  # constant + linear (the carrier) with each block's sine: higher orders are
 # nearly collinear with a one-period sine and inflate the variance (benchmarks/bench_frf.py)
+
+
+def torque_hold_s(metadata: Mapping[str, str], *, fs_hz: float) -> float:
+    """The period over which the drive held each reported torque sample (s).
+
+    Recordings that do not describe their torque sampling (``torque_sample`` absent: the
+    simulator, CSV files) hold it over their own sample period ``1/fs_hz``. A decimated
+    record of a faster control loop needs ``control_period_s``, and its command must have
+    been interpolated linearly between samples (``command_interpolation``): a held command
+    aliases into the band (module docstring).
+
+    Raises
+    ------
+    IdentificationError
+        The metadata does not say what is needed, or states a sampling that biases τ.
+    """
+    sample_s = 1.0 / fs_hz
+    if "torque_sample" not in metadata:
+        return sample_s
+    if metadata["torque_sample"] != "instantaneous":
+        raise IdentificationError(
+            f"torque sampled as {metadata['torque_sample']!r}: only an instantaneous "
+            "control-loop sample is modelled"
+        )
+    try:
+        control_s = float(metadata["control_period_s"])
+    except (KeyError, ValueError) as exc:
+        raise IdentificationError(
+            "the recording does not state the drive's control period (control_period_s): "
+            "the torque hold, and with it τ, cannot be modelled"
+        ) from exc
+    ratio = sample_s / control_s
+    if ratio < 1 - 1e-6 or abs(ratio - round(ratio)) > 1e-6:
+        raise IdentificationError(
+            f"sample period {sample_s:g} s is not a whole number of control periods "
+            f"({control_s:g} s)"
+        )
+    interpolation = metadata.get("command_interpolation", "unknown")
+    if round(ratio) > 1 and interpolation != "linear":
+        raise IdentificationError(
+            f"one row per {round(ratio)} control periods with the command interpolated "
+            f"{interpolation!r}: a held target's steps alias onto the band and bias τ by as "
+            "much as its own phase; use linear target interpolation (CiA 402 0x60C0 = 0) or "
+            "record at the control rate (drive recorder)"
+        )
+    return control_s
 
 
 def sampled_response(
@@ -116,6 +176,7 @@ def analyse_frequency(
     frequency_hz: float,
     fs_hz: float,
     blocks: int,
+    hold_s: float | None = None,
 ) -> FrequencyPoint:
     """Reduce one sine segment (settled, whole periods) to a :class:`FrequencyPoint`.
 
@@ -126,10 +187,14 @@ def analyse_frequency(
     frequency_hz
         The sine's frequency (Hz).
     fs_hz
-        The drive's sample (hold) rate (Hz).
+        The recording's sample rate (Hz).
     blocks
         Number of blocks of whole periods the segment is cut into (≥ 2).
+    hold_s
+        The period over which the drive held each reported torque (s): :func:`torque_hold_s`;
+        ``None``: ``1/fs_hz``.
     """
+    hold_fs_hz = fs_hz if hold_s is None else 1.0 / hold_s
     periods = math.floor((time_s[-1] - time_s[0] + 1.0 / fs_hz) * frequency_hz + 1e-6)
     blocks = min(blocks, periods)
     if blocks < 2:
@@ -155,7 +220,7 @@ def analyse_frequency(
     rigid = complex(
         sampled_response(
             frequency_hz,
-            fs_hz=fs_hz,
+            fs_hz=hold_fs_hz,
             inertia_kg_m2=1.0,
             viscous_over_inertia_1_s=0.0,
             time_constant_s=0.0,
@@ -175,12 +240,14 @@ def analyse_frequency(
 
 
 def fit_current_loop_lag(
-    points: Sequence[FrequencyPoint], *, fs_hz: float
+    points: Sequence[FrequencyPoint], *, fs_hz: float, hold_s: float | None = None
 ) -> CurrentLoopResult:
     """Weighted least-squares fit of τ and B/J to the lag phases of ``points`` (≥ 3).
 
+    ``fs_hz`` and ``hold_s`` as for :func:`analyse_frequency` (the same values).
     Returns τ as ``current_loop_time_constant_ms`` (Estimate in ms).
     """
+    fs_hz = fs_hz if hold_s is None else 1.0 / hold_s  # the model only needs the hold
     if len(points) < 3:
         raise IdentificationError(f"{len(points)} frequencies, need at least 3 for τ and B/J")
     freqs = np.array([p.frequency_hz for p in points])

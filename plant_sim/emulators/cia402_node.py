@@ -4,10 +4,14 @@ The emulator is a ``canopen.LocalNode`` serving ``fixtures/gimbal_hil_servo.eds`
 server, NMT slave with heartbeat, EMCY producer, the CiA 402 state machine, RPDOs and
 TPDOs as configured (by SDO) in its object dictionary, and a drive recorder with a
 waveform table (objects 0x2100/0x2200). Its clock is the SYNC: on each SYNC it latches
-its actual values (the last control-loop sample before the SYNC) and the synchronous RPDO
-data received since the previous SYNC, advances the plant by one communication period
-with that target held, and sends its synchronous TPDOs with the latched values. A run
-over real CAN frames is therefore as fast as the frames go, not as fast as the wall clock.
+its actual values and the synchronous RPDO data received since the previous SYNC, advances
+the plant by one communication period towards that target (interpolated linearly over the
+period, reached at the next SYNC, or held from this SYNC on: 0x60C0 = 0 / -1), and sends
+its synchronous TPDOs with the latched values. The actual values are the last control-loop
+sample before the SYNC: position measured at the start of that control period, torque
+(0x6077) commanded over it, so a row is one period of the control loop old and its torque
+is held over one *control* period (0x2200:6), not over the SYNC period. A run over real
+CAN frames is therefore as fast as the frames go, not as fast as the wall clock.
 
 It knows nothing about the backend that talks to it.
 """
@@ -39,6 +43,7 @@ log = logging.getLogger(__name__)
 EDS_NAME = "gimbal_hil_servo.eds"
 ABORT_VALUE_RANGE = 0x06090030
 ABORT_NOT_NOW = 0x08000022  # data cannot be transferred because of the device state
+INTERPOLATION_LINEAR, INTERPOLATION_HOLD = 0, -1  # 0x60C0 (negative: manufacturer-specific)
 
 # CiA 402 states and the statusword bits the drive reports in each
 NOT_READY, SWITCH_ON_DISABLED, READY, SWITCHED_ON, ENABLED, QUICK_STOP, FAULT_REACTION, FAULT = (
@@ -100,6 +105,13 @@ class Cia402Emulator:
         python-can channel to join (``interface`` defaults to ``"virtual"``).
     rated_torque_nm, rated_current_a : float
         Written to 0x6076 (mN·m) and 0x6075 (mA); 0x6077/0x6078 are per-mille of them.
+    exact_torque_hold : bool
+        The plant's held torque moves the position by its exact double integral, as in
+        :class:`~hil.drives.sim.SimDrive` (False: the kernel's legacy half-step advance of
+        the motion against the torque, which no drive has).
+    interpolation : int
+        Initial 0x60C0: 0 linear interpolation of cyclic-synchronous targets over the SYNC
+        period, -1 hold each target from its SYNC on.
     """
 
     def __init__(
@@ -119,7 +131,11 @@ class Cia402Emulator:
         lock_mode_while_enabled: bool = False,
         faults: CanFaults | None = None,
         eds_path: Path | None = None,
+        exact_torque_hold: bool = True,
+        interpolation: int = 0,
     ) -> None:
+        if exact_torque_hold and not plant.exact_torque_hold:
+            plant = plant.with_changes(exact_torque_hold=True)  # the same physics as SimDrive
         self.plant = Plant(plant, fs_hz=fs_hz, seed=seed)
         self.fs_hz = float(fs_hz)
         self.faults = faults or CanFaults()
@@ -134,6 +150,7 @@ class Cia402Emulator:
         self.rated_current_a = rated_current_a or rated_torque_nm / plant.torque_constant_nm_a
         self._od = canopen.import_od(str(eds_path or default_eds_path()), node_id)
         self._serial = serial_number
+        self._interpolation_code = interpolation
         self._lock = threading.RLock()
         self._network: canopen.Network | None = None
         self.node: canopen.LocalNode | None = None
@@ -183,6 +200,7 @@ class Cia402Emulator:
         store.setdefault(0x6076, {})[0] = struct.pack("<I", round(self.rated_torque_nm * 1e3))
         store.setdefault(0x6075, {})[0] = struct.pack("<I", round(self.rated_current_a * 1e3))
         store.setdefault(0x608F, {})[1] = struct.pack("<I", self.counts_per_rev)
+        store.setdefault(0x60C0, {})[0] = struct.pack("<h", self._interpolation_code)
         node.add_read_callback(self._on_read)  # type: ignore[no-untyped-call]
         node.add_write_callback(self._on_write)  # type: ignore[no-untyped-call]
         if self.faults.sdo_delay_s > 0:
@@ -269,6 +287,8 @@ class Cia402Emulator:
             self.targets[index] = int(value)
         elif index == 0x60C2 or index == 0x1006:
             self._check_period(index, subindex, int(value))
+        elif index == 0x60C0 and value not in (INTERPOLATION_LINEAR, INTERPOLATION_HOLD):
+            raise SdoAbortedError(ABORT_VALUE_RANGE)
         elif index in (0x2100, 0x2200):
             self.recorder.write(index, subindex, value, running=self.state == ENABLED)
 
@@ -555,12 +575,17 @@ class Cia402Emulator:
         waveform = self.recorder.waveform_block(steps)
         mode = _MODES[self.mode_display]
         if waveform is None and self.mode_display in (8, 9, 10):
-            # cyclic synchronous modes: interpolate linearly over the period
+            # cyclic synchronous modes: the target latched at this SYNC is reached at the
+            # next one; 0x60C0 = 0 (CiA 402 linear interpolation) ramps to it over the period,
+            # -1 (manufacturer-specific) holds it from this SYNC on
             index = {Mode.VELOCITY: 0x60FF, Mode.TORQUE: 0x6071, Mode.POSITION: 0x607A}[mode]
             new = float(self.targets[index])
             old = self._previous_target.get(index, new)
             self._previous_target = {index: new}
-            waveform = old + (new - old) * self._ramp
+            if self._raw(0x60C0) == INTERPOLATION_HOLD:
+                waveform = np.full(steps, new)
+            else:
+                waveform = old + (new - old) * self._ramp
         if mode is Mode.VELOCITY:
             raw = self.targets[0x60FF] if waveform is None else waveform
             value = np.asarray(raw, dtype=np.float64) * 2 * math.pi / cpr

@@ -204,12 +204,21 @@ def _stream_recording(
         ),
         "current_a": current * sc.rated_current_a / 1e3,
     }
+    timing = {
+        # row k: the drive's last control-loop sample before SYNC k (position measured at
+        # its start, torque commanded over it); the targets are interpolated as stated
+        "torque_sample": "instantaneous",
+        "command_interpolation": drive.command_interpolation,
+    }
+    if drive.control_period_s is not None:
+        timing["control_period_s"] = f"{drive.control_period_s:g}"
     metadata = _metadata(
         drive,
         excitation,
         acquisition="sync stream",
         sync_period_s=f"{period:g}",
         lost_samples=str(done - len(rows)),
+        **timing,
     )
     floats = {name: np.asarray(values, dtype=np.float64) for name, values in columns.items()}
     return Recording(columns=floats, metadata=metadata, source=f"canopen:{excitation.name}")
@@ -281,7 +290,13 @@ def run_recorder(drive: CanOpenDrive, excitation: Excitation) -> Recording:
     recording = Recording(
         columns=columns,
         metadata=_metadata(
-            drive, excitation, acquisition="drive recorder", recorder_divider=str(divider)
+            drive,
+            excitation,
+            acquisition="drive recorder",
+            recorder_divider=str(divider),
+            control_period_s=f"{1.0 / drive.recorder_rate_hz:g}",
+            torque_sample="instantaneous",
+            command_interpolation="hold",  # the waveform table repeats each command sample
         ),
         source=f"canopen-recorder:{excitation.name}",
     )

@@ -25,6 +25,8 @@ from hil.drives.cia402.protocol import (
     CW_QUICK_STOP,
     CW_SHUTDOWN,
     CW_SWITCH_ON,
+    INTERPOLATION_CODES,
+    INTERPOLATION_UNKNOWN,
     MODE_CANDIDATES,
     MODE_SUPPORT_BIT,
     SW_FAULT,
@@ -60,6 +62,8 @@ class CanOpenDrive(Drive):
         self.scaling: Scaling | None = None
         self.supported_modes = 0
         self.recorder_rate_hz = 0.0
+        self.control_period_s: float | None = None  # the drive's control loop, if it says
+        self.command_interpolation = INTERPOLATION_UNKNOWN
         self._period_us = round(station.sync_period_s * 1e6)
         try:
             self._bring_up()
@@ -89,9 +93,11 @@ class CanOpenDrive(Drive):
         self._write_limits()
         try:
             loop_us = int(link.read(0x2200, 6))
+            self.control_period_s = loop_us * 1e-6
             self.recorder_rate_hz = 1e6 / loop_us if st.acquisition != "stream" else 0.0
         except (DriveStateError, KeyError):
             self.recorder_rate_hz = 0.0
+        self.command_interpolation = self._read_interpolation()
         self._info = self._read_info(rate)
         link.nmt("OPERATIONAL")
         status = link.tick_until("first SYNC answer", lambda sw, mode: True)
@@ -120,6 +126,14 @@ class CanOpenDrive(Drive):
             rated_torque_nm=rated_torque,
             rated_current_a=rated_current,
         )
+
+    def _read_interpolation(self) -> str:
+        """How the drive moves from one cyclic-synchronous target to the next (0x60C0)."""
+        try:
+            code = int(self.link.read(0x60C0))
+        except (DriveStateError, KeyError):
+            return INTERPOLATION_UNKNOWN
+        return INTERPOLATION_CODES.get(code, f"{INTERPOLATION_UNKNOWN} (0x60C0 = {code})")
 
     def _write_period(self, period_us: int) -> None:
         mantissa, exponent = period_us, -6

@@ -27,6 +27,11 @@ CW_SWITCH_ON = 0x0007
 CW_ENABLE_OPERATION = 0x000F
 CW_FAULT_RESET = 0x0080
 
+# 0x60C0 interpolation sub mode select: 0 is CiA 402 linear interpolation; negative codes are
+# manufacturer-specific (-1: the emulator's "hold the target from the SYNC on")
+INTERPOLATION_CODES = {0: "linear", -1: "hold"}
+INTERPOLATION_UNKNOWN = "unknown"
+
 # (mode code, name) in order of preference for each excitation mode
 MODE_CANDIDATES: dict[Mode, tuple[tuple[int, str], ...]] = {
     Mode.VELOCITY: ((9, "cyclic synchronous velocity"), (3, "profile velocity")),
