@@ -106,6 +106,43 @@ def scan_orders(
     return sorted(n for _, n in sorted(picks, reverse=True)[:max_orders])
 
 
+def torque_resolution_nm(torque_nm: FloatArray) -> float:
+    """The reported torque's quantisation step (N·m) read off the data: the smallest step
+    between distinct values when every value lies on that grid, else 0 (not quantised)."""
+    values = np.unique(np.asarray(torque_nm, dtype=np.float64))
+    if values.size < 2:
+        return 0.0
+    step = float(np.min(np.diff(values)))
+    scale = max(float(np.max(np.abs(values))), 1e-30)
+    if step <= 1e-9 * scale:
+        return 0.0
+    grid = values / step
+    return step if bool(np.all(np.abs(grid - np.round(grid)) < 1e-3)) else 0.0
+
+
+def check_resolution(torque_nm: FloatArray, *, noise_rms_nm: float, amplitude_nm: float) -> float:
+    """Refuse a sub-LSB amplitude when the quantisation is not dithered; returns the LSB.
+
+    With noise well above half a step (σ ≥ LSB/2) the quantisation error is uniform,
+    independent of the signal: it adds ``LSB²/12`` of variance and no bias, and averaging
+    resolves harmonics far below one step. Without that noise the quantiser is a
+    deterministic staircase: an amplitude below one step is lost or distorted.
+
+    Raises
+    ------
+    IdentificationError
+        σ < LSB/2 and ``amplitude_nm`` < LSB.
+    """
+    lsb = torque_resolution_nm(torque_nm)
+    if lsb > 0 and noise_rms_nm < 0.5 * lsb and amplitude_nm < lsb:
+        raise IdentificationError(
+            f"torque resolution {lsb:.3g} N·m with noise σ = {noise_rms_nm:.3g} N·m (< LSB/2): "
+            f"the quantisation is not dithered, so a ripple of {amplitude_nm:.3g} N·m (below "
+            "one LSB) cannot be resolved; use a finer torque object or add dither"
+        )
+    return lsb
+
+
 def identify_cogging(
     passes: list[tuple[FloatArray, FloatArray, FloatArray]],
     *,
@@ -135,14 +172,22 @@ def identify_cogging(
     angle_torque = [(theta, torque) for _, theta, torque in passes]
     orders = scan_orders(angle_torque, min_order=min_order, max_order=max_order,
                          threshold=threshold, poly=poly, max_orders=max_orders)
-    if not orders:
-        raise IdentificationError(
-            f"no position harmonic of order {min_order}-{max_order} stands "
-            f"{threshold:g}× above the floor"
-        )
     lo = min(float(t.min()) for t, _ in angle_torque)
     hi = max(float(t.max()) for t, _ in angle_torque)
     centre, scale = (lo + hi) / 2, (hi - lo) / 2
+    smooth_sigma = max(float(np.std(_smooth_residual(theta, torque, poly, centre, scale)))
+                       for theta, torque in angle_torque)
+    all_torque = np.concatenate([torque for _, torque in angle_torque])
+    if not orders:
+        check_resolution(all_torque, noise_rms_nm=smooth_sigma, amplitude_nm=0.0)
+        n_min = min(len(t) for t, _ in angle_torque)
+        white_floor = 1.67 * smooth_sigma / math.sqrt(n_min)  # median Rayleigh amplitude
+        raise IdentificationError(
+            f"no position harmonic of order {min_order}-{max_order} stands "
+            f"{threshold:g}× above the floor (torque noise σ = {smooth_sigma:.3g} N·m over "
+            f"{n_min} samples a pass: white-noise floor ≈ {white_floor:.2g} N·m)"
+        )
+    lsb = torque_resolution_nm(all_torque)
     order_array = np.array(orders, dtype=np.float64)
     z, zu, levels, noise = [], [], [], []
     for time_s, theta, torque in passes:
@@ -150,7 +195,8 @@ def identify_cogging(
         coef, *_ = np.linalg.lstsq(design, torque, rcond=None)
         residual = torque - design @ coef
         dof = len(torque) - design.shape[1]
-        sigma2 = float(residual @ residual) / dof
+        # dithered quantisation is in the residual already; never claim less than it
+        sigma2 = max(float(residual @ residual) / dof, lsb**2 / 12)
         cov = sigma2 * np.linalg.inv(design.T @ design)
         harmonic = coef[poly + 1:]
         var = np.diag(cov)[poly + 1:]
@@ -185,6 +231,7 @@ def identify_cogging(
                 for n, r, u in zip(orders, ripple, ripple_u, strict=True))
     top_cog = max(cog, key=lambda h: h.amplitude)
     top_rip = max(rip, key=lambda h: h.amplitude)
+    check_resolution(all_torque, noise_rms_nm=float(max(noise)), amplitude_nm=top_cog.amplitude)
     return CoggingResult(
         cogging=cog,
         kt_ripple=rip,

@@ -127,3 +127,48 @@ def test_hidden_cogging_and_ripple_are_recovered_within_the_claimed_accuracy(
     rip = {h.order: h for h in result.kt_ripple}
     assert cog_order in cog
     assert rip_order in rip
+
+
+def _quantised_passes(amplitude_nm: float, *, noise_nm: float, lsb_nm: float,
+                      seed: int) -> list[tuple[FloatArray, FloatArray, FloatArray]]:
+    """Two passes with one cogging harmonic (order 84), the reported torque quantised to
+    ``lsb_nm`` after the noise (as a drive's per-mille 0x6077 is)."""
+    rng = np.random.default_rng(seed)
+    passes = []
+    for sign, level in ((1.0, 0.022), (-1.0, -0.022)):
+        t = np.arange(round(2.4 / 0.4 * FS)) / FS
+        theta = sign * (-1.2 + 0.4 * t)
+        torque = level + 0.015 * np.cos(theta) + amplitude_nm * np.sin(84 * theta + 0.3)
+        torque = torque + rng.normal(0.0, noise_nm, t.size)
+        passes.append((t, theta, np.round(torque / lsb_nm) * lsb_nm))
+    return passes
+
+
+@settings(max_examples=6, deadline=None)
+@given(amplitude=st.floats(0.00025, 0.00045), seed=st.integers(0, 2**16))
+def test_dithered_quantisation_resolves_sub_lsb_cogging(amplitude: float, seed: int) -> None:
+    """σ = 1.5 mN·m ≫ LSB/2 (LSB 0.5 mN·m, the CANopen per-mille of 0.5 N·m): the
+    quantisation is dithered and a harmonic below one LSB is measured without bias."""
+    lsb = 0.0005
+    result = identify_cogging(_quantised_passes(amplitude, noise_nm=0.0015, lsb_nm=lsb,
+                                                seed=seed),
+                              inertia_kg_m2=J, min_order=10, max_order=200)
+    cog = {h.order: h for h in result.cogging}
+    assert 84 in cog
+    assert cog[84].amplitude == pytest.approx(amplitude, abs=4 * cog[84].amplitude_u)
+    assert cog[84].amplitude_u >= math.sqrt(lsb**2 / 12 / 24000)  # never below quantisation
+
+
+def test_undithered_coarse_quantisation_is_refused() -> None:
+    """No noise and a 0.3 mN·m harmonic under a 0.5 mN·m LSB: refused, and the reason says
+    why."""
+    passes = _quantised_passes(0.0003, noise_nm=0.0, lsb_nm=0.0005, seed=0)
+    with pytest.raises(IdentificationError, match="not dithered"):
+        identify_cogging(passes, inertia_kg_m2=J, min_order=10, max_order=200)
+
+
+def test_a_fine_torque_object_is_not_quantised() -> None:
+    from hil.identify.cogging import torque_resolution_nm
+
+    assert torque_resolution_nm(np.array([0.0, 0.0005, 0.0015, -0.001])) == pytest.approx(0.0005)
+    assert torque_resolution_nm(np.random.default_rng(0).normal(0, 1e-3, 1000)) == 0.0
