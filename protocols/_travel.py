@@ -37,6 +37,15 @@ def speed_ramp(speed_rad_s: float, *, ramp_s: float, fs_hz: float, up: bool) -> 
     return speed_rad_s * 0.5 * (1 - np.cos(math.pi * x))
 
 
+MOVE_SPEED_FRACTION = 0.5  # of the unit's velocity limit, for repositioning moves
+
+
+def move_speed_rad_s(settings: ProtocolSettings, info: DriveInfo) -> float:
+    """Peak speed of repositioning moves: the profile's ``move_speed_rad_s``, by default half
+    the unit's velocity limit (moves are not measured; they only cost machine time)."""
+    return settings.number("move_speed_rad_s", MOVE_SPEED_FRACTION * info.limits.velocity_rad_s)
+
+
 @dataclass(frozen=True, slots=True, kw_only=True)
 class TravelSpec:
     """Base of a protocol Spec that plans motion inside the unit's travel limits."""
@@ -52,13 +61,13 @@ class TravelSpec:
         settings: ProtocolSettings, profile: UnitProfile, info: DriveInfo
     ) -> dict[str, float]:
         """The TravelSpec fields: rate and limits from profile and drive, margins from the
-        settings (``margin_rad`` 0.1, ``move_speed_rad_s`` 0.5 by default)."""
+        settings (``margin_rad`` 0.1 by default, ``move_speed_rad_s`` see below)."""
         return {
             "fs_hz": min(profile.sample_rate_hz, info.max_sample_rate_hz),
             "travel_min_rad": info.limits.travel_min_rad,
             "travel_max_rad": info.limits.travel_max_rad,
             "margin_rad": settings.number("margin_rad", 0.1),
-            "move_speed_rad_s": settings.number("move_speed_rad_s", 0.5),
+            "move_speed_rad_s": move_speed_rad_s(settings, info),
         }
 
     @property

@@ -28,7 +28,7 @@ from hil.identify.torque_constant import (
 )
 from hil.profile import UnitProfile
 from hil.recording import Recording
-from protocols._travel import move_excitation
+from protocols._travel import move_excitation, move_speed_rad_s
 
 NAME = "torque_constant"
 MEASUREMENTS = (
@@ -62,7 +62,7 @@ class Spec:
             levels=settings.integer("levels", 9),
             level_s=settings.number("level_s", 0.05),
             settle_s=settings.number("settle_s", 0.01),
-            move_speed_rad_s=settings.number("move_speed_rad_s", 0.5),
+            move_speed_rad_s=move_speed_rad_s(settings, info),
             fs_hz=min(profile.sample_rate_hz, info.max_sample_rate_hz),
             kv_rpm_per_v=None if kv is None else float(kv),
         )
