@@ -81,6 +81,9 @@ def test_samples_are_timed_by_the_drive_clock(profile: UnitProfile) -> None:
         recording = drive.run(sine(1.0, fs_hz=fs, periods=3))
     assert "the drive's clock" in recording.metadata["acquisition"]
     assert "setpoint interpolated" in recording.metadata["acquisition"]
+    assert recording.metadata["torque_sample"] == "instantaneous"
+    assert recording.metadata["command_interpolation"] == "linear"
+    assert float(recording.metadata["control_period_s"]) == CONTROL_PERIOD_S
     steps = np.diff(recording.time_s) / CONTROL_PERIOD_S
     assert np.all(steps > 0.5)  # one row per drive sample, never the same one twice
     np.testing.assert_allclose(steps, np.round(steps), atol=1e-6)  # on the drive's clock
@@ -144,7 +147,7 @@ def test_inertia_friction_over_modbus_within_tolerance(profile: UnitProfile) -> 
     well). B is not judged here: the protocol shifts the kinematics by half a *recording*
     period for the torque's hold, right for ``--drive sim`` but 5 ms off at 100 Hz for a
     drive whose torque register holds one 0.25 ms loop period (B +60 %; see
-    ``metadata["drive_control_period_s"]``)."""
+    ``metadata["control_period_s"]``)."""
     from protocols.test_inertia_friction import Spec, analyse, excitation
 
     with (

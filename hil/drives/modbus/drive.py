@@ -454,8 +454,14 @@ class ModbusDrive(Drive):
             "acquisition": acquisition,
             "poll_rate_hz": f"{len(rows) / max(excitation.duration_s, 1e-9):.1f}",
             "duplicate_reads_dropped": str(duplicates),
+            # row k: the drive's state latched at one control period (position measured at
+            # its start, torque commanded over it), as the CANopen backend states it
+            "torque_sample": "instantaneous",
+            "command_interpolation": (
+                "linear" if SETPOINT_INTERPOLATION in self.map.registers else "hold"
+            ),
             **(
-                {"drive_control_period_s": f"{self.map.control_period_s:g}"}
+                {"control_period_s": f"{self.map.control_period_s:g}"}
                 if self.map.control_period_s is not None
                 else {}
             ),
