@@ -31,7 +31,7 @@ from numpy.typing import NDArray
 from scipy.optimize import minimize_scalar
 
 from hil.errors import IdentificationError
-from hil.identify.estimate import Estimate
+from hil.identify.estimate import Estimate, combine_linear
 
 FloatArray = NDArray[np.float64]
 STANDARD_GRAVITY_M_S2 = 9.80665
@@ -91,6 +91,45 @@ class GravityCableResult:
     bin_centres_rad: FloatArray
     load_nm: FloatArray  # half sum per bin
     half_difference_nm: FloatArray  # F + hysteresis per bin
+
+
+def cable_loop_torque_nm(
+    position_rad: FloatArray, *, half_width_nm: float, angle_rad: float
+) -> FloatArray:
+    """The cable's hysteresis torque along a measured path: the Dahl loop this module fits,
+    ``dT/ds = (h·sgn(ds) − T)/s₀`` over the travel ``s``, solved exactly per step from a
+    relaxed (zero) state."""
+    steps = np.diff(position_rad, prepend=position_rad[0])
+    target = half_width_nm * np.sign(steps)
+    decay = np.exp(-np.abs(steps) / angle_rad)
+    torque = np.empty_like(position_rad)
+    state = 0.0
+    for k in range(len(steps)):
+        state = target[k] + (state - target[k]) * decay[k]
+        torque[k] = state
+    return torque
+
+
+def load_stiffness(
+    *, mge: Estimate, phase: Estimate, cable_stiffness: Estimate, position_rad: float
+) -> Estimate:
+    """``K = dL/dθ = k_cable − m·g·e·sin(θ + φ)`` at ``position_rad``: the spring rate the
+    load adds to small motions there (first-order propagation, independent inputs)."""
+    angle = position_rad + phase.value
+    weights = [1.0, -math.sin(angle), -mge.value * math.cos(angle)]
+    _, u, dof = combine_linear(
+        weights,
+        [cable_stiffness.value, mge.value, phase.value],
+        [e.standard_uncertainty for e in (cable_stiffness, mge, phase)],
+        [e.dof for e in (cable_stiffness, mge, phase)],
+    )
+    return Estimate(
+        name="load_stiffness_nm_rad",
+        value=cable_stiffness.value - mge.value * math.sin(angle),
+        standard_uncertainty=u,
+        unit="N·m/rad",
+        dof=dof,
+    )
 
 
 def eccentricity_mm(mge: Estimate, *, mass_kg: float) -> Estimate:

@@ -1,0 +1,106 @@
+"""J/B/T_c next to the load: gravity's gradient and the cable's hysteresis loop, measured by
+``gravity_cable``, bias the sine method; the protocol takes them out. Each test hides the
+effect in a simulated plant and checks the bias is real and that the correction removes it."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+import pytest
+
+import protocols.test_inertia_friction as protocol
+from hil.drives.sim import SimDrive
+from hil.identify.estimate import Estimate
+from hil.identify.gravity_cable import cable_loop_torque_nm, load_stiffness
+from hil.identify.inertia_friction import InertiaFrictionResult, stiffness_corrected_inertia
+from hil.profile import load_profile
+from hil.recording import Recording
+from plant_sim.params import PlantParams
+
+PROFILE = load_profile()
+BASE = PlantParams(
+    inertia_kg_m2=0.0036,
+    viscous_nm_s_rad=0.005,
+    coulomb_nm=0.020,
+    torque_noise_nm=0.0015,
+    encoder_counts_per_rev=1 << 19,
+    velocity_kp_nm_s_rad=0.45,
+    velocity_ki_nm_rad=12.0,
+)
+
+
+def _record(plant: PlantParams, *, centre_rad: float) -> tuple[list[Recording], protocol.Spec]:
+    with SimDrive(plant, limits=PROFILE.limits, fs_hz=4000.0, seed=3) as drive:
+        drive.enable()
+        spec = dataclasses.replace(
+            protocol.Spec.from_profile(PROFILE, drive.info), centre_rad=centre_rad
+        )
+        drive.run(protocol.move_to_centre(spec, centre_rad, position_rad=0.0))
+        return [drive.run(e) for e in protocol.excitation(spec)], spec
+
+
+def _estimate(value: float, u: float, name: str = "x") -> Estimate:
+    return Estimate(name=name, value=value, standard_uncertainty=u, unit="", dof=math.inf)
+
+
+def test_cable_loop_follows_the_fitted_dahl_law() -> None:
+    """Saturates at ±h after a long travel; after a reversal it is ``h − 2h·exp(−s/s₀)``."""
+    h, s0 = 0.002, 0.02
+    out = np.linspace(0.0, 0.3, 3001)
+    back = np.linspace(0.3, 0.2, 1001)[1:]
+    torque = cable_loop_torque_nm(np.concatenate([out, back]), half_width_nm=h, angle_rad=s0)
+    assert torque[len(out) - 1] == pytest.approx(h, rel=1e-5)
+    travel_back = 0.3 - back
+    expected = -(h - 2 * h * np.exp(-travel_back / s0))
+    np.testing.assert_allclose(torque[len(out) :], expected, atol=2e-7)
+
+
+def test_load_stiffness_is_the_slope_of_gravity_and_spring() -> None:
+    mge, phase, k = 0.015, 0.05, 0.004
+
+    def load(theta: float) -> float:
+        return mge * math.cos(theta + phase) + k * theta
+
+    for theta in (-1.2, 0.0, 0.7):
+        found = load_stiffness(
+            mge=_estimate(mge, 1e-4),
+            phase=_estimate(phase, 0.01),
+            cable_stiffness=_estimate(k, 2e-4),
+            position_rad=theta,
+        )
+        slope = (load(theta + 1e-6) - load(theta - 1e-6)) / 2e-6
+        assert found.value == pytest.approx(slope, rel=1e-6)
+        assert found.standard_uncertainty > 2e-4  # the inputs' uncertainties propagate
+
+
+def test_gravity_gradient_biases_j_and_the_measured_stiffness_removes_it() -> None:
+    plant = dataclasses.replace(BASE, gravity_mge_nm=0.05)
+    recordings, spec = _record(plant, centre_rad=-1.0)
+    found = protocol.analyse(recordings, spec)
+    centre = float(np.mean([np.mean(r.position) for r in recordings]))
+    stiffness = _estimate(-0.05 * math.sin(centre), 0.0)
+    corrected = stiffness_corrected_inertia(
+        found.inertia, stiffness=stiffness, frequency_hz=spec.frequency_hz
+    )
+    assert found.inertia.value / plant.inertia_kg_m2 - 1 < -0.05  # the bias is real
+    assert corrected.value == pytest.approx(plant.inertia_kg_m2, rel=0.01)
+
+
+def test_cable_hysteresis_biases_b_and_removing_the_measured_loop_restores_it() -> None:
+    plant = dataclasses.replace(
+        BASE, cable_hysteresis_nm=0.002, cable_hysteresis_angle_rad=0.02
+    )
+    recordings, spec = _record(plant, centre_rad=0.0)
+    loop = protocol.CableLoop(half_width_nm=0.002, half_width_u_nm=0.0002, angle_rad=0.02)
+    raw: InertiaFrictionResult = protocol.analyse(recordings, spec)
+    clean = protocol.analyse(recordings, spec, cable_loop=loop)
+    assert raw.viscous.value / plant.viscous_nm_s_rad - 1 > 0.15  # the bias is real
+    assert clean.viscous.value == pytest.approx(plant.viscous_nm_s_rad, rel=0.05)
+    assert clean.inertia.value == pytest.approx(plant.inertia_kg_m2, rel=0.01)
+    assert clean.coulomb.value == pytest.approx(plant.coulomb_nm, rel=0.02)
+    widened = protocol.with_cable_loop_uncertainty(
+        clean, recordings, spec, current_loop_lag_s=0.0, loop=loop
+    )
+    assert widened.viscous.standard_uncertainty > clean.viscous.standard_uncertainty
