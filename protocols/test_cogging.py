@@ -19,6 +19,7 @@ from hil.drives.base import Drive, DriveInfo, Excitation, Mode
 from hil.identify.cogging import CoggingResult, compensation_table, identify_cogging
 from hil.identify.estimate import Estimate
 from hil.profile import UnitProfile
+from protocols._rate import needed_sample_rate_hz, require_sample_rate
 from protocols._travel import TravelSpec
 
 NAME = "cogging"
@@ -46,6 +47,15 @@ class Spec(TravelSpec):
         )
         settings.done()
         return spec
+
+    @property
+    def highest_frequency_hz(self) -> float:
+        """Temporal frequency of the highest harmonic order searched, at the pass speed."""
+        return self.max_order * self.speed_rad_s / (2 * math.pi)
+
+    @property
+    def needed_sample_rate_hz(self) -> float:
+        return needed_sample_rate_hz(self.highest_frequency_hz)
 
     @property
     def pass_samples(self) -> int:
@@ -96,6 +106,15 @@ def inertia_for_correction(calibration: CalibrationRun, profile: UnitProfile) ->
 @pytest.fixture(scope="module")
 def result(drive: Drive, calibration: CalibrationRun, profile: UnitProfile) -> CoggingResult:
     spec = Spec.from_profile(profile, drive.info)
+    require_sample_rate(
+        spec.needed_sample_rate_hz,
+        drive.info,
+        protocol=NAME,
+        why=(
+            f"4 × order {spec.max_order} at {spec.speed_rad_s:g} rad/s = "
+            f"{spec.highest_frequency_hz:.3g} Hz"
+        ),
+    )
     move, passes = excitation(spec, position_rad=drive.status().position_rad)
     calibration.run(drive, move, protocol=NAME)
     recording = calibration.run(drive, passes, protocol=NAME)

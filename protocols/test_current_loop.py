@@ -22,6 +22,7 @@ from hil.identify.current_loop import (
 )
 from hil.profile import UnitProfile
 from hil.recording import Recording
+from protocols._rate import needed_sample_rate_hz, require_sample_rate
 from protocols._travel import TravelSpec, speed_ramp
 
 NAME = "current_loop"
@@ -60,6 +61,11 @@ class Spec(TravelSpec):
         )
         settings.done()
         return spec
+
+    @property
+    def needed_sample_rate_hz(self) -> float:
+        """The phase at the highest excitation frequency needs ≥ 4 samples per period."""
+        return needed_sample_rate_hz(max(self.frequencies_hz))
 
     def settle_samples(self, frequency_hz: float) -> int:
         return round(math.ceil(self.settle_s * frequency_hz) * self.fs_hz / frequency_hz)
@@ -116,6 +122,12 @@ def analyse(recording: Recording, spec: Spec) -> CurrentLoopResult:
 @pytest.fixture(scope="module")
 def result(drive: Drive, calibration: CalibrationRun, profile: UnitProfile) -> CurrentLoopResult:
     spec = Spec.from_profile(profile, drive.info)
+    require_sample_rate(
+        spec.needed_sample_rate_hz,
+        drive.info,
+        protocol=NAME,
+        why=f"4 × its highest excitation frequency, {max(spec.frequencies_hz):g} Hz",
+    )
     move, sines = excitation(spec, position_rad=drive.status().position_rad)
     calibration.run(drive, move, protocol=NAME)
     recording = calibration.run(drive, sines, protocol=NAME)

@@ -20,6 +20,7 @@ from hil.identify.estimate import Estimate
 from hil.identify.resonance import ResonanceResult, frf_point, identify_resonance
 from hil.profile import UnitProfile
 from hil.recording import Recording
+from protocols._rate import needed_sample_rate_hz, require_sample_rate
 from protocols._travel import TravelSpec, speed_ramp
 
 NAME = "resonance"
@@ -75,6 +76,11 @@ class Spec(TravelSpec):
     def amplitude(self, frequency_hz: float) -> float:
         scaled = self.amplitude_rad_s * max(1.0, frequency_hz / self.amplitude_knee_hz)
         return min(scaled, self.max_amplitude_rad_s)
+
+    @property
+    def needed_sample_rate_hz(self) -> float:
+        """The FRF at the top of the band needs ≥ 4 samples per period."""
+        return needed_sample_rate_hz(max(self.frequencies_hz))
 
     def settle_samples(self, frequency_hz: float) -> int:
         periods = max(2, math.ceil(self.settle_s * frequency_hz))
@@ -151,6 +157,12 @@ def result(drive: Drive, calibration: CalibrationRun, profile: UnitProfile) -> R
             "resonance to identify"
         )
     spec = Spec.from_profile(profile, drive.info)
+    require_sample_rate(
+        spec.needed_sample_rate_hz,
+        drive.info,
+        protocol=NAME,
+        why=f"4 × the top of its band, {max(spec.frequencies_hz):g} Hz",
+    )
     move, sine = excitation(spec, position_rad=drive.status().position_rad)
     calibration.run(drive, move, protocol=NAME)
     recording = calibration.run(drive, sine, protocol=NAME)
