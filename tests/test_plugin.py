@@ -9,6 +9,7 @@ from pathlib import Path
 
 import pytest
 
+from hil.certificate.controller import controller_outputs
 from hil.profile import builtin_profile_path, load_profile
 
 pytest_plugins = ["pytester"]
@@ -72,6 +73,7 @@ def test_calibration_writes_a_passing_certificate(
     controller = json.loads((out / "GMB-0042" / "controller.json").read_text())
     assert controller["certificate_id"] == cert["certificate_id"]
     assert controller["friction_feedforward"]["coulomb_nm"] == params["coulomb_nm"]["value"]
+    assert "cable_feedforward" not in controller  # gravity_cable did not run here
     listed = {a["file"]: a["sha256"] for a in cert["artifacts"]}
     assert (
         listed["controller.json"]
@@ -153,3 +155,17 @@ def test_a_typo_in_protocol_settings_is_an_error_not_a_default(
     messages = " ".join(cert["method"]["protocols"]["inertia_friction"]["messages"])
     assert "unknown setting(s) 'settle_period'" in messages
     assert str(profile) in messages
+
+
+def test_controller_outputs_carry_the_cable_loop_when_measured() -> None:
+    results = [
+        {"parameter": "coulomb_nm", "value": 0.02},
+        {"parameter": "cable_stiffness_nm_rad", "value": 0.004},
+        {"parameter": "cable_hysteresis_nm", "value": 0.001},
+    ]
+    outputs = controller_outputs(
+        {"results": results, "certificate_id": "X", "outcome": "PASS", "artifacts": []}
+    )
+    assert outputs is not None
+    assert outputs["cable_feedforward"] == {"stiffness_nm_rad": 0.004, "hysteresis_nm": 0.001}
+    assert outputs["friction_feedforward"] == {"coulomb_nm": 0.02}

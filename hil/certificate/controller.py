@@ -12,6 +12,10 @@
       "gravity_feedforward": {             # T_ff = m·g·e·cos(θ + φ)    [N·m]
         "mge_nm": ..., "phase_rad": ...
       },
+      "cable_feedforward": {               # T_ff = k·θ + h·sgn(ω*) once past the loop's
+        "stiffness_nm_rad": k,             # travel s₀ (Dahl); T_c above excludes h
+        "hysteresis_nm": h
+      },
       "inertia_kg_m2": J,                  # for acceleration feedforward J·α*
       "cogging_table": "cogging_compensation.json"   # when the cogging protocol ran
     }
@@ -27,6 +31,7 @@ SCHEMA = "gimbal-hil/controller/v1"
 
 _FRICTION = ("viscous_nm_s_rad", "coulomb_nm", "static_friction_nm", "stribeck_velocity_rad_s")
 _GRAVITY = {"gravity_mge_nm": "mge_nm", "gravity_phase_rad": "phase_rad"}
+_CABLE = {"cable_stiffness_nm_rad": "stiffness_nm_rad", "cable_hysteresis_nm": "hysteresis_nm"}
 
 
 def controller_outputs(certificate: dict[str, Any]) -> dict[str, Any] | None:
@@ -34,6 +39,7 @@ def controller_outputs(certificate: dict[str, Any]) -> dict[str, Any] | None:
     values = {r["parameter"]: r["value"] for r in certificate["results"]}
     friction = {name: values[name] for name in _FRICTION if name in values}
     gravity = {key: values[name] for name, key in _GRAVITY.items() if name in values}
+    cable = {key: values[name] for name, key in _CABLE.items() if name in values}
     if not friction and not gravity and "inertia_kg_m2" not in values:
         return None
     outputs: dict[str, Any] = {
@@ -45,6 +51,8 @@ def controller_outputs(certificate: dict[str, Any]) -> dict[str, Any] | None:
         outputs["friction_feedforward"] = friction
     if gravity:
         outputs["gravity_feedforward"] = gravity
+    if cable:
+        outputs["cable_feedforward"] = cable
     if "inertia_kg_m2" in values:
         outputs["inertia_kg_m2"] = values["inertia_kg_m2"]
     tables = [a["file"] for a in certificate["artifacts"] if "cogging" in a["file"]]
