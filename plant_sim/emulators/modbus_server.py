@@ -5,7 +5,9 @@ given (``fixtures/regmap_*.toml``). Unlike the CANopen emulator, the plant steps
 time, one control period (``1/fs_hz``) at a time: every request first brings it up to the
 wall clock with the last command held (so a read returns a state at most one control
 period old, like a real drive's registers), and a background task keeps it going between
-requests (and runs the drive's communication watchdog). With a ``timestamp`` register the
+requests (and runs the drive's communication watchdog: silence of the master for
+``watchdog_s`` trips 0x8130; time the emulator itself was not scheduled does not count,
+see ``_credit_own_stall``). With a ``timestamp`` register the
 drive's clock (the plant time of the latched feedback, in control periods) is served with
 the feedback; with a ``setpoint_interpolation_time`` register a written setpoint is reached
 by a linear ramp over that time instead of a step. Faults: line delay, exception responses,
@@ -46,6 +48,8 @@ log = logging.getLogger(__name__)
 WATCHDOG_FAULT = 0x8130  # CiA-style "life guard / heartbeat error"
 QUICK_STOP_DECEL_RAD_S2 = 20.0
 REGISTERS = 128
+TICK_S = 0.005  # period of the background task (plant between requests, watchdog)
+STALL_S = 0.05  # a tick this late: the emulator itself was not running (host overload)
 
 
 @dataclass(slots=True)
@@ -118,6 +122,9 @@ class ModbusEmulator:
         self._setpoint = _Setpoint()
         self._last_request = time.monotonic()
         self._clock = time.monotonic()
+        self._tick = time.monotonic()
+        self.stalls = 0  # times the emulator's own loop was held up ≥ STALL_S
+        self.longest_stall_s = 0.0
         self._lock = threading.Lock()
         self._dropped = False
         self._loop: asyncio.AbstractEventLoop | None = None
@@ -155,9 +162,11 @@ class ModbusEmulator:
         await server.serve_forever(background=True)
         self.port = int(getattr(server.transport, "sockets")[0].getsockname()[1])  # noqa: B009
         self._ready.set()
+        self._tick = time.monotonic()
         while not self._stopping:
-            await asyncio.sleep(0.005)
+            await asyncio.sleep(TICK_S)
             with self._lock:
+                self._credit_own_stall()
                 self._advance()
                 self._watchdog()
         await server.shutdown()  # type: ignore[no-untyped-call]
@@ -360,6 +369,23 @@ class ModbusEmulator:
         self.quick_stopping = False
         self._put("status_word", self._status_word())
         self._put("fault_code", code)
+
+    def _credit_own_stall(self) -> None:
+        """Time the emulator did not run is not time the master was silent.
+
+        The emulator lives in the master's process: when the machine is overloaded the
+        whole process (both threads) can be descheduled for 0.4-1 s. A real drive keeps
+        running and sees the master's requests as they come; this one wakes up with the
+        master's request still unread in its socket and its clock 1 s on, and would trip
+        0x8130 (seen at load average 5-13). The part of a tick's delay beyond ``STALL_S``
+        is therefore not counted as silence. Call with the lock held."""
+        now = time.monotonic()
+        late = now - self._tick - TICK_S
+        self._tick = now
+        if late > STALL_S:
+            self._last_request += late
+            self.stalls += 1
+            self.longest_stall_s = max(self.longest_stall_s, late)
 
     def _watchdog(self) -> None:
         if self.enabled and time.monotonic() - self._last_request > self.watchdog_s:

@@ -8,8 +8,13 @@ clock, unwrapped; otherwise it is the host's monotonic clock at the middle of th
 transaction, which carries the link's jitter. If the map has a
 ``setpoint_interpolation_time`` register it is set to the sample period, so the drive
 ramps between setpoints instead of stepping. ``metadata["acquisition"]`` says which.
-``info.max_sample_rate_hz`` is measured at connection (70 % of the sustained rate of a
-write and a read, rounded down to 1-2-5) and capped by the station's ``max_poll_rate_hz``.
+``info.max_sample_rate_hz`` is measured at connection (70 % of the typical rate of a
+write and a read: the median poll, so one stall of an overloaded host does not set it;
+rounded down to 1-2-5) and capped by the station's ``max_poll_rate_hz``. It is a snapshot:
+a run that achieves less than ``MIN_RATE_FRACTION`` of its requested rate raises
+:class:`DriveCommunicationError` (partial recording attached) instead of returning a
+recording with the excitation's timing gone. Over TCP a request that timed out is sent once
+more (same transaction id, so a late first answer is matched and a stale one skipped).
 """
 
 from __future__ import annotations
@@ -62,6 +67,8 @@ EXCEPTION_NAMES = {
     6: "SERVER DEVICE BUSY",
     0x0B: "GATEWAY TARGET FAILED TO RESPOND",
 }
+MIN_RATE_FRACTION = 0.7  # of the requested sample rate a run must achieve
+WATCHDOG_FAULT = 0x8130  # CiA-style life guard / heartbeat error: the drive lost its master
 COMMAND_COLUMN = {
     Mode.TORQUE: "torque_cmd_nm",
     Mode.VELOCITY: "velocity_cmd_rad_s",
@@ -84,6 +91,7 @@ class ModbusDrive(Drive):
         self.limits = limits
         self.map: RegisterMap = load_register_map(station.register_map_path)
         self._state = DriveState.DISABLED
+        self._longest_pause_s = 0.0  # between two feedback polls of the last run
         self._has_timestamp = TIMESTAMP in self.map.registers
         self._feedback_names = FEEDBACK + ((TIMESTAMP,) if self._has_timestamp else ())
         self._blocks = self.map.blocks(self._feedback_names)
@@ -106,7 +114,12 @@ class ModbusDrive(Drive):
     def _make_client(self) -> Any:
         st = self.station
         if st.transport == "tcp":
-            return ModbusTcpClient(st.host, port=st.port, timeout=st.timeout_s, retries=0)
+            # one resend after a timeout: an overloaded host can be descheduled for longer
+            # than timeout_s while the answer is under way; the resend keeps the
+            # transaction id, so whichever answer comes first is matched, the other skipped.
+            # RTU has no transaction id (a late answer would be taken for the next
+            # request's), so it is not resent there.
+            return ModbusTcpClient(st.host, port=st.port, timeout=st.timeout_s, retries=1)
         return ModbusSerialClient(
             st.serial_port,
             framer=FramerType.RTU,
@@ -188,14 +201,18 @@ class ModbusDrive(Drive):
             transport=self._where(),
         )
 
-    def _measure_poll_rate(self, polls: int = 20) -> float:
+    def _measure_poll_rate(self, polls: int = 30) -> float:
         """A sample costs a command write and a feedback read; a read is timed (it moves
-        nothing) and the write taken to cost as much."""
-        start = time.monotonic()
+        nothing) and the write taken to cost as much. The median read, not the mean: one
+        stall of an overloaded host (0.2-1 s seen) would otherwise set the rate of the
+        whole session (seen: 20 Hz chosen where 100 Hz were sustained)."""
+        reads = []
         for _ in range(polls):
+            start = time.monotonic()
             self._feedback()
-        per_sample = 2 * (time.monotonic() - start) / polls
-        achievable = 0.7 / per_sample
+            reads.append(time.monotonic() - start)
+        per_sample = 2 * float(np.median(reads))
+        achievable = 0.7 / max(per_sample, 1e-6)
         return nice_rate(min(self.station.max_poll_rate_hz, achievable))
 
     @property
@@ -348,6 +365,10 @@ class ModbusDrive(Drive):
             self.quick_stop()
             raise
         recording = self._recording(excitation, rows)
+        if error is None:
+            error = self._rate_shortfall(excitation, len(rows))
+            if error is not None:
+                self.write_value(f"{excitation.mode.value}_cmd", self._hold_value(excitation.mode))
         if error is not None:
             if isinstance(error, DriveFaultError):
                 self._state = DriveState.FAULT
@@ -357,6 +378,20 @@ class ModbusDrive(Drive):
             raise error
         self.write_value(f"{excitation.mode.value}_cmd", self._hold_value(excitation.mode))
         return recording
+
+    def _rate_shortfall(self, excitation: Excitation, polls: int) -> DriveError | None:
+        """The run achieved too few samples for its timing to mean what the protocol
+        planned (the connection-time rate is a snapshot; the machine's load may have risen)."""
+        achieved = polls / max(excitation.duration_s, 1e-9)
+        if achieved >= MIN_RATE_FRACTION * excitation.fs_hz:
+            return None
+        return DriveCommunicationError(
+            f"{self._where()}: '{excitation.name}' polled at {achieved:.0f} Hz of the "
+            f"{excitation.fs_hz:g} Hz requested (< {MIN_RATE_FRACTION:.0%}; longest pause "
+            f"{self._longest_pause_s:.3f} s): the host could not keep up, the recording is "
+            f"not the planned excitation; lower max_poll_rate_hz in {self.station.source} "
+            f"or unload the machine"
+        )
 
     def _set_interpolation(self, period_s: float) -> None:
         """Let the drive ramp over one sample period to each new setpoint (if it can)."""
@@ -378,6 +413,8 @@ class ModbusDrive(Drive):
         fs, n = excitation.fs_hz, len(command)
         last_index = -1
         t0 = time.monotonic()
+        self._longest_pause_s = 0.0
+        previous = t0
         while True:
             index = int((time.monotonic() - t0) * fs)
             if index >= n:
@@ -391,12 +428,23 @@ class ModbusDrive(Drive):
             if delay > 0:
                 time.sleep(delay)
             stamp, values = self._feedback()
+            self._longest_pause_s = max(self._longest_pause_s, stamp - previous)
+            previous = stamp
             rows.append((stamp - t0, float(command[index]), values))
             if self._bit(values, "fault"):
+                code = int(values["fault_code"])
+                why = ""
+                if code == WATCHDOG_FAULT:
+                    why = (
+                        f": communication watchdog, the drive saw no request for its watchdog "
+                        f"time (station watchdog_s = {self.station.watchdog_s:g} s); longest "
+                        f"pause between our polls this run {self._longest_pause_s:.3f} s "
+                        "(host overloaded or stalled?)"
+                    )
                 raise DriveFaultError(
                     f"{self._where()}: drive fault at t = {stamp - t0:.3f} s of "
-                    f"'{excitation.name}'",
-                    code=int(values["fault_code"]),
+                    f"'{excitation.name}'{why}",
+                    code=code,
                 )
             if not self._bit(values, "enabled"):
                 raise DriveStateError(
@@ -453,6 +501,8 @@ class ModbusDrive(Drive):
             "control_mode": excitation.mode.value,
             "acquisition": acquisition,
             "poll_rate_hz": f"{len(rows) / max(excitation.duration_s, 1e-9):.1f}",
+            "requested_rate_hz": f"{excitation.fs_hz:g}",
+            "longest_gap_s": f"{float(np.max(np.diff(time_s), initial=0.0)):.4f}",
             "duplicate_reads_dropped": str(duplicates),
             # row k: the drive's state latched at one control period (position measured at
             # its start, torque commanded over it), as the CANopen backend states it
