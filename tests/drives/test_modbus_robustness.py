@@ -14,6 +14,7 @@ from hil.drives.base import DriveState
 from hil.drives.modbus import ModbusDrive
 from hil.errors import DriveCommunicationError
 from hil.profile import UnitProfile
+from hil.recording import Recording
 from plant_sim.emulators.faults import ModbusFaults
 from plant_sim.emulators.modbus_server import WATCHDOG_FAULT
 from plant_sim.emulators.sessions import modbus_emulator
@@ -61,7 +62,7 @@ def test_run_below_its_rate_is_an_error_with_the_partial_recording(
         emulator.faults = ModbusFaults()
     assert "max_poll_rate_hz" in str(caught.value)
     partial = caught.value.partial_recording
-    assert partial is not None
+    assert isinstance(partial, Recording)
     assert 0 < len(partial) < 0.7 * fs * 1.0  # 1 s excitation
     assert float(partial.metadata["poll_rate_hz"]) < 0.7 * fs
     assert partial.metadata["control_period_s"] == "0.00025"
@@ -74,6 +75,7 @@ def test_rate_at_connection_is_the_typical_poll(profile: UnitProfile) -> None:
         modbus_emulator(profile, seed=2) as (emulator, station),
         ModbusDrive(station, limits=profile.limits) as drive,
     ):
+        assert isinstance(drive, ModbusDrive)
         quiet = drive.info.max_sample_rate_hz
 
         def hold() -> None:  # the emulator stalls 0.3 s during the measurement
