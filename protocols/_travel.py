@@ -9,9 +9,10 @@ import numpy as np
 from numpy.typing import NDArray
 
 from hil.drives.base import DriveInfo, Excitation, Mode
-from hil.errors import ProfileError
+from hil.errors import IdentificationError, ProfileError
 from hil.identify.moves import position_move, travel_shortfall_rad
 from hil.profile import ProtocolSettings, UnitProfile
+from hil.recording import Recording
 
 
 def move_excitation(
@@ -28,6 +29,34 @@ def move_excitation(
         position_rad, target_rad, fs_hz=fs_hz, speed_rad_s=speed_rad_s, hold_s=hold_s
     )
     return Excitation(name=name, mode=Mode.POSITION, fs_hz=fs_hz, command=command)
+
+
+def on_command_grid(
+    recording: Recording, excitation: Excitation
+) -> tuple[NDArray[np.float64], NDArray[np.float64], int]:
+    """Position and torque at the excitation's sample instants ``k/fs``, and how many rows
+    the recording had. A streamed drive returns one row per command sample (returned as
+    is); a polled one fewer, irregular rows, interpolated in time onto the command grid so
+    analyses that index by command sample still line up.
+
+    Raises
+    ------
+    IdentificationError
+        The recording stops short of the excitation.
+    """
+    samples = len(excitation.command)
+    time_s = recording.time_s - recording.time_s[0]
+    if len(time_s) == samples:
+        return recording.position, recording.effort, samples
+    grid = np.arange(samples) / excitation.fs_hz
+    if time_s[-1] < grid[-1] - 2.0 / excitation.fs_hz:
+        raise IdentificationError(
+            f"{recording.source}: recording ends at {time_s[-1]:.3f} s, the excitation "
+            f"'{excitation.name}' at {grid[-1]:.3f} s"
+        )
+    position = np.interp(grid, time_s, recording.position)
+    torque = np.interp(grid, time_s, recording.effort)
+    return position, torque, len(time_s)
 
 
 def speed_ramp(speed_rad_s: float, *, ramp_s: float, fs_hz: float, up: bool) -> NDArray[np.float64]:

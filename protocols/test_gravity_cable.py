@@ -26,7 +26,7 @@ from hil.identify.gravity_cable import (
     sweep_plan,
 )
 from hil.profile import UnitProfile
-from protocols._travel import TravelSpec
+from protocols._travel import TravelSpec, on_command_grid
 
 log = logging.getLogger(__name__)
 
@@ -114,8 +114,10 @@ def result(drive: Drive, calibration: CalibrationRun, spec: Spec) -> GravityCabl
     move, sweep = excitation(spec, position_rad=drive.status().position_rad)
     calibration.run(drive, move, protocol=NAME)
     recording = calibration.run(drive, sweep, protocol=NAME)
-    analysed = analyse(recording.position, recording.effort, spec)
+    position, torque, rows = on_command_grid(recording, sweep)
+    analysed = analyse(position, torque, spec)
     calibration.details[NAME] = {
+        "recorded_rows": rows,
         "offset_nm": analysed.offset_nm,
         "cable_hysteresis_angle_rad": analysed.hysteresis_angle_rad,
         "loop_half_width_nm": analysed.loop_half_width_nm,

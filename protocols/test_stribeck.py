@@ -14,7 +14,7 @@ from hil.drives.base import Drive, DriveInfo, Excitation, Mode
 from hil.identify.estimate import Estimate
 from hil.identify.stribeck import Staircase, StribeckResult, identify_stribeck, staircase
 from hil.profile import UnitProfile
-from protocols._travel import TravelSpec
+from protocols._travel import TravelSpec, on_command_grid
 
 log = logging.getLogger(__name__)
 
@@ -132,8 +132,11 @@ def result(drive: Drive, calibration: CalibrationRun, profile: UnitProfile) -> S
     move, stairs = excitation(spec, position_rad=drive.status().position_rad)
     calibration.run(drive, move, protocol=NAME)
     recording = calibration.run(drive, stairs, protocol=NAME)
-    analysed = analyse(recording.time_s, recording.position, recording.effort, spec)
+    position, torque, rows = on_command_grid(recording, stairs)
+    time_s = np.arange(len(position)) / stairs.fs_hz
+    analysed = analyse(time_s, position, torque, spec)
     calibration.details[NAME] = {
+        "recorded_rows": rows,
         "coulomb_nm": analysed.coulomb.value,
         "viscous_nm_s_rad": analysed.viscous.value,
         "residual_rms_nm": analysed.residual_rms_nm,

@@ -5,9 +5,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from hil.drives.base import Mode
-from hil.errors import ProfileError
-from protocols._travel import TravelSpec, speed_ramp
+from hil.drives.base import Excitation, Mode
+from hil.errors import IdentificationError, ProfileError
+from hil.recording import Recording
+from protocols._travel import TravelSpec, on_command_grid, speed_ramp
 
 SPEC = TravelSpec(fs_hz=1000.0, travel_min_rad=-1.0, travel_max_rad=1.0, margin_rad=0.1,
                   move_speed_rad_s=0.5)
@@ -34,3 +35,29 @@ def test_speed_ramp_rises_smoothly_and_mirrors() -> None:
     assert up[-1] == pytest.approx(0.6)
     assert down[-1] == pytest.approx(0.0)
     assert np.all(np.diff(up) > 0)
+
+
+def test_polled_rows_are_put_back_on_the_command_grid() -> None:
+    fs = 100.0
+    command = np.linspace(0.0, 1.0, 300)
+    excitation = Excitation(name="ramp", mode=Mode.VELOCITY, command=command, fs_hz=fs)
+    rng = np.random.default_rng(1)
+    kept = np.sort(rng.choice(np.arange(1, 299), size=250, replace=False))
+    t = np.concatenate([[0.0], kept / fs, [299 / fs]]) + 0.0003 * rng.standard_normal(252)
+    t[0], t[-1] = 0.0, 299 / fs
+    recording = Recording(
+        columns={
+            "time_s": t,
+            "position_rad": 2.0 * t,
+            "velocity_rad_s": 0 * t,
+            "torque_nm": 3.0 * t,
+        }
+    )
+    position, torque, rows = on_command_grid(recording, excitation)
+    grid = np.arange(300) / fs
+    assert rows == 252
+    np.testing.assert_allclose(position, 2.0 * grid, atol=1e-9)
+    np.testing.assert_allclose(torque, 3.0 * grid, atol=1e-9)
+    short = Recording(columns={k: v[:200] for k, v in recording.columns.items()}, source="short")
+    with pytest.raises(IdentificationError, match="short: recording ends"):
+        on_command_grid(short, excitation)
