@@ -28,6 +28,9 @@ CERTIFICATE_KEY = pytest.StashKey[Path]()
 PROTOCOL_MARK = "protocol"
 
 
+SIMULATED = ("sim", "canopen-emulator", "modbus-emulator")  # need no --unit-serial
+
+
 def pytest_addoption(parser: pytest.Parser) -> None:
     group = parser.getgroup("gimbal-hil", "gimbal-hil calibration")
     group.addoption(
@@ -62,6 +65,9 @@ def pytest_addoption(parser: pytest.Parser) -> None:
 
 def pytest_configure(config: pytest.Config) -> None:
     config.addinivalue_line("markers", f"{PROTOCOL_MARK}: a calibration protocol")
+    kind = config.getoption("--drive", default="sim")
+    if config.getoption("--unit-serial", default=None) is None and kind not in SIMULATED:
+        raise pytest.UsageError(f"--drive {kind} (a real unit) needs --unit-serial SERIAL")
 
 
 def _load_profile(config: pytest.Config) -> UnitProfile:
@@ -86,9 +92,7 @@ def calibration(pytestconfig: pytest.Config, profile: UnitProfile) -> Calibratio
     if RUN_KEY not in pytestconfig.stash:
         kind = pytestconfig.getoption("--drive")
         serial = pytestconfig.getoption("--unit-serial")
-        if serial is None:
-            if kind != "sim":
-                raise pytest.UsageError(f"--drive {kind} needs --unit-serial")
+        if serial is None:  # a simulated unit (pytest_configure refused a real one)
             serial = "SIM-0001"
         pytestconfig.stash[RUN_KEY] = CalibrationRun(
             profile=profile,

@@ -169,3 +169,12 @@ def test_controller_outputs_carry_the_cable_loop_when_measured() -> None:
     assert outputs is not None
     assert outputs["cable_feedforward"] == {"stiffness_nm_rad": 0.004, "hysteresis_nm": 0.001}
     assert outputs["friction_feedforward"] == {"coulomb_nm": 0.02}
+
+
+def test_a_real_drive_without_a_serial_is_a_usage_error(pytester: pytest.Pytester) -> None:
+    result = pytester.runpytest_inprocess(
+        "--pyargs", "protocols.test_inertia_friction", "-p", "no:cacheprovider",
+        "--drive", "canopen",
+    )
+    assert result.ret == pytest.ExitCode.USAGE_ERROR
+    result.stderr.fnmatch_lines(["*--drive canopen (a real unit) needs --unit-serial SERIAL*"])
