@@ -23,6 +23,7 @@ from hil.errors import ProfileError
 
 SYNC_PACINGS = ("realtime", "lockstep")
 ACQUISITIONS = ("stream", "recorder", "auto")
+TORQUE_SAMPLES = ("auto", "mean", "instantaneous")
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -33,6 +34,12 @@ class CanOpenStation:
     wall-clock time) or ``"lockstep"`` for a drive whose clock *is* the SYNC (an emulator
     or a drive in a SYNC-stepped simulation mode): the next SYNC goes out as soon as the
     previous one was answered. Never use lockstep on a real axis.
+
+    ``torque_sample``: which torque a streamed row carries. ``"auto"`` (default): the torque
+    averaged over the SYNC period (0x2077, "Torque actual value averaged" in the EDS) when
+    the drive offers it, else 0x6077; ``"mean"`` requires 0x2077; ``"instantaneous"`` always
+    0x6077. ``control_period_s``: the drive's control-loop period, for a drive that does not
+    report it (the emulator's 0x2200:6); it goes into each recording's metadata.
     """
 
     source: str
@@ -51,6 +58,8 @@ class CanOpenStation:
     state_timeout_s: float = 1.0
     acquisition: str = "stream"
     lost_sample_fraction: float = 0.02
+    torque_sample: str = "auto"
+    control_period_s: float | None = None
     rated_torque_nm: float | None = None
     rated_current_a: float | None = None
     counts_per_rev: int | None = None
@@ -140,6 +149,8 @@ _CANOPEN_KEYS = {
     "acquisition",
     "lost_sample_fraction",
     "options",
+    "torque_sample",
+    "control_period_s",
 }
 _SCALING_KEYS = {
     "rated_torque_nm",
@@ -168,6 +179,11 @@ def _canopen(
     acquisition = str(table.get("acquisition", "stream"))
     if acquisition not in ACQUISITIONS:
         raise ProfileError(f"[canopen] acquisition must be one of {ACQUISITIONS}", source=source)
+    torque_sample = str(table.get("torque_sample", "auto"))
+    if torque_sample not in TORQUE_SAMPLES:
+        raise ProfileError(
+            f"[canopen] torque_sample must be one of {TORQUE_SAMPLES}", source=source
+        )
     where = f"{source} [canopen]"
     station = CanOpenStation(
         source=source,
@@ -186,6 +202,8 @@ def _canopen(
         state_timeout_s=_pos(table, "state_timeout_s", 1.0, where),
         acquisition=acquisition,
         lost_sample_fraction=float(table.get("lost_sample_fraction", 0.02)),
+        torque_sample=torque_sample,
+        control_period_s=_opt(table, "control_period_s", where),
         rated_torque_nm=_opt(scaling, "rated_torque_nm", f"{source} [scaling]"),
         rated_current_a=_opt(scaling, "rated_current_a", f"{source} [scaling]"),
         counts_per_rev=None if "counts_per_rev" not in scaling else int(scaling["counts_per_rev"]),

@@ -31,6 +31,20 @@ SYNC, 4 kHz loop: it depends on the drive's velocity loop, which the estimator d
 know, so it is not modelled). :func:`torque_hold_s` reads the recording's
 metadata and refuses the cases it cannot model.
 
+Averaged torque (``torque_sample = "mean"``, CiA 402 emulator 0x2077): row k carries the
+mean of the ``N = T_s/T_c`` control-period torques held over ``[t_k − T_s, t_k]``, the
+position is still sampled at ``t_k − T_c``. For a sine ``u_n`` at the control rate the row's
+torque is ``u_n · B(ω)`` with the boxcar
+
+    B(ω) = (1/N) Σ_{i<N} e^{−jωiT_c} = (1/N)·(1 − e^{−jωNT_c})/(1 − e^{−jωT_c}),
+
+real-positive times ``e^{−jω(T_s − T_c)/2}`` (a pure delay of ``(T_s − T_c)/2``, 0.375 ms at
+1 kHz / 4 kHz, magnitude ``sin(ωT_s/2)/(N·sin(ωT_c/2))``), so the measured ratio is
+``G_d(ω)/B(ω)`` with ``G_d`` at the control period, exactly. Relative to the position
+sample the averaged torque's centroid sits ``T_c − T_s/2`` later (−0.25 ms: earlier). The
+boxcar has zeros at multiples of the row rate, where the point sample aliases the
+torque's high-frequency content onto the band: the alias bias and the noise floor go.
+
 Per frequency the run is cut into blocks of whole periods; the phase uncertainty is the
 scatter of the block phases (Type A). τ and B/J are a weighted least-squares fit of the
 phases; the standard uncertainty of τ is from the fit's covariance, scaled by
@@ -58,14 +72,44 @@ TREND_ORDER = 1  # constant + linear (the carrier) with each block's sine: highe
 # nearly collinear with a one-period sine and inflate the variance (benchmarks/bench_frf.py)
 
 
-def torque_hold_s(metadata: Mapping[str, str], *, fs_hz: float) -> float:
-    """The period over which the drive held each reported torque sample (s).
+class TorqueHold(float):
+    """A torque hold period in s (the float value) that also says over how many held
+    control periods each reported sample is the mean (``mean_samples``; 1: a point sample).
+
+    A float so that code passing ``hold_s`` on keeps working; :func:`analyse_frequency`
+    and :func:`fit_current_loop_lag` read ``mean_samples`` from it.
+    """
+
+    mean_samples: int
+
+    def __new__(cls, hold_s: float, *, mean_samples: int = 1) -> TorqueHold:
+        if mean_samples < 1:
+            raise ValueError(f"mean_samples must be ≥ 1, got {mean_samples}")
+        obj = super().__new__(cls, hold_s)
+        obj.mean_samples = int(mean_samples)
+        return obj
+
+    def __repr__(self) -> str:
+        return f"TorqueHold({float(self)!r}, mean_samples={self.mean_samples})"
+
+
+def _mean_samples(hold_s: float | None, mean_samples: int | None) -> int:
+    if mean_samples is not None:
+        return mean_samples
+    return hold_s.mean_samples if isinstance(hold_s, TorqueHold) else 1
+
+
+def torque_hold_s(metadata: Mapping[str, str], *, fs_hz: float) -> TorqueHold:
+    """The period over which the drive held each reported torque sample (s), and how many
+    such samples each reported value is the mean of (``TorqueHold.mean_samples``).
 
     Recordings that do not describe their torque sampling (``torque_sample`` absent: the
     simulator, CSV files) hold it over their own sample period ``1/fs_hz``. A decimated
     record of a faster control loop needs ``control_period_s``, and its command must have
     been interpolated linearly between samples (``command_interpolation``): a held command
-    aliases into the band (module docstring).
+    aliases into the band (module docstring). ``torque_sample = "mean"``: the mean over the
+    sample period (``torque_mean_period_s``, if stated, must be it) of the torque held per
+    control period; ``mean_samples = T_s/T_c``.
 
     Raises
     ------
@@ -74,12 +118,20 @@ def torque_hold_s(metadata: Mapping[str, str], *, fs_hz: float) -> float:
     """
     sample_s = 1.0 / fs_hz
     if "torque_sample" not in metadata:
-        return sample_s
-    if metadata["torque_sample"] != "instantaneous":
+        return TorqueHold(sample_s)
+    sampling = metadata["torque_sample"]
+    if sampling not in ("instantaneous", "mean"):
         raise IdentificationError(
-            f"torque sampled as {metadata['torque_sample']!r}: only an instantaneous "
-            "control-loop sample is modelled"
+            f"torque sampled as {sampling!r}: only an instantaneous control-loop sample or "
+            "the mean over the sample period is modelled"
         )
+    if sampling == "mean" and "torque_mean_period_s" in metadata:
+        mean_s = float(metadata["torque_mean_period_s"])
+        if not math.isclose(mean_s, sample_s, rel_tol=1e-6):
+            raise IdentificationError(
+                f"torque averaged over {mean_s:g} s, the rows are {sample_s:g} s apart: "
+                "only a mean over the sample period is modelled"
+            )
     try:
         control_s = float(metadata["control_period_s"])
     except (KeyError, ValueError) as exc:
@@ -101,7 +153,7 @@ def torque_hold_s(metadata: Mapping[str, str], *, fs_hz: float) -> float:
             "much as its own phase; use linear target interpolation (CiA 402 0x60C0 = 0) or "
             "record at the control rate (drive recorder)"
         )
-    return control_s
+    return TorqueHold(control_s, mean_samples=round(ratio) if sampling == "mean" else 1)
 
 
 def sampled_response(
@@ -111,8 +163,10 @@ def sampled_response(
     inertia_kg_m2: float,
     viscous_over_inertia_1_s: float,
     time_constant_s: float,
+    mean_samples: int = 1,
 ) -> ComplexArray:
-    """Sampled position over held torque, ``G_d(ω)`` above, in rad/N·m.
+    """Sampled position over held torque, ``G_d(ω)`` above, in rad/N·m (``G_d/B`` with
+    ``mean_samples = N > 1``: the torque reported as the mean of the last N held samples).
 
     Parameters
     ----------
@@ -122,6 +176,8 @@ def sampled_response(
         Sample rate of the drive (Hz): the hold period is ``1/fs_hz``.
     inertia_kg_m2, viscous_over_inertia_1_s, time_constant_s
         J (kg·m²), B/J (1/s) and the current-loop time constant τ (s).
+    mean_samples
+        N: each reported torque is the mean of the last N samples held over ``1/fs_hz``.
     """
     omega = 2 * math.pi * np.atleast_1d(np.asarray(frequency_hz, dtype=np.float64))
     step_s = 1.0 / fs_hz
@@ -130,7 +186,18 @@ def sampled_response(
     plant = 1.0 / (s * (s + viscous_over_inertia_1_s) * (time_constant_s * s + 1.0))
     total = np.sum(plant / s, axis=1)
     hold = (1.0 - np.exp(-1j * omega * step_s)) / step_s
-    return np.asarray(hold * total / inertia_kg_m2, dtype=np.complex128)
+    response = hold * total / inertia_kg_m2
+    if mean_samples > 1:
+        response = response / boxcar(omega * step_s, mean_samples)
+    return np.asarray(response, dtype=np.complex128)
+
+
+def boxcar(omega_step: FloatArray, n: int) -> ComplexArray:
+    """``B = (1/n)·Σ_{i<n} e^{−j·i·ωT}`` at ``omega_step = ωT``: the mean of the last n
+    samples of a sampled sine, relative to the newest (delay ``(n−1)T/2``)."""
+    i = np.arange(n)
+    terms = np.exp(-1j * np.multiply.outer(np.atleast_1d(omega_step), i))
+    return np.asarray(terms.mean(axis=-1), dtype=np.complex128)
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -177,6 +244,7 @@ def analyse_frequency(
     fs_hz: float,
     blocks: int,
     hold_s: float | None = None,
+    mean_samples: int | None = None,
 ) -> FrequencyPoint:
     """Reduce one sine segment (settled, whole periods) to a :class:`FrequencyPoint`.
 
@@ -193,8 +261,12 @@ def analyse_frequency(
     hold_s
         The period over which the drive held each reported torque (s): :func:`torque_hold_s`;
         ``None``: ``1/fs_hz``.
+    mean_samples
+        Each reported torque is the mean of this many held samples; ``None``: from
+        ``hold_s`` (a :class:`TorqueHold`), else 1.
     """
     hold_fs_hz = fs_hz if hold_s is None else 1.0 / hold_s
+    n_mean = _mean_samples(hold_s, mean_samples)
     periods = math.floor((time_s[-1] - time_s[0] + 1.0 / fs_hz) * frequency_hz + 1e-6)
     blocks = min(blocks, periods)
     if blocks < 2:
@@ -208,9 +280,7 @@ def analyse_frequency(
     )
     p_list, t_list = [], []
     for a, b in itertools.pairwise(edges):
-        p_hat, t_hat = block_phasors(
-            time_s[a:b], [position_rad[a:b], torque_nm[a:b]], omega=omega
-        )
+        p_hat, t_hat = block_phasors(time_s[a:b], [position_rad[a:b], torque_nm[a:b]], omega=omega)
         if t_hat == 0:
             raise IdentificationError(f"{frequency_hz:g} Hz: no torque at the frequency")
         p_list.append(p_hat)
@@ -224,6 +294,7 @@ def analyse_frequency(
             inertia_kg_m2=1.0,
             viscous_over_inertia_1_s=0.0,
             time_constant_s=0.0,
+            mean_samples=n_mean,
         )[0]
     )
     phases = np.angle(ratio / rigid)
@@ -240,13 +311,19 @@ def analyse_frequency(
 
 
 def fit_current_loop_lag(
-    points: Sequence[FrequencyPoint], *, fs_hz: float, hold_s: float | None = None
+    points: Sequence[FrequencyPoint],
+    *,
+    fs_hz: float,
+    hold_s: float | None = None,
+    mean_samples: int | None = None,
 ) -> CurrentLoopResult:
     """Weighted least-squares fit of τ and B/J to the lag phases of ``points`` (≥ 3).
 
-    ``fs_hz`` and ``hold_s`` as for :func:`analyse_frequency` (the same values).
+    ``fs_hz``, ``hold_s`` and ``mean_samples`` as for :func:`analyse_frequency` (the same
+    values).
     Returns τ as ``current_loop_time_constant_ms`` (Estimate in ms).
     """
+    n_mean = _mean_samples(hold_s, mean_samples)
     fs_hz = fs_hz if hold_s is None else 1.0 / hold_s  # the model only needs the hold
     if len(points) < 3:
         raise IdentificationError(f"{len(points)} frequencies, need at least 3 for τ and B/J")
@@ -254,7 +331,12 @@ def fit_current_loop_lag(
     phases = np.array([p.lag_phase_rad for p in points])
     sigma = np.array([max(p.lag_phase_u_rad, 1e-6) for p in points])
     rigid = sampled_response(
-        freqs, fs_hz=fs_hz, inertia_kg_m2=1.0, viscous_over_inertia_1_s=0.0, time_constant_s=0.0
+        freqs,
+        fs_hz=fs_hz,
+        inertia_kg_m2=1.0,
+        viscous_over_inertia_1_s=0.0,
+        time_constant_s=0.0,
+        mean_samples=n_mean,
     )
 
     def residual(x: FloatArray) -> FloatArray:
@@ -264,6 +346,7 @@ def fit_current_loop_lag(
             inertia_kg_m2=1.0,
             viscous_over_inertia_1_s=float(x[1]),
             time_constant_s=float(x[0]) * 1e-3,
+            mean_samples=n_mean,
         )
         return np.asarray((np.angle(model / rigid) - phases) / sigma, dtype=np.float64)
 
@@ -297,6 +380,7 @@ def fit_current_loop_lag(
         inertia_kg_m2=1.0,
         viscous_over_inertia_1_s=float(fit.x[1]),
         time_constant_s=float(fit.x[0]) * 1e-3,
+        mean_samples=n_mean,
     )
     measured = np.abs([p.response_rad_nm for p in points])
     return CurrentLoopResult(

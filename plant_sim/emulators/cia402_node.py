@@ -10,8 +10,12 @@ period, reached at the next SYNC, or held from this SYNC on: 0x60C0 = 0 / -1), a
 its synchronous TPDOs with the latched values. The actual values are the last control-loop
 sample before the SYNC: position measured at the start of that control period, torque
 (0x6077) commanded over it, so a row is one period of the control loop old and its torque
-is held over one *control* period (0x2200:6), not over the SYNC period. A run over real
-CAN frames is therefore as fast as the frames go, not as fast as the wall clock.
+is held over one *control* period (0x2200:6), not over the SYNC period. The
+manufacturer-specific 0x2077 (INTEGER16, 0.1 ‰ of 0x6076, PDO-mappable) is the mean of the
+torque commanded over the control periods of the last SYNC period, i.e. over
+``[t_k − T_sync, t_k]``: anti-aliased, where 0x6077 is a point sample of a 4 kHz signal. A
+run over real CAN frames is therefore as fast as the frames go, not as fast as the wall
+clock.
 
 It knows nothing about the backend that talks to it.
 """
@@ -44,6 +48,8 @@ EDS_NAME = "gimbal_hil_servo.eds"
 ABORT_VALUE_RANGE = 0x06090030
 ABORT_NOT_NOW = 0x08000022  # data cannot be transferred because of the device state
 INTERPOLATION_LINEAR, INTERPOLATION_HOLD = 0, -1  # 0x60C0 (negative: manufacturer-specific)
+TORQUE_MEAN = 0x2077  # mean torque over the last SYNC period, 0.1 ‰ of 0x6076
+TORQUE_MEAN_PER_RATED = 1e4  # 0x2077 counts per rated torque
 
 # CiA 402 states and the statusword bits the drive reports in each
 NOT_READY, SWITCH_ON_DISABLED, READY, SWITCHED_ON, ENABLED, QUICK_STOP, FAULT_REACTION, FAULT = (
@@ -175,7 +181,7 @@ class Cia402Emulator:
         self._tpdos: list[tuple[int, int, list[tuple[int, int, str]]]] = []
         self._last_event: dict[int, bytes] = {}
         self._pdo_dirty = True
-        self._sample = {0x6064: 0, 0x606C: 0, 0x6077: 0, 0x6078: 0}
+        self._sample = {0x6064: 0, 0x606C: 0, 0x6077: 0, 0x6078: 0, TORQUE_MEAN: 0}
         self._next_sample = dict(self._sample)
         self._previous_target: dict[int, float] = {}
         self._raw_cache: dict[tuple[int, int], int] = {}
@@ -548,6 +554,10 @@ class Cia402Emulator:
             0x606C: round(trace.velocity_rad_s[-1] * cpr / (2 * math.pi)),
             0x6077: _clip16(trace.torque_nm[-1] / self.rated_torque_nm * 1e3),
             0x6078: _clip16(trace.current_a[-1] / self.rated_current_a * 1e3),
+            # the mean over this SYNC period's control samples (each held over one period)
+            TORQUE_MEAN: _clip16(
+                float(np.mean(trace.torque_nm)) / self.rated_torque_nm * TORQUE_MEAN_PER_RATED
+            ),
         }
         if self.state == ENABLED:
             self.time_enabled_s += period_s

@@ -148,3 +148,97 @@ def test_station_errors_name_the_file(tmp_path: object, profile: UnitProfile) ->
         open_drive("modbus", profile=profile, unit_serial="X"),
     ):
         pass
+
+
+def _eds_without(tmp_path: object, *indices: str) -> object:
+    """The emulator's EDS with the given manufacturer objects removed (a drive that has no
+    0x2200 recorder, hence no 0x2200:6 loop period, and/or no averaged torque 0x2077)."""
+    from pathlib import Path
+
+    from plant_sim.emulators.cia402_node import default_eds_path
+
+    kept, skip = [], False
+    for line in default_eds_path().read_text().splitlines():
+        if line.startswith("["):
+            skip = any(line.startswith(f"[{i}") for i in indices)
+        listed = any(line.endswith(f"=0x{i}") for i in indices)  # [ManufacturerObjects]
+        if not skip and not listed:
+            kept.append(line)
+    text = "\n".join(kept) + "\n"
+    text = text.replace("SupportedObjects=3", f"SupportedObjects={3 - len(indices)}")
+    path = Path(str(tmp_path)) / "no_recorder.eds"
+    path.write_text(text)
+    return path
+
+
+def test_station_keys_torque_sample_and_control_period(tmp_path: object) -> None:
+    from pathlib import Path
+
+    from hil.drives.station import load_station
+
+    path = Path(str(tmp_path)) / "s.toml"
+    base = (
+        '[canopen]\ninterface = "virtual"\nchannel = "x"\nnode_id = 5\n'
+        'eds = "gimbal_hil_servo.eds"\n'
+    )
+    path.write_text(base)
+    default = load_station(path)
+    assert (default.torque_sample, default.control_period_s) == ("auto", None)  # type: ignore[union-attr]
+    path.write_text(base + 'torque_sample = "instantaneous"\ncontrol_period_s = 0.000125\n')
+    given = load_station(path)
+    assert (given.torque_sample, given.control_period_s) == ("instantaneous", 1.25e-4)  # type: ignore[union-attr]
+    for bad in ('torque_sample = "median"\n', "control_period_s = -1\n"):
+        path.write_text(base + bad)
+        with pytest.raises(ProfileError, match=r"s\.toml"):
+            load_station(path)
+
+
+@pytest.mark.parametrize("station_period_s", [None, 2.5e-4])
+def test_control_period_from_the_station_when_the_drive_has_none(
+    tmp_path: object, profile: UnitProfile, station_period_s: float | None
+) -> None:
+    """A drive without 0x2200:6 (and without 0x2077): the recording states the station's
+    control_period_s, so the current-loop model can use it; without it, it refuses."""
+    from hil.errors import IdentificationError
+    from hil.identify.current_loop import torque_hold_s
+
+    eds = _eds_without(tmp_path, "2200", "2077")
+    changes = {"eds_path": eds, "control_period_s": station_period_s}
+    with (
+        canopen_emulator(profile, seed=5, station_changes=changes) as (_emulator, station),
+        CanOpenDrive(station, limits=profile.limits) as drive,
+    ):
+        assert drive.torque_sample == "instantaneous"  # no 0x2077 in this EDS
+        drive.enable()
+        recording = drive.run(sine(0.2, fs_hz=1000.0, periods=1))
+    assert recording.metadata["torque_sample"] == "instantaneous"
+    if station_period_s is None:
+        assert "control_period_s" not in recording.metadata
+        with pytest.raises(IdentificationError, match="control period"):
+            torque_hold_s(recording.metadata, fs_hz=1000.0)
+    else:
+        assert recording.metadata["control_period_s"] == "0.00025"
+        assert torque_hold_s(recording.metadata, fs_hz=1000.0) == pytest.approx(2.5e-4)
+
+
+def test_station_control_period_must_agree_with_the_drive(profile: UnitProfile) -> None:
+    with (
+        pytest.raises(DriveStateError, match=r"0x2200:6 is 0\.00025 s"),
+        canopen_emulator(profile, seed=6, station_changes={"control_period_s": 5e-4}) as (
+            _emulator,
+            station,
+        ),
+        CanOpenDrive(station, limits=profile.limits),
+    ):
+        pass
+
+
+def test_mean_torque_required_but_not_offered(tmp_path: object, profile: UnitProfile) -> None:
+    eds = _eds_without(tmp_path, "2077")
+    changes = {"eds_path": eds, "torque_sample": "mean"}
+    with (
+        pytest.raises(DriveStateError, match="0x2077"),
+        canopen_emulator(profile, seed=7, station_changes=changes) as (_emulator, station),
+        CanOpenDrive(station, limits=profile.limits),
+    ):
+        pass

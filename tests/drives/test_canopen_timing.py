@@ -36,17 +36,24 @@ def _frictionless(profile: UnitProfile) -> UnitProfile:
     return dataclasses.replace(profile, plant=plant)
 
 
+@pytest.mark.parametrize("sampling", ["instantaneous", "mean"])
 @pytest.mark.parametrize("interpolation", [0, INTERPOLATION_HOLD])
-def test_torque_step_row_and_position_instant(profile: UnitProfile, interpolation: int) -> None:
+def test_torque_step_row_and_position_instant(
+    profile: UnitProfile, interpolation: int, sampling: str
+) -> None:
     """A torque step in CST on a frictionless, lag-free axis: exactly which row shows it,
-    and the position of each row is the double integral up to ``t_k − T_c``."""
+    and the position of each row is the double integral up to ``t_k − T_c``. With the
+    averaged torque (0x2077) row k is the mean of the control-period torques over
+    ``[t_k − T_s, t_k]``: the interpolated step's ramp shows as its mean in row k0+1."""
     step_nm, k0 = 0.1, 20
     command = np.where(np.arange(60) >= k0, step_nm, 0.0)
     with (
-        canopen_emulator(_frictionless(profile), seed=0, interpolation=interpolation) as (
-            _emulator,
-            station,
-        ),
+        canopen_emulator(
+            _frictionless(profile),
+            seed=0,
+            interpolation=interpolation,
+            station_changes={"torque_sample": sampling},
+        ) as (_emulator, station),
         CanOpenDrive(station, limits=profile.limits) as drive,
     ):
         assert isinstance(drive, CanOpenDrive)
@@ -59,10 +66,17 @@ def test_torque_step_row_and_position_instant(profile: UnitProfile, interpolatio
     assert recording.metadata["command_interpolation"] == (
         "linear" if interpolation == 0 else "hold"
     )
+    assert recording.metadata["torque_sample"] == sampling
     torque = recording.columns["torque_nm"]
     # the command of row k is in the RPDO before SYNC k; the drive reports it at SYNC k+1
+    first = step_nm
+    if sampling == "mean":
+        assert recording.metadata["torque_mean_period_s"] == f"{PERIOD_S:g}"
+        if interpolation == 0:  # the mean of the ramp 1/4 … 4/4 over SYNC period k0
+            first = step_nm * (1 + 2 + 3 + 4) / 16
     assert np.all(torque[: k0 + 1] == 0.0)
-    assert np.all(torque[k0 + 1 :] == pytest.approx(step_nm, abs=1e-12))
+    assert torque[k0 + 1] == pytest.approx(first, abs=1e-12)
+    assert np.all(torque[k0 + 2 :] == pytest.approx(step_nm, abs=1e-12))
     position = recording.columns["position_rad"] - start
     t = recording.time_s - recording.time_s[0]
     lsb = 2 * math.pi / (1 << 20)
@@ -92,10 +106,15 @@ def _lagged(profile: UnitProfile, tau_s: float) -> UnitProfile:
 
 
 def _current_loop_over_canopen(
-    profile: UnitProfile, *, seed: int, interpolation: int = 0
+    profile: UnitProfile, *, seed: int, interpolation: int = 0, sampling: str = "instantaneous"
 ) -> CurrentLoopResult:
     with (
-        canopen_emulator(profile, seed=seed, interpolation=interpolation) as (_emu, station),
+        canopen_emulator(
+            profile,
+            seed=seed,
+            interpolation=interpolation,
+            station_changes={"torque_sample": sampling},
+        ) as (_emu, station),
         CanOpenDrive(station, limits=profile.limits) as drive,
     ):
         drive.enable()
@@ -104,7 +123,9 @@ def _current_loop_over_canopen(
         drive.run(move)
         recording = drive.run(sines)
     assert spec.fs_hz == pytest.approx(1000.0)
-    assert torque_hold_s(recording.metadata, fs_hz=spec.fs_hz) == pytest.approx(CONTROL_S)
+    hold = torque_hold_s(recording.metadata, fs_hz=spec.fs_hz)
+    assert hold == pytest.approx(CONTROL_S)
+    assert hold.mean_samples == (4 if sampling == "mean" else 1)
     return protocol.analyse(recording, spec)
 
 
@@ -129,3 +150,28 @@ def test_held_targets_are_refused(profile: UnitProfile) -> None:
     band (τ would come out near 0); the estimator refuses and says why."""
     with pytest.raises(IdentificationError, match="alias"):
         _current_loop_over_canopen(profile, seed=1, interpolation=INTERPOLATION_HOLD)
+
+
+def test_averaged_torque_lag_at_the_nominal(profile: UnitProfile) -> None:
+    """The torque averaged over the SYNC period (0x2077, the default where the drive has it):
+    the boxcar model recovers the profile's τ (0.3 ms) within its accuracy (measured
+    +0.1 … +0.2 %; the point sample: −3 %)."""
+    accuracy = profile.measurement("current_loop_time_constant_ms").accuracy_rel
+    assert accuracy is not None
+    result = _current_loop_over_canopen(_lagged(profile, 3e-4), seed=7, sampling="mean")
+    assert result.time_constant.value == pytest.approx(0.3, rel=accuracy)
+
+
+@pytest.mark.xfail(
+    strict=True,
+    reason="known limit: +3.5 % at τ = 0.21 ms (+0.007 ms; seeds 0–7). The velocity loop "
+    "answers the 1 kHz linear target interpolation with torque sidebands at n·1 kHz ± f; the "
+    "boxcar attenuates them (zeros only at n·1 kHz) but the remainder, and the point-sampled "
+    "position's, bias τ by a few µs (it moves with the decimation phase against the "
+    "interpolation kinks). Not modelled.",
+)
+def test_averaged_torque_lag_at_the_lower_limit(profile: UnitProfile) -> None:
+    accuracy = profile.measurement("current_loop_time_constant_ms").accuracy_rel
+    assert accuracy is not None
+    result = _current_loop_over_canopen(_lagged(profile, 2.1e-4), seed=0, sampling="mean")
+    assert result.time_constant.value == pytest.approx(0.21, rel=accuracy)

@@ -16,9 +16,12 @@ from hil.drives.sim import SimDrive
 from hil.errors import IdentificationError
 from hil.identify.current_loop import (
     FrequencyPoint,
+    TorqueHold,
     analyse_frequency,
+    boxcar,
     fit_current_loop_lag,
     sampled_response,
+    torque_hold_s,
 )
 from hil.profile import load_profile
 from plant_sim.model import Plant
@@ -71,6 +74,80 @@ def test_response_matches_an_exact_zoh_simulation(tau_s: float) -> None:
         model = sampled_response(f, fs_hz=FS, inertia_kg_m2=j, viscous_over_inertia_1_s=b / j,
                                  time_constant_s=tau_s)[0]
         assert complex(coef[0], -coef[1]) == pytest.approx(model, rel=1e-3)
+
+
+def _lagged_axis(j: float, b: float, tau_s: float, step_s: float) -> np.ndarray:
+    """Transition matrix of (position, velocity, delivered torque, held command) over one
+    hold period: exact for a piecewise-constant command."""
+    a = np.array([[0.0, 1.0, 0.0], [0.0, -b / j, 1 / j], [0.0, 0.0, -1 / tau_s]])
+    augmented = np.zeros((4, 4))
+    augmented[:3, :3] = a
+    augmented[2, 3] = 1 / tau_s
+    return np.asarray(expm(augmented * step_s))
+
+
+def test_boxcar_is_a_pure_delay_of_half_the_averaged_span() -> None:
+    """Mean of 4 held 0.25 ms samples: delay (T_s − T_c)/2 = 0.375 ms, real gain ≤ 1."""
+    for f in (20.0, 150.0, 450.0):
+        w = 2 * math.pi * f
+        b = boxcar(np.array([w * 2.5e-4]), 4)[0]
+        gain = math.sin(w * 1e-3 / 2) / (4 * math.sin(w * 2.5e-4 / 2))
+        assert b == pytest.approx(gain * np.exp(-1j * w * 3.75e-4), rel=1e-12)
+
+
+@pytest.mark.parametrize("tau_s", [1e-4, 3e-4])
+def test_mean_torque_response_matches_an_exact_control_rate_simulation(tau_s: float) -> None:
+    """A 4 kHz drive streaming at 1 kHz: row k is the position at the start of control
+    period 4k−1 and the mean of the torques held over periods 4k−4 … 4k−1 (0x2077). The
+    phasor ratio is G_d(T_c)/B exactly, and a fit with the point-sample model (or with
+    a hold of the row period) misses τ by the averaging delay."""
+    j, b, control_s, n = 0.004, 0.01, 2.5e-4, 4
+    phi = _lagged_axis(j, b, tau_s, control_s)
+    for f in (30.0, 120.0):
+        fine = np.arange(round(160 / f / control_s)) * control_s
+        u = np.cos(2 * math.pi * f * fine)
+        state = np.zeros(4)
+        position = np.empty(fine.size)
+        for k in range(fine.size):
+            position[k] = state[0]
+            state[3] = u[k]
+            state = phi @ state
+        rows = np.arange(1, fine.size // n)
+        p_rows = position[n * rows - 1]
+        m_rows = u[: n * rows[-1]].reshape(-1, n).mean(axis=1)[rows - 1]
+        t = rows * n * control_s
+        tail = t >= 140 / f  # B/J = 2.5/s: the start's velocity offset has decayed
+        design = np.column_stack([np.cos(2 * math.pi * f * t[tail]),
+                                  np.sin(2 * math.pi * f * t[tail]), np.ones(tail.sum()),
+                                  t[tail]])
+        cp, cm = np.linalg.lstsq(design, np.column_stack([p_rows[tail], m_rows[tail]]),
+                                 rcond=None)[0][:2].T
+        measured = complex(cp[0], -cp[1]) / complex(cm[0], -cm[1])
+        model = sampled_response(f, fs_hz=1 / control_s, inertia_kg_m2=j,
+                                 viscous_over_inertia_1_s=b / j, time_constant_s=tau_s,
+                                 mean_samples=n)[0]
+        assert measured == pytest.approx(model, rel=1e-3)
+        point = sampled_response(f, fs_hz=1 / control_s, inertia_kg_m2=j,
+                                 viscous_over_inertia_1_s=b / j, time_constant_s=tau_s)[0]
+        assert abs(np.angle(measured / point)) > 0.9 * 2 * math.pi * f * 3.75e-4
+
+
+def test_mean_sampling_from_the_metadata() -> None:
+    meta = {"torque_sample": "mean", "control_period_s": "0.00025",
+            "command_interpolation": "linear", "torque_mean_period_s": "0.001"}
+    hold = torque_hold_s(meta, fs_hz=1000.0)
+    assert isinstance(hold, TorqueHold)
+    assert (float(hold), hold.mean_samples) == (pytest.approx(2.5e-4), 4)
+    assert torque_hold_s({**meta, "torque_sample": "instantaneous"},
+                         fs_hz=1000.0).mean_samples == 1
+    assert torque_hold_s({}, fs_hz=1000.0) == pytest.approx(1e-3)
+    with pytest.raises(IdentificationError, match="averaged over"):
+        torque_hold_s({**meta, "torque_mean_period_s": "0.002"}, fs_hz=1000.0)
+    with pytest.raises(IdentificationError, match="control period"):
+        torque_hold_s({"torque_sample": "mean", "command_interpolation": "linear"},
+                      fs_hz=1000.0)
+    with pytest.raises(IdentificationError, match="alias"):
+        torque_hold_s({**meta, "command_interpolation": "hold"}, fs_hz=1000.0)
 
 
 def _synthetic_points(tau_s: float, *, noise_nm: float, seed: int) -> list[FrequencyPoint]:

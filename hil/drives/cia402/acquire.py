@@ -22,6 +22,7 @@ from hil.drives.cia402.protocol import (
     CW_ENABLE_OPERATION,
     SW_FAULT,
     TARGET_OBJECT,
+    TORQUE_MEAN_PER_RATED,
     state_of,
 )
 from hil.errors import DriveError, DriveFaultError, DriveStateError
@@ -193,12 +194,14 @@ def _stream_recording(
     vel = np.asarray([r[0] for r in two], dtype=np.float64)
     torque = np.asarray([r[1] for r in two], dtype=np.float64)
     current = np.asarray([r[2] for r in two], dtype=np.float64)
-    period = drive.station.sync_period_s
+    period = 1.0 / excitation.fs_hz  # the SYNC period of this run (written by drive.run)
+    mean = drive.torque_sample == "mean"
+    torque_per_rated = TORQUE_MEAN_PER_RATED if mean else 1e3  # 0x2077: 0.1 ‰, 0x6077: ‰
     columns = {
         "time_s": k_arr * period,
         "position_rad": pos / sc.counts_per_rad,
         "velocity_rad_s": vel / sc.velocity_units_per_rad_s,
-        "torque_nm": torque * sc.rated_torque_nm / 1e3,
+        "torque_nm": torque * sc.rated_torque_nm / torque_per_rated,
         COMMAND_COLUMN[excitation.mode]: np.asarray(
             [sc.to_si(excitation.mode, float(v)) for v in raw[k_arr]], dtype=np.float64
         ),
@@ -206,10 +209,14 @@ def _stream_recording(
     }
     timing = {
         # row k: the drive's last control-loop sample before SYNC k (position measured at
-        # its start, torque commanded over it); the targets are interpolated as stated
-        "torque_sample": "instantaneous",
+        # its start, torque commanded over it), or with "mean" the torque averaged over the
+        # control periods of the SYNC period before SYNC k (0x2077); the targets are
+        # interpolated as stated
+        "torque_sample": drive.torque_sample,
         "command_interpolation": drive.command_interpolation,
     }
+    if mean:
+        timing["torque_mean_period_s"] = f"{period:g}"
     if drive.control_period_s is not None:
         timing["control_period_s"] = f"{drive.control_period_s:g}"
     metadata = _metadata(

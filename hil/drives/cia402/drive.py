@@ -5,6 +5,7 @@ from __future__ import annotations
 import logging
 import math
 import time
+from typing import Any
 
 from hil.drives.base import (
     Drive,
@@ -30,6 +31,11 @@ from hil.drives.cia402.protocol import (
     MODE_CANDIDATES,
     MODE_SUPPORT_BIT,
     SW_FAULT,
+    TORQUE_MEAN_NAME,
+    TORQUE_MEAN_OBJECT,
+    TORQUE_MEAN_PER_RATED,
+    TPDO_LAYOUT,
+    TPDO_LAYOUT_MEAN,
     Scaling,
     max_stream_rate_hz,
     state_of,
@@ -64,6 +70,7 @@ class CanOpenDrive(Drive):
         self.recorder_rate_hz = 0.0
         self.control_period_s: float | None = None  # the drive's control loop, if it says
         self.command_interpolation = INTERPOLATION_UNKNOWN
+        self.torque_sample = "instantaneous"  # or "mean": 0x2077 over the SYNC period
         self._period_us = round(station.sync_period_s * 1e6)
         try:
             self._bring_up()
@@ -87,7 +94,8 @@ class CanOpenDrive(Drive):
         link.nmt("PRE-OPERATIONAL")
         self.scaling = self._scaling()
         self.supported_modes = int(link.read(0x6502))
-        link.configure_pdos()
+        self.torque_sample = self._choose_torque_sample()
+        link.configure_pdos(TPDO_LAYOUT_MEAN if self.torque_sample == "mean" else TPDO_LAYOUT)
         self._write_period(self._period_us)
         link.write(0x1019, 0, 0)  # SYNC without counter
         self._write_limits()
@@ -97,6 +105,7 @@ class CanOpenDrive(Drive):
             self.recorder_rate_hz = 1e6 / loop_us if st.acquisition != "stream" else 0.0
         except (DriveStateError, KeyError):
             self.recorder_rate_hz = 0.0
+        self._check_control_period()
         self.command_interpolation = self._read_interpolation()
         self._info = self._read_info(rate)
         link.nmt("OPERATIONAL")
@@ -126,6 +135,61 @@ class CanOpenDrive(Drive):
             rated_torque_nm=rated_torque,
             rated_current_a=rated_current,
         )
+
+    def _choose_torque_sample(self) -> str:
+        """``"mean"`` when the drive offers the SYNC-period torque average (0x2077 in its
+        EDS, by name and type: a manufacturer-specific index means something else on
+        another vendor's drive) and the station does not say otherwise; else
+        ``"instantaneous"`` (0x6077)."""
+        st = self.station
+        if st.torque_sample == "instantaneous":
+            return "instantaneous"
+        assert self.node_od is not None
+        assert self.scaling is not None
+        obj = self.node_od.get(TORQUE_MEAN_OBJECT)
+        offered = (
+            obj is not None
+            and getattr(obj, "name", "") == TORQUE_MEAN_NAME
+            and getattr(obj, "data_type", None) == 0x0003  # INTEGER16
+            and bool(getattr(obj, "pdo_mappable", False))
+        )
+        # INTEGER16 at 0.1 ‰ spans ±3.28 × rated: the torque limit (0x6072) must fit
+        fits = self.limits.torque_nm / self.scaling.rated_torque_nm * TORQUE_MEAN_PER_RATED
+        reason = ""
+        if not offered:
+            reason = f"its EDS has no 0x{TORQUE_MEAN_OBJECT:04X} '{TORQUE_MEAN_NAME}'"
+        elif fits > 32767:
+            reason = (
+                f"the torque limit {self.limits.torque_nm:g} N·m exceeds the range of "
+                f"0x{TORQUE_MEAN_OBJECT:04X} (3.28 × rated)"
+            )
+        if not reason:
+            return "mean"
+        if st.torque_sample == "mean":
+            raise DriveStateError(
+                f"node {st.node_id}: torque_sample = 'mean' but {reason}; {st.source}"
+            )
+        log.info("node %d: instantaneous torque 0x6077 (%s)", st.node_id, reason)
+        return "instantaneous"
+
+    @property
+    def node_od(self) -> Any:
+        """The node's object dictionary (from the station's EDS)."""
+        return None if self.link.node is None else self.link.node.object_dictionary
+
+    def _check_control_period(self) -> None:
+        """The drive's control period: as it reports it (0x2200:6), else the station's
+        ``control_period_s``; both given must agree."""
+        st = self.station
+        if st.control_period_s is None:
+            return
+        if self.control_period_s is None:
+            self.control_period_s = st.control_period_s
+        elif not math.isclose(self.control_period_s, st.control_period_s, rel_tol=1e-6):
+            raise DriveStateError(
+                f"node {st.node_id}: control period 0x2200:6 is {self.control_period_s:g} s, "
+                f"the station file {st.source} says {st.control_period_s:g} s"
+            )
 
     def _read_interpolation(self) -> str:
         """How the drive moves from one cyclic-synchronous target to the next (0x60C0)."""

@@ -37,6 +37,7 @@ from hil.drives.cia402.protocol import (
     TPDO1_FORMAT,
     TPDO2_FORMAT,
     TPDO_LAYOUT,
+    TpdoLayout,
     state_of,
 )
 from hil.drives.station import CanOpenStation
@@ -200,14 +201,15 @@ class CanLink:
             f"node {self.node_id} did not confirm NMT {state} by heartbeat (last seen: {seen})"
         )
 
-    def configure_pdos(self) -> None:
-        """Write our PDO layout (node must be PRE-OPERATIONAL; confirmed by the caller)."""
+    def configure_pdos(self, tpdos: TpdoLayout = TPDO_LAYOUT) -> None:
+        """Write our PDO layout (node must be PRE-OPERATIONAL; confirmed by the caller);
+        ``tpdos``: :data:`TPDO_LAYOUT`, or ``TPDO_LAYOUT_MEAN`` (torque averaged, 0x2077)."""
         base = self.node_id
         for n, entries in [(*RPDO_LAYOUT[m],) for m in (Mode.VELOCITY, Mode.TORQUE, Mode.POSITION)]:
             self._map(0x1400 + n - 1, 0x1600 + n - 1, 0x200 + 0x100 * (n - 1) + base, entries)
-        for n, entries in TPDO_LAYOUT:
+        for n, entries in tpdos:
             self._map(0x1800 + n - 1, 0x1A00 + n - 1, 0x180 + 0x100 * (n - 1) + base, entries)
-        for n in range(len(TPDO_LAYOUT) + 1, 5):  # the drive's other TPDOs: off
+        for n in range(len(tpdos) + 1, 5):  # the drive's other TPDOs: off
             if 0x1800 + n - 1 in self.node.object_dictionary:  # type: ignore[union-attr]
                 cob = self.read(0x1800 + n - 1, 1)
                 self.write(0x1800 + n - 1, 1, cob | 0x80000000)

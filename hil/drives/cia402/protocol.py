@@ -52,9 +52,19 @@ RPDO_LAYOUT: dict[Mode, tuple[int, tuple[tuple[int, int], ...]]] = {
     Mode.TORQUE: (2, ((0x6040, 16), (0x6071, 16))),
     Mode.POSITION: (3, ((0x6040, 16), (0x607A, 32))),
 }
-TPDO_LAYOUT: tuple[tuple[int, tuple[tuple[int, int], ...]], ...] = (
+TpdoLayout = tuple[tuple[int, tuple[tuple[int, int], ...]], ...]
+TPDO_LAYOUT: TpdoLayout = (
     (1, ((0x6041, 16), (0x6064, 32), (0x6061, 8))),  # "<HIb" -> statusword, position, mode
     (2, ((0x606C, 32), (0x6077, 16), (0x6078, 16))),  # "<ihh" -> velocity, torque, current
+)
+# The torque averaged over the SYNC period (manufacturer-specific, the emulator's EDS): it
+# takes 0x6077's place in TPDO2, so the frames and the bus load stay the same (8 bytes).
+TORQUE_MEAN_OBJECT = 0x2077
+TORQUE_MEAN_NAME = "Torque actual value averaged"  # its EDS ParameterName: what we trust
+TORQUE_MEAN_PER_RATED = 1e4  # INTEGER16 in 0.1 ‰ of 0x6076
+TPDO_LAYOUT_MEAN: TpdoLayout = (
+    TPDO_LAYOUT[0],
+    (2, ((0x606C, 32), (TORQUE_MEAN_OBJECT, 16), (0x6078, 16))),  # "<ihh"
 )
 TPDO1_FORMAT = "<Hib"
 TPDO2_FORMAT = "<ihh"
@@ -82,7 +92,10 @@ def cycle_bits(rpdo_bytes: int, tpdo_bytes: tuple[int, ...]) -> int:
 def max_stream_rate_hz(bitrate: int, max_bus_load: float) -> float:
     """Highest SYNC rate at which our PDO layout keeps the bus below ``max_bus_load``."""
     rpdo = max(sum(bits for _, bits in entries) for _, entries in RPDO_LAYOUT.values()) // 8
-    tpdos = tuple(sum(bits for _, bits in entries) // 8 for _, entries in TPDO_LAYOUT)
+    tpdos = tuple(
+        max(sum(bits for _, bits in entries) // 8 for _, entries in (one, two))
+        for one, two in zip(TPDO_LAYOUT, TPDO_LAYOUT_MEAN, strict=True)
+    )
     return bitrate * max_bus_load / cycle_bits(rpdo, tpdos)
 
 
