@@ -35,6 +35,7 @@ from hil.identify.estimate import Estimate, combine_linear
 
 FloatArray = NDArray[np.float64]
 STANDARD_GRAVITY_M_S2 = 9.80665
+REFERENCE_SAMPLES = 4  # settled-pass samples averaged against each probe bin, at least
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -247,7 +248,11 @@ def _hysteresis(
         m = (s >= lo) & (s < hi)
         j = order[np.searchsorted(sorted_ref, reversal - hi):np.searchsorted(sorted_ref,
                                                                              reversal - lo)]
-        if m.sum() < 3 or j.size < 3:
+        if j.size < REFERENCE_SAMPLES:  # a sparse (polled) reference pass: nearest samples
+            centre = np.searchsorted(sorted_ref, reversal - (lo + hi) / 2)
+            half = REFERENCE_SAMPLES // 2
+            j = order[max(centre - half, 0):centre + half]
+        if m.sum() < 3 or j.size < REFERENCE_SAMPLES:
             continue
         ss.append(float(s[m].mean()))
         dd.append(float(t_probe[m].mean()) - float(t_ref[j].mean()))
