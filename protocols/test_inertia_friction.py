@@ -1,4 +1,4 @@
-"""J, B, T_c from sinusoidal velocity at two or more amplitudes (orthogonal correlation)."""
+"""J, B, T_c from sinusoidal velocity at two or more amplitudes (the article's experiment)."""
 
 from __future__ import annotations
 
@@ -39,7 +39,7 @@ class Spec:
     settle_periods: int
     periods: int
     fs_hz: float
-    method: Method = "orthogonal"
+    method: Method = "least_squares"
     harmonics: int = HARMONICS
     centre_rad: float | None = None  # where the sines start (None: where the axis is)
     move_speed_rad_s: float = 1.0
@@ -49,7 +49,7 @@ class Spec:
         settings = profile.settings(NAME)
         method: Method = (
             "least_squares"
-            if settings.choice("method", ("orthogonal", "least_squares"), "orthogonal")
+            if settings.choice("method", ("orthogonal", "least_squares"), "least_squares")
             == "least_squares"
             else "orthogonal"
         )
@@ -99,12 +99,20 @@ def excitation(spec: Spec) -> list[Excitation]:
 
 
 def torque_hold_samples(recording: Recording, *, current_loop_lag_s: float) -> float:
-    """How many of the recording's samples after its torque sample that torque acts on the
-    shaft: half the drive's control period (the sample is held over it; the recording's own
-    period unless ``control_period_s`` says otherwise) plus the current loop's lag."""
+    """How many of the recording's samples after its position sample the torque of the same
+    row acts on the shaft, plus the current loop's lag. An instantaneous torque sample is
+    held over the drive's control period (the recording's own period unless
+    ``control_period_s`` says otherwise): half of it. A torque averaged over the row period
+    ``T_s`` (``torque_sample = "mean"``) has its centroid ``T_c − T_s/2`` after the position
+    sample, which is taken a control period ``T_c`` before the row."""
     step_s = float(np.median(np.diff(recording.time_s)))
     control_s = float(recording.metadata.get("control_period_s", step_s))
-    return (HOLD_SAMPLES * control_s + current_loop_lag_s) / step_s
+    if recording.metadata.get("torque_sample") == "mean":
+        mean_s = float(recording.metadata.get("torque_mean_period_s", step_s))
+        hold_s = control_s - 0.5 * mean_s
+    else:
+        hold_s = HOLD_SAMPLES * control_s
+    return (hold_s + current_loop_lag_s) / step_s
 
 
 def without_cable_loop(recording: Recording, loop: CableLoop | None) -> Recording:

@@ -4,21 +4,22 @@ With ``ω = V·sin(2πft)`` over whole periods, the torque's Fourier components 
 ``c = J·V·2πf`` (cos) and ``s = B·V + T_c·4/π`` (sin); runs at two or more amplitudes
 separate B (slope of s over V) from T_c (intercept).
 
-Under a velocity loop the motion is not exactly that sine, so the correlation is done with
-the *measured* regressors: the components of α, ω and sgn ω (from phase-free derivatives of
-the encoder position) and of the torque along the first ``HARMONICS`` harmonics of the
-excitation, per period, solved by least squares over periods and amplitudes. The article
-uses the fundamental alone; sgn ω carries 19 % of its power in the odd harmonics, and
-harmonics 1–5 bring B and T_c from 1.4–1.5 to 1.14 × their Cramér–Rao bound under white
-noise (J stays at ~0.9 ×) while still ignoring the broadband torques (cogging, loop chatter)
-that bias a full time-domain fit. Samples near velocity reversal (|ω| below
-``REVERSAL_BAND``·V) are left out: there the axis sticks while the loop ramps its torque
-through ±T_c, so the torque is not ``T_c·sgn(ω)`` and would bias J by the dwell.
-``method="least_squares"`` fits the same samples in the time domain (every harmonic). Encoder
-quantisation makes the differentiated α noisy, and noise in a regressor biases plain least
-squares towards zero (J −0.33 % with a 19-bit encoder), so α and ω are instrumented by their
-first ``INSTRUMENT_HARMONICS`` harmonics; the fit still absorbs the velocity loop's
-quantisation chatter into B (−1 %), which is why it is not the default.
+Under a velocity loop the motion is not exactly that sine, so the regression is done with
+the *measured* regressors α, ω and sgn ω (phase-free derivatives of the encoder position),
+over periods and amplitudes. Samples near velocity reversal (|ω| below ``REVERSAL_BAND``·V)
+are left out: there the axis sticks while the loop ramps its torque through ±T_c, so the
+torque is not ``T_c·sgn(ω)`` and would bias J by the dwell.
+
+``method="least_squares"`` (the default) fits the samples in the time domain, so B and T_c
+keep the information sgn ω carries in its odd harmonics (19 % of its power): at the
+Cramér–Rao bound, where the article's fundamental-only correlation reaches 1.35–1.5 × it.
+Encoder quantisation makes the differentiated α noisy, and noise in a regressor biases
+plain least squares towards zero (J −0.33 % with a 19-bit encoder), so α and ω are
+instrumented by their first ``INSTRUMENT_HARMONICS`` harmonics of the excitation.
+``method="orthogonal"`` is the article's correlation: the components along cos and sin of
+the fundamental (or of harmonics ``1..harmonics``) per period, α and ω instrumented by their
+mean over periods. It ignores broadband torques a time-domain fit partly absorbs (strong
+commensurate cogging biases its J about half as much) at the cost of efficiency.
 
 Standard uncertainties are Type A by delete-one-period jackknife (robust to coloured noise
 and loop jitter), ``P − 1`` degrees of freedom for ``P`` periods in all.
@@ -46,7 +47,7 @@ REVERSAL_BAND = 0.15  # fraction of the velocity amplitude
 DERIVATIVE_WINDOW_PERIODS = 0.02  # Savitzky–Golay window, in periods of the sine
 PHASE_BINS = 200
 INSTRUMENT_HARMONICS = 7
-HARMONICS = 5  # orthogonal correlation over harmonics 1..5 (the article: the fundamental)
+HARMONICS = 1  # harmonics the orthogonal correlation uses (the article: the fundamental)
 HOLD_SAMPLES = 0.5  # the drive holds each reported torque over the following period
 
 
@@ -192,7 +193,7 @@ class InertiaFrictionResult:
 
 
 def identify_inertia_friction(
-    runs: Sequence[SineRun], *, method: Method = "orthogonal", harmonics: int = HARMONICS
+    runs: Sequence[SineRun], *, method: Method = "least_squares", harmonics: int = HARMONICS
 ) -> InertiaFrictionResult:
     """J, B, T_c from two or more runs at distinct amplitudes; ``harmonics``: how many
     harmonics of the excitation the orthogonal correlation uses (1: the article's).
@@ -212,9 +213,9 @@ def identify_inertia_friction(
             "to separate viscous from Coulomb friction (need ≥ 10 % spread)"
         )
     blocks = [
-        _normal_equations(run, k, index, len(runs), method, harmonics)
+        block
         for index, run in enumerate(runs)
-        for k in range(run.periods)
+        for block in _run_blocks(run, index, len(runs), method, harmonics)
     ]
     theta, u, dof = _jackknife(blocks)
     noise = float(np.sqrt(np.mean([r.noise_rms_nm**2 for r in runs])))
@@ -272,25 +273,45 @@ def instruments(run: SineRun, index: int, n_runs: int) -> FloatArray:
     return columns
 
 
-def _normal_equations(
-    run: SineRun, k: int, index: int, n_runs: int, method: Method, harmonics: int
-) -> Block:
-    used = (run.period == k) & run.moving
-    phi = regressors(run, index, n_runs)[used]
-    torque = run.torque_nm[used]
+def _run_blocks(
+    run: SineRun, index: int, n_runs: int, method: Method, harmonics: int
+) -> list[Block]:
+    """The normal equations of each period of ``run``, instrumented: α and ω are correlated
+    against their noise-free counterparts (errors in a regressor bias least squares)."""
     if method == "least_squares":
-        z = instruments(run, index, n_runs)[used]
-        return z.T @ phi, z.T @ torque
-    # orthogonal correlation: the low harmonics (cos, sin) of each regressor and the torque
+        phi, z = regressors(run, index, n_runs), instruments(run, index, n_runs)
+        blocks = []
+        for k in range(run.periods):
+            used = (run.period == k) & run.moving
+            blocks.append((z[used].T @ phi[used], z[used].T @ run.torque_nm[used]))
+        return blocks
+    rows, rhs = zip(
+        *(_harmonic_components(run, k, harmonics) for k in range(run.periods)), strict=True
+    )
+    # the periodic motion's components: the mean over periods, free of each period's noise
+    motion = np.mean(rows, axis=0)[:, :2]
+    blocks = []
+    for r, y in zip(rows, rhs, strict=True):
+        z = r.copy()
+        z[:, :2] = motion
+        blocks.append((z.T @ r, z.T @ y))
+    return blocks
+
+
+def _harmonic_components(
+    run: SineRun, k: int, harmonics: int
+) -> tuple[FloatArray, FloatArray]:
+    """Orthogonal correlation of period ``k``: the components of α, ω, sgn ω (rows) and of
+    the torque along cos and sin of harmonics ``1..harmonics`` (a constant absorbed)."""
+    used = (run.period == k) & run.moving
+    phi = regressors(run, 0, 1)[used][:, :3]
     omega_t = 2 * math.pi * run.frequency_hz * run.time_s[used]
     basis = np.column_stack(
-        [f(k * omega_t) for k in range(1, harmonics + 1) for f in (np.cos, np.sin)]
+        [f(n * omega_t) for n in range(1, harmonics + 1) for f in (np.cos, np.sin)]
         + [np.ones_like(omega_t)]
     )
     projector = np.linalg.pinv(basis)[:-1]
-    rows = projector @ phi[:, :3]
-    rhs = projector @ torque
-    return rows.T @ rows, rows.T @ rhs
+    return projector @ phi, projector @ run.torque_nm[used]
 
 
 def _jackknife(blocks: list[Block]) -> tuple[FloatArray, FloatArray, float]:
