@@ -139,15 +139,12 @@ def test_setpoint_is_interpolated_by_the_drive(profile: UnitProfile) -> None:
 
 
 def test_inertia_friction_over_modbus_within_tolerance(profile: UnitProfile) -> None:
-    """J and T_c from the calibration protocol over the emulator, twice, each within the
-    profile's tolerance (before the fix: J −17 … −30 %, T_c off by up to 70 %).
+    """J, B and T_c from the calibration protocol over the emulator, twice, each within the
+    profile's limits (before the timing fix: J −17 … −30 %, T_c off by up to 70 %).
 
-    The station caps polling at 100 Hz so that a loaded runner still keeps the rate (a
-    loop that falls behind leaves gaps, which the derivative estimator does not yet take
-    well). B is not judged here: the protocol shifts the kinematics by half a *recording*
-    period for the torque's hold, right for ``--drive sim`` but 5 ms off at 100 Hz for a
-    drive whose torque register holds one 0.25 ms loop period (B +60 %; see
-    ``metadata["control_period_s"]``)."""
+    The station caps polling at 100 Hz so that a loaded runner still keeps the rate. The
+    torque's hold comes from the recording's ``control_period_s`` (one 0.25 ms loop
+    period), not the 10 ms row period: B was +60 % before that."""
     from protocols.test_inertia_friction import Spec, analyse, excitation
 
     with (
@@ -161,7 +158,7 @@ def test_inertia_friction_over_modbus_within_tolerance(profile: UnitProfile) -> 
         drive.enable()
         results = [analyse([drive.run(e) for e in excitation(spec)], spec) for _ in range(2)]
     for result in results:
-        for estimate in (result.inertia, result.coulomb):
+        for estimate in (result.inertia, result.viscous, result.coulomb):
             declared = profile.measurement(estimate.name)
             assert declared.lower_limit < estimate.value < declared.upper_limit, (
                 f"{estimate.name} = {estimate.value:.6g} outside "
