@@ -28,7 +28,7 @@ parameter it fits included, ``CRB = sqrt(diag(F⁻¹))`` (delta method for funct
   Stribeck friction. Also run on a SimDrive with ``exact_torque_hold=False``: the default
   exact-hold step moves the position by ``h·ω − h²·T/(2J)`` per physics step even when
   friction balances ``T``, so the kernel's velocity (which friction sees) runs ``h·T/(2J)``
-  (≈ 0.0009 rad/s on the demo unit) above the encoder's rate: a simulator artefact that
+  (≈ 0.0008 rad/s on the demo unit) above the encoder's rate: a simulator artefact that
   biases T_s and v_s at the slowest steps (see RESULTS.md).
 - ``gravity_cable`` (m·g·e, φ, k_cable; elevation profile). Per sample ``τ = a·cos θ +
   b·sin θ + k·θ + c ± F_bin`` with a free ``F`` per position bin (cancelled by the half
