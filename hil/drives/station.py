@@ -71,7 +71,13 @@ class CanOpenStation:
 
 @dataclass(frozen=True, slots=True, kw_only=True)
 class ModbusStation:
-    """A drive reached over Modbus TCP, or Modbus RTU on a serial port or pyserial URL."""
+    """A drive reached over Modbus TCP, or Modbus RTU on a serial port or pyserial URL.
+
+    ``torque_sample``: which torque a row carries. ``"auto"`` (default): the register map's
+    ``torque_mean`` (the mean since the previous read, i.e. over the row's own period) when
+    the map declares it, else the instantaneous ``torque``; ``"mean"`` requires it;
+    ``"instantaneous"`` always ``torque``.
+    """
 
     source: str
     transport: str  # "tcp" or "rtu"
@@ -86,6 +92,7 @@ class ModbusStation:
     timeout_s: float = 0.5
     max_poll_rate_hz: float = 1000.0
     watchdog_s: float = 0.5
+    torque_sample: str = "auto"
 
 
 Station = CanOpenStation | ModbusStation
@@ -230,6 +237,7 @@ _MODBUS_KEYS = {
     "timeout_s",
     "max_poll_rate_hz",
     "watchdog_s",
+    "torque_sample",
 }
 
 
@@ -242,6 +250,9 @@ def _modbus(table: Mapping[str, Any], source: str, base_dir: Path) -> ModbusStat
         raise ProfileError("[modbus] lacks 'register_map'", source=source)
     if transport == "rtu" and not table.get("serial_port"):
         raise ProfileError("[modbus] transport 'rtu' needs 'serial_port'", source=source)
+    torque_sample = str(table.get("torque_sample", "auto"))
+    if torque_sample not in TORQUE_SAMPLES:
+        raise ProfileError(f"[modbus] torque_sample must be one of {TORQUE_SAMPLES}", source=source)
     where = f"{source} [modbus]"
     return ModbusStation(
         source=source,
@@ -259,6 +270,7 @@ def _modbus(table: Mapping[str, Any], source: str, base_dir: Path) -> ModbusStat
         timeout_s=_pos(table, "timeout_s", 0.5, where),
         max_poll_rate_hz=_pos(table, "max_poll_rate_hz", 1000.0, where),
         watchdog_s=_pos(table, "watchdog_s", 0.5, where),
+        torque_sample=torque_sample,
     )
 
 

@@ -10,7 +10,12 @@ requests (and runs the drive's communication watchdog: silence of the master for
 see ``_credit_own_stall``). With a ``timestamp`` register the
 drive's clock (the plant time of the latched feedback, in control periods) is served with
 the feedback; with a ``setpoint_interpolation_time`` register a written setpoint is reached
-by a linear ramp over that time instead of a step. Faults: line delay, exception responses,
+by a linear ramp over that time instead of a step. With a ``torque_mean`` register the drive
+serves the mean of the torque commanded per control period over the control periods since
+the previous read of that register, up to and including the latched one (a read that
+includes its first word restarts the average; a read within the same control period leaves
+the latched mean as it was), and ``torque_mean_window`` the length of that average
+(periods × control period). Faults: line delay, exception responses,
 a drive trip, a dropped connection, a drive that stops answering.
 """
 
@@ -37,6 +42,8 @@ from hil.drives.modbus.regmap import (
     FEEDBACK,
     SETPOINT_INTERPOLATION,
     TIMESTAMP,
+    TORQUE_MEAN,
+    TORQUE_MEAN_WINDOW,
     load_register_map,
 )
 from plant_sim.emulators.faults import ModbusFaults
@@ -120,6 +127,8 @@ class ModbusEmulator:
         self._ramp = 0.0
         self._control = 0
         self._setpoint = _Setpoint()
+        self._torque_sum = 0.0  # torque commanded per control period, summed since the
+        self._torque_periods = 0  # last read of torque_mean, and how many periods
         self._last_request = time.monotonic()
         self._clock = time.monotonic()
         self._tick = time.monotonic()
@@ -212,7 +221,9 @@ class ModbusEmulator:
                 if values is None:
                     if count > self.map.max_registers_per_read:
                         return ExcCodes.ILLEGAL_VALUE
-                    return [int(v) & 0xFFFF for v in self.regs[address : address + count]]
+                    words = [int(v) & 0xFFFF for v in self.regs[address : address + count]]
+                    self._restart_torque_mean(address, count)
+                    return words
                 self._write(address, values)
                 return None
         if stall:
@@ -352,6 +363,18 @@ class ModbusEmulator:
             ),
         )
         self._put("current", float(trace.current_a[-1]))
+        if TORQUE_MEAN in self.map.registers:
+            self._torque_sum += float(np.sum(trace.torque_nm))
+            self._torque_periods += len(trace.torque_nm)
+            limit = 16 * self.rated_torque_nm
+            mean = self._torque_sum / self._torque_periods
+            self._put(TORQUE_MEAN, float(np.clip(mean, -limit, limit)))
+            if TORQUE_MEAN_WINDOW in self.map.registers:
+                register = self.map[TORQUE_MEAN_WINDOW]
+                raw = min(
+                    round(self._torque_periods / self.fs_hz / register.scale), register.modulus - 1
+                )
+                self._put(TORQUE_MEAN_WINDOW, raw * register.scale)
         if TIMESTAMP in self.map.registers:
             # the drive's clock at the latched state, wrapping like the counter it is
             register = self.map[TIMESTAMP]
@@ -360,6 +383,17 @@ class ModbusEmulator:
         for name in FEEDBACK:
             if name not in self.map.registers:
                 raise KeyError(name)
+
+    def _restart_torque_mean(self, address: int, count: int) -> None:
+        """A read that includes ``torque_mean``'s first word restarts the average: the next
+        latched sample's mean is over the control periods after the one this read returned.
+        The registers keep the served mean until a control period has run (a second read
+        within one period returns the same latched state). Call with the lock held."""
+        if TORQUE_MEAN not in self.map.registers:
+            return
+        if address <= self.map[TORQUE_MEAN].address < address + count:
+            self._torque_sum = 0.0
+            self._torque_periods = 0
 
     def _trip(self, code: int) -> None:
         if not self.fault_code:

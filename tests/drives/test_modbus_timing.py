@@ -11,11 +11,13 @@ from __future__ import annotations
 import math
 import time
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
 
 from conftest import sine
+from hil.drives.base import Excitation, Mode
 from hil.drives.modbus import ModbusDrive
 from hil.drives.modbus.regmap import load_register_map
 from hil.drives.station import ModbusStation
@@ -24,10 +26,14 @@ from hil.profile import UnitProfile
 from hil.recording import Recording
 from plant_sim.emulators.modbus_server import ModbusEmulator
 from plant_sim.emulators.sessions import builtin_station, modbus_emulator, rated_torque_nm
+from plant_sim.model import PlantTrace
 
 REGMAP = builtin_station("regmap_gimbal_hil_servo.toml")
 CONTROL_PERIOD_S = 1 / 4000.0  # the demo unit's drive loop
-ERROR_RAD_S = 0.015  # see test_samples_are_timed_by_the_drive_clock
+ERROR_RAD_S = 0.015
+REGMAP_TORQUE_MEAN_LSB_NM = (
+    1e-6  # torque_mean: int32 µN·m  # see test_samples_are_timed_by_the_drive_clock
+)
 
 
 def _regmap_with(tmp_path: Path, old: str, new: str) -> Path:
@@ -38,9 +44,14 @@ def _regmap_with(tmp_path: Path, old: str, new: str) -> Path:
     return path
 
 
-def _station(regmap: Path, port: int = 1) -> ModbusStation:
+def _station(regmap: Path, port: int = 1, **changes: Any) -> ModbusStation:
+    changes.setdefault("source", "test")
     return ModbusStation(
-        source="test", transport="tcp", register_map_path=regmap, port=port, timeout_s=1.0
+        transport="tcp",
+        register_map_path=regmap,
+        port=port,
+        timeout_s=1.0,
+        **changes,
     )
 
 
@@ -57,6 +68,22 @@ def test_timing_registers_are_checked(tmp_path: Path, profile: UnitProfile) -> N
     apart = _regmap_with(tmp_path, "address = 8 ", "address = 40 ")
     with pytest.raises(ProfileError, match=r"regmap\.toml.*'timestamp' must be read in one"):
         ModbusDrive(_station(apart), limits=profile.limits)
+    mean_apart = _regmap_with(tmp_path, "address = 10 ", "address = 40 ")
+    with pytest.raises(ProfileError, match=r"'torque_mean', .*must be read in one"):
+        ModbusDrive(_station(mean_apart), limits=profile.limits)
+    unsigned = _regmap_with(
+        tmp_path, 'type = "int32"                  # up to', 'type = "uint32" #'
+    )
+    with pytest.raises(ProfileError, match=r"\[registers\.torque_mean\].*int16, int32 or"):
+        load_register_map(unsigned)
+    alone = _regmap_with(tmp_path, "[registers.torque_mean]  ", "[registers.torque_avg]  ")
+    with pytest.raises(ProfileError, match="'torque_mean_window' without 'torque_mean'"):
+        load_register_map(alone)
+    without = _regmap_with(tmp_path, "[registers.torque_mean", "[registers.torque_avg")
+    with pytest.raises(ProfileError, match=r"station\.toml.*'mean' but .* no 'torque_mean'"):
+        ModbusDrive(
+            _station(without, torque_sample="mean", source="station.toml"), limits=profile.limits
+        )
 
 
 def _derivative_error(recording: Recording) -> float:
@@ -81,7 +108,7 @@ def test_samples_are_timed_by_the_drive_clock(profile: UnitProfile) -> None:
         recording = drive.run(sine(1.0, fs_hz=fs, periods=3))
     assert "the drive's clock" in recording.metadata["acquisition"]
     assert "setpoint interpolated" in recording.metadata["acquisition"]
-    assert recording.metadata["torque_sample"] == "instantaneous"
+    assert recording.metadata["torque_sample"] == "mean"  # the map has torque_mean
     assert recording.metadata["command_interpolation"] == "linear"
     assert float(recording.metadata["control_period_s"]) == CONTROL_PERIOD_S
     steps = np.diff(recording.time_s) / CONTROL_PERIOD_S
@@ -164,3 +191,90 @@ def test_inertia_friction_over_modbus_within_tolerance(profile: UnitProfile) -> 
                 f"{estimate.name} = {estimate.value:.6g} outside "
                 f"[{declared.lower_limit:.6g}, {declared.upper_limit:.6g}] at {spec.fs_hz:g} Hz"
             )
+
+
+class _TorqueLoggingEmulator(ModbusEmulator):
+    """The emulator, keeping every control period's commanded torque (by plant step)."""
+
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        self.torque_log: list[tuple[np.ndarray, np.ndarray]] = []
+        super().__init__(*args, **kwargs)
+
+    def _sample(self, trace: PlantTrace) -> None:
+        self.torque_log.append((trace.time_s.copy(), trace.torque_nm.copy()))
+        super()._sample(trace)
+
+    def torque_by_step(self) -> np.ndarray:
+        steps = np.round(np.concatenate([s for s, _ in self.torque_log]) * self.fs_hz)
+        assert np.array_equal(steps, np.arange(steps.size))  # every period, once, in order
+        return np.concatenate([torque for _, torque in self.torque_log])
+
+
+def test_torque_mean_is_the_mean_since_the_previous_row(profile: UnitProfile) -> None:
+    """Row k's torque is the mean of the torque commanded per control period over the
+    control periods after row k-1's latched sample up to and including row k's, over real
+    pymodbus; the window column says how long that was (= the row's time step)."""
+    from protocols.test_inertia_friction import torque_hold_samples
+
+    assert profile.plant is not None
+    emulator = _TorqueLoggingEmulator(
+        profile.plant,
+        fs_hz=profile.sample_rate_hz,
+        seed=2,
+        register_map=REGMAP,
+        rated_torque_nm=rated_torque_nm(profile),
+    )
+    with emulator, ModbusDrive(_station(REGMAP, emulator.port), limits=profile.limits) as drive:
+        fs = min(drive.info.max_sample_rate_hz, 100.0)
+        drive.enable(Mode.TORQUE)
+        t = np.arange(round(fs)) / fs
+        command = 0.03 * np.sin(2 * math.pi * 3.0 * t) + 0.02 * t  # a sine on a ramp
+        recording = drive.run(
+            Excitation(name="torque", mode=Mode.TORQUE, fs_hz=fs, command=command)
+        )
+        drive.disable()
+    torque = emulator.torque_by_step()
+    meta = recording.metadata
+    assert meta["torque_sample"] == "mean"
+    window = recording.columns["torque_mean_window_s"]
+    # the drive's clock of each row, in control periods (no wrap within this test)
+    start = float(meta["drive_clock_at_start_s"])
+    last = np.round((start + recording.time_s - recording.time_s[0]) / CONTROL_PERIOD_S)
+    periods = np.round(window / CONTROL_PERIOD_S)
+    np.testing.assert_allclose(window, periods * CONTROL_PERIOD_S, atol=1e-9)
+    np.testing.assert_array_equal(periods[1:], np.diff(last))  # windows tile the run
+    assert float(meta["torque_mean_period_s"]) == pytest.approx(np.median(window))
+    assert abs(float(meta["torque_mean_period_s"]) - 1 / fs) <= 2 * CONTROL_PERIOD_S
+    cumulative = np.concatenate([[0.0], np.cumsum(torque)])
+
+    def mean_over(end: np.ndarray, count: np.ndarray) -> np.ndarray:
+        stop = (end + 1).astype(int)
+        return np.asarray((cumulative[stop] - cumulative[stop - count.astype(int)]) / count)
+
+    lsb = REGMAP_TORQUE_MEAN_LSB_NM
+    expected = mean_over(last, periods)
+    np.testing.assert_allclose(recording.effort, expected, rtol=0, atol=0.51 * lsb)
+    # the check can fail: the same window one control period early or late is ≫ 1 LSB off
+    for shift in (-1, 1):
+        assert np.median(np.abs(recording.effort - mean_over(last + shift, periods))) > 20 * lsb
+    # and its centroid is T_c − T_s/2 after the row's position sample (the protocol's hold)
+    hold = torque_hold_samples(recording, current_loop_lag_s=0.0)
+    step = float(np.median(np.diff(recording.time_s)))
+    assert hold * step == pytest.approx(CONTROL_PERIOD_S - float(np.median(window)) / 2)
+
+
+def test_instantaneous_torque_on_request(profile: UnitProfile) -> None:
+    """``torque_sample = "instantaneous"`` keeps the torque register (one control period)."""
+    with (
+        modbus_emulator(profile, seed=4, station_changes={"torque_sample": "instantaneous"}) as (
+            _,
+            station,
+        ),
+        ModbusDrive(station, limits=profile.limits) as drive,
+    ):
+        fs = min(drive.info.max_sample_rate_hz, 100.0)
+        drive.enable()
+        recording = drive.run(sine(0.5, fs_hz=fs, periods=1))
+    assert recording.metadata["torque_sample"] == "instantaneous"
+    assert "torque_mean_period_s" not in recording.metadata
+    assert "torque_mean_window_s" not in recording.columns

@@ -13,7 +13,12 @@ write and a read: the median poll, so one stall of an overloaded host does not s
 rounded down to 1-2-5) and capped by the station's ``max_poll_rate_hz``. It is a snapshot:
 a run that achieves less than ``MIN_RATE_FRACTION`` of its requested rate raises
 :class:`DriveCommunicationError` (partial recording attached) instead of returning a
-recording with the excitation's timing gone. Over TCP a request that timed out is sent once
+recording with the excitation's timing gone. Torque: with ``torque_mean`` in the map (and
+the station's ``torque_sample`` not ``"instantaneous"``) each row's torque is the drive's
+mean of the torque commanded per control period since the previous feedback read, i.e.
+over the control periods after the previous row's latched sample up to its own; its length
+(``torque_mean_window``, if the map has it) goes into a ``torque_mean_window_s`` column.
+Over TCP a request that timed out is sent once
 more (same transaction id, so a late first answer is matched and a stale one skipped).
 """
 
@@ -43,6 +48,8 @@ from hil.drives.modbus.regmap import (
     FEEDBACK,
     SETPOINT_INTERPOLATION,
     TIMESTAMP,
+    TORQUE_MEAN,
+    TORQUE_MEAN_WINDOW,
     RegisterMap,
     load_register_map,
 )
@@ -93,13 +100,22 @@ class ModbusDrive(Drive):
         self._state = DriveState.DISABLED
         self._longest_pause_s = 0.0  # between two feedback polls of the last run
         self._has_timestamp = TIMESTAMP in self.map.registers
-        self._feedback_names = FEEDBACK + ((TIMESTAMP,) if self._has_timestamp else ())
+        self.torque_sample = self._choose_torque_sample()
+        mean = self.torque_sample == "mean"
+        latched = tuple(
+            name
+            for name in (TORQUE_MEAN, TORQUE_MEAN_WINDOW)
+            if mean and name in self.map.registers
+        ) + ((TIMESTAMP,) if self._has_timestamp else ())
+        self._feedback_names = FEEDBACK + latched
         self._blocks = self.map.blocks(self._feedback_names)
-        if self._has_timestamp and len(self._blocks) > 1:
+        if latched and len(self._blocks) > 1:
+            names = ", ".join(f"'{name}'" for name in latched)
             raise ProfileError(
-                f"register '{TIMESTAMP}' must be read in one request with the feedback "
-                f"({', '.join(FEEDBACK)}); they span {len(self._blocks)} reads of at most "
-                f"{self.map.max_registers_per_read} registers",
+                f"register{'s' if len(latched) > 1 else ''} {names} must be read in one "
+                f"request with the feedback ({', '.join(FEEDBACK)}); they span "
+                f"{len(self._blocks)} reads of at most {self.map.max_registers_per_read} "
+                "registers",
                 source=self.map.source,
             )
         self._client = self._make_client()
@@ -109,6 +125,22 @@ class ModbusDrive(Drive):
         except BaseException:
             self._client.close()
             raise
+
+    def _choose_torque_sample(self) -> str:
+        """``"mean"`` when the map declares ``torque_mean`` and the station does not say
+        ``"instantaneous"``; ``"mean"`` in the station requires it."""
+        wanted = self.station.torque_sample
+        if wanted == "instantaneous":
+            return "instantaneous"
+        if TORQUE_MEAN in self.map.registers:
+            return "mean"
+        if wanted == "mean":
+            raise ProfileError(
+                f"torque_sample = 'mean' but the register map {self.map.source} has no "
+                f"'{TORQUE_MEAN}' register",
+                source=self.station.source,
+            )
+        return "instantaneous"
 
     # -- transport -----------------------------------------------------------------------
     def _make_client(self) -> Any:
@@ -477,6 +509,11 @@ class ModbusDrive(Drive):
             acquisition += f"; setpoint interpolated over {1.0 / excitation.fs_hz:g} s"
         else:
             acquisition += "; setpoint stepped at each write"
+        mean = self.torque_sample == "mean"
+        if mean:
+            acquisition += (
+                f"; torque = the drive's mean since the previous row (register '{TORQUE_MEAN}')"
+            )
 
         def column(key: str) -> np.ndarray:
             return np.asarray([r[2].get(key, np.nan) for r in rows], dtype=np.float64)
@@ -485,11 +522,24 @@ class ModbusDrive(Drive):
             "time_s": time_s,
             "position_rad": column("position"),
             "velocity_rad_s": column("velocity"),
-            "torque_nm": column("torque"),
+            "torque_nm": column(TORQUE_MEAN if mean else "torque"),
             COMMAND_COLUMN[excitation.mode]: np.asarray([r[1] for r in rows], dtype=np.float64),
         }
         if "current" in self.map.registers:
             columns["current_a"] = column("current")
+        timing: dict[str, str] = {}
+        if mean:
+            # row k's torque: the mean over the control periods after row k-1's latched
+            # sample up to row k's (unless something else read the register between)
+            if TORQUE_MEAN_WINDOW in self.map.registers:
+                window = column(TORQUE_MEAN_WINDOW)
+                columns["torque_mean_window_s"] = window
+            else:
+                window = np.diff(time_s)
+            period = float(np.median(window)) if window.size else 1.0 / excitation.fs_hz
+            timing["torque_mean_period_s"] = f"{period:g}"
+        if self._has_timestamp and rows:
+            timing["drive_clock_at_start_s"] = f"{rows[0][2][TIMESTAMP]:.6f}"
         metadata = {
             "drive": self._where(),
             "unit_id": str(self.station.unit_id),
@@ -505,8 +555,11 @@ class ModbusDrive(Drive):
             "longest_gap_s": f"{float(np.max(np.diff(time_s), initial=0.0)):.4f}",
             "duplicate_reads_dropped": str(duplicates),
             # row k: the drive's state latched at one control period (position measured at
-            # its start, torque commanded over it), as the CANopen backend states it
-            "torque_sample": "instantaneous",
+            # its start, torque commanded over it, or with "mean" the mean of the torque
+            # commanded per control period over the row's window ending with that period),
+            # as the CANopen backend states it
+            "torque_sample": self.torque_sample,
+            **timing,
             "command_interpolation": (
                 "linear" if SETPOINT_INTERPOLATION in self.map.registers else "hold"
             ),

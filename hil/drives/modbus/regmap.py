@@ -37,6 +37,12 @@ TIMESTAMP = "timestamp"
 # optional: the drive ramps linearly from the setpoint in effect to each newly written one
 # over this time (writable, scale = seconds per count); the backend sets it to its period
 SETPOINT_INTERPOLATION = "setpoint_interpolation_time"
+# optional: the mean of the torque commanded per control period over the control periods
+# since the previous read of this register, up to the latched sample (signed, N·m); reading
+# it restarts the average. With it, optionally, the length of that average (unsigned,
+# seconds per count), latched with it.
+TORQUE_MEAN = "torque_mean"
+TORQUE_MEAN_WINDOW = "torque_mean_window"
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -132,7 +138,18 @@ def load_register_map(path: str | Path) -> RegisterMap:
             raise ProfileError(
                 f"register '{name}' must be writable (access = \"rw\")", source=source
             )
-    for name in (TIMESTAMP, SETPOINT_INTERPOLATION):
+    mean = registers.get(TORQUE_MEAN)
+    if mean is not None and mean.type not in ("int16", "int32", "float32"):
+        raise ProfileError(
+            f"register '{TORQUE_MEAN}' must be int16, int32 or float32, got '{mean.type}'",
+            source=f"{source} [registers.{TORQUE_MEAN}]",
+        )
+    if TORQUE_MEAN_WINDOW in registers and mean is None:
+        raise ProfileError(
+            f"register '{TORQUE_MEAN_WINDOW}' without '{TORQUE_MEAN}'",
+            source=f"{source} [registers.{TORQUE_MEAN_WINDOW}]",
+        )
+    for name in (TIMESTAMP, SETPOINT_INTERPOLATION, TORQUE_MEAN_WINDOW):
         register = registers.get(name)
         if register is not None and register.type not in ("uint16", "uint32"):
             raise ProfileError(
