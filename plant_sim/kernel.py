@@ -187,10 +187,11 @@ def run_kernel(
             t_position = torque_cmd + pos_fraction * (torque_act - torque_cmd)
             torque_act = torque_cmd + decay * (torque_act - torque_cmd)
             ripple_gain = kt_scale * (1.0 + _periodic(theta_m, kt_ripple))
-            # exact hold: the symplectic step's position weight h² of the held torque → h²/2
-            hold_shift = 0.0
+            # exact hold: the drive's torque is held over the step, so its position effect
+            # is h²/2 (the symplectic step gives h²), plus the current loop's lag within it
+            lag_shift = 0.0
             if exact_hold:
-                hold_shift = half_h2 * inv_j_m * ripple_gain * (t_position - 2.0 * t_applied)
+                lag_shift = half_h2 * inv_j_m * ripple_gain * (t_position - t_applied)
             t_motor = t_applied * ripple_gain
             t_motor -= _periodic(theta_m, cogging)
             theta_out = theta_l if two_mass else theta_m
@@ -213,7 +214,8 @@ def run_kernel(
             if omega_m == 0.0:
                 if abs(t_drive) <= ts:
                     continue
-                omega_m = h * (t_drive - math.copysign(ts, t_drive)) * inv_j_m
+                t_fric = math.copysign(ts, t_drive)
+                omega_m = h * (t_drive - t_fric) * inv_j_m
             else:
                 if omega_m > 0.0:
                     tc = params[P_TC_POS]
@@ -230,8 +232,10 @@ def run_kernel(
                 crossed = omega_new * omega_m < 0.0
                 omega_m = 0.0 if crossed and abs(t_drive) <= ts else omega_new
             theta_m += h * omega_m
-            if omega_m != 0.0 and exact_hold:
-                theta_m += hold_shift
+            if exact_hold and omega_m != 0.0:
+                # −h²/2 of the acceleration the held torque leaves after friction and the
+                # load (zero at constant speed); the shaft spring stays symplectic
+                theta_m += lag_shift - half_h2 * inv_j_m * (t_motor - t_load - t_fric)
 
     state[S_THETA_M] = theta_m
     state[S_OMEGA_M] = omega_m

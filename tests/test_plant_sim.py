@@ -2,12 +2,14 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
 import pytest
 
 from hil.drives.base import Mode
+from hil.profile import load_profile
 from plant_sim.model import Plant, simulate
 from plant_sim.params import Harmonic, PlantParams
 
@@ -147,3 +149,21 @@ def test_frictionless_axis_passes_through_zero_speed_without_stopping() -> None:
     position = np.concatenate([[0.0], np.cumsum(velocity[:-1] * h + torque * h * h / 2 / inertia)])
     assert np.count_nonzero(np.diff(np.sign(velocity)) != 0) > 100  # many reversals
     np.testing.assert_allclose(trace.position_rad, position[:-1], atol=1e-3 * np.ptp(position))
+
+
+@pytest.mark.parametrize("speed_rad_s", [0.005, 0.02, 0.2])
+def test_at_constant_speed_the_encoder_moves_at_the_speed_friction_sees(
+    speed_rad_s: float,
+) -> None:
+    """The exact-hold position correction must not act on torque that friction balances:
+    it once let the encoder lag the internal velocity by h/2·T/J (0.0008 rad/s, 16 % of
+    the slowest Stribeck step), which biased T_s and v_s."""
+    demo = load_profile().plant
+    assert demo is not None
+    plant = dataclasses.replace(
+        demo, torque_noise_nm=0.0, cogging=(), kt_ripple=(),
+        cable_hysteresis_nm=0.0, gravity_mge_nm=0.0, cable_stiffness_nm_rad=0.0,
+    )
+    trace = Plant(plant, fs_hz=4000.0, seed=0).run(Mode.VELOCITY, np.full(40000, speed_rad_s))
+    rate = (trace.position_rad[-1] - trace.position_rad[20000]) / (19999 / 4000.0)
+    assert rate == pytest.approx(speed_rad_s, rel=1e-3)
