@@ -88,7 +88,7 @@ def result(
             recordings = [
                 calibration.run(drive, e, protocol=NAME) for e in sine.excitation(spec.sine)
             ]
-            inertia = sine.analyse(recordings, spec.sine).inertia
+            inertia = sine.analyse_in_calibration(recordings, spec.sine, calibration)[0].inertia
             if gain is not None:
                 inertia = scale_by_gain(inertia, gain=gain[0], gain_u=gain[1])
             inertias.append(inertia)

@@ -221,15 +221,12 @@ def measured_current_loop_lag_s(calibration: CalibrationRun) -> float:
     return 0.0
 
 
-@pytest.fixture(scope="module")
-def result(
-    drive: Drive, calibration: CalibrationRun, profile: UnitProfile
-) -> InertiaFrictionResult:
-    spec = Spec.from_profile(profile, drive.info)
-    if spec.centre_rad is not None:
-        move = move_to_centre(spec, spec.centre_rad, position_rad=drive.status().position_rad)
-        calibration.run(drive, move, protocol=NAME)
-    recordings = [calibration.run(drive, e, protocol=NAME) for e in excitation(spec)]
+def analyse_in_calibration(
+    recordings: list[Recording], spec: Spec, calibration: CalibrationRun
+) -> tuple[InertiaFrictionResult, dict[str, object]]:
+    """J, B, T_c with what earlier protocols measured taken out: the current loop's lag,
+    the cable's hysteresis loop (its uncertainty propagated) and the load's stiffness at
+    the sines' centre. Also returns what was applied, for the certificate's details."""
     lag_s = measured_current_loop_lag_s(calibration)
     loop = measured_cable_loop(calibration)
     analysed = analyse(recordings, spec, current_loop_lag_s=lag_s, cable_loop=loop)
@@ -244,12 +241,27 @@ def result(
             analysed.inertia, stiffness=stiffness, frequency_hz=spec.frequency_hz
         )
         analysed = dataclasses.replace(analysed, inertia=corrected)
-    calibration.details[NAME] = {
-        "method": spec.method,
+    return analysed, {
         "centre_rad": centre_rad,
         "load_stiffness_nm_rad": None if stiffness is None else stiffness.value,
         "cable_loop_removed": None if loop is None else dataclasses.asdict(loop),
         "current_loop_lag_compensated_s": lag_s,
+    }
+
+
+@pytest.fixture(scope="module")
+def result(
+    drive: Drive, calibration: CalibrationRun, profile: UnitProfile
+) -> InertiaFrictionResult:
+    spec = Spec.from_profile(profile, drive.info)
+    if spec.centre_rad is not None:
+        move = move_to_centre(spec, spec.centre_rad, position_rad=drive.status().position_rad)
+        calibration.run(drive, move, protocol=NAME)
+    recordings = [calibration.run(drive, e, protocol=NAME) for e in excitation(spec)]
+    analysed, corrections = analyse_in_calibration(recordings, spec, calibration)
+    calibration.details[NAME] = {
+        "method": spec.method,
+        **corrections,
         "fit_pct": round(analysed.fit_pct, 2),
         "noise_rms_nm": analysed.noise_rms_nm,
         "components": [
