@@ -6,6 +6,8 @@ from __future__ import annotations
 import dataclasses
 import math
 from collections.abc import Callable
+from types import ModuleType
+from typing import Any
 
 import numpy as np
 from crb_common import (
@@ -64,6 +66,31 @@ def _blocks(
     return out
 
 
+def _stepped_sine(
+    protocol: ModuleType, spec: Any, drive: Any, *, sigma: float, fs_hz: float
+) -> tuple[Any, list[FrfBlocks], FloatArray] | None:
+    """Run a stepped-sine protocol's excitation on ``drive``: its result (None if it could
+    not identify), the per-frequency blocks its estimator used, and the frequencies."""
+    move, sines = protocol.excitation(spec, position_rad=drive.status().position_rad)
+    drive.run(move)
+    recording = drive.run(sines)
+    try:
+        found = protocol.analyse(recording, spec)
+    except IdentificationError:
+        return None
+    points = _blocks(
+        recording,
+        spec.frequencies_hz,
+        start=round(spec.ramp_s * fs_hz),
+        settle=spec.settle_samples,
+        segment=spec.segment_samples,
+        fs_hz=fs_hz,
+        blocks=spec.blocks,
+        sigma=sigma,
+    )
+    return found, points, np.array(spec.frequencies_hz)
+
+
 # -------------------------------------------------------------------------- current loop
 
 
@@ -87,24 +114,10 @@ def current_loop(profile: UnitProfile, plant: PlantParams, runs: int, case: str)
     def one(seed: int) -> tuple[list[float], list[float]] | None:
         drive = sim_drive(plant, limits=profile.limits, fs_hz=fs, seed=seed)
         spec = current_protocol.Spec.from_profile(profile, drive.info)
-        move, sines = current_protocol.excitation(spec, position_rad=drive.status().position_rad)
-        drive.run(move)
-        rec = drive.run(sines)
-        try:
-            found = current_protocol.analyse(rec, spec)
-        except IdentificationError:
+        ran = _stepped_sine(current_protocol, spec, drive, sigma=sigma, fs_hz=fs)
+        if ran is None:
             return None
-        points = _blocks(
-            rec,
-            spec.frequencies_hz,
-            start=round(spec.ramp_s * fs),
-            settle=spec.settle_samples,
-            segment=spec.segment_samples,
-            fs_hz=fs,
-            blocks=spec.blocks,
-            sigma=sigma,
-        )
-        freqs = np.array(spec.frequencies_hz)
+        found, points, freqs = ran
 
         def model(x: FloatArray) -> ComplexArray:
             return sampled_response(
@@ -196,24 +209,10 @@ def resonance(
         spec = resonance_protocol.Spec.from_profile(profile, drive.info)
         if settle_s is not None:
             spec = dataclasses.replace(spec, settle_s=settle_s)
-        move, sine = resonance_protocol.excitation(spec, position_rad=drive.status().position_rad)
-        drive.run(move)
-        rec = drive.run(sine)
-        try:
-            found = resonance_protocol.analyse(rec, spec)
-        except IdentificationError:
+        ran = _stepped_sine(resonance_protocol, spec, drive, sigma=sigma, fs_hz=fs)
+        if ran is None:
             return None
-        points = _blocks(
-            rec,
-            spec.frequencies_hz,
-            start=round(spec.ramp_s * fs),
-            settle=spec.settle_samples,
-            segment=spec.segment_samples,
-            fs_hz=fs,
-            blocks=spec.blocks,
-            sigma=sigma,
-        )
-        freqs = np.array(spec.frequencies_hz)
+        found, points, freqs = ran
 
         def model(x: FloatArray) -> ComplexArray:
             return two_mass_response(TwoMassModel.from_vector(x), freqs, fs_hz=fs)
