@@ -88,13 +88,18 @@ def test_timing_registers_are_checked(tmp_path: Path, profile: UnitProfile) -> N
 
 def _derivative_error(recording: Recording) -> float:
     """RMS of Δposition/Δt against the drive's own velocity register between the samples:
-    small only if each time stamp is the time of the position it is stored with."""
+    small only if each time stamp is the time of the position it is stored with. Intervals
+    spanning a missed poll (a loaded runner's) are left out: their mean slope no longer
+    matches the mid-point velocity (0.006 → 0.016 rad/s with 55 ms gaps)."""
     t, p = recording.time_s, recording.position
     v = recording.columns["velocity_rad_s"]
-    slope = np.diff(p) / np.diff(t)
+    step = np.diff(t)
+    slope = np.diff(p) / step
     lag = 1 / (2 * math.pi * 300.0)  # the drive's velocity filter (300 Hz) lags ≈ 0.5 ms
     middle = 0.5 * (t[1:] + t[:-1]) + lag
-    return float(np.sqrt(np.mean((slope - np.interp(middle, t, v)) ** 2)))
+    regular = step < 1.5 * np.median(step)
+    error = (slope - np.interp(middle, t, v))[regular]
+    return float(np.sqrt(np.mean(error**2)))
 
 
 def test_samples_are_timed_by_the_drive_clock(profile: UnitProfile) -> None:
