@@ -45,8 +45,9 @@ sample the averaged torque's centroid sits ``T_c − T_s/2`` later (−0.25 ms: 
 boxcar has zeros at multiples of the row rate, where the point sample aliases the
 torque's high-frequency content onto the band: the noise floor goes. The sidebands the
 velocity loop makes of a linearly interpolated 1 kHz target (n·1 kHz ± f) are attenuated,
-not removed: measured on the emulator τ = +0.1 … +1.8 % from 0.3 to 0.6 ms but +3.5 %
-(+0.007 ms) at 0.21 ms (point sample: −0.1 … −2.9 %); not modelled.
+not removed: measured on the emulator τ = +0.4 %, +1.5 %, +0.4 % at 0.21, 0.3, 0.6 ms
+(point sample: −2.9 %, −1.7 %, −1.0 %); not modelled. (The +3.5 % once measured at 0.21 ms
+was the simulator's exact-hold artefact, since fixed.)
 
 Per frequency the run is cut into blocks of whole periods; the phase uncertainty is the
 scatter of the block phases (Type A). τ and B/J are a weighted least-squares fit of the
