@@ -4,14 +4,18 @@ and recovery of a hidden T_s, v_s from the simulated demo plant with every effec
 from __future__ import annotations
 
 from collections.abc import Callable
+from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from hil.calibration import CalibrationRun
 from hil.drives.base import Mode
 from hil.errors import IdentificationError
+from hil.identify.estimate import Estimate
 from hil.identify.stribeck import (
     FloatArray,
     SpeedPoint,
@@ -186,3 +190,27 @@ def test_stick_slip_speeds_are_flagged_and_left_out_of_the_fit() -> None:
     assert all(0.005 < p.speed_rad_s < 0.03 for p in flagged)
     assert result.static.value == pytest.approx(0.026, rel=0.08)
     assert result.stribeck_velocity.value == pytest.approx(0.02, rel=0.2)
+
+
+def test_cross_check_adds_the_cable_loop_to_the_sines_coulomb(tmp_path: Path) -> None:
+    """The staircase's sliding friction includes the cable loop's half-width h, the sine's
+    T_c has it taken out: compared in the same terms they agree; without h they differ by h
+    (within the lenient expanded uncertainties the profile's Type B gives, but clearly)."""
+    import protocols.test_stribeck as protocol
+
+    def estimate(name: str, value: float, u: float) -> Estimate:
+        return Estimate(name=name, value=value, standard_uncertainty=u, unit="")
+
+    staircase = SimpleNamespace(
+        coulomb=estimate("stribeck_coulomb_nm", 0.0210, 0.0002),
+        viscous=estimate("stribeck_viscous_nm_s_rad", 0.005, 0.0005),
+    )
+    run = CalibrationRun(profile=PROFILE, unit_serial="X-1", out_dir=tmp_path, drive_kind="sim")
+    run.record("inertia_friction", estimate("coulomb_nm", 0.0200, 0.0001))
+    without = protocol.cross_check(staircase, run)  # type: ignore[arg-type]
+    run.record("gravity_cable", estimate("cable_hysteresis_nm", 0.0010, 0.0001))
+    with_loop = protocol.cross_check(staircase, run)  # type: ignore[arg-type]
+    assert with_loop["coulomb_nm"]["sine"] == pytest.approx(0.0210)  # type: ignore[index]
+    assert with_loop["coulomb_nm"]["normalised_error"] < 0.2  # type: ignore[index]
+    assert without["coulomb_nm"]["sine"] == pytest.approx(0.0200)  # type: ignore[index]
+    assert without["coulomb_nm"]["normalised_error"] > 0.4  # type: ignore[index]
