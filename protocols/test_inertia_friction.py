@@ -12,16 +12,17 @@ import pytest
 from hil.calibration import CalibrationRun
 from hil.drives.base import Drive, DriveInfo, Excitation, Mode
 from hil.identify.estimate import Estimate, combine_linear
-from hil.identify.gravity_cable import cable_loop_torque_nm, load_stiffness
+from hil.identify.gravity_cable import CableLoop, load_stiffness
 from hil.identify.inertia_friction import (
     HARMONICS,
-    HOLD_SAMPLES,
     InertiaFrictionResult,
     Method,
     analyse_sine_run,
     identify_inertia_friction,
     inertia_amplitude_spread,
     stiffness_corrected_inertia,
+    torque_hold_samples,
+    without_cable_loop,
 )
 from hil.profile import UnitProfile
 from hil.recording import Recording
@@ -98,38 +99,6 @@ def excitation(spec: Spec) -> list[Excitation]:
     ]
 
 
-def torque_hold_samples(recording: Recording, *, current_loop_lag_s: float) -> float:
-    """How many of the recording's samples after its position sample the torque of the same
-    row acts on the shaft, plus the current loop's lag. An instantaneous torque sample is
-    held over the drive's control period (the recording's own period unless
-    ``control_period_s`` says otherwise): half of it. A torque averaged over the row period
-    ``T_s`` (``torque_sample = "mean"``) has its centroid ``T_c − T_s/2`` after the position
-    sample, which is taken a control period ``T_c`` before the row."""
-    step_s = float(np.median(np.diff(recording.time_s)))
-    control_s = float(recording.metadata.get("control_period_s", step_s))
-    if recording.metadata.get("torque_sample") == "mean":
-        mean_s = float(recording.metadata.get("torque_mean_period_s", step_s))
-        hold_s = control_s - 0.5 * mean_s
-    else:
-        hold_s = HOLD_SAMPLES * control_s
-    return (hold_s + current_loop_lag_s) / step_s
-
-
-def without_cable_loop(recording: Recording, loop: CableLoop | None) -> Recording:
-    """The recording with the cable's measured hysteresis torque taken out of the effort."""
-    if loop is None:
-        return recording
-    torque = recording.effort - cable_loop_torque_nm(
-        recording.position, half_width_nm=loop.half_width_nm, angle_rad=loop.angle_rad
-    )
-    return Recording(
-        columns={**recording.columns, "torque_nm": torque},
-        metadata=recording.metadata,
-        source=recording.source,
-        warnings=recording.warnings,
-    )
-
-
 def analyse(
     recordings: list[Recording],
     spec: Spec,
@@ -151,15 +120,6 @@ def analyse(
         for r in recordings
     ]
     return identify_inertia_friction(runs, method=spec.method, harmonics=spec.harmonics)
-
-
-@dataclass(frozen=True, slots=True, kw_only=True)
-class CableLoop:
-    """The cable's Dahl hysteresis as ``gravity_cable`` measured it."""
-
-    half_width_nm: float
-    half_width_u_nm: float
-    angle_rad: float
 
 
 def measured_cable_loop(calibration: CalibrationRun) -> CableLoop | None:

@@ -13,7 +13,7 @@ import pytest
 import protocols.test_inertia_friction as protocol
 from hil.drives.sim import SimDrive
 from hil.identify.estimate import Estimate
-from hil.identify.gravity_cable import cable_loop_torque_nm, load_stiffness
+from hil.identify.gravity_cable import CableLoop, cable_loop_torque_nm, load_stiffness
 from hil.identify.inertia_friction import InertiaFrictionResult, stiffness_corrected_inertia
 from hil.profile import load_profile
 from hil.recording import Recording
@@ -93,7 +93,7 @@ def test_cable_hysteresis_biases_b_and_removing_the_measured_loop_restores_it() 
         BASE, cable_hysteresis_nm=0.002, cable_hysteresis_angle_rad=0.02
     )
     recordings, spec = _record(plant, centre_rad=0.0)
-    loop = protocol.CableLoop(half_width_nm=0.002, half_width_u_nm=0.0002, angle_rad=0.02)
+    loop = CableLoop(half_width_nm=0.002, half_width_u_nm=0.0002, angle_rad=0.02)
     raw: InertiaFrictionResult = protocol.analyse(recordings, spec)
     clean = protocol.analyse(recordings, spec, cable_loop=loop)
     assert raw.viscous.value / plant.viscous_nm_s_rad - 1 > 0.15  # the bias is real

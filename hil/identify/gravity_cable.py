@@ -94,6 +94,16 @@ class GravityCableResult:
     half_difference_nm: FloatArray  # F + hysteresis per bin
 
 
+@dataclass(frozen=True, slots=True, kw_only=True)
+class CableLoop:
+    """The cable's Dahl hysteresis as ``gravity_cable`` measured it."""
+
+    half_width_nm: float
+    half_width_u_nm: float
+    angle_rad: float
+
+
+
 def cable_loop_torque_nm(
     position_rad: FloatArray, *, half_width_nm: float, angle_rad: float
 ) -> FloatArray:

@@ -37,6 +37,7 @@ from numpy.typing import NDArray
 
 from hil.errors import IdentificationError
 from hil.identify.estimate import Estimate, combine_linear
+from hil.identify.gravity_cable import CableLoop, cable_loop_torque_nm
 from hil.identify.kinematics import phase_free_derivatives
 from hil.recording import Recording
 
@@ -399,4 +400,36 @@ def stiffness_corrected_inertia(
         unit=inertia.unit,
         dof=dof,
         cramer_rao_std=inertia.cramer_rao_std,
+    )
+
+
+def torque_hold_samples(recording: Recording, *, current_loop_lag_s: float) -> float:
+    """How many of the recording's samples after its position sample the torque of the same
+    row acts on the shaft, plus the current loop's lag. An instantaneous torque sample is
+    held over the drive's control period (the recording's own period unless
+    ``control_period_s`` says otherwise): half of it. A torque averaged over the row period
+    ``T_s`` (``torque_sample = "mean"``) has its centroid ``T_c − T_s/2`` after the position
+    sample, which is taken a control period ``T_c`` before the row."""
+    step_s = float(np.median(np.diff(recording.time_s)))
+    control_s = float(recording.metadata.get("control_period_s", step_s))
+    if recording.metadata.get("torque_sample") == "mean":
+        mean_s = float(recording.metadata.get("torque_mean_period_s", step_s))
+        hold_s = control_s - 0.5 * mean_s
+    else:
+        hold_s = HOLD_SAMPLES * control_s
+    return (hold_s + current_loop_lag_s) / step_s
+
+
+def without_cable_loop(recording: Recording, loop: CableLoop | None) -> Recording:
+    """The recording with the cable's measured hysteresis torque taken out of the effort."""
+    if loop is None:
+        return recording
+    torque = recording.effort - cable_loop_torque_nm(
+        recording.position, half_width_nm=loop.half_width_nm, angle_rad=loop.angle_rad
+    )
+    return Recording(
+        columns={**recording.columns, "torque_nm": torque},
+        metadata=recording.metadata,
+        source=recording.source,
+        warnings=recording.warnings,
     )

@@ -219,7 +219,7 @@ def test_torque_mean_is_the_mean_since_the_previous_row(profile: UnitProfile) ->
     """Row k's torque is the mean of the torque commanded per control period over the
     control periods after row k-1's latched sample up to and including row k's, over real
     pymodbus; the window column says how long that was (= the row's time step)."""
-    from protocols.test_inertia_friction import torque_hold_samples
+    from hil.identify.inertia_friction import torque_hold_samples
 
     assert profile.plant is not None
     emulator = _TorqueLoggingEmulator(
