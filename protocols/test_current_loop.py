@@ -6,6 +6,7 @@ linear); numerics and the sampled-data model in :mod:`hil.identify.current_loop`
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
 
@@ -99,7 +100,7 @@ def excitation(spec: Spec, *, position_rad: float) -> list[Excitation]:
 
 
 def analyse(recording: Recording, spec: Spec) -> CurrentLoopResult:
-    hold_s = torque_hold_s(recording.metadata, fs_hz=spec.fs_hz)
+    hold = torque_hold_s(recording.metadata, fs_hz=spec.fs_hz)
     start = round(spec.ramp_s * spec.fs_hz)
     points = []
     for f in spec.frequencies_hz:
@@ -112,11 +113,14 @@ def analyse(recording: Recording, spec: Spec) -> CurrentLoopResult:
                 frequency_hz=f,
                 fs_hz=spec.fs_hz,
                 blocks=spec.blocks,
-                hold_s=hold_s,
+                hold_s=hold.hold_s,
+                mean_samples=hold.mean_samples,
             )
         )
         start += spec.segment_samples(f)
-    return fit_current_loop_lag(points, fs_hz=spec.fs_hz, hold_s=hold_s)
+    return fit_current_loop_lag(
+        points, fs_hz=spec.fs_hz, hold_s=hold.hold_s, mean_samples=hold.mean_samples
+    )
 
 
 @pytest.fixture(scope="module")
@@ -133,7 +137,7 @@ def result(drive: Drive, calibration: CalibrationRun, profile: UnitProfile) -> C
     recording = calibration.run(drive, sines, protocol=NAME)
     analysed = analyse(recording, spec)
     calibration.details[NAME] = {
-        "torque_hold_s": torque_hold_s(recording.metadata, fs_hz=spec.fs_hz),
+        "torque_hold": dataclasses.asdict(torque_hold_s(recording.metadata, fs_hz=spec.fs_hz)),
         "viscous_over_inertia_1_s": analysed.viscous_over_inertia_1_s,
         "chi2_per_dof": analysed.chi2_per_dof,
         "points": [

@@ -76,31 +76,17 @@ TREND_ORDER = 1  # constant + linear (the carrier) with each block's sine: highe
 # nearly collinear with a one-period sine and inflate the variance (benchmarks/bench_frf.py)
 
 
-class TorqueHold(float):
-    """A torque hold period in s (the float value) that also says over how many held
-    control periods each reported sample is the mean (``mean_samples``; 1: a point sample).
+@dataclass(frozen=True, slots=True, kw_only=True)
+class TorqueHold:
+    """How the drive holds the torque it reports: over ``hold_s`` per sample, each reported
+    value the mean of ``mean_samples`` such held samples (1: a point sample)."""
 
-    A float so that code passing ``hold_s`` on keeps working; :func:`analyse_frequency`
-    and :func:`fit_current_loop_lag` read ``mean_samples`` from it.
-    """
+    hold_s: float
+    mean_samples: int = 1
 
-    mean_samples: int
-
-    def __new__(cls, hold_s: float, *, mean_samples: int = 1) -> TorqueHold:
-        if mean_samples < 1:
-            raise ValueError(f"mean_samples must be ≥ 1, got {mean_samples}")
-        obj = super().__new__(cls, hold_s)
-        obj.mean_samples = int(mean_samples)
-        return obj
-
-    def __repr__(self) -> str:
-        return f"TorqueHold({float(self)!r}, mean_samples={self.mean_samples})"
-
-
-def _mean_samples(hold_s: float | None, mean_samples: int | None) -> int:
-    if mean_samples is not None:
-        return mean_samples
-    return hold_s.mean_samples if isinstance(hold_s, TorqueHold) else 1
+    def __post_init__(self) -> None:
+        if self.mean_samples < 1:
+            raise ValueError(f"mean_samples must be ≥ 1, got {self.mean_samples}")
 
 
 def torque_hold_s(metadata: Mapping[str, str], *, fs_hz: float) -> TorqueHold:
@@ -122,7 +108,7 @@ def torque_hold_s(metadata: Mapping[str, str], *, fs_hz: float) -> TorqueHold:
     """
     sample_s = 1.0 / fs_hz
     if "torque_sample" not in metadata:
-        return TorqueHold(sample_s)
+        return TorqueHold(hold_s=sample_s)
     sampling = metadata["torque_sample"]
     if sampling not in ("instantaneous", "mean"):
         raise IdentificationError(
@@ -157,7 +143,7 @@ def torque_hold_s(metadata: Mapping[str, str], *, fs_hz: float) -> TorqueHold:
             "much as its own phase; use linear target interpolation (CiA 402 0x60C0 = 0) or "
             "record at the control rate (drive recorder)"
         )
-    return TorqueHold(control_s, mean_samples=round(ratio) if sampling == "mean" else 1)
+    return TorqueHold(hold_s=control_s, mean_samples=round(ratio) if sampling == "mean" else 1)
 
 
 def sampled_response(
@@ -248,7 +234,7 @@ def analyse_frequency(
     fs_hz: float,
     blocks: int,
     hold_s: float | None = None,
-    mean_samples: int | None = None,
+    mean_samples: int = 1,
 ) -> FrequencyPoint:
     """Reduce one sine segment (settled, whole periods) to a :class:`FrequencyPoint`.
 
@@ -266,11 +252,10 @@ def analyse_frequency(
         The period over which the drive held each reported torque (s): :func:`torque_hold_s`;
         ``None``: ``1/fs_hz``.
     mean_samples
-        Each reported torque is the mean of this many held samples; ``None``: from
-        ``hold_s`` (a :class:`TorqueHold`), else 1.
+        Each reported torque is the mean of this many held samples (:func:`torque_hold_s`).
     """
     hold_fs_hz = fs_hz if hold_s is None else 1.0 / hold_s
-    n_mean = _mean_samples(hold_s, mean_samples)
+    n_mean = mean_samples
     periods = math.floor((time_s[-1] - time_s[0] + 1.0 / fs_hz) * frequency_hz + 1e-6)
     blocks = min(blocks, periods)
     if blocks < 2:
@@ -319,7 +304,7 @@ def fit_current_loop_lag(
     *,
     fs_hz: float,
     hold_s: float | None = None,
-    mean_samples: int | None = None,
+    mean_samples: int = 1,
 ) -> CurrentLoopResult:
     """Weighted least-squares fit of τ and B/J to the lag phases of ``points`` (≥ 3).
 
@@ -327,7 +312,7 @@ def fit_current_loop_lag(
     values).
     Returns τ as ``current_loop_time_constant_ms`` (Estimate in ms).
     """
-    n_mean = _mean_samples(hold_s, mean_samples)
+    n_mean = mean_samples
     fs_hz = fs_hz if hold_s is None else 1.0 / hold_s  # the model only needs the hold
     if len(points) < 3:
         raise IdentificationError(f"{len(points)} frequencies, need at least 3 for τ and B/J")

@@ -218,7 +218,7 @@ def test_control_period_from_the_station_when_the_drive_has_none(
             torque_hold_s(recording.metadata, fs_hz=1000.0)
     else:
         assert recording.metadata["control_period_s"] == "0.00025"
-        assert torque_hold_s(recording.metadata, fs_hz=1000.0) == pytest.approx(2.5e-4)
+        assert torque_hold_s(recording.metadata, fs_hz=1000.0).hold_s == pytest.approx(2.5e-4)
 
 
 def test_station_control_period_must_agree_with_the_drive(profile: UnitProfile) -> None:

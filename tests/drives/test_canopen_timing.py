@@ -124,7 +124,7 @@ def _current_loop_over_canopen(
         recording = drive.run(sines)
     assert spec.fs_hz == pytest.approx(1000.0)
     hold = torque_hold_s(recording.metadata, fs_hz=spec.fs_hz)
-    assert hold == pytest.approx(CONTROL_S)
+    assert hold.hold_s == pytest.approx(CONTROL_S)
     assert hold.mean_samples == (4 if sampling == "mean" else 1)
     return protocol.analyse(recording, spec)
 

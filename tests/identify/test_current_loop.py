@@ -137,10 +137,10 @@ def test_mean_sampling_from_the_metadata() -> None:
             "command_interpolation": "linear", "torque_mean_period_s": "0.001"}
     hold = torque_hold_s(meta, fs_hz=1000.0)
     assert isinstance(hold, TorqueHold)
-    assert (float(hold), hold.mean_samples) == (pytest.approx(2.5e-4), 4)
+    assert (hold.hold_s, hold.mean_samples) == (pytest.approx(2.5e-4), 4)
     assert torque_hold_s({**meta, "torque_sample": "instantaneous"},
                          fs_hz=1000.0).mean_samples == 1
-    assert torque_hold_s({}, fs_hz=1000.0) == pytest.approx(1e-3)
+    assert torque_hold_s({}, fs_hz=1000.0).hold_s == pytest.approx(1e-3)
     with pytest.raises(IdentificationError, match="averaged over"):
         torque_hold_s({**meta, "torque_mean_period_s": "0.002"}, fs_hz=1000.0)
     with pytest.raises(IdentificationError, match="control period"):
