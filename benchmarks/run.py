@@ -22,13 +22,11 @@ import protocols.test_inertia_friction as protocol
 from hil.drives.sim import SimDrive
 from hil.identify.inertia_friction import (
     HARMONICS,
-    HOLD_SAMPLES,
-    FloatArray,
     Method,
-    analyse_sine_run,
     cramer_rao_std,
     identify_inertia_friction,
 )
+from hil.identify.sine_run import HOLD_SAMPLES, FloatArray, analyse_sine_run
 from hil.profile import load_profile
 from plant_sim.model import Plant, simulate
 from plant_sim.params import PlantParams

@@ -17,13 +17,11 @@ from hil.identify.inertia_friction import (
     HARMONICS,
     InertiaFrictionResult,
     Method,
-    analyse_sine_run,
     identify_inertia_friction,
     inertia_amplitude_spread,
     stiffness_corrected_inertia,
-    torque_hold_samples,
-    without_cable_loop,
 )
+from hil.identify.sine_run import analyse_sine_run, torque_hold_samples, without_cable_loop
 from hil.profile import UnitProfile
 from hil.recording import Recording
 from protocols._travel import move_excitation, move_speed_rad_s

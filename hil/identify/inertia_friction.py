@@ -25,6 +25,7 @@ Standard uncertainties are Type A by delete-one-period jackknife (robust to colo
 and loop jitter), ``P − 1`` degrees of freedom for ``P`` periods in all.
 """
 
+
 from __future__ import annotations
 
 import math
@@ -33,152 +34,14 @@ from dataclasses import dataclass
 from typing import Literal
 
 import numpy as np
-from numpy.typing import NDArray
 
 from hil.errors import IdentificationError
 from hil.identify.estimate import Estimate, combine_linear
-from hil.identify.gravity_cable import CableLoop, cable_loop_torque_nm
-from hil.identify.kinematics import phase_free_derivatives
-from hil.recording import Recording
+from hil.identify.sine_run import FloatArray, SineRun, synchronous_average
 
-FloatArray = NDArray[np.float64]
 Method = Literal["orthogonal", "least_squares"]
-COULOMB_FUNDAMENTAL = 4.0 / math.pi  # fundamental of sgn(sin)
-REVERSAL_BAND = 0.15  # fraction of the velocity amplitude
-DERIVATIVE_WINDOW_PERIODS = 0.02  # Savitzky–Golay window, in periods of the sine
-PHASE_BINS = 200
 INSTRUMENT_HARMONICS = 7
 HARMONICS = 1  # harmonics the orthogonal correlation uses (the article: the fundamental)
-HOLD_SAMPLES = 0.5  # the drive holds each reported torque over the following period
-
-
-def orthogonal_components(
-    signal: FloatArray, *, time_s: FloatArray, frequency_hz: float
-) -> tuple[float, float]:
-    """The article's ``c = (2/N)·Σ x·cos`` and ``s = (2/N)·Σ x·sin`` at ``frequency_hz``.
-
-    Computed as least-squares amplitudes of cos, sin and a constant: identical to the sums
-    for uniform sampling over whole periods, and still unbiased for irregular timestamps
-    or a subset of samples.
-    """
-    omega = 2 * math.pi * frequency_hz
-    design = np.column_stack([np.cos(omega * time_s), np.sin(omega * time_s), np.ones_like(time_s)])
-    coefficients = np.linalg.lstsq(design, signal, rcond=None)[0]
-    return float(coefficients[0]), float(coefficients[1])
-
-
-@dataclass(frozen=True, slots=True, kw_only=True)
-class SineRun:
-    """One sine run over its analysis window: the article's components and the samples."""
-
-    frequency_hz: float
-    velocity_amplitude_rad_s: float
-    quadrature_nm: float  # c: torque along cos of the measured velocity phase
-    quadrature_u_nm: float
-    in_phase_nm: float  # s: torque along the measured velocity
-    in_phase_u_nm: float
-    periods: int
-    noise_rms_nm: float  # non-periodic torque (noise, loop jitter)
-    time_s: FloatArray
-    velocity_rad_s: FloatArray  # phase-free
-    acceleration_rad_s2: FloatArray  # phase-free
-    torque_nm: FloatArray
-    period: NDArray[np.intp]  # period index of each sample, 0..periods-1
-    phase_bin: NDArray[np.intp]  # phase bin of each sample within its period
-    moving: NDArray[np.bool_]  # outside the reversal band
-
-    @property
-    def inertia_kg_m2(self) -> float:
-        """J of this run alone, ``c / (V·2πf)``."""
-        return self.quadrature_nm / (
-            self.velocity_amplitude_rad_s * 2 * math.pi * self.frequency_hz
-        )
-
-
-def synchronous_average(signal: FloatArray, phase_bin: NDArray[np.intp]) -> FloatArray:
-    """Each sample replaced by the mean of its phase bin over all periods (the periodic
-    part of ``signal``); what is left over is noise and non-periodic motion."""
-    counts = np.bincount(phase_bin, minlength=PHASE_BINS)
-    sums = np.bincount(phase_bin, weights=signal, minlength=PHASE_BINS)
-    means = np.divide(sums, counts, out=np.zeros(PHASE_BINS), where=counts > 0)
-    return means[phase_bin]
-
-
-def analyse_sine_run(
-    recording: Recording,
-    *,
-    frequency_hz: float,
-    settle_periods: int,
-    hold_samples: float = HOLD_SAMPLES,
-) -> SineRun:
-    """Reduce one sinusoidal-velocity run (phase zero at the recording's first sample).
-
-    The first ``settle_periods`` are discarded; every following whole period is used.
-    ``hold_samples``: the torque reported at sample k is held by the drive over the next
-    period, so the motion it causes is centred that many samples later; the kinematics are
-    taken there (0.5 for a zero-order hold; 0 for torque already time-aligned with motion).
-    """
-    time_s = recording.time_s - recording.time_s[0]
-    dt = float(np.median(np.diff(time_s)))
-    total = math.floor((time_s[-1] + dt) * frequency_hz + 1e-6)
-    periods = total - settle_periods
-    if periods < 2:
-        raise IdentificationError(
-            f"{recording.source}: {total} whole periods at {frequency_hz} Hz, "
-            f"need at least {settle_periods + 2} ({settle_periods} settling + 2)"
-        )
-    velocity, acceleration = phase_free_derivatives(
-        recording.position, time_s=time_s, window_s=DERIVATIVE_WINDOW_PERIODS / frequency_hz
-    )
-    if hold_samples:
-        shifted = time_s + hold_samples * dt
-        velocity = np.interp(shifted, time_s, velocity)
-        acceleration = np.interp(shifted, time_s, acceleration)
-    cycles = time_s * frequency_hz
-    window = (cycles >= settle_periods - 1e-9) & (cycles < total - 1e-9)
-    t, torque = time_s[window], recording.effort[window]
-    v, a = velocity[window], acceleration[window]
-    period = np.minimum((cycles[window] - settle_periods).astype(np.intp), periods - 1)
-    phase_bin = np.minimum(
-        (np.mod(cycles[window], 1.0) * PHASE_BINS).astype(np.intp), PHASE_BINS - 1
-    )
-    amplitude = math.sqrt(2.0) * float(np.sqrt(np.mean(v**2)))
-
-    components = np.array(
-        [
-            _along_velocity(t[period == k], v[period == k], torque[period == k], frequency_hz)
-            for k in range(periods)
-        ]
-    )
-    periodic = synchronous_average(torque, phase_bin)
-    noise_rms = float(np.sqrt(np.sum((torque - periodic) ** 2) / max(len(t) - PHASE_BINS, 1)))
-    return SineRun(
-        frequency_hz=frequency_hz,
-        velocity_amplitude_rad_s=amplitude,
-        quadrature_nm=float(components[:, 0].mean()),
-        quadrature_u_nm=float(components[:, 0].std(ddof=1) / math.sqrt(periods)),
-        in_phase_nm=float(components[:, 1].mean()),
-        in_phase_u_nm=float(components[:, 1].std(ddof=1) / math.sqrt(periods)),
-        periods=periods,
-        noise_rms_nm=noise_rms,
-        time_s=t,
-        velocity_rad_s=v,
-        acceleration_rad_s2=a,
-        torque_nm=torque,
-        period=period,
-        phase_bin=phase_bin,
-        moving=np.abs(v) > REVERSAL_BAND * amplitude,
-    )
-
-
-def _along_velocity(
-    t: FloatArray, velocity: FloatArray, torque: FloatArray, frequency_hz: float
-) -> tuple[float, float]:
-    """(c, s): torque components along cos and sin of the period's measured velocity phase."""
-    v_cos, v_sin = orthogonal_components(velocity, time_s=t, frequency_hz=frequency_hz)
-    phase = math.atan2(v_cos, v_sin)  # v ≈ V·sin(ωt + φ)
-    a, b = orthogonal_components(torque, time_s=t, frequency_hz=frequency_hz)
-    return a * math.cos(phase) - b * math.sin(phase), b * math.cos(phase) + a * math.sin(phase)
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -400,36 +263,4 @@ def stiffness_corrected_inertia(
         unit=inertia.unit,
         dof=dof,
         cramer_rao_std=inertia.cramer_rao_std,
-    )
-
-
-def torque_hold_samples(recording: Recording, *, current_loop_lag_s: float) -> float:
-    """How many of the recording's samples after its position sample the torque of the same
-    row acts on the shaft, plus the current loop's lag. An instantaneous torque sample is
-    held over the drive's control period (the recording's own period unless
-    ``control_period_s`` says otherwise): half of it. A torque averaged over the row period
-    ``T_s`` (``torque_sample = "mean"``) has its centroid ``T_c − T_s/2`` after the position
-    sample, which is taken a control period ``T_c`` before the row."""
-    step_s = float(np.median(np.diff(recording.time_s)))
-    control_s = float(recording.metadata.get("control_period_s", step_s))
-    if recording.metadata.get("torque_sample") == "mean":
-        mean_s = float(recording.metadata.get("torque_mean_period_s", step_s))
-        hold_s = control_s - 0.5 * mean_s
-    else:
-        hold_s = HOLD_SAMPLES * control_s
-    return (hold_s + current_loop_lag_s) / step_s
-
-
-def without_cable_loop(recording: Recording, loop: CableLoop | None) -> Recording:
-    """The recording with the cable's measured hysteresis torque taken out of the effort."""
-    if loop is None:
-        return recording
-    torque = recording.effort - cable_loop_torque_nm(
-        recording.position, half_width_nm=loop.half_width_nm, angle_rad=loop.angle_rad
-    )
-    return Recording(
-        columns={**recording.columns, "torque_nm": torque},
-        metadata=recording.metadata,
-        source=recording.source,
-        warnings=recording.warnings,
     )

@@ -13,7 +13,8 @@ from hil.drives.base import DriveState, Excitation, Mode
 from hil.drives.cia402 import CanOpenDrive
 from hil.drives.sim import SimDrive
 from hil.errors import DriveStateError, LimitViolationError, ProfileError
-from hil.identify.inertia_friction import analyse_sine_run, identify_inertia_friction
+from hil.identify.inertia_friction import identify_inertia_friction
+from hil.identify.sine_run import analyse_sine_run
 from hil.profile import UnitProfile
 from plant_sim.emulators.cia402_node import ENABLED, SWITCH_ON_DISABLED
 from plant_sim.emulators.sessions import canopen_emulator

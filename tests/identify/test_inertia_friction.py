@@ -8,11 +8,8 @@ import numpy as np
 import pytest
 
 from hil.errors import IdentificationError
-from hil.identify.inertia_friction import (
-    analyse_sine_run,
-    identify_inertia_friction,
-    orthogonal_components,
-)
+from hil.identify.inertia_friction import identify_inertia_friction
+from hil.identify.sine_run import analyse_sine_run, orthogonal_components
 from tests.helpers import sine_model_recording
 
 ARTICLE = {"inertia": 0.0036, "viscous": 0.005, "coulomb": 0.020}
