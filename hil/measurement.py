@@ -36,6 +36,19 @@ class Measurement:
     estimate: Estimate
     outcome: Outcome
 
+    @property
+    def conforms(self) -> bool:
+        """PASS or MARGINAL: inside the limits."""
+        return self.outcome in (Outcome.PASS, Outcome.MARGINAL)
+
+    def verdict(self) -> str:
+        """``name = value ± U unit → OUTCOME (limits [lo, hi])``, for logs and test reports."""
+        e, spec = self.estimate, self.spec
+        return (
+            f"{spec.name} = {e.value:.6g} ± {e.expanded_uncertainty:.2g} {spec.unit} → "
+            f"{self.outcome.value} (limits [{spec.lower_limit:.6g}, {spec.upper_limit:.6g}])"
+        )
+
     def as_dict(self) -> dict[str, object]:
         e = self.estimate
         return {

@@ -9,7 +9,7 @@ import pytest
 
 from hil.errors import ProfileError
 from hil.identify.estimate import Estimate, coverage_factor
-from hil.measurement import Outcome, judge, with_method_accuracy
+from hil.measurement import Measurement, Outcome, judge, with_method_accuracy
 from hil.profile import MeasurementSpec, builtin_profile_path, load_profile
 
 SPEC = MeasurementSpec(
@@ -130,3 +130,15 @@ def test_protocol_settings_refuse_unread_keys() -> None:
     assert settings.number("speed_rad_s", 0.1) == 0.2
     with pytest.raises(ProfileError, match="unknown setting\\(s\\) 'sped_rad_s'"):
         settings.done()
+
+
+@pytest.mark.parametrize(
+    ("value", "conforms"), [(1.0, True), (1.085, True), (1.11, False), (math.nan, False)]
+)
+def test_a_measurement_conforms_when_inside_its_limits(value: float, conforms: bool) -> None:
+    estimate = Estimate(name="x", value=value, standard_uncertainty=0.001, unit="N·m")
+    outcome = judge(estimate, SPEC)
+    measurement = Measurement(protocol="p", spec=SPEC, estimate=estimate, outcome=outcome)
+    assert measurement.conforms is conforms
+    assert measurement.verdict().startswith(f"x = {value:.6g} ± 0.002 N·m → {outcome.value}")
+    assert "limits [0.9, 1.1]" in measurement.verdict()
