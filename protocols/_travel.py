@@ -13,6 +13,7 @@ from hil.errors import IdentificationError, ProfileError
 from hil.identify.moves import position_move, travel_shortfall_rad
 from hil.profile import ProtocolSettings, UnitProfile
 from hil.recording import Recording
+from protocols._rate import needed_sample_rate_hz
 
 
 def move_excitation(
@@ -127,3 +128,50 @@ class TravelSpec:
             speed_rad_s=self.move_speed_rad_s,
             hold_s=hold_s,
         )
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class SteppedSineSpec(TravelSpec):
+    """Base of a Spec whose excitation is velocity sines at several frequencies on top of a
+    constant-speed carrier (the axis never reverses): ramp up, one segment of whole periods
+    per frequency, ramp down. Subclasses say how long a segment is and its amplitude."""
+
+    frequencies_hz: tuple[float, ...]
+    speed_rad_s: float  # the carrier
+    settle_s: float  # discarded at the start of each frequency
+    ramp_s: float
+    blocks: int
+
+    def segment_samples(self, frequency_hz: float) -> int:
+        """Settling plus analysed samples at ``frequency_hz`` (whole periods)."""
+        raise NotImplementedError
+
+    def amplitude(self, frequency_hz: float) -> float:
+        """Velocity amplitude of the sine at ``frequency_hz`` (rad/s)."""
+        raise NotImplementedError
+
+    @property
+    def needed_sample_rate_hz(self) -> float:
+        """The phase at the highest excitation frequency needs ≥ 4 samples per period."""
+        return needed_sample_rate_hz(max(self.frequencies_hz))
+
+    def require_carrier_travel(self, *, protocol: str, source: str) -> None:
+        """Refuse a profile whose carrier runs past the travel limits."""
+        samples = sum(self.segment_samples(f) for f in self.frequencies_hz)
+        self.require_travel(
+            self.speed_rad_s * (self.ramp_s + samples / self.fs_hz),
+            protocol=protocol,
+            source=source,
+        )
+
+    def carrier_command(self) -> NDArray[np.float64]:
+        """The velocity command: ramp up, the sine segments, ramp down."""
+        segments = []
+        for f in self.frequencies_hz:
+            t = np.arange(self.segment_samples(f)) / self.fs_hz
+            segments.append(self.speed_rad_s + self.amplitude(f) * np.sin(2 * math.pi * f * t))
+        ramp = {
+            up: speed_ramp(self.speed_rad_s, ramp_s=self.ramp_s, fs_hz=self.fs_hz, up=up)
+            for up in (True, False)
+        }
+        return np.concatenate([ramp[True], *segments, ramp[False]])

@@ -10,7 +10,6 @@ import dataclasses
 import math
 from dataclasses import dataclass
 
-import numpy as np
 import pytest
 
 from hil.calibration import CalibrationRun
@@ -23,8 +22,8 @@ from hil.identify.current_loop import (
 )
 from hil.profile import UnitProfile
 from hil.recording import Recording
-from protocols._rate import needed_sample_rate_hz, require_sample_rate
-from protocols._travel import TravelSpec, speed_ramp
+from protocols._rate import require_sample_rate
+from protocols._travel import SteppedSineSpec, TravelSpec
 
 NAME = "current_loop"
 MEASUREMENTS = ("current_loop_time_constant_ms",)
@@ -32,14 +31,9 @@ pytestmark = pytest.mark.protocol(NAME)
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
-class Spec(TravelSpec):
-    frequencies_hz: tuple[float, ...]
-    speed_rad_s: float  # constant carrier speed
+class Spec(SteppedSineSpec):
     amplitude_rad_s: float  # velocity command sine amplitude
     segment_s: float  # analysed time per frequency
-    settle_s: float  # discarded at the start of each frequency
-    ramp_s: float
-    blocks: int
 
     @classmethod
     def from_profile(cls, profile: UnitProfile, info: DriveInfo) -> Spec:
@@ -54,19 +48,12 @@ class Spec(TravelSpec):
             ramp_s=settings.number("ramp_s", 0.1),
             blocks=settings.integer("blocks", 5),
         )
-        samples = sum(spec.segment_samples(f) for f in spec.frequencies_hz)
-        spec.require_travel(
-            spec.speed_rad_s * (spec.ramp_s + samples / spec.fs_hz),
-            protocol=NAME,
-            source=profile.source,
-        )
+        spec.require_carrier_travel(protocol=NAME, source=profile.source)
         settings.done()
         return spec
 
-    @property
-    def needed_sample_rate_hz(self) -> float:
-        """The phase at the highest excitation frequency needs ≥ 4 samples per period."""
-        return needed_sample_rate_hz(max(self.frequencies_hz))
+    def amplitude(self, frequency_hz: float) -> float:
+        return self.amplitude_rad_s
 
     def settle_samples(self, frequency_hz: float) -> int:
         return round(math.ceil(self.settle_s * frequency_hz) * self.fs_hz / frequency_hz)
@@ -78,24 +65,12 @@ class Spec(TravelSpec):
 
 
 def excitation(spec: Spec, *, position_rad: float) -> list[Excitation]:
-    def ramp(*, up: bool) -> np.ndarray:
-        return speed_ramp(spec.speed_rad_s, ramp_s=spec.ramp_s, fs_hz=spec.fs_hz, up=up)
-
     """Move to the lower end; ramp to the carrier speed; one sine segment per frequency."""
-    segments = []
-    for f in spec.frequencies_hz:
-        t = np.arange(spec.segment_samples(f)) / spec.fs_hz
-        segments.append(spec.speed_rad_s + spec.amplitude_rad_s * np.sin(2 * math.pi * f * t))
-    command = np.concatenate(
-        [
-            ramp(up=True),
-            *segments,
-            ramp(up=False),
-        ]
-    )
     return [
         spec.move_to_start(position_rad, hold_s=0.1),
-        Excitation(name="sines", mode=Mode.VELOCITY, fs_hz=spec.fs_hz, command=command),
+        Excitation(
+            name="sines", mode=Mode.VELOCITY, fs_hz=spec.fs_hz, command=spec.carrier_command()
+        ),
     ]
 
 

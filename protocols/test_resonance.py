@@ -20,8 +20,8 @@ from hil.identify.estimate import Estimate
 from hil.identify.resonance import ResonanceResult, frf_point, identify_resonance
 from hil.profile import UnitProfile
 from hil.recording import Recording
-from protocols._rate import needed_sample_rate_hz, require_sample_rate
-from protocols._travel import TravelSpec, speed_ramp
+from protocols._rate import require_sample_rate
+from protocols._travel import SteppedSineSpec, TravelSpec
 
 NAME = "resonance"
 MEASUREMENTS = (
@@ -34,17 +34,12 @@ pytestmark = pytest.mark.protocol(NAME)
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
-class Spec(TravelSpec):
-    frequencies_hz: tuple[float, ...]
-    speed_rad_s: float  # carrier
+class Spec(SteppedSineSpec):
     amplitude_rad_s: float  # velocity sine amplitude up to amplitude_knee_hz
     amplitude_knee_hz: float  # above: amplitude ∝ f (the motor responds ∝ 1/f)
     max_amplitude_rad_s: float
     segment_s: float
     min_periods: int
-    settle_s: float
-    blocks: int
-    ramp_s: float
 
     @classmethod
     def from_profile(cls, profile: UnitProfile, info: DriveInfo) -> Spec:
@@ -64,23 +59,13 @@ class Spec(TravelSpec):
             blocks=settings.integer("blocks", 6),
             ramp_s=settings.number("ramp_s", 0.1),
         )
-        samples = sum(spec.segment_samples(f) for f in spec.frequencies_hz)
-        spec.require_travel(
-            spec.speed_rad_s * (spec.ramp_s + samples / spec.fs_hz),
-            protocol=NAME,
-            source=profile.source,
-        )
+        spec.require_carrier_travel(protocol=NAME, source=profile.source)
         settings.done()
         return spec
 
     def amplitude(self, frequency_hz: float) -> float:
         scaled = self.amplitude_rad_s * max(1.0, frequency_hz / self.amplitude_knee_hz)
         return min(scaled, self.max_amplitude_rad_s)
-
-    @property
-    def needed_sample_rate_hz(self) -> float:
-        """The FRF at the top of the band needs ≥ 4 samples per period."""
-        return needed_sample_rate_hz(max(self.frequencies_hz))
 
     def settle_samples(self, frequency_hz: float) -> int:
         periods = max(2, math.ceil(self.settle_s * frequency_hz))
@@ -93,27 +78,14 @@ class Spec(TravelSpec):
 
 
 def excitation(spec: Spec, *, position_rad: float) -> list[Excitation]:
-    def ramp(*, up: bool) -> np.ndarray:
-        return speed_ramp(spec.speed_rad_s, ramp_s=spec.ramp_s, fs_hz=spec.fs_hz, up=up)
-
     """Move to the lower end; ramp to the carrier speed; the stepped sine; ramp down."""
-    segments = []
-    for f in spec.frequencies_hz:
-        t = np.arange(spec.segment_samples(f)) / spec.fs_hz
-        segments.append(spec.speed_rad_s + spec.amplitude(f) * np.sin(2 * math.pi * f * t))
     return [
         spec.move_to_start(position_rad, hold_s=0.1),
         Excitation(
             name="stepped_sine",
             mode=Mode.VELOCITY,
             fs_hz=spec.fs_hz,
-            command=np.concatenate(
-                [
-                    ramp(up=True),
-                    *segments,
-                    ramp(up=False),
-                ]
-            ),
+            command=spec.carrier_command(),
         ),
     ]
 
