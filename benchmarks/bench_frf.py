@@ -31,9 +31,10 @@ import numpy as np
 from scipy import signal
 
 import protocols.test_resonance as protocol
-from hil.drives.base import DriveInfo, Mode
+from hil.drives.base import DriveInfo
 from hil.drives.sim import SimDrive
 from hil.identify.resonance import TwoMassModel, frf_point, two_mass_response
+from hil.motion import Mode
 from hil.profile import load_profile
 
 

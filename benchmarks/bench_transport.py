@@ -15,8 +15,8 @@ import time
 
 import numpy as np
 
-from hil.drives import open_drive
-from hil.drives.base import Excitation, Mode
+from hil.drives.connect import open_drive
+from hil.motion import Excitation, Mode
 from hil.profile import load_profile
 
 

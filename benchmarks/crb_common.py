@@ -23,9 +23,9 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import NDArray
 
-from hil.drives.base import Limits
 from hil.drives.sim import SimDrive
 from hil.identify.current_loop import TREND_ORDER, block_phasors
+from hil.motion import Limits
 from plant_sim.params import PlantParams
 
 FloatArray = NDArray[np.float64]

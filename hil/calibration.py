@@ -14,10 +14,11 @@ from dataclasses import dataclass, field
 from datetime import UTC, datetime
 from pathlib import Path
 
-from hil.drives.base import Drive, DriveInfo, Excitation
+from hil.drives.base import Drive, DriveInfo
 from hil.errors import DriveError
 from hil.identify.estimate import Estimate
 from hil.measurement import Measurement, Outcome, judge, with_method_accuracy
+from hil.motion import Excitation
 from hil.profile import UnitProfile
 from hil.recording import Recording, write_recording
 

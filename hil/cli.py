@@ -12,9 +12,9 @@ import numpy as np
 
 from hil.diagnose.cli import add_arguments as add_diagnose_arguments
 from hil.diagnose.cli import run as run_diagnose
-from hil.drives import DRIVE_KINDS
-from hil.drives.base import Excitation, Mode
+from hil.drives.kinds import DRIVE_KINDS
 from hil.errors import HilError, InputError
+from hil.motion import MODE_OF_COLUMN, Excitation, Mode
 from hil.profile import load_profile
 from hil.recording import FloatArray, read_command_csv, write_recording
 
@@ -94,20 +94,15 @@ def _simulate(args: argparse.Namespace) -> int:
     return 0
 
 
-_COMMAND_COLUMNS = {
-    "velocity_cmd_rad_s": Mode.VELOCITY,
-    "torque_cmd_nm": Mode.TORQUE,
-    "position_cmd_rad": Mode.POSITION,
-}
 
 
 def _command_from_csv(path: Path, fs_hz: float) -> tuple[Mode, FloatArray]:
     """Read a command file and resample it (linear) onto the drive's sample grid."""
-    columns = read_command_csv(path, allowed=tuple(_COMMAND_COLUMNS))
+    columns = read_command_csv(path, allowed=tuple(MODE_OF_COLUMN))
     ((name, values),) = ((k, v) for k, v in columns.items() if k != "time_s")
     time_s = columns["time_s"]
     grid = time_s[0] + np.arange(int((time_s[-1] - time_s[0]) * fs_hz) + 1) / fs_hz
-    return _COMMAND_COLUMNS[name], np.interp(grid, time_s, values)
+    return MODE_OF_COLUMN[name], np.interp(grid, time_s, values)
 
 
 def _calibrate(args: argparse.Namespace) -> int:
@@ -120,11 +115,8 @@ def _calibrate(args: argparse.Namespace) -> int:
         options += ["--unit-serial", args.unit_serial]
     if args.station:
         options += ["--station", str(args.station)]
-    return int(
-        pytest.main(
-            ["-p", "no:cacheprovider", "--pyargs", "protocols", "-q", *options, *args.pytest_args]
-        )
-    )
+    suite = ["-p", "no:cacheprovider", "--pyargs", "gimbal_hil_protocols", "-q"]
+    return int(pytest.main([*suite, *options, *args.pytest_args]))
 
 
 if __name__ == "__main__":

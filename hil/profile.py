@@ -10,13 +10,14 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-import fixtures
-from hil.drives.base import Limits
+import gimbal_hil_fixtures
+
 from hil.errors import ProfileError
+from hil.motion import Limits
 from plant_sim.params import PlantParams, plant_from_mapping
 
 DEFAULT_PROFILE = "demo_gimbal_elevation"
-FIXTURES_DIR = Path(fixtures.__file__).parent
+FIXTURES_DIR = Path(gimbal_hil_fixtures.__file__).parent
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)

@@ -9,7 +9,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from hil.drives.base import Mode
+from hil.motion import COMMAND_COLUMN, Mode
 from hil.recording import Recording
 from plant_sim import kernel
 from plant_sim.params import Harmonic, PlantParams
@@ -21,11 +21,6 @@ _KERNEL_MODE = {
     Mode.TORQUE: kernel.MODE_TORQUE,
     Mode.VELOCITY: kernel.MODE_VELOCITY,
     Mode.POSITION: kernel.MODE_POSITION,
-}
-_COMMAND_COLUMN = {
-    Mode.TORQUE: "torque_cmd_nm",
-    Mode.VELOCITY: "velocity_cmd_rad_s",
-    Mode.POSITION: "position_cmd_rad",
 }
 
 
@@ -222,7 +217,7 @@ def trace_to_recording(
         "position_rad": trace.position_rad,
         "velocity_rad_s": trace.velocity_rad_s,
         "torque_nm": trace.torque_nm,
-        _COMMAND_COLUMN[mode]: np.asarray(command, dtype=np.float64),
+        COMMAND_COLUMN[mode]: np.asarray(command, dtype=np.float64),
         "current_a": trace.current_a,
     }
     if trace.load_torque_nm is not None:

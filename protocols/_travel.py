@@ -8,9 +8,10 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from hil.drives.base import DriveInfo, Excitation, Mode
+from hil.drives.base import DriveInfo
 from hil.errors import IdentificationError, ProfileError
 from hil.identify.moves import position_move, travel_shortfall_rad
+from hil.motion import Excitation, Mode
 from hil.profile import ProtocolSettings, UnitProfile
 from hil.recording import Recording
 from protocols._rate import needed_sample_rate_hz

@@ -15,9 +15,10 @@ import numpy as np
 import pytest
 
 from hil.calibration import CalibrationRun
-from hil.drives.base import Drive, DriveInfo, Excitation, Mode
+from hil.drives.base import Drive, DriveInfo
 from hil.identify.cogging import CoggingResult, compensation_table, identify_cogging
 from hil.identify.estimate import Estimate
+from hil.motion import Excitation, Mode
 from hil.profile import UnitProfile
 from protocols._rate import needed_sample_rate_hz, require_sample_rate
 from protocols._travel import TravelSpec, on_command_grid

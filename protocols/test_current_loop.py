@@ -13,13 +13,14 @@ from dataclasses import dataclass
 import pytest
 
 from hil.calibration import CalibrationRun
-from hil.drives.base import Drive, DriveInfo, Excitation, Mode
+from hil.drives.base import Drive, DriveInfo
 from hil.identify.current_loop import (
     CurrentLoopResult,
     analyse_frequency,
     fit_current_loop_lag,
     torque_hold_s,
 )
+from hil.motion import Excitation, Mode
 from hil.profile import UnitProfile
 from hil.recording import Recording
 from protocols._rate import require_sample_rate

@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 
 from hil.calibration import CalibrationRun
-from hil.drives.base import Drive, DriveInfo, Excitation, Mode
+from hil.drives.base import Drive, DriveInfo
 from hil.identify.estimate import Estimate
 from hil.identify.gravity_cable import (
     GravityCableResult,
@@ -25,6 +25,7 @@ from hil.identify.gravity_cable import (
     identify_gravity_cable,
     sweep_plan,
 )
+from hil.motion import Excitation, Mode
 from hil.profile import UnitProfile
 from protocols._travel import TravelSpec, on_command_grid
 

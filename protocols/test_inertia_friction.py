@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from hil.calibration import CalibrationRun
-from hil.drives.base import Drive, DriveInfo, Excitation, Mode
+from hil.drives.base import Drive, DriveInfo
 from hil.identify.estimate import Estimate, combine_linear
 from hil.identify.gravity_cable import CableLoop, load_stiffness
 from hil.identify.inertia_friction import (
@@ -22,6 +22,7 @@ from hil.identify.inertia_friction import (
     stiffness_corrected_inertia,
 )
 from hil.identify.sine_run import analyse_sine_run, torque_hold_samples, without_cable_loop
+from hil.motion import Excitation, Mode
 from hil.profile import UnitProfile
 from hil.recording import Recording
 from protocols._travel import move_excitation, move_speed_rad_s

@@ -15,9 +15,10 @@ import numpy as np
 import pytest
 
 from hil.calibration import CalibrationRun
-from hil.drives.base import Drive, DriveInfo, Excitation, Mode
+from hil.drives.base import Drive, DriveInfo
 from hil.identify.estimate import Estimate
 from hil.identify.resonance import ResonanceResult, frf_point, identify_resonance
+from hil.motion import Excitation, Mode
 from hil.profile import UnitProfile
 from hil.recording import Recording
 from protocols._rate import require_sample_rate

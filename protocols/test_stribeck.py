@@ -10,9 +10,10 @@ import numpy as np
 import pytest
 
 from hil.calibration import CalibrationRun
-from hil.drives.base import Drive, DriveInfo, Excitation, Mode
+from hil.drives.base import Drive, DriveInfo
 from hil.identify.estimate import Estimate
 from hil.identify.stribeck import Staircase, StribeckResult, identify_stribeck, staircase
+from hil.motion import Excitation, Mode
 from hil.profile import UnitProfile
 from protocols._travel import TravelSpec, on_command_grid
 

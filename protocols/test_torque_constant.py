@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 
 from hil.calibration import CalibrationRun
-from hil.drives.base import Drive, DriveInfo, Excitation, Mode
+from hil.drives.base import Drive, DriveInfo
 from hil.identify.estimate import Estimate
 from hil.identify.torque_constant import (
     LockedSweep,
@@ -26,6 +26,7 @@ from hil.identify.torque_constant import (
     datasheet_torque_constant_nm_a,
     identify_torque_constant,
 )
+from hil.motion import Excitation, Mode
 from hil.profile import UnitProfile
 from hil.recording import Recording
 from protocols._travel import move_excitation, move_speed_rad_s

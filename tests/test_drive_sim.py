@@ -5,9 +5,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from hil.drives.base import DriveState, Excitation, Limits, Mode
+from hil.drives.base import DriveState
 from hil.drives.sim import SimDrive
 from hil.errors import DriveStateError, LimitViolationError
+from hil.motion import Excitation, Limits, Mode
 from plant_sim.params import PlantParams
 
 LIMITS = Limits(velocity_rad_s=2.0, torque_nm=0.3, travel_min_rad=-1.0, travel_max_rad=1.0)

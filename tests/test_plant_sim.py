@@ -8,7 +8,7 @@ import math
 import numpy as np
 import pytest
 
-from hil.drives.base import Mode
+from hil.motion import Mode
 from hil.profile import load_profile
 from plant_sim.model import Plant, simulate
 from plant_sim.params import Harmonic, PlantParams

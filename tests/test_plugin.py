@@ -18,7 +18,7 @@ pytest_plugins = ["pytester"]
 def _run(pytester: pytest.Pytester, out: Path, *args: str) -> pytest.RunResult:
     return pytester.runpytest_inprocess(
         "--pyargs",
-        "protocols.test_inertia_friction",
+        "gimbal_hil_protocols.test_inertia_friction",
         "-p",
         "no:cacheprovider",
         "--out",
@@ -173,7 +173,7 @@ def test_controller_outputs_carry_the_cable_loop_when_measured() -> None:
 
 def test_a_real_drive_without_a_serial_is_a_usage_error(pytester: pytest.Pytester) -> None:
     result = pytester.runpytest_inprocess(
-        "--pyargs", "protocols.test_inertia_friction", "-p", "no:cacheprovider",
+        "--pyargs", "gimbal_hil_protocols.test_inertia_friction", "-p", "no:cacheprovider",
         "--drive", "canopen",
     )
     assert result.ret == pytest.ExitCode.USAGE_ERROR

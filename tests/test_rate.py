@@ -9,7 +9,8 @@ from pathlib import Path
 
 import pytest
 
-from hil.drives.base import DriveInfo, Mode
+from hil.drives.base import DriveInfo
+from hil.motion import Mode
 from hil.profile import UnitProfile, load_profile
 from protocols import test_cogging, test_current_loop, test_resonance
 from protocols._rate import (

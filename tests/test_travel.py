@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from hil.drives.base import Excitation, Mode
 from hil.errors import IdentificationError, ProfileError
+from hil.motion import Excitation, Mode
 from hil.recording import Recording
 from protocols._travel import TravelSpec, on_command_grid, speed_ramp
 

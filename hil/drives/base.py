@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import abc
 import logging
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from enum import Enum
 from types import TracebackType
 
@@ -16,6 +16,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from hil.errors import LimitViolationError
+from hil.motion import Excitation, Limits, Mode
 from hil.recording import Recording
 
 log = logging.getLogger(__name__)
@@ -23,44 +24,11 @@ log = logging.getLogger(__name__)
 FloatArray = NDArray[np.float64]
 
 
-class Mode(Enum):
-    """Control mode of an excitation; command units: N·m, rad/s, rad."""
-
-    TORQUE = "torque"
-    VELOCITY = "velocity"
-    POSITION = "position"
-
-
 class DriveState(Enum):
     DISABLED = "disabled"
     ENABLED = "enabled"
     QUICK_STOPPED = "quick_stopped"
     FAULT = "fault"
-
-
-@dataclass(frozen=True, slots=True, kw_only=True)
-class Limits:
-    """The unit's safe envelope; every backend refuses commands outside it before moving."""
-
-    velocity_rad_s: float
-    torque_nm: float
-    travel_min_rad: float
-    travel_max_rad: float
-
-
-@dataclass(frozen=True, slots=True, kw_only=True)
-class Excitation:
-    """A sampled command trajectory: one sample per control period at ``fs_hz``."""
-
-    name: str
-    mode: Mode
-    command: FloatArray
-    fs_hz: float
-    metadata: dict[str, str] = field(default_factory=dict)
-
-    @property
-    def duration_s(self) -> float:
-        return len(self.command) / self.fs_hz
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)

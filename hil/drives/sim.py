@@ -7,17 +7,9 @@ import logging
 from collections.abc import Iterator
 
 from hil import __version__
-from hil.drives.base import (
-    Drive,
-    DriveInfo,
-    DriveState,
-    DriveStatus,
-    Excitation,
-    Limits,
-    Mode,
-    check_limits,
-)
+from hil.drives.base import Drive, DriveInfo, DriveState, DriveStatus, check_limits
 from hil.errors import DriveStateError
+from hil.motion import Excitation, Limits, Mode
 from hil.recording import Recording
 from plant_sim.model import Plant, trace_to_recording
 from plant_sim.params import PlantParams

@@ -131,7 +131,7 @@ def resolve_fixture(name: str, *, base_dir: Path, source: str) -> Path:
         candidate = base_dir / candidate
     if candidate.is_file():
         return candidate
-    builtin = Path(str(resources.files("fixtures").joinpath(Path(name).name)))
+    builtin = Path(str(resources.files("gimbal_hil_fixtures").joinpath(Path(name).name)))
     if builtin.is_file():
         return builtin
     raise ProfileError(

@@ -9,7 +9,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from hil.drives.base import Mode
+from hil.motion import Mode
 from hil.recording import Recording
 from plant_sim.model import simulate
 from plant_sim.params import Harmonic, PlantParams

@@ -13,7 +13,7 @@ from hil.diagnose import cli
 from hil.diagnose.core import diagnose
 from hil.diagnose.profile_out import data_fields, model_fields, write_profile
 from hil.diagnose.signals import zero_phase_lowpass
-from hil.drives.base import Mode
+from hil.motion import Mode
 from hil.profile import load_profile
 from plant_sim.model import simulate
 from plant_sim.params import plant_from_mapping

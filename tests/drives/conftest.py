@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from hil.drives.base import Excitation, Mode
+from hil.motion import Excitation, Mode
 from hil.profile import UnitProfile, load_profile
 
 

@@ -8,16 +8,17 @@ import numpy as np
 import pytest
 
 from conftest import sine
-from hil.drives import open_drive
-from hil.drives.base import DriveState, Excitation, Mode
-from hil.drives.cia402 import CanOpenDrive
+from hil.drives.base import DriveState
+from hil.drives.cia402.drive import CanOpenDrive
+from hil.drives.cia402.emulator import ENABLED, SWITCH_ON_DISABLED
+from hil.drives.connect import open_drive
+from hil.drives.emulated import canopen_emulator
 from hil.drives.sim import SimDrive
 from hil.errors import DriveStateError, LimitViolationError, ProfileError
 from hil.identify.inertia_friction import identify_inertia_friction
 from hil.identify.sine_run import analyse_sine_run
+from hil.motion import Excitation, Mode
 from hil.profile import UnitProfile
-from plant_sim.emulators.cia402_node import ENABLED, SWITCH_ON_DISABLED
-from plant_sim.emulators.sessions import canopen_emulator
 
 
 def _identify(drive: object, fs_hz: float) -> object:
@@ -156,7 +157,7 @@ def _eds_without(tmp_path: object, *indices: str) -> object:
     0x2200 recorder, hence no 0x2200:6 loop period, and/or no averaged torque 0x2077)."""
     from pathlib import Path
 
-    from plant_sim.emulators.cia402_node import default_eds_path
+    from hil.drives.cia402.emulator import default_eds_path
 
     kept, skip = [], False
     for line in default_eds_path().read_text().splitlines():

@@ -7,12 +7,12 @@ import numpy as np
 import pytest
 
 from conftest import sine
-from hil.drives.cia402 import CanOpenDrive
+from hil.drives.cia402.drive import CanOpenDrive
+from hil.drives.cia402.emulator import ENABLED, FAULT
+from hil.drives.emulated import canopen_emulator
+from hil.drives.emulator_faults import CanFaults
 from hil.errors import DriveCommunicationError, DriveFaultError
 from hil.profile import UnitProfile
-from plant_sim.emulators.cia402_node import ENABLED, FAULT
-from plant_sim.emulators.faults import CanFaults
-from plant_sim.emulators.sessions import canopen_emulator
 
 FS = 1000.0
 

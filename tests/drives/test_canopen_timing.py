@@ -16,13 +16,13 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from hil.drives.base import Excitation, Mode
-from hil.drives.cia402 import CanOpenDrive
+from hil.drives.cia402.drive import CanOpenDrive
+from hil.drives.cia402.emulator import INTERPOLATION_HOLD
+from hil.drives.emulated import canopen_emulator
 from hil.errors import IdentificationError
 from hil.identify.current_loop import CurrentLoopResult, torque_hold_s
+from hil.motion import Excitation, Mode
 from hil.profile import UnitProfile
-from plant_sim.emulators.cia402_node import INTERPOLATION_HOLD
-from plant_sim.emulators.sessions import canopen_emulator
 from plant_sim.params import PlantParams
 from protocols import test_current_loop as protocol
 

@@ -10,13 +10,13 @@ import pytest
 from canopen.profiles.p402 import BaseNode402
 
 from conftest import sine
-from hil.drives.base import Mode
-from hil.drives.cia402 import CanOpenDrive
+from hil.drives.cia402.drive import CanOpenDrive
+from hil.drives.cia402.emulator import ENABLED, FAULT, SWITCH_ON_DISABLED
+from hil.drives.emulated import canopen_emulator
+from hil.drives.emulator_faults import CanFaults
 from hil.errors import DriveFaultError, DriveStateError
+from hil.motion import Mode
 from hil.profile import UnitProfile
-from plant_sim.emulators.cia402_node import ENABLED, FAULT, SWITCH_ON_DISABLED
-from plant_sim.emulators.faults import CanFaults
-from plant_sim.emulators.sessions import canopen_emulator
 
 
 def _library_node(station: object) -> tuple[canopen.Network, BaseNode402]:

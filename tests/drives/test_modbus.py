@@ -8,13 +8,13 @@ import numpy as np
 import pytest
 
 from conftest import sine
-from hil.drives import open_drive
-from hil.drives.modbus import ModbusDrive
+from hil.drives.connect import open_drive
+from hil.drives.emulated import builtin_station, modbus_emulator
+from hil.drives.emulator_faults import ModbusFaults
+from hil.drives.modbus.drive import ModbusDrive
 from hil.drives.modbus.regmap import load_register_map
 from hil.errors import DriveCommunicationError, DriveFaultError
 from hil.profile import UnitProfile
-from plant_sim.emulators.faults import ModbusFaults
-from plant_sim.emulators.sessions import builtin_station, modbus_emulator
 
 
 def test_register_codec_word_order() -> None:

@@ -11,13 +11,13 @@ import pytest
 
 from conftest import sine
 from hil.drives.base import DriveState
-from hil.drives.modbus import ModbusDrive
+from hil.drives.emulated import modbus_emulator
+from hil.drives.emulator_faults import ModbusFaults
+from hil.drives.modbus.drive import ModbusDrive
+from hil.drives.modbus.emulator import WATCHDOG_FAULT
 from hil.errors import DriveCommunicationError
 from hil.profile import UnitProfile
 from hil.recording import Recording
-from plant_sim.emulators.faults import ModbusFaults
-from plant_sim.emulators.modbus_server import WATCHDOG_FAULT
-from plant_sim.emulators.sessions import modbus_emulator
 
 WATCHDOG_S = 0.5  # the emulator's default
 

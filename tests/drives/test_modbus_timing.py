@@ -17,15 +17,15 @@ import numpy as np
 import pytest
 
 from conftest import sine
-from hil.drives.base import Excitation, Mode
-from hil.drives.modbus import ModbusDrive
+from hil.drives.emulated import builtin_station, modbus_emulator, rated_torque_nm
+from hil.drives.modbus.drive import ModbusDrive
+from hil.drives.modbus.emulator import ModbusEmulator
 from hil.drives.modbus.regmap import load_register_map
 from hil.drives.station import ModbusStation
 from hil.errors import ProfileError
+from hil.motion import Excitation, Mode
 from hil.profile import UnitProfile
 from hil.recording import Recording
-from plant_sim.emulators.modbus_server import ModbusEmulator
-from plant_sim.emulators.sessions import builtin_station, modbus_emulator, rated_torque_nm
 from plant_sim.model import PlantTrace
 
 REGMAP = builtin_station("regmap_gimbal_hil_servo.toml")

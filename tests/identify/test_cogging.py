@@ -10,7 +10,6 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from hil.drives.base import Mode
 from hil.errors import IdentificationError
 from hil.identify.cogging import (
     COMPENSATION_FORMAT,
@@ -19,6 +18,7 @@ from hil.identify.cogging import (
     compensation_table,
     identify_cogging,
 )
+from hil.motion import Mode
 from hil.profile import load_profile
 from plant_sim.model import Plant
 from plant_sim.params import Harmonic

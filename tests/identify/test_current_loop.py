@@ -11,7 +11,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.linalg import expm
 
-from hil.drives.base import DriveInfo, Mode, check_limits
+from hil.drives.base import DriveInfo, check_limits
 from hil.drives.sim import SimDrive
 from hil.errors import IdentificationError
 from hil.identify.current_loop import (
@@ -23,6 +23,7 @@ from hil.identify.current_loop import (
     sampled_response,
     torque_hold_s,
 )
+from hil.motion import Mode
 from hil.profile import load_profile
 from plant_sim.model import Plant
 from plant_sim.params import PlantParams

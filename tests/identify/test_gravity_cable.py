@@ -10,7 +10,6 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from hil.drives.base import Mode
 from hil.errors import IdentificationError
 from hil.identify.estimate import Estimate
 from hil.identify.gravity_cable import (
@@ -22,6 +21,7 @@ from hil.identify.gravity_cable import (
     identify_gravity_cable,
     sweep_plan,
 )
+from hil.motion import Mode
 from hil.profile import load_profile
 from plant_sim.model import Plant
 

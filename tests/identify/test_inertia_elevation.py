@@ -10,12 +10,13 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from hil.drives.base import DriveInfo, Mode
+from hil.drives.base import DriveInfo
 from hil.drives.sim import SimDrive
 from hil.errors import IdentificationError
 from hil.identify.estimate import Estimate
 from hil.identify.inertia_elevation import fit_inertia_elevation, scale_by_gain
 from hil.identify.torque_constant import identify_torque_constant
+from hil.motion import Mode
 from hil.profile import load_profile
 from plant_sim.params import PlantParams
 from protocols import test_inertia_elevation as protocol

@@ -6,7 +6,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from hil.drives.base import DriveInfo, Mode, check_limits
+from hil.drives.base import DriveInfo, check_limits
+from hil.motion import Mode
 from hil.profile import load_profile
 from protocols import test_cogging, test_gravity_cable, test_stribeck
 

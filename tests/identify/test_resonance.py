@@ -11,7 +11,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from hil.drives.base import DriveInfo, Mode, check_limits
+from hil.drives.base import DriveInfo, check_limits
 from hil.drives.sim import SimDrive
 from hil.errors import IdentificationError
 from hil.identify.current_loop import sampled_response
@@ -23,6 +23,7 @@ from hil.identify.resonance import (
     two_mass_response,
     velocity_loop_bandwidth_hz,
 )
+from hil.motion import Mode
 from hil.profile import load_profile
 from protocols import test_resonance as protocol
 

@@ -13,7 +13,6 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from hil.calibration import CalibrationRun
-from hil.drives.base import Mode
 from hil.errors import IdentificationError
 from hil.identify.estimate import Estimate
 from hil.identify.stribeck import (
@@ -27,6 +26,7 @@ from hil.identify.stribeck import (
     staircase,
     stribeck_curve,
 )
+from hil.motion import Mode
 from hil.profile import load_profile
 from plant_sim.model import Plant
 

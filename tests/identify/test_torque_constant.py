@@ -11,7 +11,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from hil.drives.base import DriveInfo, Mode
+from hil.drives.base import DriveInfo
 from hil.drives.sim import SimDrive
 from hil.errors import IdentificationError
 from hil.identify.cogging import compensation_table
@@ -22,6 +22,7 @@ from hil.identify.torque_constant import (
     datasheet_torque_constant_nm_a,
     identify_torque_constant,
 )
+from hil.motion import Mode
 from hil.profile import load_profile
 from plant_sim.params import Harmonic
 from protocols import test_cogging, test_torque_constant

@@ -1,5 +1,2 @@
-"""CiA 402 servo drives over CANopen (``canopen`` + ``python-can``)."""
-
-from hil.drives.cia402.drive import CanOpenDrive
-
-__all__ = ["CanOpenDrive"]
+"""CiA 402 servo drives over CANopen (``canopen`` + ``python-can``): the client
+(``drive``, ``link``, ``acquire``) and, beside it, the drive emulator (``emulator``)."""

@@ -16,7 +16,6 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from hil.drives.base import Excitation, Mode
 from hil.drives.cia402.protocol import (
     CW_DISABLE_VOLTAGE,
     CW_ENABLE_OPERATION,
@@ -26,6 +25,7 @@ from hil.drives.cia402.protocol import (
     state_of,
 )
 from hil.errors import DriveError, DriveFaultError, DriveStateError
+from hil.motion import COMMAND_COLUMN, Excitation, Mode
 from hil.recording import Recording
 
 if TYPE_CHECKING:
@@ -33,11 +33,6 @@ if TYPE_CHECKING:
 
 log = logging.getLogger(__name__)
 
-COMMAND_COLUMN = {
-    Mode.TORQUE: "torque_cmd_nm",
-    Mode.VELOCITY: "velocity_cmd_rad_s",
-    Mode.POSITION: "position_cmd_rad",
-}
 MAX_CONSECUTIVE_LOST = 25
 RECORDER_SAMPLE = np.dtype([("pos", "<i4"), ("vel", "<i4"), ("torque", "<i2"), ("current", "<i2")])
 _LIMITS = {"h": (-32768, 32767), "i": (-(2**31), 2**31 - 1)}

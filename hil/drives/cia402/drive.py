@@ -7,16 +7,7 @@ import math
 import time
 from typing import Any
 
-from hil.drives.base import (
-    Drive,
-    DriveInfo,
-    DriveState,
-    DriveStatus,
-    Excitation,
-    Limits,
-    Mode,
-    check_limits,
-)
+from hil.drives.base import Drive, DriveInfo, DriveState, DriveStatus, check_limits
 from hil.drives.cia402 import acquire
 from hil.drives.cia402.link import CanLink
 from hil.drives.cia402.protocol import (
@@ -42,6 +33,7 @@ from hil.drives.cia402.protocol import (
 )
 from hil.drives.station import CanOpenStation
 from hil.errors import DriveCommunicationError, DriveError, DriveFaultError, DriveStateError
+from hil.motion import Excitation, Limits, Mode
 from hil.recording import Recording
 
 log = logging.getLogger(__name__)

@@ -29,7 +29,6 @@ import can
 import canopen
 from canopen.sdo.exceptions import SdoAbortedError, SdoCommunicationError
 
-from hil.drives.base import Mode
 from hil.drives.cia402.protocol import (
     RPDO_LAYOUT,
     SW_FAULT,
@@ -42,6 +41,7 @@ from hil.drives.cia402.protocol import (
 )
 from hil.drives.station import CanOpenStation
 from hil.errors import DriveCommunicationError, DriveFaultError, DriveStateError
+from hil.motion import Mode
 
 log = logging.getLogger(__name__)
 

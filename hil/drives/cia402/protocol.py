@@ -5,7 +5,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from hil.drives.base import Mode
+from hil.motion import Mode
 
 # statusword masks (CiA 402 table 30) -> state name
 _STATES = (

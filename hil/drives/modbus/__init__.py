@@ -1,5 +1,2 @@
-"""Drives over Modbus TCP / RTU (``pymodbus``, serial ports and URLs via ``pyserial``)."""
-
-from hil.drives.modbus.drive import ModbusDrive
-
-__all__ = ["ModbusDrive"]
+"""Drives over Modbus TCP / RTU (``pymodbus``, serial ports and URLs via ``pyserial``): the
+client (``drive``) and, beside it, the drive emulator (``emulator``)."""

@@ -34,16 +34,7 @@ from pymodbus.client import ModbusSerialClient, ModbusTcpClient
 from pymodbus.exceptions import ModbusException
 from pymodbus.framer import FramerType
 
-from hil.drives.base import (
-    Drive,
-    DriveInfo,
-    DriveState,
-    DriveStatus,
-    Excitation,
-    Limits,
-    Mode,
-    check_limits,
-)
+from hil.drives.base import Drive, DriveInfo, DriveState, DriveStatus, check_limits
 from hil.drives.modbus.regmap import (
     FEEDBACK,
     SETPOINT_INTERPOLATION,
@@ -61,6 +52,7 @@ from hil.errors import (
     DriveStateError,
     ProfileError,
 )
+from hil.motion import COMMAND_COLUMN, Excitation, Limits, Mode
 from hil.recording import Recording
 
 log = logging.getLogger(__name__)
@@ -76,11 +68,6 @@ EXCEPTION_NAMES = {
 }
 MIN_RATE_FRACTION = 0.7  # of the requested sample rate a run must achieve
 WATCHDOG_FAULT = 0x8130  # CiA-style life guard / heartbeat error: the drive lost its master
-COMMAND_COLUMN = {
-    Mode.TORQUE: "torque_cmd_nm",
-    Mode.VELOCITY: "velocity_cmd_rad_s",
-    Mode.POSITION: "position_cmd_rad",
-}
 
 
 def nice_rate(rate_hz: float) -> float:

@@ -37,7 +37,7 @@ from pymodbus.datastore import ModbusServerContext
 from pymodbus.datastore.context import ModbusBaseDeviceContext
 from pymodbus.server import ModbusTcpServer
 
-from hil.drives.base import Mode
+from hil.drives.emulator_faults import ModbusFaults
 from hil.drives.modbus.regmap import (
     FEEDBACK,
     SETPOINT_INTERPOLATION,
@@ -46,7 +46,7 @@ from hil.drives.modbus.regmap import (
     TORQUE_MEAN_WINDOW,
     load_register_map,
 )
-from plant_sim.emulators.faults import ModbusFaults
+from hil.motion import Mode
 from plant_sim.model import Plant
 from plant_sim.params import PlantParams
 

@@ -10,10 +10,10 @@ from importlib import resources
 from pathlib import Path
 from typing import Any
 
+from hil.drives.emulator_faults import CanFaults, ModbusFaults
 from hil.drives.station import CanOpenStation, ModbusStation, load_station
 from hil.errors import ProfileError
 from hil.profile import UnitProfile
-from plant_sim.emulators.faults import CanFaults, ModbusFaults
 from plant_sim.params import PlantParams
 
 CANOPEN_STATION = "station_canopen_emulator.toml"
@@ -21,7 +21,7 @@ MODBUS_STATION = "station_modbus_emulator.toml"
 
 
 def builtin_station(name: str) -> Path:
-    return Path(str(resources.files("fixtures").joinpath(name)))
+    return Path(str(resources.files("gimbal_hil_fixtures").joinpath(name)))
 
 
 def _plant(profile: UnitProfile, kind: str) -> PlantParams:
@@ -45,7 +45,7 @@ def canopen_emulator(
     **emulator_options: Any,
 ) -> Iterator[tuple[Any, CanOpenStation]]:
     """A running CiA 402 emulator on a private virtual channel, and its station."""
-    from plant_sim.emulators.cia402_node import Cia402Emulator
+    from hil.drives.cia402.emulator import Cia402Emulator
 
     station = load_station(builtin_station(CANOPEN_STATION))
     assert isinstance(station, CanOpenStation)
@@ -79,7 +79,7 @@ def modbus_emulator(
     **emulator_options: Any,
 ) -> Iterator[tuple[Any, ModbusStation]]:
     """A running Modbus emulator on 127.0.0.1 (TCP, or RTU framing over ``socket://``)."""
-    from plant_sim.emulators.modbus_server import ModbusEmulator
+    from hil.drives.modbus.emulator import ModbusEmulator
 
     station = load_station(builtin_station(MODBUS_STATION))
     assert isinstance(station, ModbusStation)

@@ -36,9 +36,9 @@ import numpy as np
 from canopen.objectdictionary import ODVariable
 from canopen.sdo.exceptions import SdoAbortedError
 
-from hil.drives.base import Mode
-from plant_sim.emulators.faults import CanFaults
-from plant_sim.emulators.recorder import DriveRecorder
+from hil.drives.cia402.emulator_recorder import DriveRecorder
+from hil.drives.emulator_faults import CanFaults
+from hil.motion import Mode
 from plant_sim.model import Plant
 from plant_sim.params import PlantParams
 
@@ -85,7 +85,7 @@ _FMT = {1: "?", 2: "b", 3: "h", 4: "i", 5: "B", 6: "H", 7: "I"}
 
 
 def default_eds_path() -> Path:
-    return Path(str(resources.files("fixtures").joinpath(EDS_NAME)))
+    return Path(str(resources.files("gimbal_hil_fixtures").joinpath(EDS_NAME)))
 
 
 class _BusOffFrame(can.Message):  # type: ignore[misc]

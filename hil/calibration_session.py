@@ -1,0 +1,202 @@
+"""A calibration session under pytest: the ``profile``, ``calibration`` and ``drive``
+fixtures, protocol ordering and outcomes, and the certificate hook.
+
+Registered by :mod:`hil.plugin` only when a run asks for calibration. Thin on purpose:
+fixtures look things up, state lives in ``config.stash``.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+from collections.abc import Generator, Iterator
+from pathlib import Path
+
+import pytest
+
+from hil.calibration import CalibrationRun
+from hil.certificate import write_certificate
+from hil.drives.base import Drive
+from hil.drives.connect import open_drive
+from hil.drives.kinds import SIMULATED_KINDS
+from hil.errors import HilError
+from hil.measurement import Outcome
+from hil.profile import UnitProfile, load_profile
+
+log = logging.getLogger(__name__)
+
+RUN_KEY = pytest.StashKey[CalibrationRun]()
+PROFILE_KEY = pytest.StashKey[UnitProfile]()
+CERTIFICATE_KEY = pytest.StashKey[Path]()
+PROTOCOL_MARK = "protocol"
+
+
+def start(config: pytest.Config) -> None:
+    """Check the calibration options and read the unit profile, before collection: a real
+    unit without a serial, or a profile that does not load, is one usage error (exit 4)."""
+    config.addinivalue_line("markers", f"{PROTOCOL_MARK}: a calibration protocol")
+    kind = drive_kind(config)
+    if config.getoption("--unit-serial") is None and kind not in SIMULATED_KINDS:
+        raise pytest.UsageError(f"--drive {kind} (a real unit) needs --unit-serial SERIAL")
+    try:
+        config.stash[PROFILE_KEY] = load_profile(config.getoption("--profile"))
+    except HilError as exc:
+        raise pytest.UsageError(str(exc)) from None
+
+
+def drive_kind(config: pytest.Config) -> str:
+    return str(config.getoption("--drive") or "sim")
+
+
+@pytest.fixture(scope="session")
+def profile(pytestconfig: pytest.Config) -> UnitProfile:
+    """The unit profile named by ``--profile`` (default: the built-in demo unit)."""
+    return pytestconfig.stash[PROFILE_KEY]
+
+
+@pytest.fixture(scope="session")
+def calibration(pytestconfig: pytest.Config, profile: UnitProfile) -> CalibrationRun:
+    """The calibration run collecting recordings and judged measurements for the certificate."""
+    if RUN_KEY not in pytestconfig.stash:
+        kind = drive_kind(pytestconfig)
+        serial = pytestconfig.getoption("--unit-serial")
+        if serial is None:  # a simulated unit (pytest_configure refused a real one)
+            serial = "SIM-0001"
+        pytestconfig.stash[RUN_KEY] = CalibrationRun(
+            profile=profile,
+            unit_serial=serial,
+            out_dir=Path(pytestconfig.getoption("--out")),
+            drive_kind=kind,
+        )
+    return pytestconfig.stash[RUN_KEY]
+
+
+@pytest.fixture(scope="session")
+def drive_connection(
+    pytestconfig: pytest.Config, profile: UnitProfile, calibration: CalibrationRun
+) -> Iterator[Drive]:
+    """The open drive for the whole session; closed (and disabled) at the end."""
+    with open_drive(
+        drive_kind(pytestconfig),
+        profile=profile,
+        unit_serial=calibration.unit_serial,
+        station=pytestconfig.getoption("--station"),
+        seed=pytestconfig.getoption("--seed"),
+    ) as drive:
+        calibration.drive_info = drive.info
+        yield drive
+
+
+@pytest.fixture(scope="module")
+def drive(request: pytest.FixtureRequest, drive_connection: Drive) -> Iterator[Drive]:
+    """The drive, enabled for one protocol module; afterwards quick-stopped if anything in
+    the module failed, and always disabled."""
+    failures_before = request.session.testsfailed
+    drive_connection.enable()
+    try:
+        yield drive_connection
+    finally:
+        try:
+            if request.session.testsfailed != failures_before:
+                drive_connection.quick_stop()
+        finally:
+            drive_connection.disable()
+
+
+@pytest.fixture(autouse=True)
+def _allure_measurements(request: pytest.FixtureRequest) -> Iterator[None]:
+    """With allure-pytest active, attach each protocol test's judged measurements."""
+    run = request.config.stash.get(RUN_KEY, None)
+    before = len(run.measurements) if run else 0
+    yield
+    run = request.config.stash.get(RUN_KEY, None)
+    if run is None or not request.config.pluginmanager.hasplugin("allure_pytest"):
+        return
+    import allure
+
+    for measurement in run.measurements[before:]:
+        allure.attach(
+            json.dumps(measurement.as_dict(), indent=2),
+            name=measurement.spec.name,
+            attachment_type=allure.attachment_type.JSON,
+        )
+
+
+def _protocol_name(item: pytest.Item) -> str | None:
+    mark = item.get_closest_marker(PROTOCOL_MARK)
+    if mark is None:
+        return None
+    return str(mark.args[0]) if mark.args else item.name
+
+
+def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    """Run protocols in the order of the profile's ``[protocols.*]`` tables (later protocols
+    may use earlier results, e.g. J for an acceleration correction); others keep their place."""
+    order = list(config.stash[PROFILE_KEY].protocols)
+    slots = [i for i, item in enumerate(items) if _protocol_name(item) is not None]
+
+    def rank(item: pytest.Item) -> int:
+        name = _protocol_name(item)
+        return order.index(name) if name in order else len(order)
+
+    ordered = sorted((items[i] for i in slots), key=rank)
+    for slot, item in zip(slots, ordered, strict=True):
+        items[slot] = item
+
+
+def pytest_runtest_setup(item: pytest.Item) -> None:
+    """A protocol the unit's profile does not configure is skipped, with the reason."""
+    name = _protocol_name(item)
+    if name is None:
+        return
+    if name not in item.config.stash[PROFILE_KEY].protocols:
+        pytest.skip(f"the unit profile has no [protocols.{name}] table: not calibrated here")
+
+
+@pytest.hookimpl(wrapper=True)
+def pytest_runtest_makereport(
+    item: pytest.Item, call: pytest.CallInfo[None]
+) -> Generator[None, pytest.TestReport, pytest.TestReport]:
+    report: pytest.TestReport = yield
+    name = _protocol_name(item)
+    run = item.config.stash.get(RUN_KEY, None)
+    if name is None or run is None:
+        return report
+    if report.failed:
+        outcome = Outcome.FAIL if report.when == "call" else Outcome.ERROR
+        if call.excinfo is not None and not isinstance(call.excinfo.value, AssertionError):
+            outcome = Outcome.ERROR
+        message = call.excinfo.exconly() if call.excinfo else report.longreprtext[:200]
+        run.report_protocol(name, outcome, f"{item.name}: {message[:300]}")
+    elif report.skipped:
+        reason = report.longrepr[2] if isinstance(report.longrepr, tuple) else "skipped"
+        run.report_skip(name, f"{item.name}: {reason}")
+    elif report.when == "call" and report.passed:
+        run.report_protocol(name, Outcome.PASS)
+    return report
+
+
+def pytest_sessionfinish(session: pytest.Session, exitstatus: int) -> None:
+    run = session.config.stash.get(RUN_KEY, None)
+    if run is None or not run.active:
+        return
+    aborted = exitstatus == pytest.ExitCode.INTERRUPTED or session.shouldstop is not False
+    session.config.stash[CERTIFICATE_KEY] = write_certificate(run, aborted=bool(aborted))
+
+
+def pytest_terminal_summary(terminalreporter: pytest.TerminalReporter) -> None:
+    config = terminalreporter.config
+    path = config.stash.get(CERTIFICATE_KEY, None)
+    run = config.stash.get(RUN_KEY, None)
+    if path is None or run is None:
+        return
+    terminalreporter.section("gimbal-hil calibration")
+    for m in run.measurements:
+        e = m.estimate
+        terminalreporter.write_line(
+            f"{m.spec.name:<26}{e.value:>12.6g} ± {e.expanded_uncertainty:<9.2g}"
+            f"{m.spec.unit:<11}{m.outcome.value}"
+        )
+    outcome = json.loads(path.read_text(encoding="utf-8"))["outcome"]
+    terminalreporter.write_line(f"certificate: {path}")
+    terminalreporter.write_line(f"unit {run.unit_serial}: {outcome}")

@@ -1,0 +1,96 @@
+"""Open a drive by kind: the simulator, an emulator started here, or a real drive from a
+station file; every kind is left disabled and closed on leaving."""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from contextlib import contextmanager
+from pathlib import Path
+
+from hil.drives.base import Drive
+from hil.drives.kinds import DRIVE_KINDS
+from hil.errors import ProfileError
+from hil.profile import UnitProfile
+
+
+@contextmanager
+def open_drive(
+    kind: str,
+    *,
+    profile: UnitProfile,
+    unit_serial: str,
+    station: Path | None = None,
+    seed: int = 0,
+) -> Iterator[Drive]:
+    """Open the drive named by ``kind``; on leaving, the drive is quick-stopped on error
+    and always disabled and closed. Emulator kinds start (and stop) their emulator.
+    """
+    if kind == "sim":
+        from hil.drives.sim import SimDrive
+
+        if profile.plant is None:
+            raise ProfileError("--drive sim needs a [plant] table", source=profile.source)
+        with SimDrive(
+            profile.plant,
+            limits=profile.limits,
+            fs_hz=profile.sample_rate_hz,
+            seed=seed,
+            serial=unit_serial,
+        ) as drive:
+            yield drive
+        return
+    if kind in ("canopen", "canopen-emulator", "modbus", "modbus-emulator"):
+        with _open_field_drive(
+            kind, profile=profile, unit_serial=unit_serial, station=station, seed=seed
+        ) as drive:
+            yield drive
+        return
+    raise ProfileError(f"unknown drive kind '{kind}' (known: {', '.join(DRIVE_KINDS)})")
+
+
+@contextmanager
+def _open_field_drive(
+    kind: str, *, profile: UnitProfile, unit_serial: str, station: Path | None, seed: int
+) -> Iterator[Drive]:
+    """The CANopen and Modbus kinds: a real drive from ``station``, or an emulator of
+    ``profile.plant`` started here (and stopped on leaving)."""
+    from hil.drives.station import CanOpenStation, ModbusStation, load_station
+
+    if kind in ("canopen", "modbus"):
+        if station is None:
+            raise ProfileError(f"--drive {kind} needs --station FILE (a station TOML)")
+        loaded = load_station(station)
+        wanted = CanOpenStation if kind == "canopen" else ModbusStation
+        if not isinstance(loaded, wanted):
+            raise ProfileError(f"not a {kind} station file", source=str(station))
+        with _backend(loaded, profile) as drive:
+            yield drive
+        return
+    from hil.drives.emulated import canopen_emulator, modbus_emulator
+
+    serial = int.from_bytes(unit_serial.encode()[-4:].rjust(4, b"\0"), "big")
+    if kind == "canopen-emulator":
+        with canopen_emulator(profile, seed=seed, serial=serial) as (_, emulated):  # noqa: SIM117
+            with _backend(emulated, profile) as drive:
+                yield drive
+        return
+    with modbus_emulator(profile, seed=seed) as (_, emulated_modbus):  # noqa: SIM117
+        with _backend(emulated_modbus, profile) as drive:
+            yield drive
+
+
+@contextmanager
+def _backend(station: object, profile: UnitProfile) -> Iterator[Drive]:
+    from hil.drives.station import CanOpenStation
+
+    drive: Drive
+    if isinstance(station, CanOpenStation):
+        from hil.drives.cia402.drive import CanOpenDrive
+
+        drive = CanOpenDrive(station, limits=profile.limits)
+    else:
+        from hil.drives.modbus.drive import ModbusDrive
+
+        drive = ModbusDrive(station, limits=profile.limits)  # type: ignore[arg-type]
+    with drive:
+        yield drive

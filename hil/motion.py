@@ -1,0 +1,58 @@
+"""The motion vocabulary every layer shares: control modes, the unit's envelope, a sampled
+command trajectory, and the recording column each mode's command goes to.
+
+It sits below the drives, the simulator and the protocols; it imports nothing of theirs.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from enum import Enum
+
+import numpy as np
+from numpy.typing import NDArray
+
+FloatArray = NDArray[np.float64]
+
+
+class Mode(Enum):
+    """Control mode of an excitation; command units: N·m, rad/s, rad."""
+
+    TORQUE = "torque"
+    VELOCITY = "velocity"
+    POSITION = "position"
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class Limits:
+    """The unit's safe envelope; every backend refuses commands outside it before moving."""
+
+    velocity_rad_s: float
+    torque_nm: float
+    travel_min_rad: float
+    travel_max_rad: float
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class Excitation:
+    """A sampled command trajectory: one sample per control period at ``fs_hz``."""
+
+    name: str
+    mode: Mode
+    command: FloatArray
+    fs_hz: float
+    metadata: dict[str, str] = field(default_factory=dict)
+
+    @property
+    def duration_s(self) -> float:
+        return len(self.command) / self.fs_hz
+
+
+COMMAND_COLUMN: dict[Mode, str] = {
+    Mode.TORQUE: "torque_cmd_nm",
+    Mode.VELOCITY: "velocity_cmd_rad_s",
+    Mode.POSITION: "position_cmd_rad",
+}
+"""The recording column that holds a command of each mode."""
+
+MODE_OF_COLUMN: dict[str, Mode] = {column: mode for mode, column in COMMAND_COLUMN.items()}
