@@ -20,6 +20,7 @@ from hil.drives.base import Drive
 from hil.drives.connect import open_drive
 from hil.drives.kinds import SIMULATED_KINDS
 from hil.errors import HilError
+from hil.gum import rounded_pair
 from hil.measurement import Outcome
 from hil.profile import UnitProfile, load_profile
 
@@ -192,10 +193,9 @@ def pytest_terminal_summary(terminalreporter: pytest.TerminalReporter) -> None:
         return
     terminalreporter.section("gimbal-hil calibration")
     for m in run.measurements:
-        e = m.estimate
+        value, expanded = rounded_pair(m.estimate.value, m.estimate.expanded_uncertainty)
         terminalreporter.write_line(
-            f"{m.spec.name:<26}{e.value:>12.6g} ± {e.expanded_uncertainty:<9.2g}"
-            f"{m.spec.unit:<11}{m.outcome.value}"
+            f"{m.spec.name:<32}{value:>12} ± {expanded:<9}{m.spec.unit:<11}{m.outcome.value}"
         )
     outcome = json.loads(path.read_text(encoding="utf-8"))["outcome"]
     terminalreporter.write_line(f"certificate: {path}")

@@ -9,6 +9,7 @@ import math
 from dataclasses import dataclass
 from enum import StrEnum
 
+from hil.gum import format_result
 from hil.identify.estimate import Estimate
 from hil.profile import MeasurementSpec
 
@@ -45,7 +46,7 @@ class Measurement:
         """``name = value ± U unit → OUTCOME (limits [lo, hi])``, for logs and test reports."""
         e, spec = self.estimate, self.spec
         return (
-            f"{spec.name} = {e.value:.6g} ± {e.expanded_uncertainty:.2g} {spec.unit} → "
+            f"{spec.name} = {format_result(e.value, e.expanded_uncertainty, spec.unit)} → "
             f"{self.outcome.value} (limits [{spec.lower_limit:.6g}, {spec.upper_limit:.6g}])"
         )
 

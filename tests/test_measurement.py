@@ -133,12 +133,20 @@ def test_protocol_settings_refuse_unread_keys() -> None:
 
 
 @pytest.mark.parametrize(
-    ("value", "conforms"), [(1.0, True), (1.085, True), (1.11, False), (math.nan, False)]
+    ("value", "conforms", "shown"),
+    [
+        (1.0, True, "1.0000 ± 0.0020"),
+        (1.085, True, "1.0850 ± 0.0020"),
+        (1.11, False, "1.1100 ± 0.0020"),
+        (math.nan, False, "nan ± 0.002"),
+    ],
 )
-def test_a_measurement_conforms_when_inside_its_limits(value: float, conforms: bool) -> None:
+def test_a_measurement_conforms_when_inside_its_limits(
+    value: float, conforms: bool, shown: str
+) -> None:
     estimate = Estimate(name="x", value=value, standard_uncertainty=0.001, unit="N·m")
     outcome = judge(estimate, SPEC)
     measurement = Measurement(protocol="p", spec=SPEC, estimate=estimate, outcome=outcome)
     assert measurement.conforms is conforms
-    assert measurement.verdict().startswith(f"x = {value:.6g} ± 0.002 N·m → {outcome.value}")
+    assert measurement.verdict().startswith(f"x = {shown} N·m → {outcome.value}")
     assert "limits [0.9, 1.1]" in measurement.verdict()

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 from typing import Any
 
+from hil.gum import rounded_pair
+
 
 def render_text(cert: dict[str, Any]) -> str:
     unit, dates = cert["unit"], cert["dates"]
@@ -22,13 +24,17 @@ def render_text(cert: dict[str, Any]) -> str:
         f"Machine time   : {cert['machine_time']['motion_time_s']:.1f} s of motion, "
         f"{cert['machine_time']['wall_time_s']:.1f} s wall",
         "",
-        f"{'parameter':<26}{'value':>13}{'U (k)':>18}  {'unit':<11}{'limits':<25}outcome",
+        "Values as GUM 7.2.6 asks: U (k ≈ 2, ~95 %) to two significant digits, the value to",
+        "the same decimal place; certificate.json keeps full precision.",
+        "",
+        f"{'parameter':<32}{'value':>13}{'U':>11} {'(k)':<7}{'unit':<11}{'limits':<25}outcome",
     ]
     for r in cert["results"]:
         limits = f"[{r['lower_limit']:.4g}, {r['upper_limit']:.4g}]"
+        value, expanded = rounded_pair(r["value"], r["expanded_uncertainty"])
         lines.append(
-            f"{r['parameter']:<26}{r['value']:>13.6g}{r['expanded_uncertainty']:>12.2g} "
-            f"({r['coverage_factor']:.2f})  {r['unit']:<11}{limits:<25}{r['outcome']}"
+            f"{r['parameter']:<32}{value:>13}{expanded:>11} ({r['coverage_factor']:.2f}) "
+            f"{r['unit']:<11}{limits:<25}{r['outcome']}"
         )
     lines += ["", "Protocols:"]
     for name, p in cert["method"]["protocols"].items():
