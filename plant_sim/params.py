@@ -4,9 +4,10 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping
-from dataclasses import dataclass, fields, replace
-from typing import Any
+from dataclasses import MISSING, dataclass, fields, replace
+from typing import Any, get_type_hints
 
+from hil.config import ConfigTable
 from hil.errors import ProfileError
 
 
@@ -152,39 +153,54 @@ _HARMONIC_FIELDS = ("cogging", "kt_ripple")
 
 
 def plant_from_mapping(data: Mapping[str, Any], *, source: str = "[plant]") -> PlantParams:
-    """Build :class:`PlantParams` from a TOML table, naming any unknown or bad key."""
-    known = {f.name for f in fields(PlantParams)}
+    """Build :class:`PlantParams` from a parsed ``[plant]`` table (see :func:`plant_from_table`)."""
+    return plant_from_table(ConfigTable(data, table="[plant]", source=source))
+
+
+def plant_from_table(table: ConfigTable) -> PlantParams:
+    """Build :class:`PlantParams` from a ``[plant]`` table.
+
+    Every key is a field of :class:`PlantParams`, of that field's type; harmonics are lists
+    of ``{order, amplitude, phase_rad}``.
+
+    Raises
+    ------
+    ProfileError
+        An unknown key, a wrong type or a value out of range, naming file, table and key.
+    """
+    hints = get_type_hints(PlantParams)
     kwargs: dict[str, Any] = {}
-    for key, value in data.items():
-        if key not in known:
-            raise ProfileError(f"unknown plant parameter '{key}'", source=source)
-        if key in _HARMONIC_FIELDS:
-            kwargs[key] = tuple(_harmonic(item, f"{source}.{key}") for item in value)
-        else:
-            kwargs[key] = value
+    for f in fields(PlantParams):
+        if f.name not in table and f.default is not MISSING:
+            continue  # required fields fall through and are reported missing
+        kind = hints[f.name]
+        if f.name in _HARMONIC_FIELDS:
+            kwargs[f.name] = tuple(_harmonic(item) for item in table.table_list(f.name))
+        elif kind is bool:
+            kwargs[f.name] = table.boolean(f.name)
+        elif kind is int:
+            kwargs[f.name] = table.integer(f.name)
+        else:  # float or float | None
+            kwargs[f.name] = table.number(f.name)
+    table.done()
     try:
         return PlantParams(**kwargs)
-    except TypeError as exc:
-        raise ProfileError(str(exc), source=source) from exc
     except ProfileError as exc:
-        raise ProfileError(exc.message, source=source) from exc
+        raise ProfileError(f"{table.table} {exc.message}", source=table.source) from None
 
 
-def _harmonic(item: Any, source: str) -> Harmonic:
-    if not isinstance(item, Mapping):
-        raise ProfileError("each harmonic is a table {order, amplitude, phase_rad}", source=source)
-    try:
-        return Harmonic(
-            order=int(item["order"]),
-            amplitude=float(item["amplitude"]),
-            phase_rad=float(item.get("phase_rad", 0.0)),
-        )
-    except KeyError as exc:
-        raise ProfileError(f"harmonic lacks {exc}", source=source) from exc
+def _harmonic(item: ConfigTable) -> Harmonic:
+    harmonic = Harmonic(
+        order=item.integer("order"),
+        amplitude=item.number("amplitude"),
+        phase_rad=item.number("phase_rad", 0.0),
+    )
+    item.done()
+    return harmonic
 
 
 def plant_to_mapping(params: PlantParams) -> dict[str, Any]:
-    """Inverse of :func:`plant_from_mapping` (only non-default values, TOML-ready)."""
+    """Inverse of :func:`plant_from_table` (only non-default values, TOML-ready)."""
     out: dict[str, Any] = {}
     for f in fields(PlantParams):
         value = getattr(params, f.name)

@@ -6,10 +6,10 @@ import dataclasses
 import uuid
 from collections.abc import Iterator
 from contextlib import contextmanager
-from importlib import resources
 from pathlib import Path
 from typing import Any
 
+from hil.config import builtin_fixture
 from hil.drives.emulator_faults import CanFaults, ModbusFaults
 from hil.drives.station import CanOpenStation, ModbusStation, load_station
 from hil.errors import ProfileError
@@ -21,7 +21,7 @@ MODBUS_STATION = "station_modbus_emulator.toml"
 
 
 def builtin_station(name: str) -> Path:
-    return Path(str(resources.files("gimbal_hil_fixtures").joinpath(name)))
+    return builtin_fixture(name)
 
 
 def _plant(profile: UnitProfile, kind: str) -> PlantParams:

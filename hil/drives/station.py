@@ -11,14 +11,12 @@ file name that does not exist there is looked up in the built-in ``fixtures/``.
 
 from __future__ import annotations
 
-import math
-import tomllib
 from collections.abc import Mapping
 from dataclasses import dataclass, field
-from importlib import resources
 from pathlib import Path
 from typing import Any
 
+from hil.config import ConfigTable, builtin_fixture, read_toml
 from hil.errors import ProfileError
 
 SYNC_PACINGS = ("realtime", "lockstep")
@@ -99,29 +97,34 @@ Station = CanOpenStation | ModbusStation
 
 
 def load_station(path: str | Path) -> Station:
-    """Read a station file. Raises :class:`ProfileError` naming the file and key."""
+    """Read a station file.
+
+    Raises
+    ------
+    ProfileError
+        Naming the file, the table and the key: missing or unknown, wrong type, out of range.
+    """
     path = Path(path)
-    source = str(path)
     if not path.is_file():
-        raise ProfileError("station file not found", source=source)
-    try:
-        data = tomllib.loads(path.read_text(encoding="utf-8"))
-    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
-        raise ProfileError(f"not valid TOML: {exc}", source=source) from exc
-    return station_from_mapping(data, source=source, base_dir=path.parent)
+        raise ProfileError("station file not found", source=str(path))
+    data, _ = read_toml(path)
+    return station_from_mapping(data, source=str(path), base_dir=path.parent)
 
 
 def station_from_mapping(data: Mapping[str, Any], *, source: str, base_dir: Path) -> Station:
-    if "canopen" in data and "modbus" in data:
-        raise ProfileError("a station has either [canopen] or [modbus], not both", source=source)
-    try:
-        if "canopen" in data:
-            return _canopen(data["canopen"], data.get("scaling", {}), source, base_dir)
-        if "modbus" in data:
-            return _modbus(data["modbus"], source, base_dir)
-    except (TypeError, ValueError) as exc:
-        raise ProfileError(f"bad value: {exc}", source=source) from exc
-    raise ProfileError("missing table [canopen] or [modbus]", source=source)
+    """Build a station from a parsed station file (one of ``[canopen]`` or ``[modbus]``)."""
+    document = ConfigTable.root(data, source=source)
+    if ("canopen" in document) == ("modbus" in document):
+        raise ProfileError("a station has one table [canopen] or [modbus]", source=source)
+    station: Station
+    if "canopen" in document:
+        station = _canopen(
+            document.table_at("canopen"), document.table_at("scaling", required=False), base_dir
+        )
+    else:
+        station = _modbus(document.table_at("modbus"), base_dir)
+    document.done()
+    return station
 
 
 def resolve_fixture(name: str, *, base_dir: Path, source: str) -> Path:
@@ -131,7 +134,7 @@ def resolve_fixture(name: str, *, base_dir: Path, source: str) -> Path:
         candidate = base_dir / candidate
     if candidate.is_file():
         return candidate
-    builtin = Path(str(resources.files("gimbal_hil_fixtures").joinpath(Path(name).name)))
+    builtin = builtin_fixture(Path(name).name)
     if builtin.is_file():
         return builtin
     raise ProfileError(
@@ -139,155 +142,70 @@ def resolve_fixture(name: str, *, base_dir: Path, source: str) -> Path:
     )
 
 
-_CANOPEN_KEYS = {
-    "interface",
-    "channel",
-    "bitrate",
-    "node_id",
-    "eds",
-    "sync_period_s",
-    "sync_pacing",
-    "max_bus_load",
-    "sdo_timeout_s",
-    "pdo_timeout_s",
-    "heartbeat_period_s",
-    "heartbeat_timeout_s",
-    "state_timeout_s",
-    "acquisition",
-    "lost_sample_fraction",
-    "options",
-    "torque_sample",
-    "control_period_s",
-}
-_SCALING_KEYS = {
-    "rated_torque_nm",
-    "rated_current_a",
-    "counts_per_rev",
-    "velocity_units_per_rad_s",
-    "quick_stop_option_code",
-    "quick_stop_decel_rad_s2",
-}
-
-
-def _canopen(
-    table: Mapping[str, Any], scaling: Mapping[str, Any], source: str, base_dir: Path
-) -> CanOpenStation:
-    _no_unknown(table, _CANOPEN_KEYS, f"{source} [canopen]")
-    _no_unknown(scaling, _SCALING_KEYS, f"{source} [scaling]")
-    for key in ("interface", "channel", "node_id", "eds"):
-        if key not in table:
-            raise ProfileError(f"[canopen] lacks '{key}'", source=source)
-    node_id = int(table["node_id"])
+def _canopen(table: ConfigTable, scaling: ConfigTable, base_dir: Path) -> CanOpenStation:
+    node_id = table.integer("node_id")
     if not 1 <= node_id <= 127:
-        raise ProfileError(f"[canopen] node_id must be 1..127, got {node_id}", source=source)
-    pacing = str(table.get("sync_pacing", "realtime"))
-    if pacing not in SYNC_PACINGS:
-        raise ProfileError(f"[canopen] sync_pacing must be one of {SYNC_PACINGS}", source=source)
-    acquisition = str(table.get("acquisition", "stream"))
-    if acquisition not in ACQUISITIONS:
-        raise ProfileError(f"[canopen] acquisition must be one of {ACQUISITIONS}", source=source)
-    torque_sample = str(table.get("torque_sample", "auto"))
-    if torque_sample not in TORQUE_SAMPLES:
-        raise ProfileError(
-            f"[canopen] torque_sample must be one of {TORQUE_SAMPLES}", source=source
-        )
-    where = f"{source} [canopen]"
+        raise table.error("node_id", f"must be 1..127, got {node_id}")
     station = CanOpenStation(
-        source=source,
-        interface=str(table["interface"]),
-        channel=str(table["channel"]),
-        bitrate=int(table.get("bitrate", 1_000_000)),
+        source=table.source,
+        interface=table.string("interface"),
+        channel=table.string("channel"),
+        bitrate=table.integer("bitrate", 1_000_000),
         node_id=node_id,
-        eds_path=resolve_fixture(str(table["eds"]), base_dir=base_dir, source=source),
-        sync_period_s=_pos(table, "sync_period_s", 0.001, where),
-        sync_pacing=pacing,
-        max_bus_load=_pos(table, "max_bus_load", 0.6, where),
-        sdo_timeout_s=_pos(table, "sdo_timeout_s", 0.5, where),
-        pdo_timeout_s=_pos(table, "pdo_timeout_s", 0.1, where),
-        heartbeat_period_s=_pos(table, "heartbeat_period_s", 0.1, where),
-        heartbeat_timeout_s=_pos(table, "heartbeat_timeout_s", 1.0, where),
-        state_timeout_s=_pos(table, "state_timeout_s", 1.0, where),
-        acquisition=acquisition,
-        lost_sample_fraction=float(table.get("lost_sample_fraction", 0.02)),
-        torque_sample=torque_sample,
-        control_period_s=_opt(table, "control_period_s", where),
-        rated_torque_nm=_opt(scaling, "rated_torque_nm", f"{source} [scaling]"),
-        rated_current_a=_opt(scaling, "rated_current_a", f"{source} [scaling]"),
-        counts_per_rev=None if "counts_per_rev" not in scaling else int(scaling["counts_per_rev"]),
-        velocity_units_per_rad_s=_opt(scaling, "velocity_units_per_rad_s", f"{source} [scaling]"),
-        quick_stop_option_code=int(scaling.get("quick_stop_option_code", 2)),
-        quick_stop_decel_rad_s2=_pos(scaling, "quick_stop_decel_rad_s2", 20.0, source),
-        can_options=dict(table.get("options", {})),
+        eds_path=resolve_fixture(table.string("eds"), base_dir=base_dir, source=table.source),
+        sync_period_s=table.positive("sync_period_s", 0.001),
+        sync_pacing=table.choice("sync_pacing", SYNC_PACINGS, "realtime"),
+        max_bus_load=table.positive("max_bus_load", 0.6),
+        sdo_timeout_s=table.positive("sdo_timeout_s", 0.5),
+        pdo_timeout_s=table.positive("pdo_timeout_s", 0.1),
+        heartbeat_period_s=table.positive("heartbeat_period_s", 0.1),
+        heartbeat_timeout_s=table.positive("heartbeat_timeout_s", 1.0),
+        state_timeout_s=table.positive("state_timeout_s", 1.0),
+        acquisition=table.choice("acquisition", ACQUISITIONS, "stream"),
+        lost_sample_fraction=table.non_negative("lost_sample_fraction", 0.02),
+        torque_sample=table.choice("torque_sample", TORQUE_SAMPLES, "auto"),
+        control_period_s=_optional_positive(table, "control_period_s"),
+        rated_torque_nm=_optional_positive(scaling, "rated_torque_nm"),
+        rated_current_a=_optional_positive(scaling, "rated_current_a"),
+        counts_per_rev=scaling.integer("counts_per_rev") if "counts_per_rev" in scaling else None,
+        velocity_units_per_rad_s=_optional_positive(scaling, "velocity_units_per_rad_s"),
+        quick_stop_option_code=scaling.integer("quick_stop_option_code", 2),
+        quick_stop_decel_rad_s2=scaling.positive("quick_stop_decel_rad_s2", 20.0),
+        can_options=dict(table.table_at("options", required=False).values),  # python-can's
     )
+    table.done()
+    scaling.done()
     if station.max_bus_load > 1:
-        raise ProfileError("[canopen] max_bus_load is a fraction (0..1]", source=source)
+        raise table.error("max_bus_load", "is a fraction (0..1]")
     return station
 
 
-_MODBUS_KEYS = {
-    "transport",
-    "register_map",
-    "host",
-    "port",
-    "serial_port",
-    "baudrate",
-    "parity",
-    "stopbits",
-    "unit_id",
-    "timeout_s",
-    "max_poll_rate_hz",
-    "watchdog_s",
-    "torque_sample",
-}
-
-
-def _modbus(table: Mapping[str, Any], source: str, base_dir: Path) -> ModbusStation:
-    _no_unknown(table, _MODBUS_KEYS, f"{source} [modbus]")
-    transport = str(table.get("transport", "tcp"))
-    if transport not in ("tcp", "rtu"):
-        raise ProfileError("[modbus] transport must be 'tcp' or 'rtu'", source=source)
-    if "register_map" not in table:
-        raise ProfileError("[modbus] lacks 'register_map'", source=source)
-    if transport == "rtu" and not table.get("serial_port"):
-        raise ProfileError("[modbus] transport 'rtu' needs 'serial_port'", source=source)
-    torque_sample = str(table.get("torque_sample", "auto"))
-    if torque_sample not in TORQUE_SAMPLES:
-        raise ProfileError(f"[modbus] torque_sample must be one of {TORQUE_SAMPLES}", source=source)
-    where = f"{source} [modbus]"
-    return ModbusStation(
-        source=source,
+def _modbus(table: ConfigTable, base_dir: Path) -> ModbusStation:
+    transport = table.choice("transport", ("tcp", "rtu"), "tcp")
+    serial_port = table.string("serial_port", "")
+    if transport == "rtu" and not serial_port:
+        raise table.error("serial_port", "transport 'rtu' needs it")
+    station = ModbusStation(
+        source=table.source,
         transport=transport,
         register_map_path=resolve_fixture(
-            str(table["register_map"]), base_dir=base_dir, source=source
+            table.string("register_map"), base_dir=base_dir, source=table.source
         ),
-        host=str(table.get("host", "127.0.0.1")),
-        port=int(table.get("port", 502)),
-        serial_port=str(table.get("serial_port", "")),
-        baudrate=int(table.get("baudrate", 115200)),
-        parity=str(table.get("parity", "N")),
-        stopbits=int(table.get("stopbits", 1)),
-        unit_id=int(table.get("unit_id", 1)),
-        timeout_s=_pos(table, "timeout_s", 0.5, where),
-        max_poll_rate_hz=_pos(table, "max_poll_rate_hz", 1000.0, where),
-        watchdog_s=_pos(table, "watchdog_s", 0.5, where),
-        torque_sample=torque_sample,
+        host=table.string("host", "127.0.0.1"),
+        port=table.integer("port", 502),
+        serial_port=serial_port,
+        baudrate=table.integer("baudrate", 115200),
+        parity=table.choice("parity", ("N", "E", "O"), "N"),
+        stopbits=table.integer("stopbits", 1),
+        unit_id=table.integer("unit_id", 1),
+        timeout_s=table.positive("timeout_s", 0.5),
+        max_poll_rate_hz=table.positive("max_poll_rate_hz", 1000.0),
+        watchdog_s=table.positive("watchdog_s", 0.5),
+        torque_sample=table.choice("torque_sample", TORQUE_SAMPLES, "auto"),
     )
+    table.done()
+    return station
 
 
-def _no_unknown(table: Mapping[str, Any], known: set[str], source: str) -> None:
-    if not isinstance(table, Mapping):
-        raise ProfileError("must be a table", source=source)
-    unknown = sorted(set(table) - known)
-    if unknown:
-        raise ProfileError(f"unknown key(s) {', '.join(unknown)}", source=source)
-
-
-def _pos(table: Mapping[str, Any], key: str, default: float, source: str) -> float:
-    value = float(table.get(key, default))
-    if not (math.isfinite(value) and value > 0):
-        raise ProfileError(f"'{key}' must be a positive number, got {value!r}", source=source)
-    return value
-
-
-def _opt(table: Mapping[str, Any], key: str, source: str) -> float | None:
-    return None if key not in table else _pos(table, key, 1.0, source)
+def _optional_positive(table: ConfigTable, key: str) -> float | None:
+    return table.positive(key) if key in table else None

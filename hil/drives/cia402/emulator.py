@@ -26,7 +26,6 @@ import logging
 import math
 import struct
 import threading
-from importlib import resources
 from pathlib import Path
 from typing import Any
 
@@ -36,6 +35,7 @@ import numpy as np
 from canopen.objectdictionary import ODVariable
 from canopen.sdo.exceptions import SdoAbortedError
 
+from hil.config import builtin_fixture
 from hil.drives.cia402.emulator_recorder import DriveRecorder
 from hil.drives.emulator_faults import CanFaults
 from hil.motion import Mode
@@ -85,7 +85,7 @@ _FMT = {1: "?", 2: "b", 3: "h", 4: "i", 5: "B", 6: "H", 7: "I"}
 
 
 def default_eds_path() -> Path:
-    return Path(str(resources.files("gimbal_hil_fixtures").joinpath(EDS_NAME)))
+    return builtin_fixture(EDS_NAME)
 
 
 class _BusOffFrame(can.Message):  # type: ignore[misc]

@@ -3,12 +3,12 @@
 from __future__ import annotations
 
 import struct
-import tomllib
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Literal
+from typing import Literal
 
+from hil.config import ConfigTable, read_toml
 from hil.errors import ProfileError
 
 TYPES = {
@@ -18,6 +18,7 @@ TYPES = {
     "uint32": ("I", 2),
     "float32": ("f", 2),
 }
+ORDERS = ("big", "little")
 REQUIRED = (
     "status_word",
     "fault_code",
@@ -118,21 +119,38 @@ class RegisterMap:
 
 
 def load_register_map(path: str | Path) -> RegisterMap:
+    """Read a register map.
+
+    Raises
+    ------
+    ProfileError
+        Naming the file, the table and the key: missing or unknown, wrong type, out of range,
+        or a register that cannot serve its role.
+    """
     path = Path(path)
     source = str(path)
-    try:
-        data = tomllib.loads(path.read_text(encoding="utf-8"))
-    except (OSError, tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
-        raise ProfileError(f"cannot read register map: {exc}", source=source) from exc
-    device = data.get("device", {})
-    byte_order = str(device.get("byte_order", "big"))
-    word_order = str(device.get("word_order", "big"))
-    registers: dict[str, Register] = {}
-    for name, spec in data.get("registers", {}).items():
-        registers[name] = _register(name, spec, byte_order, word_order, source)
+    document = ConfigTable.root(read_toml(path)[0], source=source)
+    device = document.table_at("device", required=False)
+    byte_order = device.choice("byte_order", ORDERS, "big")
+    word_order = device.choice("word_order", ORDERS, "big")
+    model = device.string("model", path.stem)
+    max_registers_per_read = device.integer("max_registers_per_read", 125)
+    frame_gap_s = device.non_negative("frame_gap_s", 0.0)
+    control_period = device.positive("control_period_s") if "control_period_s" in device else None
+    device.done()
+    registers = {
+        name: _register(name, table, byte_order, word_order)
+        for name, table in document.tables("registers").items()
+    }
     missing = [name for name in REQUIRED if name not in registers]
     if missing:
-        raise ProfileError(f"register map lacks {', '.join(missing)}", source=source)
+        raise ProfileError(f"[registers] lacks {', '.join(missing)}", source=source)
+    bits = document.table_at("bits", required=False)
+    control_bits = _integers(bits.table_at("control", required=False))
+    status_bits = _integers(bits.table_at("status", required=False))
+    bits.done()
+    modes = _integers(document.table_at("modes", required=False))
+    document.done()
     for name in ("control_word", "mode", "velocity_cmd", "torque_cmd", "position_cmd"):
         if not registers[name].writable:
             raise ProfileError(
@@ -166,53 +184,39 @@ def load_register_map(path: str | Path) -> RegisterMap:
             f"register '{SETPOINT_INTERPOLATION}' must be writable (access = \"rw\")",
             source=f"{source} [registers.{SETPOINT_INTERPOLATION}]",
         )
-    control_period = device.get("control_period_s")
-    if control_period is not None and not (
-        isinstance(control_period, int | float) and control_period > 0
-    ):
-        raise ProfileError(
-            f"[device] control_period_s must be a positive number, got {control_period!r}",
-            source=source,
-        )
-    bits = data.get("bits", {})
     return RegisterMap(
         source=source,
-        model=str(device.get("model", path.stem)),
+        model=model,
         registers=registers,
-        max_registers_per_read=int(device.get("max_registers_per_read", 125)),
-        frame_gap_s=float(device.get("frame_gap_s", 0.0)),
-        control_period_s=None if control_period is None else float(control_period),
-        control_bits={"enable": 0, "quick_stop": 1, "fault_reset": 2, **bits.get("control", {})},
-        status_bits={"enabled": 0, "fault": 1, "quick_stop_active": 2, **bits.get("status", {})},
-        modes={"torque": 1, "velocity": 2, "position": 3, **data.get("modes", {})},
+        max_registers_per_read=max_registers_per_read,
+        frame_gap_s=frame_gap_s,
+        control_period_s=control_period,
+        control_bits={"enable": 0, "quick_stop": 1, "fault_reset": 2, **control_bits},
+        status_bits={"enabled": 0, "fault": 1, "quick_stop_active": 2, **status_bits},
+        modes={"torque": 1, "velocity": 2, "position": 3, **modes},
     )
 
 
-def _register(
-    name: str, spec: Mapping[str, Any], byte_order: str, word_order: str, source: str
-) -> Register:
-    where = f"{source} [registers.{name}]"
-    if not isinstance(spec, Mapping) or "address" not in spec or "type" not in spec:
-        raise ProfileError("needs 'address' and 'type'", source=where)
-    kind = str(spec["type"])
-    if kind not in TYPES:
-        raise ProfileError(f"type must be one of {', '.join(TYPES)}, got '{kind}'", source=where)
-    access = str(spec.get("access", "r"))
-    if access not in ("r", "rw", "w"):
-        raise ProfileError("access must be 'r', 'w' or 'rw'", source=where)
-    scale = float(spec.get("scale", 1.0))
+def _integers(table: ConfigTable) -> dict[str, int]:
+    """A table of named integers (bit numbers, mode values)."""
+    values = {key: table.integer(key) for key in table.values}
+    table.done()
+    return values
+
+
+def _register(name: str, table: ConfigTable, byte_order: str, word_order: str) -> Register:
+    scale = table.number("scale", 1.0)
     if scale == 0:
-        raise ProfileError("scale must not be 0", source=where)
-    order = str(spec.get("word_order", word_order))
-    if order not in ("big", "little") or byte_order not in ("big", "little"):
-        raise ProfileError("byte/word order must be 'big' or 'little'", source=where)
-    return Register(
+        raise table.error("scale", "must not be 0")
+    register = Register(
         name=name,
-        address=int(spec["address"]),
-        type=kind,
-        word_order=order,
+        address=table.integer("address"),
+        type=table.choice("type", tuple(TYPES)),
+        word_order=table.choice("word_order", ORDERS, word_order),
         byte_order=byte_order,
         scale=scale,
-        unit=str(spec.get("unit", "")),
-        writable=access in ("rw", "w"),
+        unit=table.string("unit", ""),
+        writable=table.choice("access", ("r", "w", "rw"), "r") in ("rw", "w"),
     )
+    table.done()
+    return register

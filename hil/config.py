@@ -1,0 +1,221 @@
+"""The one reader of TOML settings: unit profiles, station files, register maps, the plant.
+
+Every table is read through a :class:`ConfigTable`: typed getters that refuse a wrong type
+(a string where a number belongs, a bool where an integer belongs), and :meth:`~ConfigTable.done`,
+which refuses every key nobody asked for, so a misspelt setting is an error naming the file,
+the table and the key, never a silent default.
+"""
+
+from __future__ import annotations
+
+import difflib
+import math
+import tomllib
+from collections.abc import Mapping
+from importlib import resources
+from pathlib import Path
+from typing import Any, Final, TypeVar
+
+from hil.errors import ProfileError
+
+FIXTURES_PACKAGE: Final = "gimbal_hil_fixtures"
+
+_T = TypeVar("_T")
+
+
+class _Required:
+    def __repr__(self) -> str:
+        return "REQUIRED"
+
+
+REQUIRED: Final = _Required()
+"""Default of a getter whose key must be present."""
+
+
+def builtin_fixture(name: str) -> Path:
+    """Path of a data file shipped with gimbal-hil (profiles, stations, EDS, register map)."""
+    return Path(str(resources.files(FIXTURES_PACKAGE).joinpath(name)))
+
+
+def read_toml(path: Path) -> tuple[dict[str, Any], bytes]:
+    """Parse ``path``; the parsed document and the raw bytes (for a SHA-256).
+
+    Raises
+    ------
+    ProfileError
+        The file is missing, not UTF-8 or not valid TOML (naming the file).
+    """
+    try:
+        payload = path.read_bytes()
+    except OSError as exc:
+        raise ProfileError(f"cannot read: {exc.strerror}", source=str(path)) from None
+    try:
+        return tomllib.loads(payload.decode("utf-8")), payload
+    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
+        raise ProfileError(f"not valid TOML: {exc}", source=str(path)) from None
+
+
+class ConfigTable:
+    """One TOML table of one file, read key by key.
+
+    Parameters
+    ----------
+    values : Mapping
+        The parsed table.
+    table : str
+        Its name as a person finds it in the file, e.g. ``"[limits]"``.
+    source : str
+        The file.
+    """
+
+    def __init__(self, values: Mapping[str, Any], *, table: str, source: str) -> None:
+        self.values = values
+        self.table = table
+        self.source = source
+        self._read: set[str] = set()
+
+    @classmethod
+    def root(cls, document: Mapping[str, Any], *, source: str) -> ConfigTable:
+        """The whole document as a table (its keys are the top-level tables)."""
+        return cls(document, table="(top level)", source=source)
+
+    def error(self, key: str, message: str) -> ProfileError:
+        """A :class:`ProfileError` naming file, table and key."""
+        return ProfileError(f"{self.table} '{key}': {message}", source=self.source)
+
+    def __contains__(self, key: str) -> bool:
+        return key in self.values
+
+    def _get(self, key: str, default: Any) -> Any:
+        self._read.add(key)
+        if key in self.values:
+            return self.values[key]
+        if default is REQUIRED:
+            raise ProfileError(f"{self.table} lacks '{key}'", source=self.source)
+        return default
+
+    def _typed(self, key: str, default: Any, kind: type | tuple[type, ...], what: str) -> Any:
+        value = self._get(key, default)
+        if value is default and default is not REQUIRED:
+            return value
+        if isinstance(value, bool) and bool not in _as_tuple(kind):
+            raise self.error(key, f"must be {what}, got {value!r}")
+        if not isinstance(value, kind):
+            raise self.error(key, f"must be {what}, got {value!r}")
+        return value
+
+    def number(self, key: str, default: float | _Required | None = REQUIRED) -> float:
+        """A finite number (int or float in the file). ``default=None`` means required too,
+        as the protocol settings have always read it."""
+        value = self._typed(key, REQUIRED if default is None else default, (int, float),
+                            "a number")
+        if not math.isfinite(value):
+            raise self.error(key, f"must be finite, got {value!r}")
+        return float(value)
+
+    def optional_number(self, key: str) -> float | None:
+        """A finite number, or ``None`` when the key is absent."""
+        return None if key not in self.values and self._mark(key) else self.number(key)
+
+    def positive(self, key: str, default: float | _Required = REQUIRED) -> float:
+        """A finite number above zero."""
+        value = self.number(key, default)
+        if not value > 0:
+            raise self.error(key, f"must be above zero, got {value!r}")
+        return value
+
+    def non_negative(self, key: str, default: float | _Required = REQUIRED) -> float:
+        """A finite number at or above zero."""
+        value = self.number(key, default)
+        if not value >= 0:
+            raise self.error(key, f"must be zero or above, got {value!r}")
+        return value
+
+    def integer(self, key: str, default: int | _Required | None = REQUIRED) -> int:
+        """An integer (a float such as ``2.0`` is refused)."""
+        value: int = self._typed(key, REQUIRED if default is None else default, int,
+                                 "an integer")
+        return value
+
+    def boolean(self, key: str, default: bool | _Required = REQUIRED) -> bool:
+        """``true`` or ``false``."""
+        value: bool = self._typed(key, default, bool, "true or false")
+        return value
+
+    def string(self, key: str, default: str | _Required = REQUIRED) -> str:
+        """A string."""
+        value: str = self._typed(key, default, str, "a string")
+        return value
+
+    def choice(self, key: str, options: tuple[str, ...], default: str | _Required = REQUIRED
+               ) -> str:
+        """One of ``options``."""
+        value = self.string(key, default)
+        if value not in options:
+            raise self.error(key, f"must be one of {', '.join(options)}, got {value!r}")
+        return value
+
+    def numbers(self, key: str, *, count: int | None = None) -> tuple[float, ...]:
+        """A non-empty list of finite numbers (``count`` of them when given)."""
+        value = self._get(key, REQUIRED)
+        if (
+            not isinstance(value, list)
+            or not value
+            or any(isinstance(v, bool) or not isinstance(v, int | float) for v in value)
+            or not all(math.isfinite(v) for v in value)
+        ):
+            raise self.error(key, f"must be a non-empty list of finite numbers, got {value!r}")
+        if count is not None and len(value) != count:
+            raise self.error(key, f"must be a list of {count} numbers, got {len(value)}")
+        return tuple(float(v) for v in value)
+
+    def table_at(self, key: str, *, required: bool = True) -> ConfigTable:
+        """The sub-table ``key`` (``[parent.key]``); empty when optional and absent."""
+        value = self._get(key, REQUIRED if required else {})
+        if not isinstance(value, Mapping):
+            raise self.error(key, f"must be a table, got {value!r}")
+        return ConfigTable(value, table=self._child(key), source=self.source)
+
+    def tables(self, key: str) -> dict[str, ConfigTable]:
+        """The sub-tables of ``key`` by name (``[key.NAME]``); none when absent."""
+        parent = self.table_at(key, required=False)
+        out = {}
+        for name in parent.values:
+            out[name] = parent.table_at(name)
+        return out
+
+    def table_list(self, key: str) -> list[ConfigTable]:
+        """An array of inline tables (``key = [{...}, {...}]``); empty when absent."""
+        value = self._get(key, [])
+        if not isinstance(value, list) or not all(isinstance(v, Mapping) for v in value):
+            raise self.error(key, f"must be a list of tables, got {value!r}")
+        return [
+            ConfigTable(item, table=f"{self._child(key)}[{i}]", source=self.source)
+            for i, item in enumerate(value)
+        ]
+
+    def done(self) -> None:
+        """Refuse every key no getter asked for (a typo names its nearest known key)."""
+        unknown = sorted(set(self.values) - self._read)
+        if not unknown:
+            return
+        key = unknown[0]
+        close = difflib.get_close_matches(key, sorted(self._read), n=1)
+        hint = f" (did you mean '{close[0]}'?)" if close else ""
+        others = f"; also unknown: {', '.join(map(repr, unknown[1:]))}" if unknown[1:] else ""
+        raise ProfileError(
+            f"{self.table} has an unknown setting '{key}'{hint}{others} "
+            f"(known: {', '.join(sorted(self._read))})",
+            source=self.source,
+        )
+
+    def _mark(self, key: str) -> bool:
+        self._read.add(key)
+        return True
+
+    def _child(self, key: str) -> str:
+        return f"[{key}]" if self.table == "(top level)" else f"{self.table[:-1]}.{key}]"
+
+
+def _as_tuple(kind: type | tuple[type, ...]) -> tuple[type, ...]:
+    return kind if isinstance(kind, tuple) else (kind,)
