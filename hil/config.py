@@ -91,8 +91,13 @@ class ConfigTable:
         if key in self.values:
             return self.values[key]
         if default is REQUIRED:
-            raise ProfileError(f"{self.table} lacks '{key}'", source=self.source)
+            raise ProfileError(f"{self.table} lacks '{key}'{self._found(key)}", source=self.source)
         return default
+
+    def _found(self, missing: str) -> str:
+        """A hint naming a present key that looks like a misspelling of ``missing``."""
+        close = difflib.get_close_matches(missing, sorted(set(self.values) - self._read), n=1)
+        return f" (found '{close[0]}': misspelt?)" if close else ""
 
     def _typed(self, key: str, default: Any, kind: type | tuple[type, ...], what: str) -> Any:
         value = self._get(key, default)
@@ -171,7 +176,11 @@ class ConfigTable:
 
     def table_at(self, key: str, *, required: bool = True) -> ConfigTable:
         """The sub-table ``key`` (``[parent.key]``); empty when optional and absent."""
-        value = self._get(key, REQUIRED if required else {})
+        if required and key not in self.values:
+            self._read.add(key)
+            raise ProfileError(f"missing table {self._child(key)}{self._found(key)}",
+                               source=self.source)
+        value = self._get(key, {})
         if not isinstance(value, Mapping):
             raise self.error(key, f"must be a table, got {value!r}")
         return ConfigTable(value, table=self._child(key), source=self.source)

@@ -109,6 +109,7 @@ def profile_from_mapping(data: Mapping[str, Any], *, source: str, sha256: str = 
     unit_type = unit.string("type", "unknown")
     axis = unit.string("axis", "unknown")
     unit.string("description", "")
+    unit.choice("axis_kind", ("rotary", "linear"), "rotary")
     for key in ("rated_torque_nm", "mass_kg", "kv_rpm_per_v"):
         if key in unit:
             unit.positive(key)
@@ -122,8 +123,6 @@ def profile_from_mapping(data: Mapping[str, Any], *, source: str, sha256: str = 
     measurements = {
         name: _measurement(name, table) for name, table in document.tables("measurements").items()
     }
-    if not measurements:
-        raise ProfileError("no [measurements.*] table: nothing to judge", source=source)
     document.done()
     return UnitProfile(
         source=source,

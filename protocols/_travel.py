@@ -8,11 +8,12 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from hil.config import ConfigTable
 from hil.drives.base import DriveInfo
 from hil.errors import IdentificationError, ProfileError
 from hil.identify.moves import position_move, travel_shortfall_rad
 from hil.motion import Excitation, Mode
-from hil.profile import ProtocolSettings, UnitProfile
+from hil.profile import UnitProfile
 from hil.recording import Recording
 from protocols._rate import needed_sample_rate_hz
 
@@ -71,7 +72,7 @@ def speed_ramp(speed_rad_s: float, *, ramp_s: float, fs_hz: float, up: bool) -> 
 MOVE_SPEED_FRACTION = 0.5  # of the unit's velocity limit, for repositioning moves
 
 
-def move_speed_rad_s(settings: ProtocolSettings, info: DriveInfo) -> float:
+def move_speed_rad_s(settings: ConfigTable, info: DriveInfo) -> float:
     """Peak speed of repositioning moves: the profile's ``move_speed_rad_s``, by default half
     the unit's velocity limit (moves are not measured; they only cost machine time)."""
     return settings.number("move_speed_rad_s", MOVE_SPEED_FRACTION * info.limits.velocity_rad_s)
@@ -89,7 +90,7 @@ class TravelSpec:
 
     @staticmethod
     def envelope(
-        settings: ProtocolSettings, profile: UnitProfile, info: DriveInfo
+        settings: ConfigTable, profile: UnitProfile, info: DriveInfo
     ) -> dict[str, float]:
         """The TravelSpec fields: rate and limits from profile and drive, margins from the
         settings (``margin_rad`` 0.1 by default, ``move_speed_rad_s`` see below)."""

@@ -78,8 +78,16 @@ def _profile_text() -> str:
     ("old", "new", "message"),
     [
         ("[limits]", "[limit]", "missing table \\[limits\\]"),
-        ("torque_nm = 0.5\ntravel", "torque_nm = -1\ntravel", "'torque_nm' must be a positive"),
-        ("inertia_kg_m2 = 0.0036\n", "inertia_kg_m = 0.0036\n", "unknown plant parameter"),
+        (
+            "torque_nm = 0.5\ntravel",
+            "torque_nm = -1\ntravel",
+            "\\[limits\\] 'torque_nm': must be above",
+        ),
+        (
+            "inertia_kg_m2 = 0.0036\n",
+            "inertia_kg_m = 0.0036\n",
+            "lacks 'inertia_kg_m2' \\(found 'inertia_kg_m'",
+        ),
         ("nominal = 0.0036\ntolerance_pct = 15", "nominal = 0.0036", "tolerance_pct"),
         ("sample_rate_hz = 4000.0", "sample_rate_hz = 'fast'", "must be a number, got 'fast'"),
     ],
@@ -112,9 +120,9 @@ def test_missing_profile_and_unknown_builtin(tmp_path: Path) -> None:
     ],
 )
 def test_protocol_settings_name_table_and_key(table, read, message: str) -> None:  # type: ignore[no-untyped-def]
-    from hil.profile import ProtocolSettings
+    from hil.config import ConfigTable
 
-    settings = ProtocolSettings(table, table="[protocols.x]", source="unit.toml")
+    settings = ConfigTable(table, table="[protocols.x]", source="unit.toml")
     with pytest.raises(ProfileError, match=message) as caught:
         read(settings)
     assert "unit.toml" in str(caught.value)
@@ -122,13 +130,13 @@ def test_protocol_settings_name_table_and_key(table, read, message: str) -> None
 
 
 def test_protocol_settings_refuse_unread_keys() -> None:
-    from hil.profile import ProtocolSettings
+    from hil.config import ConfigTable
 
-    settings = ProtocolSettings(
+    settings = ConfigTable(
         {"speed_rad_s": 0.2, "sped_rad_s": 0.3}, table="[protocols.x]", source="unit.toml"
     )
     assert settings.number("speed_rad_s", 0.1) == 0.2
-    with pytest.raises(ProfileError, match="unknown setting\\(s\\) 'sped_rad_s'"):
+    with pytest.raises(ProfileError, match="unknown setting 'sped_rad_s'.*did you mean 'speed_r"):
         settings.done()
 
 

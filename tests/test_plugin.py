@@ -153,7 +153,7 @@ def test_a_typo_in_protocol_settings_is_an_error_not_a_default(
     cert = json.loads((out / "SIM-0001" / "certificate.json").read_text())
     assert cert["outcome"] == "ERROR"
     messages = " ".join(cert["method"]["protocols"]["inertia_friction"]["messages"])
-    assert "unknown setting(s) 'settle_period'" in messages
+    assert "unknown setting 'settle_period' (did you mean 'settle_periods'?)" in messages
     assert str(profile) in messages
 
 
