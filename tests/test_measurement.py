@@ -136,7 +136,7 @@ def test_protocol_settings_refuse_unread_keys() -> None:
         {"speed_rad_s": 0.2, "sped_rad_s": 0.3}, table="[protocols.x]", source="unit.toml"
     )
     assert settings.number("speed_rad_s", 0.1) == 0.2
-    with pytest.raises(ProfileError, match="unknown setting 'sped_rad_s'.*did you mean 'speed_r"):
+    with pytest.raises(ProfileError, match=r"unknown setting 'sped_rad_s'.*did you mean 'speed_r"):
         settings.done()
 
 
