@@ -19,6 +19,9 @@ TYPES = {
     "float32": ("f", 2),
 }
 ORDERS = ("big", "little")
+CONTROL_BITS = {"enable": 0, "quick_stop": 1, "fault_reset": 2}
+STATUS_BITS = {"enabled": 0, "fault": 1, "quick_stop_active": 2}
+MODES = {"torque": 1, "velocity": 2, "position": 3}
 REQUIRED = (
     "status_word",
     "fault_code",
@@ -146,10 +149,10 @@ def load_register_map(path: str | Path) -> RegisterMap:
     if missing:
         raise ProfileError(f"[registers] lacks {', '.join(missing)}", source=source)
     bits = document.table_at("bits", required=False)
-    control_bits = _integers(bits.table_at("control", required=False))
-    status_bits = _integers(bits.table_at("status", required=False))
+    control_bits = _integers(bits.table_at("control", required=False), CONTROL_BITS)
+    status_bits = _integers(bits.table_at("status", required=False), STATUS_BITS)
     bits.done()
-    modes = _integers(document.table_at("modes", required=False))
+    modes = _integers(document.table_at("modes", required=False), MODES)
     document.done()
     for name in ("control_word", "mode", "velocity_cmd", "torque_cmd", "position_cmd"):
         if not registers[name].writable:
@@ -191,15 +194,16 @@ def load_register_map(path: str | Path) -> RegisterMap:
         max_registers_per_read=max_registers_per_read,
         frame_gap_s=frame_gap_s,
         control_period_s=control_period,
-        control_bits={"enable": 0, "quick_stop": 1, "fault_reset": 2, **control_bits},
-        status_bits={"enabled": 0, "fault": 1, "quick_stop_active": 2, **status_bits},
-        modes={"torque": 1, "velocity": 2, "position": 3, **modes},
+        control_bits=control_bits,
+        status_bits=status_bits,
+        modes=modes,
     )
 
 
-def _integers(table: ConfigTable) -> dict[str, int]:
-    """A table of named integers (bit numbers, mode values)."""
-    values = {key: table.integer(key) for key in table.values}
+def _integers(table: ConfigTable, defaults: Mapping[str, int]) -> dict[str, int]:
+    """A table of named integers (bit numbers, mode values); names other than the defaults'
+    are refused."""
+    values = {key: table.integer(key, default) for key, default in defaults.items()}
     table.done()
     return values
 
