@@ -36,7 +36,7 @@ HOLD_SAMPLES = 0.5
 
 @dataclass(frozen=True, slots=True, kw_only=True)
 class Diagnosis:
-    """Everything ``gimbal-hil diagnose`` reports (see :meth:`to_dict`)."""
+    """Everything ``gimbal-hil diagnose`` found (laid out by :func:`report.report`)."""
 
     recording: Recording
     signals: Signals
@@ -69,11 +69,6 @@ class Diagnosis:
         rows = self.heldout.rows
         signals = self.heldout.signals
         return signals.effort_filtered[rows], self.designer.predict(fit, signals)[rows]
-
-    def to_dict(self) -> dict[str, Any]:
-        from hil.diagnose.report import report  # the JSON layout lives in report.py
-
-        return report(self)
 
 
 def block_split(signals: Signals) -> tuple[DataSet, DataSet]:

@@ -12,24 +12,25 @@ from __future__ import annotations
 import logging
 import math
 import struct
-from typing import TYPE_CHECKING
+from typing import Protocol
 
 import numpy as np
 
+from hil.drives.base import DriveInfo
+from hil.drives.cia402.link import CanLink
 from hil.drives.cia402.protocol import (
     CW_DISABLE_VOLTAGE,
     CW_ENABLE_OPERATION,
     SW_FAULT,
     TARGET_OBJECT,
     TORQUE_MEAN_PER_RATED,
+    Scaling,
     state_of,
 )
-from hil.errors import DriveError, DriveFaultError, DriveStateError
-from hil.motion import COMMAND_COLUMN, Excitation, Mode
+from hil.drives.station import CanOpenStation
+from hil.errors import DriveCommunicationError, DriveError, DriveFaultError, DriveStateError
+from hil.motion import COMMAND_COLUMN, Excitation, Limits, Mode
 from hil.recording import Recording
-
-if TYPE_CHECKING:
-    from hil.drives.cia402.drive import CanOpenDrive
 
 log = logging.getLogger(__name__)
 
@@ -38,13 +39,39 @@ RECORDER_SAMPLE = np.dtype([("pos", "<i4"), ("vel", "<i4"), ("torque", "<i2"), (
 _LIMITS = {"h": (-32768, 32767), "i": (-(2**31), 2**31 - 1)}
 
 
+class AcquiringDrive(Protocol):
+    """What acquisition uses of a connected CiA 402 drive, and nothing else: the link, the
+    station and scaling it connected with, what it learnt of the drive, and how to make it
+    safe after a failed run."""
+
+    link: CanLink
+    station: CanOpenStation
+    scaling: Scaling | None
+    limits: Limits
+    torque_sample: str  # "mean" (0x2077) or "instantaneous" (0x6077)
+    command_interpolation: str
+    control_period_s: float | None
+    recorder_rate_hz: float
+
+    @property
+    def info(self) -> DriveInfo: ...
+
+    def comm_error(self, message: str) -> DriveCommunicationError: ...
+
+    def mark_faulted(self) -> None: ...
+
+    def quick_stop(self) -> None: ...
+
+    def disable(self) -> None: ...
+
+
 class _FaultedError(Exception):
     def __init__(self, time_s: float) -> None:
         super().__init__(time_s)
         self.time_s = time_s
 
 
-def _raw_command(drive: CanOpenDrive, excitation: Excitation) -> np.ndarray:
+def _raw_command(drive: AcquiringDrive, excitation: Excitation) -> np.ndarray:
     assert drive.scaling is not None
     sc, mode = drive.scaling, excitation.mode
     factor = {
@@ -56,7 +83,7 @@ def _raw_command(drive: CanOpenDrive, excitation: Excitation) -> np.ndarray:
     return np.clip(np.round(np.asarray(excitation.command) * factor), low, high).astype(np.int64)
 
 
-def _metadata(drive: CanOpenDrive, excitation: Excitation, **extra: str) -> dict[str, str]:
+def _metadata(drive: AcquiringDrive, excitation: Excitation, **extra: str) -> dict[str, str]:
     info, st = drive.info, drive.station
     return {
         "drive": f"canopen node {st.node_id}",
@@ -74,7 +101,7 @@ def _metadata(drive: CanOpenDrive, excitation: Excitation, **extra: str) -> dict
     }
 
 
-def run_stream(drive: CanOpenDrive, excitation: Excitation) -> Recording:
+def run_stream(drive: AcquiringDrive, excitation: Excitation) -> Recording:
     link, st = drive.link, drive.station
     assert drive.scaling is not None
     sc, mode = drive.scaling, excitation.mode
@@ -133,7 +160,7 @@ def run_stream(drive: CanOpenDrive, excitation: Excitation) -> Recording:
 
 
 def _stream_loop(
-    drive: CanOpenDrive,
+    drive: AcquiringDrive,
     excitation: Excitation,
     raw: np.ndarray,
     cob: int,
@@ -177,7 +204,7 @@ def _stream_loop(
 
 
 def _stream_recording(
-    drive: CanOpenDrive, excitation: Excitation, raw: np.ndarray, first: int, done: int
+    drive: AcquiringDrive, excitation: Excitation, raw: np.ndarray, first: int, done: int
 ) -> Recording:
     link = drive.link
     assert drive.scaling is not None
@@ -226,7 +253,7 @@ def _stream_recording(
     return Recording(columns=floats, metadata=metadata, source=f"canopen:{excitation.name}")
 
 
-def _make_safe(drive: CanOpenDrive, error: DriveError) -> None:
+def _make_safe(drive: AcquiringDrive, error: DriveError) -> None:
     """After a fault: power off (the drive already is in FAULT); otherwise quick stop."""
     link = drive.link
     if isinstance(error, DriveFaultError):
@@ -241,7 +268,7 @@ def _make_safe(drive: CanOpenDrive, error: DriveError) -> None:
     drive.disable()
 
 
-def run_recorder(drive: CanOpenDrive, excitation: Excitation) -> Recording:
+def run_recorder(drive: AcquiringDrive, excitation: Excitation) -> Recording:
     link, st = drive.link, drive.station
     assert drive.scaling is not None
     sc = drive.scaling
