@@ -106,6 +106,19 @@ class CalibrationRun:
         self._keep(recording, protocol, excitation, complete=True)
         return recording
 
+    def result(self, name: str) -> Estimate | None:
+        """The judged estimate of an earlier protocol's declared measurement ``name``, as
+        recorded (method accuracy included), or ``None`` when no protocol measured it."""
+        for measurement in self.measurements:
+            if measurement.spec.name == name:
+                return measurement.estimate
+        return None
+
+    def results(self, *names: str) -> tuple[Estimate, ...] | None:
+        """Several earlier results at once; ``None`` unless every one was measured."""
+        found = [self.result(name) for name in names]
+        return None if any(e is None for e in found) else tuple(e for e in found if e)
+
     def record(self, protocol: str, estimate: Estimate) -> Measurement:
         """Judge ``estimate`` against the profile's declared measurement of the same name."""
         spec = self.profile.measurement(estimate.name)

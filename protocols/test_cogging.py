@@ -113,9 +113,9 @@ def analyse(
 
 def inertia_for_correction(calibration: CalibrationRun, profile: UnitProfile) -> tuple[float, str]:
     """Measured J if the sine protocol ran already, else the unit type's declared nominal."""
-    for m in calibration.measurements:
-        if m.spec.name == "inertia_kg_m2":
-            return m.estimate.value, "measured (inertia_friction)"
+    inertia = calibration.result("inertia_kg_m2")
+    if inertia is not None:
+        return inertia.value, "measured (inertia_friction)"
     return profile.measurement("inertia_kg_m2").nominal, "declared nominal"
 
 

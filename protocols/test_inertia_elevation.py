@@ -61,10 +61,10 @@ class Spec:
 
 def reported_torque_gain(calibration: CalibrationRun) -> tuple[float, float] | None:
     """Shaft over reported torque (and its standard uncertainty) from the K_t protocol."""
-    for m in calibration.measurements:
-        if m.spec.name == "reported_torque_gain_error_pct":
-            return 1.0 + m.estimate.value / 100.0, m.estimate.standard_uncertainty / 100.0
-    return None
+    gain_error = calibration.result("reported_torque_gain_error_pct")
+    if gain_error is None:
+        return None
+    return 1.0 + gain_error.value / 100.0, gain_error.standard_uncertainty / 100.0
 
 
 @pytest.fixture(scope="module")

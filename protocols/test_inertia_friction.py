@@ -123,11 +123,10 @@ def analyse(
 
 def measured_cable_loop(calibration: CalibrationRun) -> CableLoop | None:
     """The cable's hysteresis loop if ``gravity_cable`` ran earlier."""
-    found = {m.spec.name: m.estimate for m in calibration.measurements}
+    h = calibration.result("cable_hysteresis_nm")
     angle = calibration.details.get("gravity_cable", {}).get("cable_hysteresis_angle_rad")
-    if "cable_hysteresis_nm" not in found or not isinstance(angle, float):
+    if h is None or not isinstance(angle, float):
         return None
-    h = found["cable_hysteresis_nm"]
     return CableLoop(
         half_width_nm=h.value, half_width_u_nm=h.standard_uncertainty, angle_rad=angle
     )
@@ -164,20 +163,17 @@ def with_cable_loop_uncertainty(
 
 def measured_load_stiffness(calibration: CalibrationRun, *, position_rad: float) -> Estimate | None:
     """``dL/dθ`` of gravity and cable at ``position_rad`` if ``gravity_cable`` ran earlier."""
-    found = {m.spec.name: m.estimate for m in calibration.measurements}
-    names = ("gravity_mge_nm", "gravity_phase_rad", "cable_stiffness_nm_rad")
-    if not all(n in found for n in names):
+    found = calibration.results("gravity_mge_nm", "gravity_phase_rad", "cable_stiffness_nm_rad")
+    if found is None:
         return None
-    mge, phase, cable = (found[n] for n in names)
+    mge, phase, cable = found
     return load_stiffness(mge=mge, phase=phase, cable_stiffness=cable, position_rad=position_rad)
 
 
 def measured_current_loop_lag_s(calibration: CalibrationRun) -> float:
     """The current-loop time constant if that protocol ran earlier, else 0."""
-    for measurement in calibration.measurements:
-        if measurement.spec.name == "current_loop_time_constant_ms":
-            return measurement.estimate.value / 1000.0
-    return 0.0
+    tau = calibration.result("current_loop_time_constant_ms")
+    return 0.0 if tau is None else tau.value / 1000.0
 
 
 def analyse_in_calibration(

@@ -116,10 +116,8 @@ def analyse(recording: Recording, spec: Spec, *, time_constant_s: float = 2e-4) 
 
 def measured_time_constant_s(calibration: CalibrationRun) -> float:
     """The current-loop protocol's τ when it ran already (a start value only)."""
-    for m in calibration.measurements:
-        if m.spec.name == "current_loop_time_constant_ms":
-            return m.estimate.value * 1e-3
-    return 2e-4
+    tau = calibration.result("current_loop_time_constant_ms")
+    return 2e-4 if tau is None else tau.value * 1e-3
 
 
 @pytest.fixture(scope="module")

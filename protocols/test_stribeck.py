@@ -109,13 +109,13 @@ def cross_check(result: StribeckResult, calibration: CalibrationRun) -> dict[str
     T_c excludes the cable loop's half-width h (taken out there), the staircase's sliding
     friction includes it: when h was measured it is added to the sine's side."""
     ours = {e.name: e for e in (result.coulomb, result.viscous)}
-    theirs = {m.spec.name: m.estimate for m in calibration.measurements}
-    loop = theirs.get("cable_hysteresis_nm")
+    loop = calibration.result("cable_hysteresis_nm")
     checks: dict[str, object] = {}
     for other, mine in CROSS_CHECK:
-        if other not in theirs:
+        b = calibration.result(other)
+        if b is None:
             continue
-        a, b = ours[mine], theirs[other]
+        a = ours[mine]
         b_value, b_expanded = b.value, b.expanded_uncertainty
         if other == "coulomb_nm" and loop is not None:
             b_value += loop.value

@@ -158,3 +158,22 @@ def test_a_measurement_conforms_when_inside_its_limits(
     assert measurement.conforms is conforms
     assert measurement.verdict().startswith(f"x = {shown} N·m → {outcome.value}")
     assert "limits [0.9, 1.1]" in measurement.verdict()
+
+
+def test_earlier_results_are_looked_up_by_name(tmp_path: Path) -> None:
+    from hil.calibration import CalibrationRun
+    from hil.profile import load_profile
+
+    run = CalibrationRun(
+        profile=load_profile(), unit_serial="X", out_dir=tmp_path, drive_kind="sim"
+    )
+    assert run.result("inertia_kg_m2") is None
+    inertia = Estimate(name="inertia_kg_m2", value=0.0036, standard_uncertainty=1e-5,
+                       unit="kg·m²")
+    run.record("inertia_friction", inertia)
+    found = run.result("inertia_kg_m2")
+    assert found is not None
+    assert found.value == 0.0036
+    assert found.standard_uncertainty > 1e-5  # as recorded: the method accuracy added
+    assert run.results("inertia_kg_m2", "coulomb_nm") is None
+    assert run.results("inertia_kg_m2") == (found,)
