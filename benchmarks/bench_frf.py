@@ -30,7 +30,7 @@ import math
 import numpy as np
 from scipy import signal
 
-import protocols.test_resonance as protocol
+import hil.suite.resonance as protocol
 from hil.drives.base import DriveInfo
 from hil.drives.sim import SimDrive
 from hil.identify.resonance import TwoMassModel, frf_point, two_mass_response

@@ -25,8 +25,8 @@ from crb_common import (
     sim_drive,
 )
 
-import protocols.test_current_loop as current_protocol
-import protocols.test_resonance as resonance_protocol
+import hil.suite.current_loop as current_protocol
+import hil.suite.resonance as resonance_protocol
 from hil.errors import IdentificationError
 from hil.identify.current_loop import sampled_response
 from hil.identify.resonance import TwoMassModel, two_mass_response

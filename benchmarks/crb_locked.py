@@ -17,9 +17,9 @@ from crb_common import (
     sim_drive,
 )
 
-import protocols.test_inertia_elevation as elevation_protocol
-import protocols.test_inertia_friction as sine
-import protocols.test_torque_constant as torque_protocol
+import hil.suite.inertia_elevation as elevation_protocol
+import hil.suite.inertia_friction as sine
+import hil.suite.torque_constant as torque_protocol
 from hil.errors import IdentificationError
 from hil.identify.estimate import Estimate
 from hil.identify.inertia_elevation import fit_inertia_elevation

@@ -21,9 +21,9 @@ from crb_common import (
 )
 from numpy.typing import NDArray
 
-import protocols.test_cogging as cogging_protocol
-import protocols.test_gravity_cable as gravity_protocol
-import protocols.test_stribeck as stribeck_protocol
+import hil.suite.cogging as cogging_protocol
+import hil.suite.gravity_cable as gravity_protocol
+import hil.suite.stribeck as stribeck_protocol
 from hil.errors import IdentificationError
 from hil.identify.cogging import _design
 from hil.identify.stribeck import (

@@ -18,7 +18,7 @@ import time
 
 import numpy as np
 
-import protocols.test_inertia_friction as protocol
+import hil.suite.inertia_friction as protocol
 from hil.drives.sim import SimDrive
 from hil.identify.inertia_friction import (
     HARMONICS,

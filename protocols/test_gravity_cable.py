@@ -5,33 +5,25 @@ One protocol for both because they are separated by one joint fit of the load to
 for the same information. The sweep passes every elevation in both directions, so the
 friction cancels in the half sum of the two passes (the 48 position bins are the
 "holding" elevations).
+
+Library: :mod:`hil.suite.gravity_cable`.
 """
 
 from __future__ import annotations
 
-import logging
-from dataclasses import dataclass
-
-import numpy as np
 import pytest
 
 from hil.calibration import CalibrationRun
-from hil.drives.base import Drive, DriveInfo
+from hil.drives.base import Drive
 from hil.identify.estimate import Estimate
 from hil.identify.gravity_cable import (
     GravityCableResult,
-    SweepPlan,
     eccentricity_mm,
-    identify_gravity_cable,
-    sweep_plan,
 )
-from hil.motion import Excitation, Mode
 from hil.profile import UnitProfile
-from protocols._travel import TravelSpec, on_command_grid
+from hil.suite.gravity_cable import NAME, Spec, analyse, excitation
+from hil.suite.travel import on_command_grid
 
-log = logging.getLogger(__name__)
-
-NAME = "gravity_cable"
 MEASUREMENTS = (
     "gravity_mge_nm",
     "gravity_phase_rad",
@@ -40,69 +32,6 @@ MEASUREMENTS = (
     "cable_hysteresis_nm",
 )
 pytestmark = pytest.mark.protocol(NAME)
-
-
-@dataclass(frozen=True, slots=True, kw_only=True)
-class Spec(TravelSpec):
-    speed_rad_s: float
-    rewind_speed_rad_s: float
-    probe_rad: float
-    probe_speed_rad_s: float
-    probe_settle_s: float
-    exclude_rad: float
-    bins: int
-    mass_kg: float | None
-
-    @classmethod
-    def from_profile(cls, profile: UnitProfile, info: DriveInfo) -> Spec:
-        settings = profile.settings(NAME)
-        mass = profile.unit.get("mass_kg")
-        spec = cls(
-            **TravelSpec.envelope(settings, profile, info),
-            speed_rad_s=settings.number("speed_rad_s", 0.15),
-            rewind_speed_rad_s=settings.number("rewind_speed_rad_s", 0.6),
-            probe_rad=settings.number("probe_rad", 0.2),
-            probe_speed_rad_s=settings.number("probe_speed_rad_s", 0.05),
-            probe_settle_s=settings.number("probe_settle_s", 0.12),
-            exclude_rad=settings.number("exclude_rad", 0.1),
-            bins=settings.integer("bins", 48),
-            mass_kg=None if mass is None else float(mass),
-        )
-        settings.done()
-        return spec
-
-    @property
-    def plan(self) -> SweepPlan:
-        return sweep_plan(
-            start_rad=self.start_rad,
-            stop_rad=self.travel_max_rad - self.margin_rad,
-            speed_rad_s=self.speed_rad_s,
-            rewind_speed_rad_s=self.rewind_speed_rad_s,
-            probe_rad=self.probe_rad,
-            probe_speed_rad_s=self.probe_speed_rad_s,
-            fs_hz=self.fs_hz,
-        )
-
-
-def excitation(spec: Spec, *, position_rad: float) -> list[Excitation]:
-    """A position move to the lower end of the travel, then the sweep."""
-    return [
-        spec.move_to_start(position_rad, hold_s=0.2),
-        Excitation(
-            name="sweep", mode=Mode.VELOCITY, fs_hz=spec.fs_hz, command=spec.plan.command_rad_s
-        ),
-    ]
-
-
-def analyse(position_rad: np.ndarray, torque_nm: np.ndarray, spec: Spec) -> GravityCableResult:
-    return identify_gravity_cable(
-        position_rad=position_rad,
-        torque_nm=torque_nm,
-        plan=spec.plan,
-        exclude_rad=spec.exclude_rad,
-        bins=spec.bins,
-        settle_rad=spec.probe_settle_s * spec.probe_speed_rad_s,
-    )
 
 
 @pytest.fixture(scope="module")

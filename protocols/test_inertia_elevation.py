@@ -5,18 +5,19 @@ Skips without a ``[protocols.inertia_elevation]`` table (not an azimuth axis) an
 station whose drive cannot move the elevation axis (``drive.set_elevation``). When the
 torque-constant protocol ran first, J is scaled by its reported-torque gain (shaft torque
 over reported torque): the result is in shaft-torque units.
+
+Library: :mod:`hil.suite.inertia_elevation`.
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass
 from typing import cast
 
 import pytest
 
 from hil.calibration import CalibrationRun
-from hil.drives.base import Drive, DriveInfo
+from hil.drives.base import Drive
 from hil.identify.estimate import Estimate
 from hil.identify.inertia_elevation import (
     InertiaElevationResult,
@@ -24,47 +25,15 @@ from hil.identify.inertia_elevation import (
     scale_by_gain,
 )
 from hil.profile import UnitProfile
-from protocols import test_inertia_friction as sine
+from hil.suite import inertia_friction as sine
+from hil.suite.inertia_elevation import NAME, Spec, reported_torque_gain
 
-NAME = "inertia_elevation"
 MEASUREMENTS = (
     "azimuth_inertia_level_kg_m2",
     "azimuth_inertia_zenith_kg_m2",
     "azimuth_inertia_ratio",
 )
 pytestmark = pytest.mark.protocol(NAME)
-
-
-@dataclass(frozen=True, slots=True, kw_only=True)
-class Spec:
-    elevations_rad: tuple[float, ...]
-    park_elevation_rad: float  # where the elevation axis is left afterwards
-    sine: sine.Spec
-
-    @classmethod
-    def from_profile(cls, profile: UnitProfile, info: DriveInfo) -> Spec:
-        settings = profile.settings(NAME)
-        spec = cls(
-            elevations_rad=settings.numbers("elevations_rad"),
-            park_elevation_rad=settings.number("park_elevation_rad", 0.0),
-            sine=sine.Spec(
-                frequency_hz=settings.number("frequency_hz", 2.0),
-                amplitudes_rad_s=settings.numbers("amplitudes_rad_s"),
-                settle_periods=settings.integer("settle_periods", 2),
-                periods=settings.integer("periods", 8),
-                fs_hz=min(profile.sample_rate_hz, info.max_sample_rate_hz),
-            ),
-        )
-        settings.done()
-        return spec
-
-
-def reported_torque_gain(calibration: CalibrationRun) -> tuple[float, float] | None:
-    """Shaft over reported torque (and its standard uncertainty) from the K_t protocol."""
-    gain_error = calibration.result("reported_torque_gain_error_pct")
-    if gain_error is None:
-        return None
-    return 1.0 + gain_error.value / 100.0, gain_error.standard_uncertainty / 100.0
 
 
 @pytest.fixture(scope="module")

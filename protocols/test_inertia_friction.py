@@ -1,207 +1,29 @@
-"""J, B, T_c from sinusoidal velocity at two or more amplitudes (the article's experiment)."""
+"""J, B, T_c from sinusoidal velocity at two or more amplitudes (the article's experiment).
+
+Library: :mod:`hil.suite.inertia_friction`.
+"""
 
 from __future__ import annotations
 
-import dataclasses
-import math
-from dataclasses import dataclass
-
-import numpy as np
 import pytest
 
 from hil.calibration import CalibrationRun
-from hil.drives.base import Drive, DriveInfo
-from hil.identify.estimate import Estimate, combine_linear
-from hil.identify.gravity_cable import CableLoop, load_stiffness
+from hil.drives.base import Drive
 from hil.identify.inertia_friction import (
-    HARMONICS,
     InertiaFrictionResult,
-    Method,
-    identify_inertia_friction,
     inertia_amplitude_spread,
-    stiffness_corrected_inertia,
 )
-from hil.identify.sine_run import analyse_sine_run, torque_hold_samples, without_cable_loop
-from hil.motion import Excitation, Mode
 from hil.profile import UnitProfile
-from hil.recording import Recording
-from protocols._travel import move_excitation, move_speed_rad_s
+from hil.suite.inertia_friction import (
+    NAME,
+    Spec,
+    analyse_in_calibration,
+    excitation,
+    move_to_centre,
+)
 
-NAME = "inertia_friction"
 MEASUREMENTS = ("inertia_kg_m2", "viscous_nm_s_rad", "coulomb_nm", "inertia_amplitude_spread_pct")
 pytestmark = pytest.mark.protocol(NAME)
-
-
-@dataclass(frozen=True, slots=True, kw_only=True)
-class Spec:
-    frequency_hz: float
-    amplitudes_rad_s: tuple[float, ...]
-    settle_periods: int
-    periods: int
-    fs_hz: float
-    method: Method = "least_squares"
-    harmonics: int = HARMONICS
-    centre_rad: float | None = None  # where the sines start (None: where the axis is)
-    move_speed_rad_s: float = 1.0
-
-    @classmethod
-    def from_profile(cls, profile: UnitProfile, info: DriveInfo) -> Spec:
-        settings = profile.settings(NAME)
-        method: Method = (
-            "least_squares"
-            if settings.choice("method", ("orthogonal", "least_squares"), "least_squares")
-            == "least_squares"
-            else "orthogonal"
-        )
-        middle = (info.limits.travel_min_rad + info.limits.travel_max_rad) / 2
-        spec = cls(
-            frequency_hz=settings.number("frequency_hz"),
-            amplitudes_rad_s=settings.numbers("amplitudes_rad_s"),
-            settle_periods=settings.integer("settle_periods", 2),
-            periods=settings.integer("periods", 8),
-            fs_hz=min(profile.sample_rate_hz, info.max_sample_rate_hz),
-            centre_rad=settings.number("centre_rad", middle),
-            move_speed_rad_s=move_speed_rad_s(settings, info),
-            method=method,
-            harmonics=settings.integer("harmonics", HARMONICS),
-        )
-        settings.done()
-        return spec
-
-
-def move_to_centre(spec: Spec, centre_rad: float, *, position_rad: float) -> Excitation:
-    """To the sines' start: by default the middle of the travel (level, for an elevation
-    axis: the least gravity gradient)."""
-    return move_excitation(
-        "move_to_centre",
-        position_rad,
-        centre_rad,
-        fs_hz=spec.fs_hz,
-        speed_rad_s=spec.move_speed_rad_s,
-        hold_s=0.2,
-    )
-
-
-def excitation(spec: Spec) -> list[Excitation]:
-    """One velocity sine per amplitude, whole periods, starting and ending at rest."""
-    samples = round((spec.settle_periods + spec.periods) * spec.fs_hz / spec.frequency_hz)
-    t = np.arange(samples) / spec.fs_hz
-    shape = np.sin(2 * math.pi * spec.frequency_hz * t)
-    return [
-        Excitation(
-            name=f"sine_{spec.frequency_hz:g}hz_{amplitude:g}rad_s",
-            mode=Mode.VELOCITY,
-            command=amplitude * shape,
-            fs_hz=spec.fs_hz,
-        )
-        for amplitude in spec.amplitudes_rad_s
-    ]
-
-
-def analyse(
-    recordings: list[Recording],
-    spec: Spec,
-    *,
-    current_loop_lag_s: float = 0.0,
-    cable_loop: CableLoop | None = None,
-) -> InertiaFrictionResult:
-    """J, B, T_c. The reported torque reaches the shaft half a control period (zero-order
-    hold) plus the current loop's lag later, which would otherwise leak into B as
-    ``c·2πf·τ``; the cable's hysteresis loop, when measured, is taken out first (it acts as
-    a stiff spring just after each reversal: −1.5 % on J, +20 % on B on the demo unit)."""
-    runs = [
-        analyse_sine_run(
-            without_cable_loop(r, cable_loop),
-            frequency_hz=spec.frequency_hz,
-            settle_periods=spec.settle_periods,
-            hold_samples=torque_hold_samples(r, current_loop_lag_s=current_loop_lag_s),
-        )
-        for r in recordings
-    ]
-    return identify_inertia_friction(runs, method=spec.method, harmonics=spec.harmonics)
-
-
-def measured_cable_loop(calibration: CalibrationRun) -> CableLoop | None:
-    """The cable's hysteresis loop if ``gravity_cable`` ran earlier."""
-    h = calibration.result("cable_hysteresis_nm")
-    angle = calibration.details.get("gravity_cable", {}).get("cable_hysteresis_angle_rad")
-    if h is None or not isinstance(angle, float):
-        return None
-    return CableLoop(
-        half_width_nm=h.value, half_width_u_nm=h.standard_uncertainty, angle_rad=angle
-    )
-
-
-def with_cable_loop_uncertainty(
-    result: InertiaFrictionResult,
-    recordings: list[Recording],
-    spec: Spec,
-    *,
-    current_loop_lag_s: float,
-    loop: CableLoop,
-) -> InertiaFrictionResult:
-    """Add the effect of the loop width's standard uncertainty (re-analysed at h + u(h))."""
-    shifted = dataclasses.replace(loop, half_width_nm=loop.half_width_nm + loop.half_width_u_nm)
-    other = analyse(recordings, spec, current_loop_lag_s=current_loop_lag_s, cable_loop=shifted)
-
-    def widened(mine: Estimate, theirs: Estimate) -> Estimate:
-        u_b = abs(theirs.value - mine.value)
-        return dataclasses.replace(
-            mine,
-            standard_uncertainty=math.hypot(mine.standard_uncertainty, u_b),
-            dof=combine_linear([1, 1], [0, 0], [mine.standard_uncertainty, u_b],
-                               [mine.dof, math.inf])[2],
-        )
-
-    return dataclasses.replace(
-        result,
-        inertia=widened(result.inertia, other.inertia),
-        viscous=widened(result.viscous, other.viscous),
-        coulomb=widened(result.coulomb, other.coulomb),
-    )
-
-
-def measured_load_stiffness(calibration: CalibrationRun, *, position_rad: float) -> Estimate | None:
-    """``dL/dθ`` of gravity and cable at ``position_rad`` if ``gravity_cable`` ran earlier."""
-    found = calibration.results("gravity_mge_nm", "gravity_phase_rad", "cable_stiffness_nm_rad")
-    if found is None:
-        return None
-    mge, phase, cable = found
-    return load_stiffness(mge=mge, phase=phase, cable_stiffness=cable, position_rad=position_rad)
-
-
-def measured_current_loop_lag_s(calibration: CalibrationRun) -> float:
-    """The current-loop time constant if that protocol ran earlier, else 0."""
-    tau = calibration.result("current_loop_time_constant_ms")
-    return 0.0 if tau is None else tau.value / 1000.0
-
-
-def analyse_in_calibration(
-    recordings: list[Recording], spec: Spec, calibration: CalibrationRun
-) -> tuple[InertiaFrictionResult, dict[str, object]]:
-    """J, B, T_c with what earlier protocols measured taken out: the current loop's lag,
-    the cable's hysteresis loop (its uncertainty propagated) and the load's stiffness at
-    the sines' centre. Also returns what was applied, for the certificate's details."""
-    lag_s = measured_current_loop_lag_s(calibration)
-    loop = measured_cable_loop(calibration)
-    analysed = analyse(recordings, spec, current_loop_lag_s=lag_s, cable_loop=loop)
-    if loop is not None:
-        analysed = with_cable_loop_uncertainty(
-            analysed, recordings, spec, current_loop_lag_s=lag_s, loop=loop
-        )
-    centre_rad = float(np.mean([np.mean(r.position) for r in recordings]))
-    stiffness = measured_load_stiffness(calibration, position_rad=centre_rad)
-    if stiffness is not None:
-        corrected = stiffness_corrected_inertia(
-            analysed.inertia, stiffness=stiffness, frequency_hz=spec.frequency_hz
-        )
-        analysed = dataclasses.replace(analysed, inertia=corrected)
-    return analysed, {
-        "centre_rad": centre_rad,
-        "load_stiffness_nm_rad": None if stiffness is None else stiffness.value,
-        "cable_loop_removed": None if loop is None else dataclasses.asdict(loop),
-        "current_loop_lag_compensated_s": lag_s,
-    }
 
 
 @pytest.fixture(scope="module")

@@ -95,7 +95,7 @@ def _load_profile_and_protocols(path: Path) -> None:
     drive = SimDrive(profile.plant, limits=profile.limits, fs_hz=profile.sample_rate_hz, seed=0)
     info = drive.info
     for name in profile.protocols:
-        module = importlib.import_module(f"protocols.test_{name}")
+        module = importlib.import_module(f"hil.suite.{name}")
         module.Spec.from_profile(profile, info)
 
 

@@ -10,7 +10,7 @@ import math
 import numpy as np
 import pytest
 
-import protocols.test_inertia_friction as protocol
+import hil.suite.inertia_friction as protocol
 from hil.drives.sim import SimDrive
 from hil.identify.estimate import Estimate
 from hil.identify.gravity_cable import CableLoop, cable_loop_torque_nm, load_stiffness

@@ -11,7 +11,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-import protocols.test_inertia_friction as protocol
+import hil.suite.inertia_friction as protocol
 from hil.calibration import CalibrationRun
 from hil.drives.sim import SimDrive
 from hil.identify.inertia_friction import (

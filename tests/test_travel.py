@@ -8,7 +8,7 @@ import pytest
 from hil.errors import IdentificationError, ProfileError
 from hil.motion import Excitation, Mode
 from hil.recording import Recording
-from protocols._travel import TravelSpec, on_command_grid, speed_ramp
+from hil.suite.travel import TravelSpec, on_command_grid, speed_ramp
 
 SPEC = TravelSpec(fs_hz=1000.0, travel_min_rad=-1.0, travel_max_rad=1.0, margin_rad=0.1,
                   move_speed_rad_s=0.5)

@@ -23,8 +23,8 @@ from hil.errors import IdentificationError
 from hil.identify.current_loop import CurrentLoopResult, torque_hold_s
 from hil.motion import Excitation, Mode
 from hil.profile import UnitProfile
+from hil.suite import current_loop as protocol
 from plant_sim.params import PlantParams
-from protocols import test_current_loop as protocol
 
 J = 0.004
 CONTROL_S = 2.5e-4  # the emulator's control period at the demo's 4 kHz

@@ -178,7 +178,7 @@ def test_inertia_friction_over_modbus_within_tolerance(profile: UnitProfile) -> 
     The station caps polling at 100 Hz so that a loaded runner still keeps the rate. B is
     not judged here: two short runs at 100 Hz bound it to ±0.0045 N·m·s/rad (its Cramér–Rao
     std on a loaded runner), wider than its tolerance; the full suite judges it with its U."""
-    from protocols.test_inertia_friction import Spec, analyse, excitation
+    from hil.suite.inertia_friction import Spec, analyse, excitation
 
     with (
         modbus_emulator(profile, seed=5, station_changes={"max_poll_rate_hz": 100.0}) as (

@@ -25,9 +25,9 @@ from hil.identify.current_loop import (
 )
 from hil.motion import Mode
 from hil.profile import load_profile
+from hil.suite import current_loop as protocol
 from plant_sim.model import Plant
 from plant_sim.params import PlantParams
-from protocols import test_current_loop as protocol
 
 PROFILE = load_profile()
 FS = 4000.0

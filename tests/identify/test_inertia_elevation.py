@@ -18,10 +18,10 @@ from hil.identify.inertia_elevation import fit_inertia_elevation, scale_by_gain
 from hil.identify.torque_constant import identify_torque_constant
 from hil.motion import Mode
 from hil.profile import load_profile
+from hil.suite import inertia_elevation as protocol
+from hil.suite import inertia_friction as sine
+from hil.suite import torque_constant as kt
 from plant_sim.params import PlantParams
-from protocols import test_inertia_elevation as protocol
-from protocols import test_inertia_friction as sine
-from protocols import test_torque_constant as kt
 
 PROFILE = load_profile("demo_gimbal_azimuth")
 FS = 4000.0

@@ -9,7 +9,9 @@ import pytest
 from hil.drives.base import DriveInfo, check_limits
 from hil.motion import Mode
 from hil.profile import load_profile
-from protocols import test_cogging, test_gravity_cable, test_stribeck
+from hil.suite import cogging as test_cogging
+from hil.suite import gravity_cable as test_gravity_cable
+from hil.suite import stribeck as test_stribeck
 
 PROFILE = load_profile()
 INFO = DriveInfo(vendor="test", model="test", firmware_version="0", serial="0",

@@ -25,7 +25,7 @@ from hil.identify.resonance import (
 )
 from hil.motion import Mode
 from hil.profile import load_profile
-from protocols import test_resonance as protocol
+from hil.suite import resonance as protocol
 
 PROFILE = load_profile("demo_gimbal_azimuth")
 FS = 4000.0

@@ -196,7 +196,7 @@ def test_cross_check_adds_the_cable_loop_to_the_sines_coulomb(tmp_path: Path) ->
     """The staircase's sliding friction includes the cable loop's half-width h, the sine's
     T_c has it taken out: compared in the same terms they agree; without h they differ by h
     (within the lenient expanded uncertainties the profile's Type B gives, but clearly)."""
-    import protocols.test_stribeck as protocol
+    import hil.suite.stribeck as protocol
 
     def estimate(name: str, value: float, u: float) -> Estimate:
         return Estimate(name=name, value=value, standard_uncertainty=u, unit="")

@@ -24,8 +24,9 @@ from hil.identify.torque_constant import (
 )
 from hil.motion import Mode
 from hil.profile import load_profile
+from hil.suite import cogging as test_cogging
+from hil.suite import torque_constant as test_torque_constant
 from plant_sim.params import Harmonic
-from protocols import test_cogging, test_torque_constant
 
 PROFILE = load_profile()
 FS = 4000.0

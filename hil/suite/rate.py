@@ -1,4 +1,4 @@
-"""Sample-rate requirement of a protocol: skip (with the reason) where the drive's transport
+"""Sample-rate requirement of a protocol: the reason to skip it where the drive's transport
 cannot sample fast enough, instead of running and fitting garbage.
 
 Rule of thumb used by the suite: a protocol whose analysis needs content up to ``f_max``
@@ -10,8 +10,6 @@ transport samples irregularly).
 from __future__ import annotations
 
 import math
-
-import pytest
 
 from hil.drives.base import DriveInfo
 
@@ -37,10 +35,3 @@ def sample_rate_shortfall(
         f"the drive offers {offered:.4g} Hz (drive.info.max_sample_rate_hz, {info.transport}): "
         "not measurable over this link"
     )
-
-
-def require_sample_rate(needed_hz: float, info: DriveInfo, *, protocol: str, why: str) -> None:
-    """Skip the calling protocol (``pytest.skip``) if the drive cannot sample at ``needed_hz``."""
-    reason = sample_rate_shortfall(needed_hz, info, protocol=protocol, why=why)
-    if reason is not None:
-        pytest.skip(reason)

@@ -15,7 +15,7 @@ from hil.identify.moves import position_move, travel_shortfall_rad
 from hil.motion import Excitation, Mode
 from hil.profile import UnitProfile
 from hil.recording import Recording
-from protocols._rate import needed_sample_rate_hz
+from hil.suite.rate import needed_sample_rate_hz
 
 
 def move_excitation(

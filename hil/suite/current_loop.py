@@ -1,0 +1,95 @@
+"""current_loop: the protocol's library (spec, excitation, analysis); the test and its
+declared measurements are in ``protocols/test_current_loop.py``.
+
+Current-loop lag τ from the phase of the motion against the reported torque, 20–150 Hz.
+
+Velocity-mode sines on top of a constant speed (the axis never reverses, so friction stays
+linear); numerics and the sampled-data model in :mod:`hil.identify.current_loop`.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+from hil.drives.base import DriveInfo
+from hil.identify.current_loop import (
+    CurrentLoopResult,
+    analyse_frequency,
+    fit_current_loop_lag,
+    torque_hold_s,
+)
+from hil.motion import Excitation, Mode
+from hil.profile import UnitProfile
+from hil.recording import Recording
+from hil.suite.travel import SteppedSineSpec, TravelSpec
+
+NAME = "current_loop"
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class Spec(SteppedSineSpec):
+    amplitude_rad_s: float  # velocity command sine amplitude
+    segment_s: float  # analysed time per frequency
+
+    @classmethod
+    def from_profile(cls, profile: UnitProfile, info: DriveInfo) -> Spec:
+        settings = profile.settings(NAME)
+        spec = cls(
+            **TravelSpec.envelope(settings, profile, info),
+            frequencies_hz=settings.numbers("frequencies_hz"),
+            speed_rad_s=settings.number("speed_rad_s", 0.6),
+            amplitude_rad_s=settings.number("amplitude_rad_s", 0.3),
+            segment_s=settings.number("segment_s", 0.25),
+            settle_s=settings.number("settle_s", 0.05),
+            ramp_s=settings.number("ramp_s", 0.1),
+            blocks=settings.integer("blocks", 5),
+        )
+        spec.require_carrier_travel(protocol=NAME, source=profile.source)
+        settings.done()
+        return spec
+
+    def amplitude(self, frequency_hz: float) -> float:
+        return self.amplitude_rad_s
+
+    def settle_samples(self, frequency_hz: float) -> int:
+        return round(math.ceil(self.settle_s * frequency_hz) * self.fs_hz / frequency_hz)
+
+    def segment_samples(self, frequency_hz: float) -> int:
+        """Settling plus analysed samples: whole periods of ``frequency_hz``."""
+        periods = math.ceil(self.settle_s * frequency_hz) + round(self.segment_s * frequency_hz)
+        return round(periods * self.fs_hz / frequency_hz)
+
+
+def excitation(spec: Spec, *, position_rad: float) -> list[Excitation]:
+    """Move to the lower end; ramp to the carrier speed; one sine segment per frequency."""
+    return [
+        spec.move_to_start(position_rad, hold_s=0.1),
+        Excitation(
+            name="sines", mode=Mode.VELOCITY, fs_hz=spec.fs_hz, command=spec.carrier_command()
+        ),
+    ]
+
+
+def analyse(recording: Recording, spec: Spec) -> CurrentLoopResult:
+    hold = torque_hold_s(recording.metadata, fs_hz=spec.fs_hz)
+    start = round(spec.ramp_s * spec.fs_hz)
+    points = []
+    for f in spec.frequencies_hz:
+        a, b = start + spec.settle_samples(f), start + spec.segment_samples(f)
+        points.append(
+            analyse_frequency(
+                recording.time_s[a:b],
+                recording.position[a:b],
+                recording.effort[a:b],
+                frequency_hz=f,
+                fs_hz=spec.fs_hz,
+                blocks=spec.blocks,
+                hold_s=hold.hold_s,
+                mean_samples=hold.mean_samples,
+            )
+        )
+        start += spec.segment_samples(f)
+    return fit_current_loop_lag(
+        points, fs_hz=spec.fs_hz, hold_s=hold.hold_s, mean_samples=hold.mean_samples
+    )

@@ -1,0 +1,137 @@
+"""stribeck: the protocol's library (spec, excitation, analysis); the test and its
+declared measurements are in ``protocols/test_stribeck.py``.
+
+Stribeck friction (T_s, v_s) from a slow constant-velocity staircase in both directions.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from hil.calibration import CalibrationRun
+from hil.drives.base import DriveInfo
+from hil.identify.stribeck import Staircase, StribeckResult, identify_stribeck, staircase
+from hil.motion import Excitation, Mode
+from hil.profile import UnitProfile
+from hil.suite.travel import TravelSpec
+
+log = logging.getLogger(__name__)
+
+
+NAME = "stribeck"
+
+
+# the sine protocol's results that this one cross-checks: (its name, ours)
+CROSS_CHECK = (
+    ("coulomb_nm", "stribeck_coulomb_nm"),
+    ("viscous_nm_s_rad", "stribeck_viscous_nm_s_rad"),
+)
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class Spec(TravelSpec):
+    speeds_rad_s: tuple[float, ...]
+    step_travel_rad: float
+    settle_s: float
+    turnaround_rad: float
+    turnaround_speed_rad_s: float
+
+    @classmethod
+    def from_profile(cls, profile: UnitProfile, info: DriveInfo) -> Spec:
+        settings = profile.settings(NAME)
+        spec = cls(
+            **TravelSpec.envelope(settings, profile, info),
+            speeds_rad_s=settings.numbers("speeds_rad_s"),
+            step_travel_rad=settings.number("step_travel_rad", 0.03),
+            settle_s=settings.number("settle_s", 0.3),
+            turnaround_rad=settings.number("turnaround_rad", 0.08),
+            turnaround_speed_rad_s=settings.number("turnaround_speed_rad_s", 0.1),
+        )
+        settings.done()
+        return spec
+
+    @property
+    def stairs(self) -> Staircase:
+        return staircase(
+            self.speeds_rad_s,
+            fs_hz=self.fs_hz,
+            step_travel_rad=self.step_travel_rad,
+            settle_s=self.settle_s,
+            turnaround_rad=self.turnaround_rad,
+            turnaround_speed_rad_s=self.turnaround_speed_rad_s,
+        )
+
+    @property
+    def start_rad(self) -> float:
+        """Start so that the staircase and its turnaround are centred in the travel."""
+        stairs = self.stairs
+        extent = stairs.travel_rad + stairs.turnaround_rad
+        middle = (self.travel_min_rad + self.travel_max_rad) / 2
+        if extent > 0.9 * (self.travel_max_rad - self.travel_min_rad):
+            raise ValueError(f"staircase needs {extent:.3g} rad, more than 90 % of the travel")
+        return middle - extent / 2
+
+
+def excitation(spec: Spec, *, position_rad: float) -> list[Excitation]:
+    """A position move from ``position_rad`` to the start, then the velocity staircase."""
+    return [
+        spec.move_to_start(position_rad, hold_s=0.2),
+        Excitation(
+            name="staircase",
+            mode=Mode.VELOCITY,
+            fs_hz=spec.fs_hz,
+            command=spec.stairs.command_rad_s,
+        ),
+    ]
+
+
+def analyse(
+    time_s: np.ndarray, position_rad: np.ndarray, torque_nm: np.ndarray, spec: Spec
+) -> StribeckResult:
+    return identify_stribeck(
+        time_s=time_s,
+        position_rad=position_rad,
+        torque_nm=torque_nm,
+        stairs=spec.stairs,
+        settle_s=spec.settle_s,
+    )
+
+
+def finite_or_none(value: float) -> float | None:
+    """JSON has no NaN or infinity: a stick-slip speed has no friction value."""
+    return value if math.isfinite(value) else None
+
+
+def cross_check(result: StribeckResult, calibration: CalibrationRun) -> dict[str, object]:
+    """Compare T_c and B with the sine protocol's, when it ran: normalised error
+    ``|Δ| / √(U₁² + U₂²)`` (≤ 1: consistent within the expanded uncertainties). The sine's
+    T_c excludes the cable loop's half-width h (taken out there), the staircase's sliding
+    friction includes it: when h was measured it is added to the sine's side."""
+    ours = {e.name: e for e in (result.coulomb, result.viscous)}
+    loop = calibration.result("cable_hysteresis_nm")
+    checks: dict[str, object] = {}
+    for other, mine in CROSS_CHECK:
+        b = calibration.result(other)
+        if b is None:
+            continue
+        a = ours[mine]
+        b_value, b_expanded = b.value, b.expanded_uncertainty
+        if other == "coulomb_nm" and loop is not None:
+            b_value += loop.value
+            b_expanded = float(np.hypot(b_expanded, loop.expanded_uncertainty))
+        expanded = float(np.hypot(a.expanded_uncertainty, b_expanded))
+        error = abs(a.value - b_value) / expanded
+        checks[other] = {"stribeck": a.value, "sine": b_value, "normalised_error": error}
+        if error > 1:
+            log.warning(
+                "%s: staircase %.4g vs sine %.4g differ by %.1f expanded uncertainties",
+                other,
+                a.value,
+                b_value,
+                error,
+            )
+    return checks

@@ -1,0 +1,121 @@
+"""torque_constant: the protocol's library (spec, excitation, analysis); the test and its
+declared measurements are in ``protocols/test_torque_constant.py``.
+
+K_t from a locked rotor and the shaft torque sensor: current swept up and down at several
+locked angles (numerics in :mod:`hil.identify.torque_constant`).
+
+Needs a station with a shaft torque sensor (``drive.info.has_torque_sensor``) and a
+locked-rotor fixture the harness can engage (``drive.locked_rotor()``); skips otherwise.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from hil.drives.base import DriveInfo
+from hil.identify.estimate import Estimate
+from hil.identify.torque_constant import (
+    LockedSweep,
+    TorqueConstantResult,
+    analyse_locked_sweep,
+    datasheet_deviation,
+)
+from hil.motion import Excitation, Mode
+from hil.profile import UnitProfile
+from hil.recording import Recording
+from hil.suite.travel import move_excitation, move_speed_rad_s
+
+NAME = "torque_constant"
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class Spec:
+    angles_rad: tuple[float, ...]
+    peak_torque_nm: float
+    levels: int  # per direction
+    level_s: float
+    settle_s: float
+    move_speed_rad_s: float
+    fs_hz: float
+    kv_rpm_per_v: float | None
+
+    @classmethod
+    def from_profile(cls, profile: UnitProfile, info: DriveInfo) -> Spec:
+        settings = profile.settings(NAME)
+        kv = profile.unit.get("kv_rpm_per_v")
+        limit = min(info.limits.torque_nm, info.rated_torque_nm)
+        spec = cls(
+            angles_rad=settings.numbers("angles_rad"),
+            peak_torque_nm=settings.number("peak_torque_fraction", 0.8) * limit,
+            levels=settings.integer("levels", 9),
+            level_s=settings.number("level_s", 0.05),
+            settle_s=settings.number("settle_s", 0.01),
+            move_speed_rad_s=move_speed_rad_s(settings, info),
+            fs_hz=min(profile.sample_rate_hz, info.max_sample_rate_hz),
+            kv_rpm_per_v=None if kv is None else float(kv),
+        )
+        settings.done()
+        return spec
+
+    @property
+    def level_samples(self) -> int:
+        return round(self.level_s * self.fs_hz)
+
+    @property
+    def settle_samples(self) -> int:
+        return math.ceil(self.settle_s * self.fs_hz)
+
+    @property
+    def torque_levels_nm(self) -> np.ndarray:
+        """Up from −peak to +peak, then back down: both directions at every level."""
+        up = np.linspace(-self.peak_torque_nm, self.peak_torque_nm, self.levels)
+        return np.concatenate([up, up[::-1]])
+
+
+def move(spec: Spec, *, position_rad: float, angle_rad: float) -> Excitation:
+    return move_excitation(
+        f"move_to_{angle_rad:+.3f}rad",
+        position_rad,
+        angle_rad,
+        fs_hz=spec.fs_hz,
+        speed_rad_s=spec.move_speed_rad_s,
+        hold_s=0.1,
+    )
+
+
+def sweep(spec: Spec, *, angle_rad: float) -> Excitation:
+    """Torque staircase for a locked rotor, ending with a short zero level (not analysed)."""
+    command = np.concatenate(
+        [np.repeat(spec.torque_levels_nm, spec.level_samples), np.zeros(spec.settle_samples)]
+    )
+    return Excitation(
+        name=f"locked_sweep_{angle_rad:+.3f}rad",
+        mode=Mode.TORQUE,
+        fs_hz=spec.fs_hz,
+        command=command,
+    )
+
+
+def analyse_sweep(recording: Recording, spec: Spec, *, angle_rad: float) -> LockedSweep:
+    columns = recording.columns
+    return analyse_locked_sweep(
+        columns["current_a"],
+        columns["load_torque_nm"],
+        recording.effort,
+        angle_rad=angle_rad,
+        level_samples=spec.level_samples,
+        settle_samples=spec.settle_samples,
+        levels=spec.torque_levels_nm.size,
+    )
+
+
+def estimates(result: TorqueConstantResult, spec: Spec) -> dict[str, Estimate]:
+    found = {e.name: e for e in (result.torque_constant, result.linearity, result.gain_error)}
+    if spec.kv_rpm_per_v is not None:
+        found["torque_constant_vs_datasheet_pct"] = datasheet_deviation(
+            result.torque_constant, kv_rpm_per_v=spec.kv_rpm_per_v
+        )
+    return found
