@@ -98,7 +98,7 @@ def test_current_loop_skips_over_modbus(pytester: pytest.Pytester, tmp_path: Pat
     out = tmp_path / "certs"
     result = pytester.runpytest_inprocess(
         "--pyargs",
-        "protocols.test_current_loop",
+        "gimbal_hil_protocols.test_current_loop",
         "-p",
         "no:cacheprovider",
         "-rs",
