@@ -10,7 +10,7 @@ from dataclasses import dataclass
 from enum import StrEnum
 
 from hil.gum import format_result
-from hil.identify.estimate import Estimate
+from hil.identify.estimate import Estimate, combine_linear
 from hil.profile import MeasurementSpec
 
 DECISION_RULE = (
@@ -88,10 +88,11 @@ def with_method_accuracy(estimate: Estimate, spec: MeasurementSpec) -> Estimate:
     rectangular: ``u_B = a·|value|/√3``; Welch–Satterthwaite dof."""
     if spec.accuracy_rel is None:
         return estimate
-    u_a = estimate.standard_uncertainty
     u_b = spec.accuracy_rel * abs(estimate.value) / math.sqrt(3)
-    u_c = math.hypot(u_a, u_b)
-    dof = u_c**4 / (u_a**4 / estimate.dof) if u_a > 0 and math.isfinite(estimate.dof) else math.inf
+    _, u_c, dof = combine_linear(
+        [1.0, 1.0], [estimate.value, 0.0], [estimate.standard_uncertainty, u_b],
+        [estimate.dof, math.inf],
+    )
     return Estimate(
         name=estimate.name,
         value=estimate.value,

@@ -22,7 +22,10 @@ Z99 = 2.5758293035489004
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
-class Estimate:
+class FittedParameter:
+    """A parameter of a fitted model with its standard deviation from the fit's covariance
+    (not a calibration result: those are :class:`hil.identify.estimate.Estimate`)."""
+
     value: float
     std: float
 
@@ -35,25 +38,25 @@ class Estimate:
         }
 
 
-def _linear(fit: Fit, weights: dict[str, float], offset: float = 0.0) -> Estimate:
+def _linear(fit: Fit, weights: dict[str, float], offset: float = 0.0) -> FittedParameter:
     """``offset + Σ w·coef`` with its standard deviation."""
     labels = tuple(weights)
     values, covariance = fit.block(labels)
     w = np.array([weights[label] for label in labels])
     variance = float(w @ covariance @ w) if np.all(np.isfinite(covariance)) else math.inf
-    return Estimate(value=offset + float(w @ values), std=math.sqrt(max(variance, 0.0)))
+    return FittedParameter(value=offset + float(w @ values), std=math.sqrt(max(variance, 0.0)))
 
 
-def _amplitude(fit: Fit, sin_label: str, cos_label: str) -> tuple[Estimate, float]:
+def _amplitude(fit: Fit, sin_label: str, cos_label: str) -> tuple[FittedParameter, float]:
     """Amplitude (delta method) and phase of ``a·sin + b·cos = A·sin(x + φ)``."""
     (a, b), covariance = fit.block((sin_label, cos_label))
     amplitude = math.hypot(a, b)
     phase = math.atan2(b, a)
     if amplitude == 0.0 or not np.all(np.isfinite(covariance)):
-        return Estimate(value=amplitude, std=math.inf), phase
+        return FittedParameter(value=amplitude, std=math.inf), phase
     gradient = np.array([a, b]) / amplitude
     std = math.sqrt(max(float(gradient @ covariance @ gradient), 0.0))
-    return Estimate(value=amplitude, std=std), phase
+    return FittedParameter(value=amplitude, std=std), phase
 
 
 def units(axis_kind: AxisKind) -> dict[str, str]:
@@ -75,7 +78,7 @@ def units(axis_kind: AxisKind) -> dict[str, str]:
     }
 
 
-def base_parameters(fit: Fit) -> dict[str, Estimate]:
+def base_parameters(fit: Fit) -> dict[str, FittedParameter]:
     return {
         "inertia_kg_m2": _linear(fit, {"inertia": 1.0}),
         "viscous_nm_s_rad": _linear(fit, {"viscous": 1.0}),
@@ -101,8 +104,8 @@ def _harmonics(fit: Fit, effect: str) -> list[dict[str, float]]:
 
 
 def effect_parameters(effect: str, fit: Fit, *, lag_std_s: float = math.nan) -> dict[str, Any]:
-    """Named parameters of ``effect`` in ``fit``: ``{name: value}`` and ``{name: Estimate}``."""
-    estimates: dict[str, Estimate] = {}
+    """Named parameters of ``effect`` in ``fit``: values and :class:`FittedParameter` s."""
+    estimates: dict[str, FittedParameter] = {}
     extra: dict[str, Any] = {}
     values = fit.as_dict()
     if effect == "offset":
@@ -120,12 +123,12 @@ def effect_parameters(effect: str, fit: Fit, *, lag_std_s: float = math.nan) -> 
         term = fit.model.term("stribeck")
         estimates["static_torque_nm"] = _linear(fit, {"coulomb": 1.0, "stribeck_delta": 1.0})
         velocity = term.nonlinear["stribeck_velocity"] if term else math.nan
-        estimates["stribeck_velocity_rad_s"] = Estimate(value=velocity, std=math.nan)
+        estimates["stribeck_velocity_rad_s"] = FittedParameter(value=velocity, std=math.nan)
     elif effect in ("cogging", "kt_ripple"):
         rows = _harmonics(fit, effect)
         name = "amplitude_nm" if effect == "cogging" else "relative_amplitude"
         extra["periods_per_rev"] = rows[0]["order"] if rows else 0
-        estimates[name] = Estimate(value=rows[0]["amplitude"], std=rows[0]["amplitude_std"])
+        estimates[name] = FittedParameter(value=rows[0]["amplitude"], std=rows[0]["amplitude_std"])
         extra["orders"] = [
             {"periods_per_rev": r["order"], name: r["amplitude"], "phase_rad": r["phase_rad"]}
             for r in rows
@@ -152,7 +155,7 @@ def effect_parameters(effect: str, fit: Fit, *, lag_std_s: float = math.nan) -> 
         else:
             extra["hysteresis_nm"] = 0.0
     elif effect == "current_lag":
-        estimates["time_constant_s"] = Estimate(value=fit.model.lag_s, std=lag_std_s)
+        estimates["time_constant_s"] = FittedParameter(value=fit.model.lag_s, std=lag_std_s)
     elif effect == "two_mass":
         extra.update(two_mass_parameters(fit))
         estimates["load_inertia_kg_m2"] = _linear(fit, {"load_inertia": 1.0})
