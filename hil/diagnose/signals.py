@@ -19,6 +19,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
+from scipy import stats
 from scipy.signal import butter, sosfiltfilt
 
 from hil.errors import IdentificationError
@@ -313,4 +314,4 @@ def _noise_std(values: FloatArray) -> float:
     if len(values) < 10:
         return 0.0
     third = np.diff(values, 3) / math.sqrt(20.0)
-    return float(1.4826 * np.median(np.abs(third - np.median(third))))
+    return float(stats.median_abs_deviation(third, scale="normal"))
