@@ -25,6 +25,8 @@ FloatArray = NDArray[np.float64]
 
 
 class DriveState(Enum):
+    """The drive's power state as the contract sees it (CiA 402's states map onto these)."""
+
     DISABLED = "disabled"
     ENABLED = "enabled"
     QUICK_STOPPED = "quick_stopped"
@@ -33,7 +35,25 @@ class DriveState(Enum):
 
 @dataclass(frozen=True, slots=True, kw_only=True)
 class DriveInfo:
-    """What the certificate records about the drive, and what protocols may rely on."""
+    """What the certificate records about the drive, and what protocols may rely on.
+
+    Attributes
+    ----------
+    vendor, model, firmware_version, serial : str
+        As the drive reports them (its identity object or registers).
+    rated_torque_nm : float
+        The torque the drive's per-mille or percent units refer to.
+    limits : Limits
+        The envelope this drive enforces before any motion.
+    modes : tuple of Mode
+        The control modes :meth:`Drive.run` accepts.
+    max_sample_rate_hz : float
+        The fastest rate a recording can be sampled at over this transport.
+    has_torque_sensor : bool
+        A shaft torque sensor is fitted (locked-rotor K_t).
+    transport : str
+        ``"sim"``, ``"canopen ..."``, ``"modbus tcp"``, ...: for messages and skips.
+    """
 
     vendor: str
     model: str
@@ -49,6 +69,17 @@ class DriveInfo:
 
 @dataclass(frozen=True, slots=True, kw_only=True)
 class DriveStatus:
+    """A snapshot of the drive.
+
+    Attributes
+    ----------
+    state : DriveState
+    position_rad, velocity_rad_s : float
+        The axis' encoder position and the drive's velocity estimate.
+    fault_code : int or None
+        The drive's fault code while in :attr:`DriveState.FAULT`.
+    """
+
     state: DriveState
     position_rad: float
     velocity_rad_s: float
@@ -60,6 +91,21 @@ def check_limits(excitation: Excitation, limits: Limits, *, start_position_rad: 
 
     Velocity commands are integrated from ``start_position_rad`` to check travel; position
     commands are checked directly and their finite-difference velocity too.
+
+    Parameters
+    ----------
+    excitation : Excitation
+        The command trajectory about to be run.
+    limits : Limits
+        The unit's envelope.
+    start_position_rad : float
+        Where the axis is now.
+
+    Raises
+    ------
+    LimitViolationError
+        The command is empty or non-finite, or its peak torque, peak velocity or travel
+        leaves ``limits``; the message names the excitation, the quantity and both values.
     """
     command = np.asarray(excitation.command, dtype=np.float64)
     where = f"excitation '{excitation.name}'"
@@ -101,23 +147,49 @@ class Drive(abc.ABC):
 
     @property
     @abc.abstractmethod
-    def info(self) -> DriveInfo: ...
+    def info(self) -> DriveInfo:
+        """What the drive is and can do (read once when it connected)."""
 
     @abc.abstractmethod
-    def enable(self) -> None: ...
+    def enable(self) -> None:
+        """Bring the drive to an enabled state, holding its position.
+
+        Raises
+        ------
+        DriveError
+            The drive did not reach the state in time, or is in fault.
+        """
 
     @abc.abstractmethod
-    def disable(self) -> None: ...
+    def disable(self) -> None:
+        """Remove torque. Idempotent and always safe to call, also after a fault or a lost
+        link (then it does what it still can and logs the rest)."""
 
     @abc.abstractmethod
-    def quick_stop(self) -> None: ...
+    def quick_stop(self) -> None:
+        """Decelerate to standstill by the drive's quick-stop ramp, then hold or disable as
+        the drive's quick-stop option says."""
 
     @abc.abstractmethod
-    def status(self) -> DriveStatus: ...
+    def status(self) -> DriveStatus:
+        """The drive's state, position and velocity now."""
 
     @abc.abstractmethod
     def run(self, excitation: Excitation) -> Recording:
         """Execute ``excitation`` and return what was measured.
+
+        Parameters
+        ----------
+        excitation : Excitation
+            One command sample per control period at ``excitation.fs_hz``, in the mode
+            ``excitation.mode`` (N·m, rad/s or rad).
+
+        Returns
+        -------
+        Recording
+            One row per command sample: time, command, encoder position, velocity, reported
+            torque (and current, load torque where the drive has them), with metadata
+            stating how the samples were timed.
 
         Raises
         ------
