@@ -12,9 +12,9 @@ import pytest
 from hil.drives.base import DriveInfo
 from hil.motion import Mode
 from hil.profile import UnitProfile, load_profile
-from hil.suite import cogging as test_cogging
-from hil.suite import current_loop as test_current_loop
-from hil.suite import resonance as test_resonance
+from hil.suite import cogging as cogging_suite
+from hil.suite import current_loop as current_loop_suite
+from hil.suite import resonance as resonance_suite
 from hil.suite.rate import (
     OVERSAMPLING,
     needed_sample_rate_hz,
@@ -75,17 +75,17 @@ def test_fast_enough_a_drive_runs(elevation: UnitProfile) -> None:
 
 def test_protocol_needs_follow_their_settings(elevation: UnitProfile, azimuth: UnitProfile) -> None:
     fast = _info(elevation, 4000.0)
-    current = test_current_loop.Spec.from_profile(elevation, fast)
+    current = current_loop_suite.Spec.from_profile(elevation, fast)
     assert current.needed_sample_rate_hz == pytest.approx(4 * 150.0)  # frequencies up to 150
-    cogging = test_cogging.Spec.from_profile(elevation, fast)
+    cogging = cogging_suite.Spec.from_profile(elevation, fast)
     # order 200 at 0.6 rad/s passes at 200 · 0.6 / 2π = 19.1 Hz; but 4000 samples over a
     # 2.6 rad pass at 0.6 rad/s need more
     assert cogging.needed_sample_rate_hz == pytest.approx(4000 / (2.6 / 0.6))
     assert cogging.needed_sample_rate_hz > 4 * 200 * 0.6 / (2 * math.pi)
-    resonance = test_resonance.Spec.from_profile(azimuth, _info(azimuth, 4000.0))
+    resonance = resonance_suite.Spec.from_profile(azimuth, _info(azimuth, 4000.0))
     assert resonance.needed_sample_rate_hz == pytest.approx(4 * 300.0)  # band up to 300 Hz
     # the needs do not depend on the rate a drive offers (no circular planning)
-    slow = test_current_loop.Spec.from_profile(
+    slow = current_loop_suite.Spec.from_profile(
         elevation, dataclasses.replace(fast, max_sample_rate_hz=100.0)
     )
     assert slow.needed_sample_rate_hz == current.needed_sample_rate_hz

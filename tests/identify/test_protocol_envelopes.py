@@ -9,15 +9,15 @@ import pytest
 from hil.drives.base import DriveInfo, check_limits
 from hil.motion import Mode
 from hil.profile import load_profile
-from hil.suite import cogging as test_cogging
-from hil.suite import gravity_cable as test_gravity_cable
-from hil.suite import stribeck as test_stribeck
+from hil.suite import cogging as cogging_suite
+from hil.suite import gravity_cable as gravity_cable_suite
+from hil.suite import stribeck as stribeck_suite
 
 PROFILE = load_profile()
 INFO = DriveInfo(vendor="test", model="test", firmware_version="0", serial="0",
                  rated_torque_nm=0.5, limits=PROFILE.limits, modes=tuple(Mode),
                  max_sample_rate_hz=PROFILE.sample_rate_hz)
-MODULES = (test_stribeck, test_gravity_cable, test_cogging)
+MODULES = (stribeck_suite, gravity_cable_suite, cogging_suite)
 
 
 @pytest.mark.parametrize("module", MODULES, ids=lambda m: m.NAME)

@@ -24,8 +24,8 @@ from hil.identify.torque_constant import (
 )
 from hil.motion import Mode
 from hil.profile import load_profile
-from hil.suite import cogging as test_cogging
-from hil.suite import torque_constant as test_torque_constant
+from hil.suite import cogging as cogging_suite
+from hil.suite import torque_constant as torque_constant_suite
 from plant_sim.params import Harmonic
 
 PROFILE = load_profile()
@@ -33,7 +33,7 @@ FS = 4000.0
 INFO = DriveInfo(vendor="test", model="test", firmware_version="0", serial="0",
                  rated_torque_nm=0.5, limits=PROFILE.limits, modes=tuple(Mode),
                  max_sample_rate_hz=FS, has_torque_sensor=True)
-SPEC = test_torque_constant.Spec.from_profile(PROFILE, INFO)
+SPEC = torque_constant_suite.Spec.from_profile(PROFILE, INFO)
 ACCURACY = PROFILE.measurement("torque_constant_nm_a").accuracy_rel
 
 
@@ -110,9 +110,9 @@ def test_locked_rotor_holds_still_and_reads_the_true_torque() -> None:
         drive.enable()
         before = drive.status().position_rad
         with drive.locked_rotor():
-            recording = drive.run(test_torque_constant.sweep(SPEC, angle_rad=0.0))
+            recording = drive.run(torque_constant_suite.sweep(SPEC, angle_rad=0.0))
         assert drive.status().position_rad == before
-        released = drive.run(test_torque_constant.move(SPEC, position_rad=before, angle_rad=0.1))
+        released = drive.run(torque_constant_suite.move(SPEC, position_rad=before, angle_rad=0.1))
     assert "load_torque_nm" not in released.columns
     settled = np.abs(np.diff(recording.effort, prepend=0.0)) == 0
     sensor = recording.columns["load_torque_nm"][settled]
@@ -121,11 +121,11 @@ def test_locked_rotor_holds_still_and_reads_the_true_torque() -> None:
 
 def _measured_ripple(drive: SimDrive) -> list[tuple[int, float, float]]:
     """What the cogging protocol (which runs first) hands over."""
-    spec = test_cogging.Spec.from_profile(PROFILE, drive.info)
-    move, passes = test_cogging.excitation(spec, position_rad=drive.status().position_rad)
+    spec = cogging_suite.Spec.from_profile(PROFILE, drive.info)
+    move, passes = cogging_suite.excitation(spec, position_rad=drive.status().position_rad)
     drive.run(move)
     rec = drive.run(passes)
-    table = compensation_table(test_cogging.analyse(rec.time_s, rec.position, rec.effort, spec,
+    table = compensation_table(cogging_suite.analyse(rec.time_s, rec.position, rec.effort, spec,
                                                     inertia_kg_m2=0.0036))
     return [(h["order"], h["amplitude"], h["phase_rad"])
             for h in json.loads(json.dumps(table))["kt_ripple"]]
@@ -148,11 +148,11 @@ def test_hidden_torque_constant_is_recovered_within_the_claimed_accuracy(
         table = _measured_ripple(drive)
         sweeps = []
         for angle in SPEC.angles_rad:
-            drive.run(test_torque_constant.move(SPEC, position_rad=drive.status().position_rad,
+            drive.run(torque_constant_suite.move(SPEC, position_rad=drive.status().position_rad,
                                                 angle_rad=angle))
             with drive.locked_rotor():
-                recording = drive.run(test_torque_constant.sweep(SPEC, angle_rad=angle))
-            sweeps.append(test_torque_constant.analyse_sweep(recording, SPEC, angle_rad=angle))
+                recording = drive.run(torque_constant_suite.sweep(SPEC, angle_rad=angle))
+            sweeps.append(torque_constant_suite.analyse_sweep(recording, SPEC, angle_rad=angle))
     result = identify_torque_constant(sweeps, ripple=table)
     truth = plant.torque_constant_nm_a * (1 + error)
     assert result.torque_constant.value == pytest.approx(truth, rel=ACCURACY)
