@@ -30,11 +30,9 @@ import time
 from typing import Any
 
 import numpy as np
-from pymodbus.client import ModbusSerialClient, ModbusTcpClient
-from pymodbus.exceptions import ModbusException
-from pymodbus.framer import FramerType
 
 from hil.drives.base import Drive, DriveInfo, DriveState, DriveStatus, check_limits
+from hil.drives.modbus.link import ModbusLink
 from hil.drives.modbus.regmap import (
     FEEDBACK,
     SETPOINT_INTERPOLATION,
@@ -57,15 +55,6 @@ from hil.recording import Recording
 
 log = logging.getLogger(__name__)
 
-EXCEPTION_NAMES = {
-    1: "ILLEGAL FUNCTION",
-    2: "ILLEGAL DATA ADDRESS",
-    3: "ILLEGAL DATA VALUE",
-    4: "SERVER DEVICE FAILURE",
-    5: "ACKNOWLEDGE",
-    6: "SERVER DEVICE BUSY",
-    0x0B: "GATEWAY TARGET FAILED TO RESPOND",
-}
 MIN_RATE_FRACTION = 0.7  # of the requested sample rate a run must achieve
 WATCHDOG_FAULT = 0x8130  # CiA-style life guard / heartbeat error: the drive lost its master
 
@@ -105,12 +94,11 @@ class ModbusDrive(Drive):
                 "registers",
                 source=self.map.source,
             )
-        self._client = self._make_client()
-        self._connect()
+        self.link = ModbusLink(station, self.map)
         try:
             self._info = self._read_info()
         except BaseException:
-            self._client.close()
+            self.link.close()
             raise
 
     def _choose_torque_sample(self) -> str:
@@ -129,77 +117,13 @@ class ModbusDrive(Drive):
             )
         return "instantaneous"
 
-    # -- transport -----------------------------------------------------------------------
-    def _make_client(self) -> Any:
-        st = self.station
-        if st.transport == "tcp":
-            # one resend after a timeout: an overloaded host can be descheduled for longer
-            # than timeout_s while the answer is under way; the resend keeps the
-            # transaction id, so whichever answer comes first is matched, the other skipped.
-            # RTU has no transaction id (a late answer would be taken for the next
-            # request's), so it is not resent there.
-            return ModbusTcpClient(st.host, port=st.port, timeout=st.timeout_s, retries=1)
-        return ModbusSerialClient(
-            st.serial_port,
-            framer=FramerType.RTU,
-            baudrate=st.baudrate,
-            parity=st.parity,
-            stopbits=st.stopbits,
-            timeout=st.timeout_s,
-            retries=0,
-        )
-
-    def _where(self) -> str:
-        st = self.station
-        link = f"{st.host}:{st.port}" if st.transport == "tcp" else st.serial_port
-        return f"modbus {st.transport} {link} unit {st.unit_id}"
-
-    def _connect(self) -> None:
-        if not self._client.connect():
-            raise DriveCommunicationError(f"{self._where()}: cannot connect")
-
-    def _call(self, what: str, method: str, *args: Any, **kwargs: Any) -> Any:
-        gap = self.map.frame_gap_s
-        if gap:
-            time.sleep(gap)
-        try:
-            response = getattr(self._client, method)(
-                *args, device_id=self.station.unit_id, **kwargs
-            )
-        except ModbusException as exc:
-            raise DriveCommunicationError(f"{self._where()}: {what}: {exc}") from exc
-        except OSError as exc:
-            raise DriveCommunicationError(f"{self._where()}: {what}: {exc}") from exc
-        if response.isError():
-            code = int(getattr(response, "exception_code", 0))
-            name = EXCEPTION_NAMES.get(code, "unknown")
-            raise DriveFaultError(
-                f"{self._where()}: {what} answered with Modbus exception {code} ({name})",
-                code=code,
-            )
-        return response
-
-    def _read_regs(self, address: int, count: int) -> list[int]:
-        response = self._call(
-            f"read {count} registers at {address}", "read_holding_registers", address, count=count
-        )
-        return list(response.registers)
-
     def read_values(self, names: tuple[str, ...]) -> dict[str, float]:
-        words: dict[int, int] = {}
-        for address, count in self.map.blocks(names):
-            for offset, value in enumerate(self._read_regs(address, count)):
-                words[address + offset] = value
-        out = {}
-        for name in names:
-            if name in self.map.registers:
-                r = self.map[name]
-                out[name] = r.decode([words[r.address + i] for i in range(r.count)])
-        return out
+        """Read registers by name, in SI units (see :meth:`ModbusLink.read_values`)."""
+        return self.link.read_values(names)
 
     def write_value(self, name: str, value_si: float) -> None:
-        register = self.map[name]
-        self._call(f"write {name}", "write_registers", register.address, register.encode(value_si))
+        """Write one register from an SI value (see :meth:`ModbusLink.write_value`)."""
+        self.link.write_value(name, value_si)
 
     # -- info ----------------------------------------------------------------------------
     def _read_info(self) -> DriveInfo:
@@ -217,7 +141,7 @@ class ModbusDrive(Drive):
                 Mode(name) for name in self.map.modes if name in ("torque", "velocity", "position")
             ),
             max_sample_rate_hz=rate,
-            transport=self._where(),
+            transport=self.link.where,
         )
 
     def _measure_poll_rate(self, polls: int = 30) -> float:
@@ -241,18 +165,10 @@ class ModbusDrive(Drive):
     # -- state ---------------------------------------------------------------------------
     def _feedback(self) -> tuple[float, dict[str, float]]:
         """One poll of the feedback block: (host time at the middle, values)."""
-        words: dict[int, int] = {}
         t0 = time.monotonic()
-        for address, count in self._blocks:
-            for offset, value in enumerate(self._read_regs(address, count)):
-                words[address + offset] = value
+        words = self.link.read_words(self._blocks)
         t1 = time.monotonic()
-        values = {}
-        for name in self._feedback_names:
-            if name in self.map.registers:
-                r = self.map[name]
-                values[name] = r.decode([words[r.address + i] for i in range(r.count)])
-        return (t0 + t1) / 2, values
+        return (t0 + t1) / 2, self.link.decode(words, self._feedback_names)
 
     def _bit(self, values: dict[str, float], name: str) -> bool:
         return bool(int(values["status_word"]) >> self.map.status_bits[name] & 1)
@@ -290,7 +206,7 @@ class ModbusDrive(Drive):
                 return values
             if time.monotonic() > deadline:
                 raise DriveStateError(
-                    f"{self._where()}: {what} not confirmed "
+                    f"{self.link.where}: {what} not confirmed "
                     f"(status word 0x{int(values['status_word']):04X})"
                 )
             time.sleep(0.005)
@@ -302,7 +218,7 @@ class ModbusDrive(Drive):
             self._control("fault_reset")
             self._control()
             values = self._await("fault reset", lambda v: not self._bit(v, "fault"))
-            log.info("%s: fault 0x%04X reset", self._where(), code)
+            log.info("%s: fault 0x%04X reset", self.link.where, code)
         self._select(mode)
         self._control("enable")
         self._await("enable", lambda v: self._bit(v, "enabled") or self._bit(v, "fault"))
@@ -313,7 +229,7 @@ class ModbusDrive(Drive):
         self.write_value(f"{mode.value}_cmd", self._hold_value(mode))
         self.write_value("mode", self.map.modes[mode.value])
         if int(self.read_values(("mode",))["mode"]) != self.map.modes[mode.value]:
-            raise DriveStateError(f"{self._where()}: mode register does not show {mode.value}")
+            raise DriveStateError(f"{self.link.where}: mode register does not show {mode.value}")
         self._mode = mode
 
     def _hold_value(self, mode: Mode) -> float:
@@ -326,24 +242,24 @@ class ModbusDrive(Drive):
         if self._bit(values, "fault"):
             self._state = DriveState.FAULT
             raise DriveFaultError(
-                f"{self._where()}: drive fault {context}", code=int(values["fault_code"])
+                f"{self.link.where}: drive fault {context}", code=int(values["fault_code"])
             )
 
     def disable(self) -> None:
-        if not self._client.connected:
+        if not self.link.connected:
             self._state = DriveState.DISABLED
             return
         try:
             self._control()
             self._await("disable", lambda v: not self._bit(v, "enabled"))
         except DriveError as exc:
-            log.error("%s: disable not confirmed: %s", self._where(), exc)
+            log.error("%s: disable not confirmed: %s", self.link.where, exc)
         self._state = DriveState.DISABLED
 
     def quick_stop(self) -> None:
         try:
-            if not self._client.connected:
-                self._connect()  # the drive's watchdog stops it anyway; try to confirm
+            if not self.link.connected:
+                self.link.connect()  # the drive's watchdog stops it anyway; try to confirm
             self._control("quick_stop")
             self._await(
                 "quick stop",
@@ -351,14 +267,14 @@ class ModbusDrive(Drive):
                 timeout_s=5.0,
             )
         except DriveError as exc:
-            log.error("%s: quick stop not confirmed: %s", self._where(), exc)
+            log.error("%s: quick stop not confirmed: %s", self.link.where, exc)
         self._state = DriveState.QUICK_STOPPED
 
     def close(self) -> None:
         try:
             self.disable()
         finally:
-            self._client.close()
+            self.link.close()
 
     # -- run -----------------------------------------------------------------------------
     def run(self, excitation: Excitation) -> Recording:
@@ -405,7 +321,7 @@ class ModbusDrive(Drive):
         if achieved >= MIN_RATE_FRACTION * excitation.fs_hz:
             return None
         return DriveCommunicationError(
-            f"{self._where()}: '{excitation.name}' polled at {achieved:.0f} Hz of the "
+            f"{self.link.where}: '{excitation.name}' polled at {achieved:.0f} Hz of the "
             f"{excitation.fs_hz:g} Hz requested (< {MIN_RATE_FRACTION:.0%}; longest pause "
             f"{self._longest_pause_s:.3f} s): the host could not keep up, the recording is "
             f"not the planned excitation; lower max_poll_rate_hz in {self.station.source} "
@@ -419,7 +335,7 @@ class ModbusDrive(Drive):
         register = self.map[SETPOINT_INTERPOLATION]
         if round(period_s / register.scale) >= register.modulus:
             raise DriveStateError(
-                f"{self._where()}: sample period {period_s:g} s exceeds the range of "
+                f"{self.link.where}: sample period {period_s:g} s exceeds the range of "
                 f"'{SETPOINT_INTERPOLATION}' ({(register.modulus - 1) * register.scale:g} s)"
             )
         self.write_value(SETPOINT_INTERPOLATION, period_s)
@@ -461,13 +377,13 @@ class ModbusDrive(Drive):
                         "(host overloaded or stalled?)"
                     )
                 raise DriveFaultError(
-                    f"{self._where()}: drive fault at t = {stamp - t0:.3f} s of "
+                    f"{self.link.where}: drive fault at t = {stamp - t0:.3f} s of "
                     f"'{excitation.name}'{why}",
                     code=code,
                 )
             if not self._bit(values, "enabled"):
                 raise DriveStateError(
-                    f"{self._where()}: drive disabled itself during '{excitation.name}'"
+                    f"{self.link.where}: drive disabled itself during '{excitation.name}'"
                 )
             next_due = t0 + (index + 1) / fs
             delay = next_due - time.monotonic()
@@ -528,7 +444,7 @@ class ModbusDrive(Drive):
         if self._has_timestamp and rows:
             timing["drive_clock_at_start_s"] = f"{rows[0][2][TIMESTAMP]:.6f}"
         metadata = {
-            "drive": self._where(),
+            "drive": self.link.where,
             "unit_id": str(self.station.unit_id),
             "model": self._info.model,
             "firmware": self._info.firmware_version,
