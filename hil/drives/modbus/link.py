@@ -42,7 +42,7 @@ class ModbusLink:
     Raises
     ------
     DriveCommunicationError
-        The connection cannot be made (on creation) or a request fails or times out.
+        The connection cannot be made (:meth:`connect`) or a request fails or times out.
     DriveFaultError
         The drive answers a request with a Modbus exception (its code attached).
     """
@@ -51,7 +51,6 @@ class ModbusLink:
         self.station = station
         self.map = register_map
         self._client = self._make_client()
-        self.connect()
 
     def _make_client(self) -> Any:
         st = self.station
