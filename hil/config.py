@@ -14,14 +14,11 @@ import tomllib
 from collections.abc import Mapping
 from importlib import resources
 from pathlib import Path
-from typing import Any, Final, TypeVar
+from typing import Any, Final
 
 from hil.errors import ProfileError
 
 FIXTURES_PACKAGE: Final = "gimbal_hil_fixtures"
-
-_T = TypeVar("_T")
-
 
 class _Required:
     def __repr__(self) -> str:
@@ -118,9 +115,6 @@ class ConfigTable:
             raise self.error(key, f"must be finite, got {value!r}")
         return float(value)
 
-    def optional_number(self, key: str) -> float | None:
-        """A finite number, or ``None`` when the key is absent."""
-        return None if key not in self.values and self._mark(key) else self.number(key)
 
     def positive(self, key: str, default: float | _Required = REQUIRED) -> float:
         """A finite number above zero."""
@@ -128,6 +122,11 @@ class ConfigTable:
         if not value > 0:
             raise self.error(key, f"must be above zero, got {value!r}")
         return value
+
+    def optional_positive(self, key: str) -> float | None:
+        """A finite number above zero, or ``None`` when the key is absent."""
+        self._read.add(key)
+        return self.positive(key) if key in self.values else None
 
     def non_negative(self, key: str, default: float | _Required = REQUIRED) -> float:
         """A finite number at or above zero."""
@@ -217,10 +216,6 @@ class ConfigTable:
             f"(known: {', '.join(sorted(self._read))})",
             source=self.source,
         )
-
-    def _mark(self, key: str) -> bool:
-        self._read.add(key)
-        return True
 
     def _child(self, key: str) -> str:
         return f"[{key}]" if self.table == "(top level)" else f"{self.table[:-1]}.{key}]"

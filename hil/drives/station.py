@@ -164,11 +164,11 @@ def _canopen(table: ConfigTable, scaling: ConfigTable, base_dir: Path) -> CanOpe
         acquisition=table.choice("acquisition", ACQUISITIONS, "stream"),
         lost_sample_fraction=table.non_negative("lost_sample_fraction", 0.02),
         torque_sample=table.choice("torque_sample", TORQUE_SAMPLES, "auto"),
-        control_period_s=_optional_positive(table, "control_period_s"),
-        rated_torque_nm=_optional_positive(scaling, "rated_torque_nm"),
-        rated_current_a=_optional_positive(scaling, "rated_current_a"),
+        control_period_s=table.optional_positive("control_period_s"),
+        rated_torque_nm=scaling.optional_positive("rated_torque_nm"),
+        rated_current_a=scaling.optional_positive("rated_current_a"),
         counts_per_rev=scaling.integer("counts_per_rev") if "counts_per_rev" in scaling else None,
-        velocity_units_per_rad_s=_optional_positive(scaling, "velocity_units_per_rad_s"),
+        velocity_units_per_rad_s=scaling.optional_positive("velocity_units_per_rad_s"),
         quick_stop_option_code=scaling.integer("quick_stop_option_code", 2),
         quick_stop_decel_rad_s2=scaling.positive("quick_stop_decel_rad_s2", 20.0),
         can_options=dict(table.table_at("options", required=False).values),  # python-can's
@@ -205,7 +205,3 @@ def _modbus(table: ConfigTable, base_dir: Path) -> ModbusStation:
     )
     table.done()
     return station
-
-
-def _optional_positive(table: ConfigTable, key: str) -> float | None:
-    return table.positive(key) if key in table else None

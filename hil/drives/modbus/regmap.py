@@ -139,7 +139,7 @@ def load_register_map(path: str | Path) -> RegisterMap:
     model = device.string("model", path.stem)
     max_registers_per_read = device.integer("max_registers_per_read", 125)
     frame_gap_s = device.non_negative("frame_gap_s", 0.0)
-    control_period = device.positive("control_period_s") if "control_period_s" in device else None
+    control_period = device.optional_positive("control_period_s")
     device.done()
     registers = {
         name: _register(name, table, byte_order, word_order)
