@@ -38,6 +38,7 @@ from numpy.typing import NDArray
 
 from hil.errors import IdentificationError
 from hil.identify.estimate import Estimate
+from hil.identify.harmonic_fit import harmonic_columns, polynomial_columns
 
 FloatArray = NDArray[np.float64]
 COMPENSATION_FORMAT = "gimbal-hil cogging compensation 1"
@@ -64,11 +65,9 @@ class CoggingResult:
 
 def _design(theta: FloatArray, orders: list[int], poly: int, centre: float,
             scale: float) -> FloatArray:
-    x = (theta - centre) / scale
-    cols = [x**k for k in range(poly + 1)]
-    for n in orders:
-        cols += [np.cos(n * theta), np.sin(n * theta)]
-    return np.column_stack(cols)
+    return np.column_stack(
+        [polynomial_columns((theta - centre) / scale, poly), harmonic_columns(theta, orders)]
+    )
 
 
 def _smooth_residual(theta: FloatArray, torque: FloatArray, poly: int, centre: float,

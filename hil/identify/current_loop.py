@@ -68,6 +68,7 @@ from scipy.optimize import least_squares
 
 from hil.errors import IdentificationError
 from hil.identify.estimate import Estimate
+from hil.identify.harmonic_fit import fit_harmonics, polynomial_columns
 
 FloatArray = NDArray[np.float64]
 ComplexArray = NDArray[np.complex128]
@@ -218,11 +219,12 @@ def block_phasors(
     """Complex amplitude ``c − j·s`` of each signal at ``omega`` (plus a polynomial trend)."""
     centred = time_s - time_s.mean()
     scale = max(float(np.ptp(centred)), 1e-12)
-    columns = [np.cos(omega * time_s), np.sin(omega * time_s)]
-    columns += [(centred / scale) ** p for p in range(TREND_ORDER + 1)]
-    design = np.column_stack(columns)
-    coefficients = np.linalg.lstsq(design, np.column_stack(signals), rcond=None)[0]
-    return [complex(coefficients[0, i], -coefficients[1, i]) for i in range(len(signals))]
+    fit = fit_harmonics(
+        omega * time_s,
+        np.column_stack(signals),
+        trend=polynomial_columns(centred / scale, TREND_ORDER),
+    )
+    return [complex(fit.cos[0, i], -fit.sin[0, i]) for i in range(len(signals))]
 
 
 def analyse_frequency(

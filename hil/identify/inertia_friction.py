@@ -37,6 +37,7 @@ import numpy as np
 
 from hil.errors import IdentificationError
 from hil.identify.estimate import Estimate, combine_linear
+from hil.identify.harmonic_fit import fit_harmonics, polynomial_columns
 from hil.identify.sine_run import FloatArray, SineRun, synchronous_average
 
 Method = Literal["orthogonal", "least_squares"]
@@ -170,12 +171,14 @@ def _harmonic_components(
     used = (run.period == k) & run.moving
     phi = regressors(run, 0, 1)[used][:, :3]
     omega_t = 2 * math.pi * run.frequency_hz * run.time_s[used]
-    basis = np.column_stack(
-        [f(n * omega_t) for n in range(1, harmonics + 1) for f in (np.cos, np.sin)]
-        + [np.ones_like(omega_t)]
+    fit = fit_harmonics(
+        omega_t,
+        np.column_stack([phi, run.torque_nm[used]]),
+        orders=range(1, harmonics + 1),
+        trend=polynomial_columns(omega_t, 0),
     )
-    projector = np.linalg.pinv(basis)[:-1]
-    return projector @ phi, projector @ run.torque_nm[used]
+    components = fit.interleaved()
+    return components[:, :3], components[:, 3]
 
 
 def _jackknife(blocks: list[Block]) -> tuple[FloatArray, FloatArray, float]:

@@ -17,6 +17,7 @@ from numpy.typing import NDArray
 
 from hil.errors import IdentificationError
 from hil.identify.gravity_cable import CableLoop, cable_loop_torque_nm
+from hil.identify.harmonic_fit import fit_harmonics, polynomial_columns
 from hil.identify.kinematics import phase_free_derivatives
 from hil.recording import Recording
 
@@ -36,10 +37,10 @@ def orthogonal_components(
     for uniform sampling over whole periods, and still unbiased for irregular timestamps
     or a subset of samples.
     """
-    omega = 2 * math.pi * frequency_hz
-    design = np.column_stack([np.cos(omega * time_s), np.sin(omega * time_s), np.ones_like(time_s)])
-    coefficients = np.linalg.lstsq(design, signal, rcond=None)[0]
-    return float(coefficients[0]), float(coefficients[1])
+    fit = fit_harmonics(
+        2 * math.pi * frequency_hz * time_s, signal, trend=polynomial_columns(time_s, 0)
+    )
+    return float(fit.cos[0]), float(fit.sin[0])
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
