@@ -140,9 +140,21 @@ def test_wrapping_drive_clock_is_unwrapped(tmp_path: Path, profile: UnitProfile)
         assert drive.map["timestamp"].modulus == 1 << 16
         fs = min(drive.info.max_sample_rate_hz, 100.0)
         drive.enable()
-        recording = drive.run(sine(0.5, fs_hz=fs, periods=1))
+        excitation = sine(0.5, fs_hz=fs, periods=1)
+        recording = drive.run(excitation)
+    # Which command sample each row carried (rows are an ordered subsequence of the
+    # command): the rows' drive-clock span must equal the span of those samples' due times.
+    # A wrong wrap count is off by a whole wrap (65.5 ms); the read lands half a period
+    # after its sample is due, give or take one period, whatever the host's stalls.
+    indices, start = [], 0
+    for value in recording.columns["velocity_cmd_rad_s"]:
+        start = int(np.flatnonzero(excitation.command[start:] == value)[0]) + start
+        indices.append(start)
+    due_span_s = (indices[-1] - indices[0]) / fs
+    wrap_s = drive.map["timestamp"].modulus * drive.map["timestamp"].scale
     duration = recording.time_s[-1] - recording.time_s[0]
-    assert duration == pytest.approx(0.5, abs=0.05)  # 7 wraps: drive and host agree
+    assert abs(duration - due_span_s) < min(wrap_s / 2, 2 / fs + 0.005), (duration, due_span_s)
+    assert duration > 6 * wrap_s  # the run crossed several wraps
     assert _derivative_error(recording) < ERROR_RAD_S
 
 
