@@ -115,7 +115,6 @@ class ConfigTable:
             raise self.error(key, f"must be finite, got {value!r}")
         return float(value)
 
-
     def positive(self, key: str, default: float | _Required = REQUIRED) -> float:
         """A finite number above zero."""
         value = self.number(key, default)
