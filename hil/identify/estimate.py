@@ -13,8 +13,19 @@ COVERAGE_PROBABILITY = 0.9545  # the coverage of k = 2 for a normal distribution
 
 
 def coverage_factor(dof: float) -> float:
-    """GUM coverage factor for ~95 % coverage: k = 2 for many degrees of freedom, Student-t
-    for few (``dof`` < 50)."""
+    """GUM coverage factor for ~95 % coverage.
+
+    Parameters
+    ----------
+    dof : float
+        Effective degrees of freedom of the standard uncertainty (``inf`` when known).
+
+    Returns
+    -------
+    float
+        2 for 50 or more degrees of freedom; Student-t's two-sided 95.45 % quantile for
+        fewer (at least one degree of freedom is assumed).
+    """
     if not math.isfinite(dof) or dof >= 50:
         return 2.0
     return float(stats.t.ppf(0.5 + COVERAGE_PROBABILITY / 2, max(dof, 1.0)))
@@ -22,11 +33,20 @@ def coverage_factor(dof: float) -> float:
 
 @dataclass(frozen=True, slots=True, kw_only=True)
 class Estimate:
-    """``value ± coverage_factor · standard_uncertainty`` in ``unit``.
+    """An identified value with its standard uncertainty (GUM): ``value ± k·u`` in ``unit``.
 
-    ``dof`` are the effective degrees of freedom (Welch–Satterthwaite) behind the
-    uncertainty; ``cramer_rao_std`` is the bound on the standard deviation of any unbiased
-    estimator given the same data, when known.
+    Attributes
+    ----------
+    name : str
+        The declared measurement it answers (``inertia_kg_m2``, ...).
+    value, standard_uncertainty : float
+        The estimate and its combined standard uncertainty ``u``.
+    unit : str
+    dof : float
+        Effective degrees of freedom (Welch–Satterthwaite) behind ``u``; sets ``k``.
+    cramer_rao_std : float or None
+        The bound on the standard deviation of any unbiased estimator given the same data,
+        when known.
     """
 
     name: str
@@ -55,8 +75,20 @@ def combine_linear(
     uncertainties: ArrayLike,
     dofs: ArrayLike,
 ) -> tuple[float, float, float]:
-    """Value, standard uncertainty and Welch–Satterthwaite dof of ``Σ wᵢ·xᵢ`` for independent
-    inputs ``xᵢ ± uᵢ`` with ``νᵢ`` degrees of freedom."""
+    """Combine independent inputs linearly: ``y = Σ wᵢ·xᵢ``.
+
+    Parameters
+    ----------
+    weights, values, uncertainties, dofs : array_like
+        Sensitivities ``wᵢ``, input values ``xᵢ``, their standard uncertainties ``uᵢ`` and
+        degrees of freedom ``νᵢ`` (``inf`` for a Type B component).
+
+    Returns
+    -------
+    value, standard_uncertainty, dof : float
+        ``y``, ``u(y) = √Σ(wᵢuᵢ)²`` and the Welch–Satterthwaite effective degrees of
+        freedom ``u(y)⁴ / Σ (wᵢuᵢ)⁴/νᵢ`` (``inf`` when every component has infinite dof).
+    """
     w = np.asarray(weights, dtype=np.float64)
     x = np.asarray(values, dtype=np.float64)
     u = np.asarray(uncertainties, dtype=np.float64)
