@@ -160,6 +160,27 @@ def identify_cogging(
     position ripple ``δθ_n`` (harmonic fit of θ about its linear trend in time) gives the
     acceleration ``α_n = −(n·v)²·δθ_n``; ``J·α_n`` is removed from the torque harmonic.
 
+    Parameters
+    ----------
+    passes : list of (time_s, position_rad, torque_nm)
+        The two constant-velocity passes.
+    inertia_kg_m2 : float
+        J for the acceleration correction (measured, or the declared nominal).
+    min_order, max_order : int
+        The orders per revolution scanned.
+    threshold : float
+        An order is taken when its amplitude exceeds this many times the scan's median.
+    poly : int
+        Order of the smooth (friction, gravity, cable) trend removed against position.
+    max_orders : int
+        At most this many orders are kept.
+
+    Returns
+    -------
+    CoggingResult
+        Cogging and K_t-ripple harmonics, their peaks as estimates, the torque levels and
+        the noise.
+
     Raises
     ------
     IdentificationError

@@ -60,8 +60,24 @@ class InertiaFrictionResult:
 def identify_inertia_friction(
     runs: Sequence[SineRun], *, method: Method = "least_squares", harmonics: int = HARMONICS
 ) -> InertiaFrictionResult:
-    """J, B, T_c from two or more runs at distinct amplitudes; ``harmonics``: how many
-    harmonics of the excitation the orthogonal correlation uses (1: the article's).
+    """J, B, T_c from two or more sine runs at distinct amplitudes.
+
+    Parameters
+    ----------
+    runs : sequence of SineRun
+        The reduced runs (:func:`hil.identify.sine_run.analyse_sine_run`), one per amplitude.
+    method : {"least_squares", "orthogonal"}
+        ``least_squares`` (default): a time-domain fit of ``τ = J·α + B·ω + T_c·sgn ω``
+        with α and ω instrumented by their low harmonics. ``orthogonal``: the article's
+        correlation per period.
+    harmonics : int
+        Harmonics of the excitation the orthogonal correlation uses (1: the article's).
+
+    Returns
+    -------
+    InertiaFrictionResult
+        J, B, T_c as :class:`~hil.identify.estimate.Estimate` (delete-one-period jackknife
+        standard uncertainties, P − 1 degrees of freedom) and per-amplitude details.
 
     Raises
     ------

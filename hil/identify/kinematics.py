@@ -20,6 +20,20 @@ def phase_free_derivatives(
     Irregular timestamps (polled transports) are handled by a cubic spline onto a uniform
     grid at the median step and back: linear interpolation across a missed poll cuts the
     corner of the path and biased J low (−3 % with 10 % of 200 Hz polls missing).
+
+    Parameters
+    ----------
+    position : array
+        Encoder position (rad).
+    time_s : array
+        Sample times; irregular times are resampled as above.
+    window_s : float
+        Width of the Savitzky–Golay window.
+
+    Returns
+    -------
+    velocity, acceleration : array
+        At the input's samples (rad/s, rad/s²).
     """
     steps = np.diff(time_s)
     step = float(np.median(steps))

@@ -304,6 +304,23 @@ def identify_stribeck(
     Velocity windows for the stick-slip test span ``counts_per_window`` encoder steps (the
     step is read off the data) at the commanded speed, so quantisation does not pass for
     stick-slip.
+
+    Parameters
+    ----------
+    time_s, position_rad, torque_nm : array
+        The recorded run, one row per command sample.
+    stairs : Staircase
+        The commanded staircase (speeds, both directions, sample ranges).
+    settle_s : float
+        Time discarded at the start of each step.
+    counts_per_window : float
+        Encoder steps per stick-slip test window.
+
+    Returns
+    -------
+    StribeckResult
+        T_s, v_s (and the sliding T_c, B) with uncertainties, the per-speed points and
+        which speeds were flagged as stick-slip and left out.
     """
     if len(time_s) != len(stairs.command_rad_s):
         raise IdentificationError(
