@@ -77,7 +77,8 @@ def identify_inertia_friction(
     -------
     InertiaFrictionResult
         J, B, T_c as :class:`~hil.identify.estimate.Estimate` (delete-one-period jackknife
-        standard uncertainties, P − 1 degrees of freedom) and per-amplitude details.
+        standard uncertainties, P − 1 degrees of freedom), the runs, the fit's share of the
+        periodic torque, its lack of fit and the noise.
 
     Raises
     ------

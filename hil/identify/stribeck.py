@@ -319,8 +319,9 @@ def identify_stribeck(
     Returns
     -------
     StribeckResult
-        T_s, v_s (and the sliding T_c, B) with uncertainties, the per-speed points and
-        which speeds were flagged as stick-slip and left out.
+        T_s, v_s (and the sliding T_c, B) with uncertainties, the per-speed points (each
+        says whether it was flagged as stick-slip and left out), the fit's residual and the
+        lowest clean speed.
     """
     if len(time_s) != len(stairs.command_rad_s):
         raise IdentificationError(
