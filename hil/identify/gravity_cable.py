@@ -173,6 +173,13 @@ def identify_gravity_cable(
         Number of position bins for the load fit.
     settle_rad
         Travel after the probe's reversal skipped (velocity-loop transient).
+
+    Returns
+    -------
+    GravityCableResult
+        m·g·e, its phase φ, the cable stiffness and the hysteresis half-width h as
+        estimates; the offset, the loop's angle s₀, the sliding friction at sweep speed and
+        the binned load and half-difference curves.
     """
     if len(position_rad) != len(plan.command_rad_s):
         raise IdentificationError(

@@ -35,7 +35,21 @@ class InertiaElevationResult:
 def fit_inertia_elevation(
     elevations_rad: Sequence[float], inertias: Sequence[Estimate]
 ) -> InertiaElevationResult:
-    """Fit ``J = J_zenith + ΔJ·cos²(el)`` (≥ 3 elevations, spanning different cos²)."""
+    """Fit ``J = J_zenith + ΔJ·cos²(el)`` to the inertia measured at several elevations.
+
+    Parameters
+    ----------
+    elevations_rad : sequence of float
+        Elevation of the other axis at each measurement (≥ 3, spanning different cos²).
+    inertias : sequence of Estimate
+        J measured there, with its uncertainty (the fit's weights).
+
+    Returns
+    -------
+    InertiaElevationResult
+        J level (el = 0), J zenith and their ratio (max/min over elevation) as estimates,
+        and the fit's χ²/dof.
+    """
     if len(elevations_rad) != len(inertias) or len(inertias) < 3:
         raise IdentificationError("need J at 3 or more elevations")
     c2 = np.cos(np.asarray(elevations_rad, dtype=np.float64)) ** 2

@@ -163,7 +163,23 @@ def _initial_model(points: Sequence[FrfPoint], *, time_constant_s: float) -> Two
 
 def identify_resonance(points: Sequence[FrfPoint], *, fs_hz: float,
                        time_constant_s: float = 2e-4) -> ResonanceResult:
-    """Fit :class:`TwoMassModel` to ``points`` (≥ 6), ``time_constant_s`` as the start."""
+    """Fit the two-mass model to a measured frequency response.
+
+    Parameters
+    ----------
+    points : sequence of FrfPoint
+        The stepped-sine FRF, at least 6 frequencies.
+    fs_hz : float
+        The control loop's sample rate (the model's sampled-data terms).
+    time_constant_s : float
+        Start value of the current-loop lag (the current-loop protocol's τ when measured).
+
+    Returns
+    -------
+    ResonanceResult
+        f_res, f_anti, damping and f_res over the velocity-loop bandwidth as estimates, the
+        fitted :class:`TwoMassModel`, the bandwidth, the points and the fit's χ²/dof.
+    """
     if len(points) < 6:
         raise IdentificationError(f"{len(points)} frequencies, need at least 6")
     freqs = np.array([p.frequency_hz for p in points])
