@@ -170,7 +170,7 @@ def identify_resonance(points: Sequence[FrfPoint], *, fs_hz: float,
     points : sequence of FrfPoint
         The stepped-sine FRF, at least 6 frequencies.
     fs_hz : float
-        The control loop's sample rate (the model's sampled-data terms).
+        The recording's sample rate: the model's zero-order hold and its images.
     time_constant_s : float
         Start value of the current-loop lag (the current-loop protocol's τ when measured).
 
