@@ -93,6 +93,23 @@ def analyse_sine_run(
     ``hold_samples``: the torque reported at sample k is held by the drive over the next
     period, so the motion it causes is centred that many samples later; the kinematics are
     taken there (0.5 for a zero-order hold; 0 for torque already time-aligned with motion).
+
+    Parameters
+    ----------
+    recording : Recording
+        A velocity-mode sine run.
+    frequency_hz : float
+        The sine's frequency.
+    settle_periods : int
+        Periods discarded at the start.
+    hold_samples : float
+        See above.
+
+    Returns
+    -------
+    SineRun
+        The article's components ``c`` and ``s`` with their uncertainties, the noise, and
+        the analysed samples with their phase-free kinematics, period and phase bin.
     """
     time_s = recording.time_s - recording.time_s[0]
     dt = float(np.median(np.diff(time_s)))

@@ -96,7 +96,27 @@ def analyse_locked_sweep(
     settle_samples: int,
     levels: int,
 ) -> LockedSweep:
-    """Level means and the line of one sweep (arrays start at the first level)."""
+    """Level means and the fitted line of one locked-rotor current sweep.
+
+    Parameters
+    ----------
+    current_a, sensor_torque_nm, reported_torque_nm : array
+        The sweep's samples, starting at its first level.
+    angle_rad : float
+        The rotor angle the sweep was locked at.
+    level_samples : int
+        Samples per current level.
+    settle_samples : int
+        Samples discarded at the start of each level.
+    levels : int
+        Number of levels.
+
+    Returns
+    -------
+    LockedSweep
+        The level means, K_t (slope of shaft torque over current) with its standard
+        uncertainty, the intercept, the reported-torque gain and the largest residual.
+    """
     i = level_means(current_a, level_samples=level_samples, settle_samples=settle_samples,
                     levels=levels)
     t = level_means(sensor_torque_nm, level_samples=level_samples,
