@@ -92,11 +92,22 @@ def diagnose(
 
     Parameters
     ----------
-    recording : the measured log to explain.
-    validate : a second log of the same axis (held out: never fitted).
-    cutoff_hz : analysis bandwidth in Hz (default: an eighth of the sample rate).
-    hold_samples : how many sample periods the effort leads the motion (0.5: zero-order
-        hold); ``None`` estimates it within ±1 sample.
+    recording : Recording
+        The measured log to explain.
+    validate : Recording, optional
+        A second log of the same axis, held out: never fitted. Without it a block split of
+        ``recording`` is held out.
+    cutoff_hz : float, optional
+        Analysis bandwidth (default: an eighth of the sample rate).
+    hold_samples : float or None
+        How many sample periods the effort leads the motion (0.5: zero-order hold);
+        ``None`` estimates it within ±1 sample.
+
+    Returns
+    -------
+    Diagnosis
+        The base fit, the causes named (ranked, each with its held-out gain), the residual
+        analysis and the data issues; :func:`hil.diagnose.report.report` lays it out.
 
     Raises
     ------
