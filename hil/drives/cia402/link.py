@@ -52,7 +52,23 @@ NMT_NAMES = {0: "INITIALISING", 4: "STOPPED", 5: "OPERATIONAL", 127: "PRE-OPERAT
 
 
 class CanLink:
-    """Owns the python-can bus, the canopen network and the node's cyclic exchange."""
+    """Owns the python-can bus, the canopen network and the node's cyclic exchange.
+
+    Parameters
+    ----------
+    station : CanOpenStation
+        Interface, channel, bitrate, node, EDS and the link's timing (SYNC period and
+        pacing, PDO, SDO and heartbeat timeouts).
+
+    Attributes
+    ----------
+    sync_index : int
+        The index of the last SYNC sent; feedback is keyed by it (``rx1``, ``rx2``).
+    emcy : list of (int, float)
+        EMCY codes received (with their host time), newest last.
+    mode, controlword, target
+        What the RPDO of a tick without arguments carries.
+    """
 
     def __init__(self, station: CanOpenStation) -> None:
         self.station = station
@@ -77,6 +93,13 @@ class CanLink:
 
     # -- connection ------------------------------------------------------------------
     def open(self) -> None:
+        """Connect to the bus and listen to the node's heartbeat, EMCY and TPDOs.
+
+        Raises
+        ------
+        DriveCommunicationError
+            The CAN interface cannot be opened.
+        """
         st = self.station
         try:
             self.network.connect(
@@ -98,6 +121,7 @@ class CanLink:
         self.network.subscribe(0x280 + base, self._on_tpdo2)
 
     def close(self) -> None:
+        """Disconnect from the bus (a receive thread that died is logged, not raised)."""
         if self._connected:
             self._connected = False
             try:
@@ -107,6 +131,7 @@ class CanLink:
 
     @property
     def connected(self) -> bool:
+        """Whether the bus is open (it may still have failed since: see :meth:`check`)."""
         return self._connected
 
     # -- listeners (python-can Notifier thread) -----------------------------------------
@@ -162,9 +187,20 @@ class CanLink:
 
     # -- SDO -------------------------------------------------------------------------
     def read(self, index: int, subindex: int = 0) -> Any:
+        """An object's value by SDO upload.
+
+        Raises
+        ------
+        DriveStateError
+            The node aborted the transfer.
+        DriveCommunicationError
+            No answer within the SDO timeout, or a CAN error.
+        """
         return self._sdo(lambda var: var.raw, index, subindex)
 
     def write(self, index: int, subindex: int, value: Any) -> None:
+        """An object's value by SDO download (errors as :meth:`read`)."""
+
         def set_raw(var: Any) -> None:
             var.raw = value
 
@@ -226,6 +262,7 @@ class CanLink:
 
     # -- the cyclic exchange ------------------------------------------------------------
     def rpdo_payload(self, mode: Mode, controlword: int, target: int) -> tuple[int, bytes]:
+        """COB-ID and data of the RPDO carrying ``controlword`` and the target of ``mode``."""
         n = RPDO_LAYOUT[mode][0]
         fmt = "<H" + TARGET_OBJECT[mode][1]
         return 0x200 + 0x100 * (n - 1) + self.node_id, struct.pack(fmt, controlword, target)
@@ -370,6 +407,7 @@ class CanLink:
         return code
 
     def raise_if_faulted(self, statusword: int, context: str) -> None:
+        """Raise :class:`DriveFaultError` (code from EMCY or 0x603F) on a fault bit or EMCY."""
         if statusword & SW_FAULT or self.emcy:
             code = self.emcy[-1][0] if self.emcy else self.fault_code()
             raise DriveFaultError(f"node {self.node_id} faulted {context}", code=code)
@@ -383,6 +421,7 @@ class CanLink:
         return one, two
 
     def forget(self) -> None:
+        """Drop the feedback received so far (before a run)."""
         self.rx1.clear()
         self.rx2.clear()
 
