@@ -152,10 +152,11 @@ def test_bus_error_mid_run(profile: UnitProfile) -> None:
             assert partial is not None
             rows = _rows(partial)
             lost = int(partial.metadata["lost_samples"])
-            assert len(rows) + lost == rows[-1] + 1  # every SYNC of the run: a row or lost
-            # the bus-off is queued after the TPDOs answering error_sync (row error_sync - 1);
-            # the answer to one more SYNC may be collected before the master reads it (seen:
-            # 3 of 4 runs); earlier only if answers were lost
+            # the bus-off is queued after the TPDOs answering error_sync (row error_sync - 1)
+            # and read while waiting for the next SYNC's answer: that SYNC is counted lost,
+            # or its answer was collected first (both seen); an earlier last row only if
+            # answers were lost
+            assert rows[-1] + 1 <= len(rows) + lost <= rows[-1] + 2  # every SYNC sent
             assert error_sync - 1 - lost <= rows[-1] <= error_sync
         assert emulator.state != ENABLED
 
