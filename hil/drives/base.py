@@ -74,6 +74,7 @@ class DriveStatus:
     Attributes
     ----------
     state : DriveState
+        The power state, as the contract sees it.
     position_rad, velocity_rad_s : float
         The axis' encoder position and the drive's velocity estimate.
     fault_code : int or None
@@ -140,15 +141,34 @@ def _check_peak(where: str, what: str, values: FloatArray, limit: float, unit: s
 
 
 class Drive(abc.ABC):
-    """A drive backend. ``disable`` is idempotent and always safe to call.
+    """A drive backend: executes sampled command trajectories and records what happened.
 
-    Use as a context manager: leaving the block disables the drive whatever happened.
+    Everything crossing this interface is in SI units; unit conversion lives in the
+    backend. :meth:`disable` is idempotent and always safe to call.
+
+    Notes
+    -----
+    Use as a context manager: leaving the block quick-stops the drive if an exception is
+    propagating, then closes it (which disables it) whatever happened.
+
+    Examples
+    --------
+    >>> with open_drive("sim", profile=profile, unit_serial="X") as drive:  # doctest: +SKIP
+    ...     drive.enable()
+    ...     recording = drive.run(excitation)
     """
 
     @property
     @abc.abstractmethod
     def info(self) -> DriveInfo:
-        """What the drive is and can do (read once when it connected)."""
+        """What the drive is and can do.
+
+        Returns
+        -------
+        DriveInfo
+            Identity, rated torque, limits, modes and the fastest sample rate, read (or
+            measured) once when the drive connected.
+        """
 
     @abc.abstractmethod
     def enable(self) -> None:
@@ -162,17 +182,34 @@ class Drive(abc.ABC):
 
     @abc.abstractmethod
     def disable(self) -> None:
-        """Remove torque. Idempotent and always safe to call, also after a fault or a lost
-        link (then it does what it still can and logs the rest)."""
+        """Remove torque.
+
+        Idempotent and always safe to call, also after a fault or a lost link: then it does
+        what it still can and logs the rest; it does not raise a :class:`DriveError`.
+        """
 
     @abc.abstractmethod
     def quick_stop(self) -> None:
-        """Decelerate to standstill by the drive's quick-stop ramp, then hold or disable as
-        the drive's quick-stop option says."""
+        """Decelerate to standstill by the drive's quick-stop ramp.
+
+        The drive then holds or disables as its quick-stop option says. Safe to call after
+        a fault or a lost link: what cannot be confirmed is logged, not raised.
+        """
 
     @abc.abstractmethod
     def status(self) -> DriveStatus:
-        """The drive's state, position and velocity now."""
+        """The drive's state, position and velocity now.
+
+        Returns
+        -------
+        DriveStatus
+            Read from the drive (not remembered), with its fault code while in fault.
+
+        Raises
+        ------
+        DriveError
+            The drive cannot be read.
+        """
 
     @abc.abstractmethod
     def run(self, excitation: Excitation) -> Recording:
@@ -201,10 +238,11 @@ class Drive(abc.ABC):
         """
 
     def close(self) -> None:
-        """Release the transport. Disables first."""
+        """Disable the drive, then release the transport."""
         self.disable()
 
     def __enter__(self) -> Drive:
+        """Return the drive itself."""
         return self
 
     def __exit__(
@@ -213,6 +251,7 @@ class Drive(abc.ABC):
         exc: BaseException | None,
         tb: TracebackType | None,
     ) -> None:
+        """Quick-stop if an exception propagates (its own failure logged), then close."""
         if exc is not None:
             try:
                 self.quick_stop()

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import time
 
 import numpy as np
 import pytest
@@ -29,6 +30,7 @@ from plant_sim.params import PlantParams
 J = 0.004
 CONTROL_S = 2.5e-4  # the emulator's control period at the demo's 4 kHz
 PERIOD_S = 1e-3  # the station's SYNC
+LSB_RAD = 2 * math.pi / (1 << 20)  # the emulator's encoder
 
 
 def _frictionless(profile: UnitProfile) -> UnitProfile:
@@ -79,23 +81,63 @@ def test_torque_step_row_and_position_instant(
     assert np.all(torque[k0 + 2 :] == pytest.approx(step_nm, abs=1e-12))
     position = recording.columns["position_rad"] - start
     t = recording.time_s - recording.time_s[0]
-    lsb = 2 * math.pi / (1 << 20)
-    # the drive's torque per control period n (4 per SYNC): the step from SYNC k0 on, or a
-    # ramp to it over [t_k0, t_k0+1] when interpolated; exact double integral of the hold
-    fine = np.where(np.arange(4 * len(t)) >= 4 * k0, step_nm, 0.0)
+    expected = _step_position(len(t), k0, step_nm, interpolation)
+    if interpolation == INTERPOLATION_HOLD:
+        closed_form = step_nm / (2 * J) * np.clip(t - CONTROL_S - k0 * PERIOD_S, 0.0, None) ** 2
+        assert expected == pytest.approx(closed_form, abs=1e-12)
+    assert np.max(np.abs(position - expected)) <= 1.01 * LSB_RAD
+    # and not one control period later or earlier: those differ by many counts at the end
+    shifted = step_nm / (2 * J) * np.clip(t - k0 * PERIOD_S, 0.0, None) ** 2
+    assert np.max(np.abs(position - shifted)) > 20 * LSB_RAD
+
+
+def _step_position(rows: int, k0: int, step_nm: float, interpolation: int) -> np.ndarray:
+    """The position of each row (from the run's start) under a torque step at SYNC k0 on
+    the frictionless axis: the exact double integral of the torque per control period n
+    (4 per SYNC), the step from SYNC k0 on, or a ramp to it over [t_k0, t_k0+1] when
+    interpolated; row k measured at the start of control period 4k - 1 (t_k - T_c)."""
+    fine = np.where(np.arange(4 * rows) >= 4 * k0, step_nm, 0.0)
     if interpolation == 0:
         fine[4 * k0 : 4 * k0 + 4] = step_nm * np.arange(1, 5) / 4
     velocity = np.concatenate([[0.0], np.cumsum(fine) * CONTROL_S / J])
     angle = np.concatenate([[0.0], np.cumsum(velocity[:-1] + velocity[1:]) * CONTROL_S / 2])
-    # row k: measured at the start of control period 4k - 1, i.e. at t_k - T_c
-    expected = np.concatenate([[0.0], angle[4 * np.arange(1, len(t)) - 1]])
-    if interpolation == INTERPOLATION_HOLD:
-        closed_form = step_nm / (2 * J) * np.clip(t - CONTROL_S - k0 * PERIOD_S, 0.0, None) ** 2
-        assert expected == pytest.approx(closed_form, abs=1e-12)
-    assert np.max(np.abs(position - expected)) <= 1.01 * lsb
-    # and not one control period later or earlier: those differ by many counts at the end
-    shifted = step_nm / (2 * J) * np.clip(t - k0 * PERIOD_S, 0.0, None) ** 2
-    assert np.max(np.abs(position - shifted)) > 20 * lsb
+    return np.concatenate([[0.0], angle[4 * np.arange(1, rows) - 1]])
+
+
+def test_late_answer_stays_on_its_sync(profile: UnitProfile) -> None:
+    """The emulator answers one SYNC of a lockstep run later than the PDO timeout (a loaded
+    host descheduling it; here a sleep at that SYNC, 3 × the timeout): its TPDOs are still
+    filed under that SYNC, and no row after it carries the previous SYNC's feedback (they
+    were all one SYNC late: positions off by many counts)."""
+    step_nm, k0 = 0.1, 20
+    pdo_timeout_s = 0.02
+    command = np.where(np.arange(60) >= k0, step_nm, 0.0)
+    with (
+        canopen_emulator(
+            _frictionless(profile),
+            seed=0,
+            station_changes={"torque_sample": "instantaneous", "pdo_timeout_s": pdo_timeout_s},
+        ) as (emulator, station),
+        CanOpenDrive(station, limits=profile.limits) as drive,
+    ):
+        drive.enable(Mode.TORQUE)
+        start = drive.status().position_rad
+        late_sync = emulator.sync_count + k0 + 10  # the run's SYNC k0 + 10 (counted from 1)
+        advance = emulator._advance
+
+        def late_advance() -> None:  # runs in the emulator's receive thread, at each SYNC
+            if emulator.sync_count == late_sync:
+                time.sleep(3 * pdo_timeout_s)
+            advance()
+
+        emulator._advance = late_advance  # type: ignore[method-assign]
+        recording = drive.run(
+            Excitation(name="step", mode=Mode.TORQUE, fs_hz=1000.0, command=command)
+        )
+    assert recording.metadata["lost_samples"] == "0"  # the late answer was collected
+    expected = _step_position(len(command), k0, step_nm, interpolation=0)
+    position = recording.columns["position_rad"] - start
+    assert np.max(np.abs(position - expected)) <= 1.01 * LSB_RAD
 
 
 def _lagged(profile: UnitProfile, tau_s: float) -> UnitProfile:

@@ -160,7 +160,8 @@ def test_wrapping_drive_clock_is_unwrapped(tmp_path: Path, profile: UnitProfile)
 
 def test_setpoint_is_interpolated_by_the_drive(profile: UnitProfile) -> None:
     """A velocity step written with a 0.2 s interpolation time is reached by a 0.2 s ramp
-    (the velocity loop alone follows a step within ≈ 20 ms)."""
+    (the velocity loop alone follows a step within ≈ 20 ms). Read on the drive's clock
+    until it shows 0.35 s after the write (not for 0.35 s of the host's)."""
     with (
         modbus_emulator(profile, seed=1) as (_, station),
         ModbusDrive(station, limits=profile.limits) as drive,
@@ -169,9 +170,8 @@ def test_setpoint_is_interpolated_by_the_drive(profile: UnitProfile) -> None:
         drive.write_value("setpoint_interpolation_time", 0.2)
         t0 = drive.read_values(("timestamp",))["timestamp"]
         drive.write_value("velocity_cmd", 0.4)
-        trace = []
-        deadline = time.monotonic() + 0.35
-        while time.monotonic() < deadline:
+        trace: list[tuple[float, float]] = []
+        while not trace or trace[-1][0] < 0.35 or sum(t > 0.3 for t, _ in trace) < 3:
             values = drive.read_values(("timestamp", "velocity"))
             trace.append((values["timestamp"] - t0, values["velocity"]))
             time.sleep(0.005)
@@ -262,10 +262,10 @@ def test_torque_mean_is_the_mean_since_the_previous_row(profile: UnitProfile) ->
     np.testing.assert_allclose(window, periods * CONTROL_PERIOD_S, atol=1e-9)
     np.testing.assert_array_equal(periods[1:], np.diff(last))  # windows tile the run
     assert float(meta["torque_mean_period_s"]) == pytest.approx(np.median(window))
-    # the row period the link achieved (a loaded runner polls late: 10.6 ms for 10 ms seen)
-    assert float(meta["torque_mean_period_s"]) == pytest.approx(
-        np.median(np.diff(recording.time_s)), abs=CONTROL_PERIOD_S
-    )
+    # the row period the link achieved (a loaded runner polls late: 10.6 ms for 10 ms
+    # seen): the windows are the first row's (since the read before the run) and the row
+    # steps on the drive's clock, exactly
+    np.testing.assert_allclose(window[1:], np.diff(recording.time_s), atol=1e-9)
     cumulative = np.concatenate([[0.0], np.cumsum(torque)])
 
     def mean_over(end: np.ndarray, count: np.ndarray) -> np.ndarray:

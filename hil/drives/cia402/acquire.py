@@ -12,14 +12,12 @@ from __future__ import annotations
 import logging
 import math
 import struct
-from typing import Protocol
+from dataclasses import dataclass
 
 import numpy as np
 
-from hil.drives.base import DriveInfo
 from hil.drives.cia402.link import CanLink
 from hil.drives.cia402.protocol import (
-    CW_DISABLE_VOLTAGE,
     CW_ENABLE_OPERATION,
     SW_FAULT,
     TARGET_OBJECT,
@@ -27,9 +25,8 @@ from hil.drives.cia402.protocol import (
     Scaling,
     state_of,
 )
-from hil.drives.station import CanOpenStation
 from hil.errors import DriveCommunicationError, DriveError, DriveFaultError, DriveStateError
-from hil.motion import COMMAND_COLUMN, Excitation, Limits, Mode
+from hil.motion import COMMAND_COLUMN, Excitation, Mode
 from hil.recording import Recording
 
 log = logging.getLogger(__name__)
@@ -39,30 +36,57 @@ RECORDER_SAMPLE = np.dtype([("pos", "<i4"), ("vel", "<i4"), ("torque", "<i2"), (
 _LIMITS = {"h": (-32768, 32767), "i": (-(2**31), 2**31 - 1)}
 
 
-class AcquiringDrive(Protocol):
-    """What acquisition uses of a connected CiA 402 drive, and nothing else: the link, the
-    station and scaling it connected with, what it learnt of the drive, and how to make it
-    safe after a failed run."""
+@dataclass(frozen=True, slots=True, kw_only=True)
+class RunSetup:
+    """What acquisition needs of the connected drive besides its link, and nothing else.
 
-    link: CanLink
-    station: CanOpenStation
-    scaling: Scaling | None
-    limits: Limits
-    torque_sample: str  # "mean" (0x2077) or "instantaneous" (0x6077)
+    Attributes
+    ----------
+    node_id : int
+        For messages.
+    sync_period_s : float
+        The station's SYNC period (messages; the recorder's wait in SYNC ticks).
+    lost_sample_fraction : float
+        Lost rows a streamed run may have before it is a communication error.
+    scaling : Scaling
+        Drive units <-> SI.
+    travel_rad : tuple of float
+        The unit's travel limits (a streamed run stops when the position leaves them).
+    torque_sample : str
+        ``"mean"`` (0x2077, averaged over the SYNC period) or ``"instantaneous"`` (0x6077).
+    command_interpolation : str
+        How the drive moves between cyclic targets (0x60C0), for the metadata.
+    control_period_s : float or None
+        The drive's control period, if known.
+    recorder_rate_hz : float
+        The drive recorder's sample rate (0: no recorder).
+    identity : dict of str to str
+        The metadata naming the drive (drive, node, vendor, model, firmware, serial,
+        transport).
+    operation_mode : str
+        The CiA 402 operation mode code (0x6060) the run is made in.
+    """
+
+    node_id: int
+    sync_period_s: float
+    lost_sample_fraction: float
+    scaling: Scaling
+    travel_rad: tuple[float, float]
+    torque_sample: str
     command_interpolation: str
     control_period_s: float | None
     recorder_rate_hz: float
+    identity: dict[str, str]
+    operation_mode: str
 
-    @property
-    def info(self) -> DriveInfo: ...
 
-    def comm_error(self, message: str) -> DriveCommunicationError: ...
+@dataclass(frozen=True, slots=True)
+class Acquired:
+    """A run's recording, and the error that cut it short (then the drive must be made
+    safe before the error, with this recording attached, is raised)."""
 
-    def mark_faulted(self) -> None: ...
-
-    def quick_stop(self) -> None: ...
-
-    def disable(self) -> None: ...
+    recording: Recording
+    failure: DriveError | None = None
 
 
 class _FaultedError(Exception):
@@ -71,9 +95,8 @@ class _FaultedError(Exception):
         self.time_s = time_s
 
 
-def _raw_command(drive: AcquiringDrive, excitation: Excitation) -> np.ndarray:
-    assert drive.scaling is not None
-    sc, mode = drive.scaling, excitation.mode
+def _raw_command(setup: RunSetup, excitation: Excitation) -> np.ndarray:
+    sc, mode = setup.scaling, excitation.mode
     factor = {
         Mode.VELOCITY: sc.velocity_units_per_rad_s,
         Mode.TORQUE: 1e3 / sc.rated_torque_nm,
@@ -83,54 +106,68 @@ def _raw_command(drive: AcquiringDrive, excitation: Excitation) -> np.ndarray:
     return np.clip(np.round(np.asarray(excitation.command) * factor), low, high).astype(np.int64)
 
 
-def _metadata(drive: AcquiringDrive, excitation: Excitation, **extra: str) -> dict[str, str]:
-    info, st = drive.info, drive.station
+def _metadata(setup: RunSetup, excitation: Excitation, **extra: str) -> dict[str, str]:
     return {
-        "drive": f"canopen node {st.node_id}",
-        "node_id": str(st.node_id),
-        "vendor": info.vendor,
-        "model": info.model,
-        "firmware": info.firmware_version,
-        "serial": info.serial,
-        "transport": info.transport,
+        **setup.identity,
         "excitation": excitation.name,
         "control_mode": excitation.mode.value,
-        "operation_mode": str(getattr(drive, "mode_code", "")),
+        "operation_mode": setup.operation_mode,
         **extra,
         **excitation.metadata,
     }
 
 
-def run_stream(drive: AcquiringDrive, excitation: Excitation) -> Recording:
-    link, st = drive.link, drive.station
-    assert drive.scaling is not None
-    sc, mode = drive.scaling, excitation.mode
-    raw = _raw_command(drive, excitation)
+def run_stream(link: CanLink, setup: RunSetup, excitation: Excitation) -> Acquired:
+    """Stream ``excitation`` one sample per SYNC (the SYNC period already written).
+
+    Parameters
+    ----------
+    link : CanLink
+        The node's link, in OPERATIONAL, the drive enabled in the excitation's mode.
+    setup : RunSetup
+        What acquisition needs of the drive.
+    excitation : Excitation
+        The command, one sample per SYNC period.
+
+    Returns
+    -------
+    Acquired
+        The recording (row k timed ``k / fs`` from the SYNC count; rows whose TPDOs were
+        lost are left out), and the error that cut the run short, if any.
+
+    Raises
+    ------
+    DriveCommunicationError
+        More than ``lost_sample_fraction`` of the rows were lost (the drive is left as it
+        is, enabled; the recording attached).
+    """
+    sc, mode = setup.scaling, excitation.mode
+    raw = _raw_command(setup, excitation)
     cob, _ = link.rpdo_payload(mode, CW_ENABLE_OPERATION, 0)
     packer = struct.Struct("<H" + TARGET_OBJECT[mode][1])
     counts_margin = 0.05 * sc.counts_per_rad  # the drive's own 0x607D acts first
     travel = (
-        drive.limits.travel_min_rad * sc.counts_per_rad - counts_margin,
-        drive.limits.travel_max_rad * sc.counts_per_rad + counts_margin,
+        setup.travel_rad[0] * sc.counts_per_rad - counts_margin,
+        setup.travel_rad[1] * sc.counts_per_rad + counts_margin,
     )
     link.forget()
     first = link.sync_index + 1
     error: DriveError | None = None
     log.info(
         "node %d: streaming %s (%d samples at %.0f Hz)",
-        st.node_id,
+        setup.node_id,
         excitation.name,
         len(raw),
-        1 / st.sync_period_s,
+        1 / setup.sync_period_s,
     )
     try:
         with link.direct_receive():
-            done = _stream_loop(drive, excitation, raw, cob, packer, travel)
+            done = _stream_loop(link, setup, excitation, raw, cob, packer, travel)
     except _FaultedError as fault:
         # 0x603F by SDO: only now that the Notifier receives again
         code = link.emcy[-1][0] if link.emcy else link.fault_code()
         error = DriveFaultError(
-            f"node {st.node_id} faulted at t = {fault.time_s:.3f} s of '{excitation.name}' "
+            f"node {setup.node_id} faulted at t = {fault.time_s:.3f} s of '{excitation.name}' "
             f"({'EMCY' if link.emcy else 'statusword fault bit, 0x603F'})",
             code=code,
         )
@@ -138,29 +175,25 @@ def run_stream(drive: AcquiringDrive, excitation: Excitation) -> Recording:
     except DriveError as exc:
         error = exc
         done = link.sync_index - first + 1
-    except BaseException:
-        drive.quick_stop()
-        raise
-    recording = _stream_recording(drive, excitation, raw, first, done)
+    recording = _stream_recording(link, setup, excitation, raw, first, done)
     if error is not None:
-        _make_safe(drive, error)
-        error.partial_recording = recording
-        raise error
+        return Acquired(recording, error)
     link.target = 0 if mode is not Mode.POSITION else int(raw[-1])
     link.tick()
     lost = len(raw) - len(recording)
-    if lost > st.lost_sample_fraction * len(raw):
-        comm = drive.comm_error(
-            f"lost {lost} of {len(raw)} samples of '{excitation.name}' (limit "
-            f"{st.lost_sample_fraction:.1%})"
+    if lost > setup.lost_sample_fraction * len(raw):
+        comm = DriveCommunicationError(
+            f"node {setup.node_id}: lost {lost} of {len(raw)} samples of '{excitation.name}' "
+            f"(limit {setup.lost_sample_fraction:.1%})"
         )
         comm.partial_recording = recording
         raise comm
-    return recording
+    return Acquired(recording)
 
 
 def _stream_loop(
-    drive: AcquiringDrive,
+    link: CanLink,
+    setup: RunSetup,
     excitation: Excitation,
     raw: np.ndarray,
     cob: int,
@@ -168,10 +201,8 @@ def _stream_loop(
     travel: tuple[float, float],
 ) -> int:
     """The cyclic exchange; returns the number of SYNCs sent."""
-    link, st = drive.link, drive.station
-    assert drive.scaling is not None
-    sc = drive.scaling
-    period_s = st.sync_period_s
+    sc = setup.scaling
+    period_s = setup.sync_period_s
     lost_in_a_row = 0
     done = 0
     for k in range(len(raw)):
@@ -181,8 +212,8 @@ def _stream_loop(
             lost_in_a_row += 1
             if lost_in_a_row > MAX_CONSECUTIVE_LOST:
                 link.check()
-                raise drive.comm_error(
-                    f"no feedback PDOs for {lost_in_a_row} SYNC periods "
+                raise DriveCommunicationError(
+                    f"node {setup.node_id}: no feedback PDOs for {lost_in_a_row} SYNC periods "
                     f"(at t = {k * period_s:.3f} s of '{excitation.name}')"
                 )
             continue
@@ -192,7 +223,7 @@ def _stream_loop(
             raise _FaultedError(k * period_s)
         if statusword & 0x6F != 0x27:
             raise DriveStateError(
-                f"node {st.node_id} left OPERATION ENABLED ({state_of(statusword)}) at "
+                f"node {setup.node_id} left OPERATION ENABLED ({state_of(statusword)}) at "
                 f"t = {k * period_s:.3f} s of '{excitation.name}'"
             )
         if not travel[0] <= position <= travel[1]:
@@ -204,11 +235,14 @@ def _stream_loop(
 
 
 def _stream_recording(
-    drive: AcquiringDrive, excitation: Excitation, raw: np.ndarray, first: int, done: int
+    link: CanLink,
+    setup: RunSetup,
+    excitation: Excitation,
+    raw: np.ndarray,
+    first: int,
+    done: int,
 ) -> Recording:
-    link = drive.link
-    assert drive.scaling is not None
-    sc = drive.scaling
+    sc = setup.scaling
     rows = [k for k in range(done) if first + k in link.rx1 and first + k in link.rx2]
     one, two = link.decode([first + k for k in rows])
     k_arr = np.asarray(rows, dtype=np.int64)
@@ -217,7 +251,7 @@ def _stream_recording(
     torque = np.asarray([r[1] for r in two], dtype=np.float64)
     current = np.asarray([r[2] for r in two], dtype=np.float64)
     period = 1.0 / excitation.fs_hz  # the SYNC period of this run (written by drive.run)
-    mean = drive.torque_sample == "mean"
+    mean = setup.torque_sample == "mean"
     torque_per_rated = TORQUE_MEAN_PER_RATED if mean else 1e3  # 0x2077: 0.1 ‰, 0x6077: ‰
     columns = {
         "time_s": k_arr * period,
@@ -234,15 +268,15 @@ def _stream_recording(
         # its start, torque commanded over it), or with "mean" the torque averaged over the
         # control periods of the SYNC period before SYNC k (0x2077); the targets are
         # interpolated as stated
-        "torque_sample": drive.torque_sample,
-        "command_interpolation": drive.command_interpolation,
+        "torque_sample": setup.torque_sample,
+        "command_interpolation": setup.command_interpolation,
     }
     if mean:
         timing["torque_mean_period_s"] = f"{period:g}"
-    if drive.control_period_s is not None:
-        timing["control_period_s"] = f"{drive.control_period_s:g}"
+    if setup.control_period_s is not None:
+        timing["control_period_s"] = f"{setup.control_period_s:g}"
     metadata = _metadata(
-        drive,
+        setup,
         excitation,
         acquisition="sync stream",
         sync_period_s=f"{period:g}",
@@ -253,27 +287,33 @@ def _stream_recording(
     return Recording(columns=floats, metadata=metadata, source=f"canopen:{excitation.name}")
 
 
-def _make_safe(drive: AcquiringDrive, error: DriveError) -> None:
-    """After a fault: power off (the drive already is in FAULT); otherwise quick stop."""
-    link = drive.link
-    if isinstance(error, DriveFaultError):
-        drive.mark_faulted()
-        link.controlword = CW_DISABLE_VOLTAGE
-        try:
-            link.tick()
-        except DriveError as exc:
-            log.error("node %d: %s", drive.station.node_id, exc)
-        return
-    drive.quick_stop()
-    drive.disable()
+def run_recorder(link: CanLink, setup: RunSetup, excitation: Excitation) -> Acquired:
+    """Play ``excitation`` from the drive's waveform table and upload its trace recorder.
 
+    Parameters
+    ----------
+    link : CanLink
+        The node's link, the drive enabled in the excitation's mode.
+    setup : RunSetup
+        What acquisition needs of the drive (``recorder_rate_hz`` > 0).
+    excitation : Excitation
+        The command, at the recorder's rate divided by a whole number.
 
-def run_recorder(drive: AcquiringDrive, excitation: Excitation) -> Recording:
-    link, st = drive.link, drive.station
-    assert drive.scaling is not None
-    sc = drive.scaling
-    divider = round(drive.recorder_rate_hz / excitation.fs_hz)
-    wave = np.repeat(_raw_command(drive, excitation), divider).astype("<i4")
+    Returns
+    -------
+    Acquired
+        The uploaded samples (timed ``k / fs`` by the drive's loop), and the error that
+        cut the run short, if any.
+
+    Raises
+    ------
+    DriveStateError
+        The excitation does not fit the recorder (nothing moved).
+    """
+    st_period_s = setup.sync_period_s
+    sc = setup.scaling
+    divider = round(setup.recorder_rate_hz / excitation.fs_hz)
+    wave = np.repeat(_raw_command(setup, excitation), divider).astype("<i4")
     capacity = int(link.read(0x2200, 5))
     if len(excitation.command) > capacity:
         raise DriveStateError(
@@ -283,8 +323,8 @@ def run_recorder(drive: AcquiringDrive, excitation: Excitation) -> Recording:
     link.write(0x2100, 1, wave.tobytes())
     link.write(0x2200, 3, divider)
     link.write(0x2200, 1, 1)
-    loop_s = 1.0 / drive.recorder_rate_hz
-    ticks = math.ceil(len(wave) * loop_s / st.sync_period_s) + 1
+    loop_s = 1.0 / setup.recorder_rate_hz
+    ticks = math.ceil(len(wave) * loop_s / st_period_s) + 1
     error: DriveError | None = None
     try:
         for tick in range(ticks):
@@ -292,7 +332,7 @@ def run_recorder(drive: AcquiringDrive, excitation: Excitation) -> Recording:
             status = link.latest_status()
             if status is not None and (status[0] & SW_FAULT or link.emcy):
                 raise DriveFaultError(
-                    f"node {st.node_id} faulted at t = {tick * st.sync_period_s:.3f} s of "
+                    f"node {setup.node_id} faulted at t = {tick * st_period_s:.3f} s of "
                     f"'{excitation.name}' (EMCY, drive recorder)",
                     code=(link.emcy[-1][0] if link.emcy else 0) or link.fault_code(),
                 )
@@ -300,9 +340,6 @@ def run_recorder(drive: AcquiringDrive, excitation: Excitation) -> Recording:
             raise DriveStateError(f"drive recorder did not finish '{excitation.name}'")
     except DriveError as exc:
         error = exc
-    except BaseException:
-        drive.quick_stop()
-        raise
     data = bytes(link.read(0x2200, 7)) if link.connected else b""
     samples = np.frombuffer(data[: len(data) // 12 * 12], dtype=RECORDER_SAMPLE)
     n = len(samples)
@@ -319,18 +356,14 @@ def run_recorder(drive: AcquiringDrive, excitation: Excitation) -> Recording:
     recording = Recording(
         columns=columns,
         metadata=_metadata(
-            drive,
+            setup,
             excitation,
             acquisition="drive recorder",
             recorder_divider=str(divider),
-            control_period_s=f"{1.0 / drive.recorder_rate_hz:g}",
+            control_period_s=f"{1.0 / setup.recorder_rate_hz:g}",
             torque_sample="instantaneous",
             command_interpolation="hold",  # the waveform table repeats each command sample
         ),
         source=f"canopen-recorder:{excitation.name}",
     )
-    if error is not None:
-        _make_safe(drive, error)
-        error.partial_recording = recording
-        raise error
-    return recording
+    return Acquired(recording, error)

@@ -1,27 +1,24 @@
-"""CanOpenDrive: the Drive contract over a CiA 402 servo on CANopen."""
+"""CanOpenDrive: the Drive contract over a CiA 402 servo on CANopen.
+
+Composed of the link (``link.py``: bus, NMT, SDO, PDO layout, SYNC ticks, heartbeat), the
+state machine (``state_machine.py``: enable, mode, disable, quick stop, fault reset) and
+the acquisition (``acquire.py``: SYNC-clocked streaming, the drive recorder); this module
+brings the node up (scaling, limits, PDO layout, torque sample, control period) and checks
+a run against what the link can do before handing it to the acquisition.
+"""
 
 from __future__ import annotations
 
 import logging
 import math
-import time
 from typing import Any
 
 from hil.drives.base import Drive, DriveInfo, DriveState, DriveStatus, check_limits
-from hil.drives.cia402 import acquire
+from hil.drives.cia402.acquire import RunSetup, run_recorder, run_stream
 from hil.drives.cia402.link import CanLink
 from hil.drives.cia402.protocol import (
-    CW_DISABLE_VOLTAGE,
-    CW_ENABLE_OPERATION,
-    CW_FAULT_RESET,
-    CW_QUICK_STOP,
-    CW_SHUTDOWN,
-    CW_SWITCH_ON,
     INTERPOLATION_CODES,
     INTERPOLATION_UNKNOWN,
-    MODE_CANDIDATES,
-    MODE_SUPPORT_BIT,
-    SW_FAULT,
     TORQUE_MEAN_NAME,
     TORQUE_MEAN_OBJECT,
     TORQUE_MEAN_PER_RATED,
@@ -31,8 +28,9 @@ from hil.drives.cia402.protocol import (
     max_stream_rate_hz,
     state_of,
 )
+from hil.drives.cia402.state_machine import Cia402StateMachine
 from hil.drives.station import CanOpenStation
-from hil.errors import DriveCommunicationError, DriveError, DriveFaultError, DriveStateError
+from hil.errors import DriveError, DriveStateError
 from hil.motion import Excitation, Limits, Mode
 from hil.recording import Recording
 
@@ -55,7 +53,6 @@ class CanOpenDrive(Drive):
         self.station = station
         self.limits = limits
         self.link = CanLink(station)
-        self._state = DriveState.DISABLED
         self._info: DriveInfo | None = None
         self.scaling: Scaling | None = None
         self.supported_modes = 0
@@ -99,6 +96,12 @@ class CanOpenDrive(Drive):
             self.recorder_rate_hz = 0.0
         self._check_control_period()
         self.command_interpolation = self._read_interpolation()
+        self.states = Cia402StateMachine(
+            link,
+            scaling=self.scaling,
+            supported_modes=self.supported_modes,
+            quick_stop_timeout_s=st.state_timeout_s * 3,
+        )
         self._info = self._read_info(rate)
         link.nmt("OPERATIONAL")
         status = link.tick_until("first SYNC answer", lambda sw, mode: True)
@@ -218,11 +221,6 @@ class CanOpenDrive(Drive):
 
     def _read_info(self, rate_hz: float) -> DriveInfo:
         link, st = self.link, self.station
-        modes = tuple(
-            mode
-            for mode, candidates in MODE_CANDIDATES.items()
-            if any(self.supported_modes & MODE_SUPPORT_BIT[code] for code, _ in candidates)
-        )
         assert self.scaling is not None
         return DriveInfo(
             vendor=f"vendor 0x{int(link.read(0x1018, 1)):08X}",
@@ -231,7 +229,7 @@ class CanOpenDrive(Drive):
             serial=str(link.read(0x1018, 4)),
             rated_torque_nm=self.scaling.rated_torque_nm,
             limits=self.limits,
-            modes=modes,
+            modes=self.states.modes(),
             max_sample_rate_hz=max(rate_hz, self.recorder_rate_hz),
             transport=f"canopen {st.interface}:{st.channel} node {st.node_id}",
         )
@@ -239,164 +237,52 @@ class CanOpenDrive(Drive):
     # -- the contract ---------------------------------------------------------------------
     @property
     def info(self) -> DriveInfo:
+        """What the node is and can do (read at bring-up)."""
         assert self._info is not None
         return self._info
 
     @property
     def stream_rate_hz(self) -> float:
+        """The station's SYNC rate: the fastest a run can be streamed."""
         return 1.0 / self.station.sync_period_s
 
+    @property
+    def mode_code(self) -> int | None:
+        """The CiA 402 operation mode (0x6060) selected last, None before any."""
+        return self.states.mode_code
+
     def status(self) -> DriveStatus:
-        assert self.scaling is not None
-        link, sc = self.link, self.scaling
-        statusword = int(link.read(0x6041))
-        state = state_of(statusword)
-        drive_state = {
-            "OPERATION ENABLED": DriveState.ENABLED,
-            "QUICK STOP ACTIVE": DriveState.QUICK_STOPPED,
-            "FAULT": DriveState.FAULT,
-            "FAULT REACTION ACTIVE": DriveState.FAULT,
-        }.get(state, DriveState.DISABLED)
-        return DriveStatus(
-            state=drive_state,
-            position_rad=sc.to_si(Mode.POSITION, int(link.read(0x6064))),
-            velocity_rad_s=sc.to_si(Mode.VELOCITY, int(link.read(0x606C))),
-            fault_code=int(link.read(0x603F)) if statusword & SW_FAULT else None,
-        )
+        """The node's state, position and velocity, read by SDO."""
+        return self.states.status()
 
     def enable(self, mode: Mode = Mode.VELOCITY) -> None:
-        link = self.link
-        link.check()
-        link.emcy.clear()
-        status = link.tick_until("statusword", lambda sw, m: True)
-        if status[0] & SW_FAULT:
-            self._reset_fault()
-        self._select_mode(mode)
-        for word, target in (
-            (CW_SHUTDOWN, "READY TO SWITCH ON"),
-            (CW_SWITCH_ON, "SWITCHED ON"),
-            (CW_ENABLE_OPERATION, "OPERATION ENABLED"),
-        ):
-            link.controlword = word
-            self._await_state(target, allow=("OPERATION ENABLED",) if word == CW_SWITCH_ON else ())
-        self._state = DriveState.ENABLED
-        log.info("node %d enabled in %s", self.station.node_id, link.mode.value)
+        """Reset a fault (verified), select ``mode`` (cyclic synchronous where the node has
+        it), and enable operation, each step confirmed by the statusword.
 
-    def _await_state(self, target: str, allow: tuple[str, ...] = ()) -> None:
-        def reached(statusword: int, _mode: int) -> bool:
-            self.link.raise_if_faulted(statusword, f"while going to {target}")
-            return state_of(statusword) in (target, *allow)
+        Parameters
+        ----------
+        mode : Mode
+            The excitation mode the next runs use (a run in another mode switches).
 
-        self.link.tick_until(target, reached)
-
-    def _reset_fault(self) -> None:
-        """Fault reset on a rising edge of bit 7, verified: the fault must clear and stay
-        cleared for a few cycles (a reset does not remove the cause)."""
-        link = self.link
-        code = link.fault_code()
-        link.controlword = CW_DISABLE_VOLTAGE
-        link.tick()
-        link.controlword = CW_FAULT_RESET
-        try:
-            link.tick_until("fault reset", lambda sw, m: not sw & SW_FAULT)
-            for _ in range(3):
-                link.tick()
-                status = link.latest_status()
-                if status is not None and status[0] & SW_FAULT:
-                    raise DriveStateError("fault came back")
-        except DriveStateError as exc:
-            raise DriveFaultError(
-                f"node {self.station.node_id}: fault reset did not clear the fault ({exc})",
-                code=link.fault_code() or code,
-            ) from exc
-        finally:
-            link.controlword = CW_DISABLE_VOLTAGE
-        link.emcy.clear()
-        log.info("node %d: fault 0x%04X reset", self.station.node_id, code)
-
-    def _select_mode(self, mode: Mode) -> None:
-        """Pick the cyclic synchronous mode (else the profile mode) and verify 0x6061."""
-        link = self.link
-        for code, name in MODE_CANDIDATES[mode]:  # noqa: B007 (used after the loop)
-            if self.supported_modes & MODE_SUPPORT_BIT[code]:
-                break
-        else:
-            raise DriveStateError(f"node {self.station.node_id} supports no {mode.value} mode")
-        assert self.scaling is not None
-        hold = 0
-        if mode is Mode.POSITION:
-            hold = int(link.read(0x6064))
-        link.mode, link.target = mode, hold
-        if code == 3:  # profile velocity: no ramp of our own on top of the excitation
-            link.write(0x6083, 0, 0xFFFFFFFF)
-            link.write(0x6084, 0, 0xFFFFFFFF)
-        if code == 4:
-            link.write(0x6087, 0, 0xFFFFFFFF)
-        link.write(0x6060, 0, code)
-        link.tick_until(f"mode {name} (0x6061 = {code})", lambda sw, m: m == code)
-        if int(link.read(0x6061)) != code:
-            raise DriveStateError(f"node {self.station.node_id}: 0x6061 does not show mode {code}")
-        self.mode_code = code
-        log.info("node %d: mode %s", self.station.node_id, name)
+        Raises
+        ------
+        DriveFaultError
+            The node faulted, or a fault reset did not clear its fault.
+        DriveStateError
+            A state or the mode was not confirmed in the station's state timeout.
+        """
+        self.states.enable(mode)
 
     def disable(self) -> None:
-        if not self.link.connected:
-            self._state = DriveState.DISABLED
-            return
-        try:
-            self.link.controlword = CW_SHUTDOWN
-            self.link.check()
-            self.link.tick_until(
-                "disable",
-                lambda sw, m: state_of(sw) in ("READY TO SWITCH ON", "SWITCH ON DISABLED", "FAULT"),
-            )
-        except DriveError as exc:
-            log.error("node %d: disable not confirmed: %s", self.station.node_id, exc)
-            self._best_effort(CW_DISABLE_VOLTAGE)
-        self._state = DriveState.DISABLED
+        """Shutdown, confirmed; idempotent, and best effort on a lost link."""
+        self.states.disable()
 
     def quick_stop(self) -> None:
-        if not self.link.connected:
-            return
-        link = self.link
-        link.controlword = CW_QUICK_STOP
-        try:
-            link.check()
-            deadline = time.monotonic() + self.station.state_timeout_s * 3
-            while time.monotonic() < deadline:
-                status = link.latest_status() if link.tick() else None
-                if status is None:
-                    status = int(link.read(0x6041)), 0
-                state = state_of(status[0])
-                if state in ("SWITCH ON DISABLED", "FAULT"):
-                    break
-                if state == "QUICK STOP ACTIVE" and abs(self.status().velocity_rad_s) < 1e-2:
-                    break
-            else:
-                raise DriveStateError("axis not at rest after the quick-stop timeout")
-        except DriveError as exc:
-            log.error("node %d: quick stop not confirmed: %s", self.station.node_id, exc)
-            self._best_effort(CW_QUICK_STOP)
-        self._state = DriveState.QUICK_STOPPED
-
-    def _best_effort(self, controlword: int) -> None:
-        """The receiver died or the drive is mute: restart reception, send the controlword
-        by SDO and as RPDO, and confirm by SDO if the node answers."""
-        link = self.link
-        link.restart_receiver()
-        link.controlword = controlword
-        for _ in range(3):
-            try:
-                link.tick()
-            except DriveError:
-                break
-        try:
-            link.write(0x6040, 0, controlword)
-            log.warning("node %d now %s", self.station.node_id, state_of(int(link.read(0x6041))))
-        except DriveError as exc:
-            log.error("node %d: cannot confirm a safe state: %s", self.station.node_id, exc)
+        """Quick stop by the drive's ramp (0x605A, 0x6085), confirmed at rest."""
+        self.states.quick_stop()
 
     def close(self) -> None:
+        """Disable, return the node to PRE-OPERATIONAL, release the bus."""
         try:
             self.disable()
             if self.link.connected:
@@ -408,8 +294,24 @@ class CanOpenDrive(Drive):
             self.link.close()
 
     def run(self, excitation: Excitation) -> Recording:
-        if self._state is not DriveState.ENABLED:
-            raise DriveStateError(f"cannot run '{excitation.name}': drive is {self._state.value}")
+        """Run ``excitation``: streamed one sample per SYNC up to the SYNC rate, above it by
+        the drive recorder (rates ``recorder_rate_hz / n``). See :meth:`Drive.run`.
+
+        Raises
+        ------
+        DriveStateError
+            The drive is not enabled, the rate is not one this link can do, or the mode is
+            refused; nothing moved.
+        LimitViolationError
+            The command leaves the unit's limits; nothing moved.
+        DriveError
+            The run was cut short (the drive made safe, the partial recording attached),
+            or lost more rows than the station allows.
+        """
+        if self.states.state is not DriveState.ENABLED:
+            raise DriveStateError(
+                f"cannot run '{excitation.name}': drive is {self.states.state.value}"
+            )
         fs = excitation.fs_hz
         use_recorder = self.recorder_rate_hz > 0 and fs > self.stream_rate_hz
         if use_recorder:
@@ -430,15 +332,45 @@ class CanOpenDrive(Drive):
         start = self.status()
         check_limits(excitation, self.limits, start_position_rad=start.position_rad)
         if excitation.mode is not self.link.mode:
-            self._select_mode(excitation.mode)
-        if use_recorder:
-            return acquire.run_recorder(self, excitation)
-        if round(1e6 / fs) != self._period_us:
+            self.states.select_mode(excitation.mode)
+        if not use_recorder and round(1e6 / fs) != self._period_us:
             self._write_period(round(1e6 / fs))
-        return acquire.run_stream(self, excitation)
+        acquire = run_recorder if use_recorder else run_stream
+        try:
+            acquired = acquire(self.link, self._run_setup(), excitation)
+        except DriveError:
+            raise
+        except BaseException:
+            self.states.quick_stop()
+            raise
+        if acquired.failure is not None:
+            self.states.make_safe(acquired.failure)
+            acquired.failure.partial_recording = acquired.recording
+            raise acquired.failure
+        return acquired.recording
 
-    def mark_faulted(self) -> None:
-        self._state = DriveState.FAULT
-
-    def comm_error(self, message: str) -> DriveCommunicationError:
-        return DriveCommunicationError(f"node {self.station.node_id}: {message}")
+    def _run_setup(self) -> RunSetup:
+        assert self.scaling is not None
+        info, st = self.info, self.station
+        mode_code = self.states.mode_code
+        return RunSetup(
+            node_id=st.node_id,
+            sync_period_s=st.sync_period_s,
+            lost_sample_fraction=st.lost_sample_fraction,
+            scaling=self.scaling,
+            travel_rad=(self.limits.travel_min_rad, self.limits.travel_max_rad),
+            torque_sample=self.torque_sample,
+            command_interpolation=self.command_interpolation,
+            control_period_s=self.control_period_s,
+            recorder_rate_hz=self.recorder_rate_hz,
+            identity={
+                "drive": f"canopen node {st.node_id}",
+                "node_id": str(st.node_id),
+                "vendor": info.vendor,
+                "model": info.model,
+                "firmware": info.firmware_version,
+                "serial": info.serial,
+                "transport": info.transport,
+            },
+            operation_mode="" if mode_code is None else str(mode_code),
+        )

@@ -22,6 +22,7 @@ It knows nothing about the backend that talks to it.
 
 from __future__ import annotations
 
+import copy
 import logging
 import math
 import struct
@@ -196,6 +197,10 @@ class Cia402Emulator:
 
     # -- life cycle ------------------------------------------------------------------
     def start(self) -> None:
+        # the plant's compiled kernel (numba, cached on disk) compiles at its first run: on
+        # a fresh checkout that took seconds inside the first SYNC, beyond the master's PDO
+        # and SDO timeouts. A copy runs it here, the plant itself untouched.
+        copy.deepcopy(self.plant).run(Mode.TORQUE, np.zeros(1))
         network = canopen.Network()
         network.connect(interface=self.interface, channel=self.channel, bitrate=1_000_000)
         node = canopen.LocalNode(self.node_id, self._od)

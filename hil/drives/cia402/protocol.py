@@ -71,6 +71,7 @@ TPDO2_FORMAT = "<ihh"
 
 
 def state_of(statusword: int) -> str:
+    """The CiA 402 state name of ``statusword`` (``"UNKNOWN"`` if no mask matches)."""
     for mask, value, name in _STATES:
         if statusword & mask == value:
             return name
@@ -110,9 +111,11 @@ class Scaling:
 
     @property
     def counts_per_rad(self) -> float:
+        """Position increments per radian."""
         return self.counts_per_rev / (2 * math.pi)
 
     def to_drive(self, mode: Mode, value_si: float) -> int:
+        """A target of ``mode`` in drive units (increments, velocity units, ‰ rated)."""
         if mode is Mode.VELOCITY:
             return round(value_si * self.velocity_units_per_rad_s)
         if mode is Mode.TORQUE:
@@ -120,6 +123,7 @@ class Scaling:
         return round(value_si * self.counts_per_rad)
 
     def to_si(self, mode: Mode, value_drive: float) -> float:
+        """A value of ``mode`` in drive units, in SI (rad, rad/s, N·m)."""
         if mode is Mode.VELOCITY:
             return value_drive / self.velocity_units_per_rad_s
         if mode is Mode.TORQUE:

@@ -2,8 +2,9 @@
 
 Cut as the CANopen backend is: the link (``link.py``: client, resend, exception codes,
 register values), the acquisition (``acquire.py``: feedback block, polled run, timing by
-the drive's clock, averaged torque, rate check) and, here, the state machine (enable with
-fault reset, mode selection, disable, quick stop) and the connection-time facts:
+the drive's clock, averaged torque, rate check), the state machine (``state_machine.py``:
+enable with fault reset, mode selection, disable, quick stop) and, here, their composition
+and the connection-time facts:
 ``info.max_sample_rate_hz`` is measured at connection (70 % of the typical rate of a
 write and a read: the median poll, so one stall of an overloaded host does not set it;
 rounded down to 1-2-5) and capped by the station's ``max_poll_rate_hz``. It is a snapshot:
@@ -21,7 +22,6 @@ from __future__ import annotations
 import logging
 import math
 import time
-from typing import Any
 
 import numpy as np
 
@@ -35,23 +35,14 @@ from hil.drives.modbus.acquire import (
     to_recording,
 )
 from hil.drives.modbus.link import ModbusLink
-from hil.drives.modbus.regmap import (
-    TORQUE_MEAN,
-    RegisterMap,
-    load_register_map,
-)
+from hil.drives.modbus.regmap import TORQUE_MEAN, RegisterMap, load_register_map
+from hil.drives.modbus.state_machine import ModbusStateMachine
 from hil.drives.station import ModbusStation
-from hil.errors import (
-    DriveError,
-    DriveFaultError,
-    DriveStateError,
-    ProfileError,
-)
+from hil.errors import DriveError, DriveStateError, ProfileError
 from hil.motion import Excitation, Limits, Mode
 from hil.recording import Recording
 
 log = logging.getLogger(__name__)
-
 
 
 def nice_rate(rate_hz: float) -> float:
@@ -64,14 +55,31 @@ def nice_rate(rate_hz: float) -> float:
 
 
 class ModbusDrive(Drive):
+    """A drive on Modbus TCP or RTU, described by a register map.
+
+    Parameters
+    ----------
+    station : ModbusStation
+        Transport, address, unit id, timeouts, register map, poll-rate cap.
+    limits : Limits
+        The unit's envelope, refused before motion.
+
+    Raises
+    ------
+    ProfileError
+        The register map cannot be used (or lacks ``torque_mean`` the station requires).
+    DriveCommunicationError
+        The drive cannot be reached.
+    """
+
     def __init__(self, station: ModbusStation, *, limits: Limits) -> None:
         self.station = station
         self.limits = limits
         self.map: RegisterMap = load_register_map(station.register_map_path)
-        self._state = DriveState.DISABLED
         self.torque_sample = self._choose_torque_sample()
         self.link = ModbusLink(station, self.map)
         self.feedback = Feedback(self.link, self.torque_sample)  # checks the map: no I/O
+        self.states = ModbusStateMachine(self.link, self.feedback)
         self.link.connect()
         try:
             self._info = self._read_info()
@@ -138,108 +146,41 @@ class ModbusDrive(Drive):
 
     @property
     def info(self) -> DriveInfo:
+        """What the drive is and can do (read and measured at connection)."""
         return self._info
 
     # -- state ---------------------------------------------------------------------------
     def status(self) -> DriveStatus:
-        _, v = self.feedback.read()
-        fault = self.feedback.bit(v, "fault")
-        state = (
-            DriveState.FAULT
-            if fault
-            else (
-                DriveState.QUICK_STOPPED
-                if self.feedback.bit(v, "quick_stop_active")
-                else DriveState.ENABLED
-                if self.feedback.bit(v, "enabled")
-                else DriveState.DISABLED
-            )
-        )
-        return DriveStatus(
-            state=state,
-            position_rad=v["position"],
-            velocity_rad_s=v["velocity"],
-            fault_code=int(v["fault_code"]) if fault else None,
-        )
-
-    def _control(self, *bits: str) -> None:
-        word = sum(1 << self.map.control_bits[b] for b in bits)
-        self.write_value("control_word", word)
-
-    def _await(self, what: str, done: Any, timeout_s: float = 2.0) -> dict[str, float]:
-        deadline = time.monotonic() + timeout_s
-        while True:
-            _, values = self.feedback.read()
-            if done(values):
-                return values
-            if time.monotonic() > deadline:
-                raise DriveStateError(
-                    f"{self.link.where}: {what} not confirmed "
-                    f"(status word 0x{int(values['status_word']):04X})"
-                )
-            time.sleep(0.005)
+        """The drive's state, position and velocity (one feedback read)."""
+        return self.states.status()
 
     def enable(self, mode: Mode = Mode.VELOCITY) -> None:
-        _, values = self.feedback.read()
-        if self.feedback.bit(values, "fault"):
-            code = int(values["fault_code"])
-            self._control("fault_reset")
-            self._control()
-            values = self._await("fault reset", lambda v: not self.feedback.bit(v, "fault"))
-            log.info("%s: fault 0x%04X reset", self.link.where, code)
-        self._select(mode)
-        self._control("enable")
-        bit = self.feedback.bit
-        self._await("enable", lambda v: bit(v, "enabled") or bit(v, "fault"))
-        self._raise_if_faulted("while enabling")
-        self._state = DriveState.ENABLED
+        """Reset a fault, select ``mode`` holding the axis, and enable, each confirmed.
 
-    def _select(self, mode: Mode) -> None:
-        self.write_value(f"{mode.value}_cmd", self._hold_value(mode))
-        self.write_value("mode", self.map.modes[mode.value])
-        if int(self.read_values(("mode",))["mode"]) != self.map.modes[mode.value]:
-            raise DriveStateError(f"{self.link.where}: mode register does not show {mode.value}")
-        self._mode = mode
+        Parameters
+        ----------
+        mode : Mode
+            The excitation mode the next runs use (a run in another mode switches).
 
-    def _hold_value(self, mode: Mode) -> float:
-        if mode is Mode.POSITION:
-            return self.read_values(("position",))["position"]
-        return 0.0
-
-    def _raise_if_faulted(self, context: str) -> None:
-        _, values = self.feedback.read()
-        if self.feedback.bit(values, "fault"):
-            self._state = DriveState.FAULT
-            raise DriveFaultError(
-                f"{self.link.where}: drive fault {context}", code=int(values["fault_code"])
-            )
+        Raises
+        ------
+        DriveFaultError
+            The drive is in fault after enabling.
+        DriveStateError
+            The reset, the mode or the enable was not confirmed.
+        """
+        self.states.enable(mode)
 
     def disable(self) -> None:
-        if not self.link.connected:
-            self._state = DriveState.DISABLED
-            return
-        try:
-            self._control()
-            self._await("disable", lambda v: not self.feedback.bit(v, "enabled"))
-        except DriveError as exc:
-            log.error("%s: disable not confirmed: %s", self.link.where, exc)
-        self._state = DriveState.DISABLED
+        """Clear the control word, confirmed; idempotent, and logs what it cannot do."""
+        self.states.disable()
 
     def quick_stop(self) -> None:
-        try:
-            if not self.link.connected:
-                self.link.connect()  # the drive's watchdog stops it anyway; try to confirm
-            self._control("quick_stop")
-            self._await(
-                "quick stop",
-                lambda v: not self.feedback.bit(v, "enabled") and abs(v["velocity"]) < 1e-2,
-                timeout_s=5.0,
-            )
-        except DriveError as exc:
-            log.error("%s: quick stop not confirmed: %s", self.link.where, exc)
-        self._state = DriveState.QUICK_STOPPED
+        """Quick stop by the drive's ramp, confirmed at rest (reconnecting if needed)."""
+        self.states.quick_stop()
 
     def close(self) -> None:
+        """Disable, then close the connection."""
         try:
             self.disable()
         finally:
@@ -247,8 +188,24 @@ class ModbusDrive(Drive):
 
     # -- run -----------------------------------------------------------------------------
     def run(self, excitation: Excitation) -> Recording:
-        if self._state is not DriveState.ENABLED:
-            raise DriveStateError(f"cannot run '{excitation.name}': drive is {self._state.value}")
+        """Poll ``excitation``: each command sample written at its time, the feedback read
+        half a period later, rows timed by the drive's clock if the map has one. See
+        :meth:`Drive.run`.
+
+        Raises
+        ------
+        DriveStateError
+            The drive is not enabled or the rate exceeds ``info.max_sample_rate_hz``;
+            nothing moved.
+        LimitViolationError
+            The command leaves the unit's limits; nothing moved.
+        DriveError
+            A fault, a lost link, or a run below ``MIN_RATE_FRACTION`` of its rate: the
+            drive made safe, the partial recording attached.
+        """
+        states = self.states
+        if states.state is not DriveState.ENABLED:
+            raise DriveStateError(f"cannot run '{excitation.name}': drive is {states.state.value}")
         if excitation.fs_hz > self._info.max_sample_rate_hz * (1 + 1e-9):
             raise DriveStateError(
                 f"excitation '{excitation.name}' is sampled at {excitation.fs_hz} Hz; this "
@@ -256,8 +213,8 @@ class ModbusDrive(Drive):
             )
         start = self.status()
         check_limits(excitation, self.limits, start_position_rad=start.position_rad)
-        if excitation.mode is not getattr(self, "_mode", None):
-            self._select(excitation.mode)
+        if excitation.mode is not states.mode:
+            states.select(excitation.mode)
         set_interpolation(self.link, 1.0 / excitation.fs_hz)
         run = PolledRun()
         error: DriveError | None = None
@@ -266,20 +223,16 @@ class ModbusDrive(Drive):
         except DriveError as exc:
             error = exc
         except BaseException:
-            self.quick_stop()
+            states.quick_stop()
             raise
         recording = to_recording(excitation, run, self.feedback, self._info)
         if error is None:
             error = rate_shortfall(excitation, run, self.link)
             if error is not None:
-                self.write_value(f"{excitation.mode.value}_cmd", self._hold_value(excitation.mode))
+                states.hold(excitation.mode)
         if error is not None:
-            if isinstance(error, DriveFaultError):
-                self._state = DriveState.FAULT
-            self.quick_stop()
-            self.disable()
+            states.make_safe(error)
             error.partial_recording = recording
             raise error
-        self.write_value(f"{excitation.mode.value}_cmd", self._hold_value(excitation.mode))
+        states.hold(excitation.mode)
         return recording
-
