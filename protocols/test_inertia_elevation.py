@@ -19,14 +19,10 @@ import pytest
 from hil.calibration import CalibrationRun
 from hil.drives.base import Drive
 from hil.identify.estimate import Estimate
-from hil.identify.inertia_elevation import (
-    InertiaElevationResult,
-    fit_inertia_elevation,
-    scale_by_gain,
-)
+from hil.identify.inertia_elevation import InertiaElevationResult, fit_inertia_elevation
 from hil.profile import UnitProfile
 from hil.suite import inertia_friction as sine
-from hil.suite.inertia_elevation import NAME, Spec, reported_torque_gain
+from hil.suite.inertia_elevation import NAME, Spec, inertia_at_elevation, reported_torque_gain
 
 MEASUREMENTS = (
     "azimuth_inertia_level_kg_m2",
@@ -57,10 +53,7 @@ def result(
             recordings = [
                 calibration.run(drive, e, protocol=NAME) for e in sine.excitation(spec.sine)
             ]
-            inertia = sine.analyse_in_calibration(recordings, spec.sine, calibration)[0].inertia
-            if gain is not None:
-                inertia = scale_by_gain(inertia, gain=gain[0], gain_u=gain[1])
-            inertias.append(inertia)
+            inertias.append(inertia_at_elevation(recordings, spec, calibration, gain=gain))
     finally:
         move_elevation(spec.park_elevation_rad)
     analysed = fit_inertia_elevation(spec.elevations_rad, inertias)

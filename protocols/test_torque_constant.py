@@ -22,7 +22,15 @@ from hil.identify.torque_constant import (
     identify_torque_constant,
 )
 from hil.profile import UnitProfile
-from hil.suite.torque_constant import NAME, Spec, analyse_sweep, estimates, move, sweep
+from hil.suite.torque_constant import (
+    NAME,
+    Spec,
+    analyse_sweep,
+    estimates,
+    kt_ripple_from_cogging,
+    move,
+    sweep,
+)
 
 MEASUREMENTS = (
     "torque_constant_nm_a",
@@ -53,12 +61,7 @@ def result(
         with cast(AbstractContextManager[Any], locked_rotor()):
             recording = calibration.run(drive, sweep(spec, angle_rad=angle), protocol=NAME)
         sweeps.append(analyse_sweep(recording, spec, angle_rad=angle))
-    ripple = [
-        (int(h["order"]), float(h["amplitude"]), float(h["phase_rad"]))
-        for h in cast(
-            list[dict[str, Any]], calibration.details.get("cogging", {}).get("kt_ripple", [])
-        )
-    ]
+    ripple = kt_ripple_from_cogging(calibration)
     analysed = identify_torque_constant(sweeps, ripple=ripple)
     calibration.details[NAME] = {
         "kt_ripple_correction": "cogging protocol's table" if ripple else "none",

@@ -16,7 +16,10 @@ from dataclasses import dataclass
 
 from hil.calibration import CalibrationRun
 from hil.drives.base import DriveInfo
+from hil.identify.estimate import Estimate
+from hil.identify.inertia_elevation import scale_by_gain
 from hil.profile import UnitProfile
+from hil.recording import Recording
 from hil.suite import inertia_friction as sine
 
 NAME = "inertia_elevation"
@@ -52,3 +55,18 @@ def reported_torque_gain(calibration: CalibrationRun) -> tuple[float, float] | N
     if gain_error is None:
         return None
     return 1.0 + gain_error.value / 100.0, gain_error.standard_uncertainty / 100.0
+
+
+def inertia_at_elevation(
+    recordings: list[Recording],
+    spec: Spec,
+    calibration: CalibrationRun,
+    *,
+    gain: tuple[float, float] | None,
+) -> Estimate:
+    """J from the sines run at one elevation, in shaft-torque units when the gain is known.
+    """
+    inertia = sine.analyse_in_calibration(recordings, spec.sine, calibration)[0].inertia
+    if gain is None:
+        return inertia
+    return scale_by_gain(inertia, gain=gain[0], gain_u=gain[1])

@@ -12,9 +12,11 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Any, cast
 
 import numpy as np
 
+from hil.calibration import CalibrationRun
 from hil.drives.base import DriveInfo
 from hil.identify.estimate import Estimate
 from hil.identify.torque_constant import (
@@ -119,3 +121,24 @@ def estimates(result: TorqueConstantResult, spec: Spec) -> dict[str, Estimate]:
             result.torque_constant, kv_rpm_per_v=spec.kv_rpm_per_v
         )
     return found
+
+
+def kt_ripple_from_cogging(calibration: CalibrationRun) -> list[tuple[int, float, float]]:
+    """The cogging protocol's K_t ripple table, if it ran earlier in this calibration.
+
+    Parameters
+    ----------
+    calibration : CalibrationRun
+        The calibration in progress; the cogging protocol leaves its table in
+        ``calibration.details["cogging"]["kt_ripple"]``.
+
+    Returns
+    -------
+    list of (int, float, float)
+        ``(order, amplitude, phase_rad)`` per harmonic of
+        ``K_t(θ) = K_t·(1 + Σ a_n·sin(n·θ + ψ_n))``; empty when cogging did not run.
+    """
+    table = cast(
+        list[dict[str, Any]], calibration.details.get("cogging", {}).get("kt_ripple", [])
+    )
+    return [(int(h["order"]), float(h["amplitude"]), float(h["phase_rad"])) for h in table]
