@@ -27,7 +27,28 @@ def move_excitation(
     speed_rad_s: float,
     hold_s: float,
 ) -> Excitation:
-    """A smooth position-mode move from ``position_rad`` to ``target_rad``, then a hold."""
+    """A smooth position-mode move from ``position_rad`` to ``target_rad``, then a hold.
+
+    Parameters
+    ----------
+    name : str
+        The excitation's name (in the recording and the certificate's details).
+    position_rad : float
+        Where the axis is now.
+    target_rad : float
+        Where the move ends.
+    fs_hz : float
+        Command sample rate.
+    speed_rad_s : float
+        Peak speed of the move.
+    hold_s : float
+        Time held at ``target_rad`` after the move.
+
+    Returns
+    -------
+    Excitation
+        A :attr:`Mode.POSITION` excitation.
+    """
     command = position_move(
         position_rad, target_rad, fs_hz=fs_hz, speed_rad_s=speed_rad_s, hold_s=hold_s
     )
@@ -41,6 +62,22 @@ def on_command_grid(
     the recording had. A streamed drive returns one row per command sample (returned as
     is); a polled one fewer, irregular rows, interpolated in time onto the command grid so
     analyses that index by command sample still line up.
+
+    Parameters
+    ----------
+    recording : Recording
+        What the drive recorded while it ran ``excitation``.
+    excitation : Excitation
+        The excitation run; its command length and ``fs_hz`` set the grid.
+
+    Returns
+    -------
+    position_rad : ndarray
+        Position at ``k/fs_hz``, one per command sample.
+    torque_nm : ndarray
+        Reported torque (the recording's effort) at the same instants.
+    rows : int
+        Rows the recording had (for the certificate's details).
 
     Raises
     ------
@@ -63,7 +100,24 @@ def on_command_grid(
 
 
 def speed_ramp(speed_rad_s: float, *, ramp_s: float, fs_hz: float, up: bool) -> NDArray[np.float64]:
-    """Raised-cosine velocity ramp from rest to ``speed_rad_s`` (or back down)."""
+    """Raised-cosine velocity ramp from rest to ``speed_rad_s`` (or back down).
+
+    Parameters
+    ----------
+    speed_rad_s : float
+        Speed at the top of the ramp.
+    ramp_s : float
+        Duration of the ramp (at least one sample).
+    fs_hz : float
+        Command sample rate.
+    up : bool
+        From rest up to ``speed_rad_s`` if True, else from ``speed_rad_s`` down to rest.
+
+    Returns
+    -------
+    ndarray
+        ``round(ramp_s·fs_hz)`` velocity samples (rad/s), ending exactly at the target.
+    """
     n = max(round(ramp_s * fs_hz), 1)
     x = (np.arange(n) + 1) / n if up else 1 - (np.arange(n) + 1) / n
     return speed_rad_s * 0.5 * (1 - np.cos(math.pi * x))
@@ -74,7 +128,25 @@ MOVE_SPEED_FRACTION = 0.5  # of the unit's velocity limit, for repositioning mov
 
 def move_speed_rad_s(settings: ConfigTable, info: DriveInfo) -> float:
     """Peak speed of repositioning moves: the profile's ``move_speed_rad_s``, by default half
-    the unit's velocity limit (moves are not measured; they only cost machine time)."""
+    the unit's velocity limit (moves are not measured; they only cost machine time).
+
+    Parameters
+    ----------
+    settings : ConfigTable
+        The protocol's ``[protocols.NAME]`` table.
+    info : DriveInfo
+        The drive; ``info.limits.velocity_rad_s`` sets the default.
+
+    Returns
+    -------
+    float
+        Peak speed of repositioning moves (rad/s).
+
+    Raises
+    ------
+    ProfileError
+        ``move_speed_rad_s`` is not a finite number.
+    """
     return settings.number("move_speed_rad_s", MOVE_SPEED_FRACTION * info.limits.velocity_rad_s)
 
 
@@ -93,7 +165,28 @@ class TravelSpec:
         settings: ConfigTable, profile: UnitProfile, info: DriveInfo
     ) -> dict[str, float]:
         """The TravelSpec fields: rate and limits from profile and drive, margins from the
-        settings (``margin_rad`` 0.1 by default, ``move_speed_rad_s`` see below)."""
+        settings (``margin_rad`` 0.1 by default, ``move_speed_rad_s`` see
+        :func:`move_speed_rad_s`).
+
+        Parameters
+        ----------
+        settings : ConfigTable
+            The protocol's ``[protocols.NAME]`` table.
+        profile : UnitProfile
+            The unit's profile; its ``sample_rate_hz`` caps ``fs_hz``.
+        info : DriveInfo
+            The drive: its travel limits and its ``max_sample_rate_hz``.
+
+        Returns
+        -------
+        dict of str to float
+            Keyword arguments for the TravelSpec fields of a subclass's constructor.
+
+        Raises
+        ------
+        ProfileError
+            ``margin_rad`` or ``move_speed_rad_s`` is not a finite number.
+        """
         return {
             "fs_hz": min(profile.sample_rate_hz, info.max_sample_rate_hz),
             "travel_min_rad": info.limits.travel_min_rad,
@@ -104,10 +197,26 @@ class TravelSpec:
 
     @property
     def start_rad(self) -> float:
+        """Where the excitation starts: the lower travel limit plus the margin."""
         return self.travel_min_rad + self.margin_rad
 
     def require_travel(self, needed_rad: float, *, protocol: str, source: str) -> None:
-        """Refuse a profile whose one-way excitation needs more travel than the limits leave."""
+        """Refuse a profile whose one-way excitation needs more travel than the limits leave.
+
+        Parameters
+        ----------
+        needed_rad : float
+            Travel the excitation covers in one direction.
+        protocol : str
+            The protocol's name, for the error.
+        source : str
+            The profile's path, for the error.
+
+        Raises
+        ------
+        ProfileError
+            ``needed_rad`` exceeds the travel between the limits less both margins.
+        """
         shortfall = travel_shortfall_rad(
             needed_rad=needed_rad,
             travel_min_rad=self.travel_min_rad,
@@ -122,6 +231,8 @@ class TravelSpec:
             )
 
     def move_to_start(self, position_rad: float, *, hold_s: float) -> Excitation:
+        """The repositioning move from ``position_rad`` to :attr:`start_rad`, then a hold
+        of ``hold_s`` (see :func:`move_excitation`)."""
         return move_excitation(
             "move_to_start",
             position_rad,
@@ -158,7 +269,21 @@ class SteppedSineSpec(TravelSpec):
         return needed_sample_rate_hz(max(self.frequencies_hz))
 
     def require_carrier_travel(self, *, protocol: str, source: str) -> None:
-        """Refuse a profile whose carrier runs past the travel limits."""
+        """Refuse a profile whose carrier runs past the travel limits.
+
+        Parameters
+        ----------
+        protocol : str
+            The protocol's name, for the error.
+        source : str
+            The profile's path, for the error.
+
+        Raises
+        ------
+        ProfileError
+            The ramp and every segment at the carrier speed need more travel than the
+            limits leave.
+        """
         samples = sum(self.segment_samples(f) for f in self.frequencies_hz)
         self.require_travel(
             self.speed_rad_s * (self.ramp_s + samples / self.fs_hz),
@@ -167,7 +292,15 @@ class SteppedSineSpec(TravelSpec):
         )
 
     def carrier_command(self) -> NDArray[np.float64]:
-        """The velocity command: ramp up, the sine segments, ramp down."""
+        """The velocity command: ramp up, the sine segments, ramp down.
+
+        Returns
+        -------
+        ndarray
+            Velocity samples (rad/s) at ``fs_hz``: the ramp to the carrier, then per
+            frequency ``segment_samples(f)`` samples of carrier + ``amplitude(f)·sin(2πft)``,
+            then the ramp back to rest.
+        """
         segments = []
         for f in self.frequencies_hz:
             t = np.arange(self.segment_samples(f)) / self.fs_hz
