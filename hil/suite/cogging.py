@@ -37,6 +37,8 @@ MIN_SAMPLES_PER_PASS = 4000
 
 @dataclass(frozen=True, slots=True, kw_only=True)
 class Spec(TravelSpec):
+    """Two constant-velocity passes over the travel and the harmonic orders searched."""
+
     speed_rad_s: float
     skip_rad: float
     min_order: int
@@ -45,6 +47,24 @@ class Spec(TravelSpec):
 
     @classmethod
     def from_profile(cls, profile: UnitProfile, info: DriveInfo) -> Spec:
+        """The spec from the profile's ``[protocols.cogging]`` table and the drive.
+
+        Parameters
+        ----------
+        profile : UnitProfile
+            The unit's profile.
+        info : DriveInfo
+            The drive: its limits and its highest sample rate.
+
+        Returns
+        -------
+        Spec
+
+        Raises
+        ------
+        ProfileError
+            A missing, mistyped or unknown key.
+        """
         settings = profile.settings(NAME)
         spec = cls(
             **TravelSpec.envelope(settings, profile, info),
@@ -64,6 +84,7 @@ class Spec(TravelSpec):
 
     @property
     def pass_s(self) -> float:
+        """Duration of one pass over the travel less both margins."""
         travel = self.travel_max_rad - self.travel_min_rad - 2 * self.margin_rad
         return travel / self.speed_rad_s
 
@@ -78,11 +99,25 @@ class Spec(TravelSpec):
 
     @property
     def pass_samples(self) -> int:
+        """Command samples in one pass."""
         return round(self.pass_s * self.fs_hz)
 
 
 def excitation(spec: Spec, *, position_rad: float) -> list[Excitation]:
-    """Move to the lower end, then one pass up and one down at constant speed."""
+    """Move to the lower end, then one pass up and one down at constant speed.
+
+    Parameters
+    ----------
+    spec : Spec
+        The protocol's spec.
+    position_rad : float
+        Where the axis is now.
+
+    Returns
+    -------
+    list of Excitation
+        The move to :attr:`Spec.start_rad`, then the passes (velocity mode).
+    """
     n = spec.pass_samples
     return [
         spec.move_to_start(position_rad, hold_s=0.2),
@@ -103,6 +138,28 @@ def analyse(
     *,
     inertia_kg_m2: float,
 ) -> CoggingResult:
+    """Cogging and K_t ripple from the two passes, each with its first ``skip_rad`` dropped.
+
+    Parameters
+    ----------
+    time_s, position_rad, torque_nm : ndarray
+        The passes' recording on the command grid (see
+        :func:`hil.suite.travel.on_command_grid`).
+    spec : Spec
+        The protocol's spec (pass length, skip, orders).
+    inertia_kg_m2 : float
+        J for the acceleration correction (see :func:`inertia_for_correction`).
+
+    Returns
+    -------
+    CoggingResult
+        See :func:`hil.identify.cogging.identify_cogging`.
+
+    Raises
+    ------
+    IdentificationError
+        No harmonic above the noise, or torque levels too close to separate ripple.
+    """
     n = spec.pass_samples
     skip = math.ceil(spec.skip_rad / spec.speed_rad_s * spec.fs_hz)
     passes = [
@@ -114,7 +171,27 @@ def analyse(
 
 
 def inertia_for_correction(calibration: CalibrationRun, profile: UnitProfile) -> tuple[float, str]:
-    """Measured J if the sine protocol ran already, else the unit type's declared nominal."""
+    """Measured J if the sine protocol ran already, else the unit type's declared nominal.
+
+    Parameters
+    ----------
+    calibration : CalibrationRun
+        The calibration in progress (earlier results).
+    profile : UnitProfile
+        The unit's profile: the declared ``inertia_kg_m2``.
+
+    Returns
+    -------
+    inertia_kg_m2 : float
+        J for the acceleration correction.
+    source : str
+        Where it came from, for the certificate's details.
+
+    Raises
+    ------
+    ProfileError
+        Neither measured nor declared (no ``[measurements.inertia_kg_m2]``).
+    """
     inertia = calibration.result("inertia_kg_m2")
     if inertia is not None:
         return inertia.value, "measured (inertia_friction)"

@@ -29,11 +29,31 @@ NAME = "current_loop"
 
 @dataclass(frozen=True, slots=True, kw_only=True)
 class Spec(SteppedSineSpec):
+    """Velocity sines of one amplitude on a constant-speed carrier, one segment each."""
+
     amplitude_rad_s: float  # velocity command sine amplitude
     segment_s: float  # analysed time per frequency
 
     @classmethod
     def from_profile(cls, profile: UnitProfile, info: DriveInfo) -> Spec:
+        """The spec from the profile's ``[protocols.current_loop]`` table and the drive.
+
+        Parameters
+        ----------
+        profile : UnitProfile
+            The unit's profile.
+        info : DriveInfo
+            The drive: its limits and its highest sample rate.
+
+        Returns
+        -------
+        Spec
+
+        Raises
+        ------
+        ProfileError
+            A missing, mistyped or unknown key, or a carrier that runs past the travel limits.
+        """
         settings = profile.settings(NAME)
         spec = cls(
             **TravelSpec.envelope(settings, profile, info),
@@ -50,9 +70,11 @@ class Spec(SteppedSineSpec):
         return spec
 
     def amplitude(self, frequency_hz: float) -> float:
+        """The same velocity amplitude at every frequency."""
         return self.amplitude_rad_s
 
     def settle_samples(self, frequency_hz: float) -> int:
+        """Samples discarded at the start of a segment: whole periods covering ``settle_s``."""
         return round(math.ceil(self.settle_s * frequency_hz) * self.fs_hz / frequency_hz)
 
     def segment_samples(self, frequency_hz: float) -> int:
@@ -62,7 +84,20 @@ class Spec(SteppedSineSpec):
 
 
 def excitation(spec: Spec, *, position_rad: float) -> list[Excitation]:
-    """Move to the lower end; ramp to the carrier speed; one sine segment per frequency."""
+    """Move to the lower end; ramp to the carrier speed; one sine segment per frequency.
+
+    Parameters
+    ----------
+    spec : Spec
+        The protocol's spec.
+    position_rad : float
+        Where the axis is now.
+
+    Returns
+    -------
+    list of Excitation
+        The move to :attr:`Spec.start_rad`, then the sines (velocity mode).
+    """
     return [
         spec.move_to_start(position_rad, hold_s=0.1),
         Excitation(
@@ -72,6 +107,26 @@ def excitation(spec: Spec, *, position_rad: float) -> list[Excitation]:
 
 
 def analyse(recording: Recording, spec: Spec) -> CurrentLoopResult:
+    """τ from the phase of motion against reported torque in each frequency's segment.
+
+    Parameters
+    ----------
+    recording : Recording
+        The sines' recording (one row per command sample).
+    spec : Spec
+        The protocol's spec (segments, blocks).
+
+    Returns
+    -------
+    CurrentLoopResult
+        See :func:`hil.identify.current_loop.fit_current_loop_lag`.
+
+    Raises
+    ------
+    IdentificationError
+        A segment too short for its blocks or without torque at its frequency, fewer than
+        3 frequencies, or a fit that does not converge or cannot separate τ from B/J.
+    """
     hold = torque_hold_s(recording.metadata, fs_hz=spec.fs_hz)
     start = round(spec.ramp_s * spec.fs_hz)
     points = []

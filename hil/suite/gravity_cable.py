@@ -36,6 +36,8 @@ NAME = "gravity_cable"
 
 @dataclass(frozen=True, slots=True, kw_only=True)
 class Spec(TravelSpec):
+    """One slow sweep up the travel and back, with probes at the turnarounds."""
+
     speed_rad_s: float
     rewind_speed_rad_s: float
     probe_rad: float
@@ -47,6 +49,24 @@ class Spec(TravelSpec):
 
     @classmethod
     def from_profile(cls, profile: UnitProfile, info: DriveInfo) -> Spec:
+        """The spec from the profile's ``[protocols.gravity_cable]`` table and the drive.
+
+        Parameters
+        ----------
+        profile : UnitProfile
+            The unit's profile.
+        info : DriveInfo
+            The drive: its limits and its highest sample rate.
+
+        Returns
+        -------
+        Spec
+
+        Raises
+        ------
+        ProfileError
+            A missing, mistyped or unknown key.
+        """
         settings = profile.settings(NAME)
         mass = profile.unit.get("mass_kg")
         spec = cls(
@@ -65,6 +85,7 @@ class Spec(TravelSpec):
 
     @property
     def plan(self) -> SweepPlan:
+        """The sweep's command and its phases (:func:`hil.identify.gravity_cable.sweep_plan`)."""
         return sweep_plan(
             start_rad=self.start_rad,
             stop_rad=self.travel_max_rad - self.margin_rad,
@@ -77,7 +98,20 @@ class Spec(TravelSpec):
 
 
 def excitation(spec: Spec, *, position_rad: float) -> list[Excitation]:
-    """A position move to the lower end of the travel, then the sweep."""
+    """A position move to the lower end of the travel, then the sweep.
+
+    Parameters
+    ----------
+    spec : Spec
+        The protocol's spec.
+    position_rad : float
+        Where the axis is now.
+
+    Returns
+    -------
+    list of Excitation
+        The move to :attr:`Spec.start_rad`, then the sweep (velocity mode).
+    """
     return [
         spec.move_to_start(position_rad, hold_s=0.2),
         Excitation(
@@ -87,6 +121,27 @@ def excitation(spec: Spec, *, position_rad: float) -> list[Excitation]:
 
 
 def analyse(position_rad: np.ndarray, torque_nm: np.ndarray, spec: Spec) -> GravityCableResult:
+    """m·g·e, its phase, k_cable and the cable's hysteresis from the sweep.
+
+    Parameters
+    ----------
+    position_rad, torque_nm : ndarray
+        The sweep's recording on the command grid (see
+        :func:`hil.suite.travel.on_command_grid`).
+    spec : Spec
+        The protocol's spec (plan, bins, exclusions).
+
+    Returns
+    -------
+    GravityCableResult
+        See :func:`hil.identify.gravity_cable.identify_gravity_cable`.
+
+    Raises
+    ------
+    IdentificationError
+        The recording is shorter than the sweep, the usable sweep is under 1 rad, or fewer
+        than 8 position bins hold both passes.
+    """
     return identify_gravity_cable(
         position_rad=position_rad,
         torque_nm=torque_nm,
