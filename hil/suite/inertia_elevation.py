@@ -27,12 +27,32 @@ NAME = "inertia_elevation"
 
 @dataclass(frozen=True, slots=True, kw_only=True)
 class Spec:
+    """The elevations visited and the J/B/T_c sine run at each."""
+
     elevations_rad: tuple[float, ...]
     park_elevation_rad: float  # where the elevation axis is left afterwards
     sine: sine.Spec
 
     @classmethod
     def from_profile(cls, profile: UnitProfile, info: DriveInfo) -> Spec:
+        """The spec from the profile's ``[protocols.inertia_elevation]`` table and the drive.
+
+        Parameters
+        ----------
+        profile : UnitProfile
+            The unit's profile.
+        info : DriveInfo
+            The drive: its limits and its highest sample rate.
+
+        Returns
+        -------
+        Spec
+
+        Raises
+        ------
+        ProfileError
+            A missing, mistyped or unknown key.
+        """
         settings = profile.settings(NAME)
         spec = cls(
             elevations_rad=settings.numbers("elevations_rad"),
@@ -50,7 +70,19 @@ class Spec:
 
 
 def reported_torque_gain(calibration: CalibrationRun) -> tuple[float, float] | None:
-    """Shaft over reported torque (and its standard uncertainty) from the K_t protocol."""
+    """Shaft over reported torque (and its standard uncertainty) from the K_t protocol.
+
+    Parameters
+    ----------
+    calibration : CalibrationRun
+        The calibration in progress (earlier results).
+
+    Returns
+    -------
+    tuple of (float, float) or None
+        ``(gain, u(gain))`` from ``reported_torque_gain_error_pct``, or ``None`` when the
+        torque-constant protocol has not measured it.
+    """
     gain_error = calibration.result("reported_torque_gain_error_pct")
     if gain_error is None:
         return None
@@ -65,6 +97,29 @@ def inertia_at_elevation(
     gain: tuple[float, float] | None,
 ) -> Estimate:
     """J from the sines run at one elevation, in shaft-torque units when the gain is known.
+
+    Parameters
+    ----------
+    recordings : list of Recording
+        One per amplitude of ``spec.sine``, run at this elevation.
+    spec : Spec
+        The protocol's spec.
+    calibration : CalibrationRun
+        The calibration in progress: earlier results the sine analysis takes out (see
+        :func:`hil.suite.inertia_friction.analyse_in_calibration`).
+    gain : tuple of (float, float) or None
+        Shaft over reported torque and its standard uncertainty (see
+        :func:`reported_torque_gain`); ``None`` leaves J in reported-torque units.
+
+    Returns
+    -------
+    Estimate
+        J at this elevation.
+
+    Raises
+    ------
+    IdentificationError
+        The sine analysis fails (see :func:`hil.suite.inertia_friction.analyse`).
     """
     inertia = sine.analyse_in_calibration(recordings, spec.sine, calibration)[0].inertia
     if gain is None:

@@ -34,6 +34,8 @@ NAME = "inertia_friction"
 
 @dataclass(frozen=True, slots=True, kw_only=True)
 class Spec:
+    """Velocity sines of one frequency at two or more amplitudes, and how to fit them."""
+
     frequency_hz: float
     amplitudes_rad_s: tuple[float, ...]
     settle_periods: int
@@ -46,6 +48,24 @@ class Spec:
 
     @classmethod
     def from_profile(cls, profile: UnitProfile, info: DriveInfo) -> Spec:
+        """The spec from the profile's ``[protocols.inertia_friction]`` table and the drive.
+
+        Parameters
+        ----------
+        profile : UnitProfile
+            The unit's profile.
+        info : DriveInfo
+            The drive: its limits and its highest sample rate.
+
+        Returns
+        -------
+        Spec
+
+        Raises
+        ------
+        ProfileError
+            A missing, mistyped or unknown key.
+        """
         settings = profile.settings(NAME)
         method: Method = (
             "least_squares"
@@ -71,7 +91,22 @@ class Spec:
 
 def move_to_centre(spec: Spec, centre_rad: float, *, position_rad: float) -> Excitation:
     """To the sines' start: by default the middle of the travel (level, for an elevation
-    axis: the least gravity gradient)."""
+    axis: the least gravity gradient).
+
+    Parameters
+    ----------
+    spec : Spec
+        The protocol's spec (rate, move speed).
+    centre_rad : float
+        Where the sines start.
+    position_rad : float
+        Where the axis is now.
+
+    Returns
+    -------
+    Excitation
+        A position-mode move and a 0.2 s hold.
+    """
     return move_excitation(
         "move_to_centre",
         position_rad,
@@ -83,7 +118,18 @@ def move_to_centre(spec: Spec, centre_rad: float, *, position_rad: float) -> Exc
 
 
 def excitation(spec: Spec) -> list[Excitation]:
-    """One velocity sine per amplitude, whole periods, starting and ending at rest."""
+    """One velocity sine per amplitude, whole periods, starting and ending at rest.
+
+    Parameters
+    ----------
+    spec : Spec
+        The protocol's spec.
+
+    Returns
+    -------
+    list of Excitation
+        One velocity-mode excitation per ``spec.amplitudes_rad_s``.
+    """
     samples = round((spec.settle_periods + spec.periods) * spec.fs_hz / spec.frequency_hz)
     t = np.arange(samples) / spec.fs_hz
     shape = np.sin(2 * math.pi * spec.frequency_hz * t)
@@ -108,7 +154,30 @@ def analyse(
     """J, B, T_c. The reported torque reaches the shaft half a control period (zero-order
     hold) plus the current loop's lag later, which would otherwise leak into B as
     ``c·2πf·τ``; the cable's hysteresis loop, when measured, is taken out first (it acts as
-    a stiff spring just after each reversal: −1.5 % on J, +20 % on B on the demo unit)."""
+    a stiff spring just after each reversal: −1.5 % on J, +20 % on B on the demo unit).
+
+    Parameters
+    ----------
+    recordings : list of Recording
+        One per amplitude, as :func:`excitation` ordered them.
+    spec : Spec
+        The protocol's spec.
+    current_loop_lag_s : float
+        The current loop's time constant, added to the zero-order hold's delay.
+    cable_loop : CableLoop or None
+        The cable's hysteresis loop to take out, if measured.
+
+    Returns
+    -------
+    InertiaFrictionResult
+        See :func:`hil.identify.inertia_friction.identify_inertia_friction`.
+
+    Raises
+    ------
+    IdentificationError
+        A run with too few whole periods, fewer than two runs, or amplitudes too close to
+        separate B from T_c.
+    """
     runs = [
         analyse_sine_run(
             without_cable_loop(r, cable_loop),
@@ -122,7 +191,19 @@ def analyse(
 
 
 def measured_cable_loop(calibration: CalibrationRun) -> CableLoop | None:
-    """The cable's hysteresis loop if ``gravity_cable`` ran earlier."""
+    """The cable's hysteresis loop if ``gravity_cable`` ran earlier.
+
+    Parameters
+    ----------
+    calibration : CalibrationRun
+        The calibration in progress (earlier results and details).
+
+    Returns
+    -------
+    CableLoop or None
+        Half-width, its standard uncertainty and the loop's angle; ``None`` when not
+        measured.
+    """
     h = calibration.result("cable_hysteresis_nm")
     angle = calibration.details.get("gravity_cable", {}).get("cable_hysteresis_angle_rad")
     if h is None or not isinstance(angle, float):
@@ -140,7 +221,27 @@ def with_cable_loop_uncertainty(
     current_loop_lag_s: float,
     loop: CableLoop,
 ) -> InertiaFrictionResult:
-    """Add the effect of the loop width's standard uncertainty (re-analysed at h + u(h))."""
+    """Add the effect of the loop width's standard uncertainty (re-analysed at h + u(h)).
+
+    Parameters
+    ----------
+    result : InertiaFrictionResult
+        The analysis with ``loop`` taken out.
+    recordings : list of Recording
+        The runs ``result`` came from.
+    spec : Spec
+        The protocol's spec.
+    current_loop_lag_s : float
+        As for :func:`analyse`.
+    loop : CableLoop
+        The loop taken out.
+
+    Returns
+    -------
+    InertiaFrictionResult
+        ``result`` with J, B and T_c widened by ``|Δ|`` at ``h + u(h)`` (in quadrature,
+        infinite degrees of freedom for the added term; Welch–Satterthwaite).
+    """
     shifted = dataclasses.replace(loop, half_width_nm=loop.half_width_nm + loop.half_width_u_nm)
     other = analyse(recordings, spec, current_loop_lag_s=current_loop_lag_s, cable_loop=shifted)
 
@@ -162,7 +263,21 @@ def with_cable_loop_uncertainty(
 
 
 def measured_load_stiffness(calibration: CalibrationRun, *, position_rad: float) -> Estimate | None:
-    """``dL/dθ`` of gravity and cable at ``position_rad`` if ``gravity_cable`` ran earlier."""
+    """``dL/dθ`` of gravity and cable at ``position_rad`` if ``gravity_cable`` ran earlier.
+
+    Parameters
+    ----------
+    calibration : CalibrationRun
+        The calibration in progress (earlier results).
+    position_rad : float
+        Where the stiffness is taken (the sines' centre).
+
+    Returns
+    -------
+    Estimate or None
+        The load's stiffness (N·m/rad), or ``None`` unless m·g·e, its phase and k_cable
+        were all measured.
+    """
     found = calibration.results("gravity_mge_nm", "gravity_phase_rad", "cable_stiffness_nm_rad")
     if found is None:
         return None
@@ -171,7 +286,18 @@ def measured_load_stiffness(calibration: CalibrationRun, *, position_rad: float)
 
 
 def measured_current_loop_lag_s(calibration: CalibrationRun) -> float:
-    """The current-loop time constant if that protocol ran earlier, else 0."""
+    """The current-loop time constant if that protocol ran earlier, else 0.
+
+    Parameters
+    ----------
+    calibration : CalibrationRun
+        The calibration in progress (earlier results).
+
+    Returns
+    -------
+    float
+        τ in seconds (from ``current_loop_time_constant_ms``), or 0.
+    """
     tau = calibration.result("current_loop_time_constant_ms")
     return 0.0 if tau is None else tau.value / 1000.0
 
@@ -181,7 +307,29 @@ def analyse_in_calibration(
 ) -> tuple[InertiaFrictionResult, dict[str, object]]:
     """J, B, T_c with what earlier protocols measured taken out: the current loop's lag,
     the cable's hysteresis loop (its uncertainty propagated) and the load's stiffness at
-    the sines' centre. Also returns what was applied, for the certificate's details."""
+    the sines' centre. Also returns what was applied, for the certificate's details.
+
+    Parameters
+    ----------
+    recordings : list of Recording
+        One per amplitude, as :func:`excitation` ordered them.
+    spec : Spec
+        The protocol's spec.
+    calibration : CalibrationRun
+        The calibration in progress (earlier results).
+
+    Returns
+    -------
+    result : InertiaFrictionResult
+        J (stiffness-corrected when the load's stiffness is known), B, T_c.
+    applied : dict of str to object
+        The centre, the load stiffness, the cable loop and the lag taken out.
+
+    Raises
+    ------
+    IdentificationError
+        As for :func:`analyse`.
+    """
     lag_s = measured_current_loop_lag_s(calibration)
     loop = measured_cable_loop(calibration)
     analysed = analyse(recordings, spec, current_loop_lag_s=lag_s, cable_loop=loop)

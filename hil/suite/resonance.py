@@ -29,6 +29,8 @@ NAME = "resonance"
 
 @dataclass(frozen=True, slots=True, kw_only=True)
 class Spec(SteppedSineSpec):
+    """A stepped sine over a geometric band on a constant-speed carrier."""
+
     amplitude_rad_s: float  # velocity sine amplitude up to amplitude_knee_hz
     amplitude_knee_hz: float  # above: amplitude ∝ f (the motor responds ∝ 1/f)
     max_amplitude_rad_s: float
@@ -37,6 +39,24 @@ class Spec(SteppedSineSpec):
 
     @classmethod
     def from_profile(cls, profile: UnitProfile, info: DriveInfo) -> Spec:
+        """The spec from the profile's ``[protocols.resonance]`` table and the drive.
+
+        Parameters
+        ----------
+        profile : UnitProfile
+            The unit's profile.
+        info : DriveInfo
+            The drive: its limits and its highest sample rate.
+
+        Returns
+        -------
+        Spec
+
+        Raises
+        ------
+        ProfileError
+            A missing, mistyped or unknown key, or a carrier that runs past the travel limits.
+        """
         settings = profile.settings(NAME)
         low, high = settings.numbers("band_hz", count=2)
         points = settings.integer("points", 28)
@@ -58,10 +78,13 @@ class Spec(SteppedSineSpec):
         return spec
 
     def amplitude(self, frequency_hz: float) -> float:
+        """``amplitude_rad_s``, ∝ f above the knee, capped at ``max_amplitude_rad_s``."""
         scaled = self.amplitude_rad_s * max(1.0, frequency_hz / self.amplitude_knee_hz)
         return min(scaled, self.max_amplitude_rad_s)
 
     def settle_samples(self, frequency_hz: float) -> int:
+        """Samples discarded at the start of a segment: ≥ 2 whole periods covering
+        ``settle_s``."""
         periods = max(2, math.ceil(self.settle_s * frequency_hz))
         return round(periods * self.fs_hz / frequency_hz)
 
@@ -72,7 +95,20 @@ class Spec(SteppedSineSpec):
 
 
 def excitation(spec: Spec, *, position_rad: float) -> list[Excitation]:
-    """Move to the lower end; ramp to the carrier speed; the stepped sine; ramp down."""
+    """Move to the lower end; ramp to the carrier speed; the stepped sine; ramp down.
+
+    Parameters
+    ----------
+    spec : Spec
+        The protocol's spec.
+    position_rad : float
+        Where the axis is now.
+
+    Returns
+    -------
+    list of Excitation
+        The move to the start, then the stepped sine (velocity mode).
+    """
     return [
         spec.move_to_start(position_rad, hold_s=0.1),
         Excitation(
@@ -85,6 +121,30 @@ def excitation(spec: Spec, *, position_rad: float) -> list[Excitation]:
 
 
 def analyse(recording: Recording, spec: Spec, *, time_constant_s: float = 2e-4) -> ResonanceResult:
+    """The FRF point of each frequency's segment, and the two-mass model fitted to them.
+
+    Parameters
+    ----------
+    recording : Recording
+        The stepped sine's recording, with its velocity command.
+    spec : Spec
+        The protocol's spec (frequencies, segments, carrier).
+    time_constant_s : float
+        The current loop's τ, the fit's start value (see :func:`measured_time_constant_s`).
+
+    Returns
+    -------
+    ResonanceResult
+        See :func:`hil.identify.resonance.identify_resonance`.
+
+    Raises
+    ------
+    ValueError
+        The recording has no velocity command.
+    IdentificationError
+        A segment too short for its blocks or without torque at its frequency, fewer
+        than 6 frequencies, or a model fit that fails.
+    """
     command = recording.velocity_cmd
     if command is None:
         raise ValueError("the stepped-sine recording lacks its velocity command")
@@ -108,6 +168,17 @@ def analyse(recording: Recording, spec: Spec, *, time_constant_s: float = 2e-4) 
 
 
 def measured_time_constant_s(calibration: CalibrationRun) -> float:
-    """The current-loop protocol's τ when it ran already (a start value only)."""
+    """The current-loop protocol's τ when it ran already (a start value only).
+
+    Parameters
+    ----------
+    calibration : CalibrationRun
+        The calibration in progress (earlier results).
+
+    Returns
+    -------
+    float
+        τ in seconds; 2e-4 when the current-loop protocol has not measured it.
+    """
     tau = calibration.result("current_loop_time_constant_ms")
     return 2e-4 if tau is None else tau.value * 1e-3
