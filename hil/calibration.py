@@ -107,15 +107,38 @@ class CalibrationRun:
         return recording
 
     def result(self, name: str) -> Estimate | None:
-        """The judged estimate of an earlier protocol's declared measurement ``name``, as
-        recorded (method accuracy included), or ``None`` when no protocol measured it."""
+        """The judged estimate of an earlier protocol's declared measurement ``name``.
+
+        Parameters
+        ----------
+        name : str
+            A declared measurement, e.g. ``"reported_torque_gain_error_pct"``.
+
+        Returns
+        -------
+        Estimate or None
+            The estimate as recorded (method accuracy included), or ``None`` when no
+            protocol has measured it in this run.
+        """
         for measurement in self.measurements:
             if measurement.spec.name == name:
                 return measurement.estimate
         return None
 
     def results(self, *names: str) -> tuple[Estimate, ...] | None:
-        """Several earlier results at once; ``None`` unless every one was measured."""
+        """Several earlier results at once.
+
+        Parameters
+        ----------
+        *names : str
+            Declared measurements.
+
+        Returns
+        -------
+        tuple of Estimate or None
+            The estimates in the order of ``names`` (see :meth:`result`), or ``None``
+            unless every one was measured.
+        """
         found = [self.result(name) for name in names]
         return None if any(e is None for e in found) else tuple(e for e in found if e)
 

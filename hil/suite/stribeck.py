@@ -34,6 +34,8 @@ CROSS_CHECK = (
 
 @dataclass(frozen=True, slots=True, kw_only=True)
 class Spec(TravelSpec):
+    """A slow velocity staircase up and down, centred in the travel."""
+
     speeds_rad_s: tuple[float, ...]
     step_travel_rad: float
     settle_s: float
@@ -42,6 +44,24 @@ class Spec(TravelSpec):
 
     @classmethod
     def from_profile(cls, profile: UnitProfile, info: DriveInfo) -> Spec:
+        """The spec from the profile's ``[protocols.stribeck]`` table and the drive.
+
+        Parameters
+        ----------
+        profile : UnitProfile
+            The unit's profile.
+        info : DriveInfo
+            The drive: its limits and its highest sample rate.
+
+        Returns
+        -------
+        Spec
+
+        Raises
+        ------
+        ProfileError
+            A missing, mistyped or unknown key.
+        """
         settings = profile.settings(NAME)
         spec = cls(
             **TravelSpec.envelope(settings, profile, info),
@@ -56,6 +76,7 @@ class Spec(TravelSpec):
 
     @property
     def stairs(self) -> Staircase:
+        """The staircase's command and steps (see :func:`hil.identify.stribeck.staircase`)."""
         return staircase(
             self.speeds_rad_s,
             fs_hz=self.fs_hz,
@@ -67,7 +88,13 @@ class Spec(TravelSpec):
 
     @property
     def start_rad(self) -> float:
-        """Start so that the staircase and its turnaround are centred in the travel."""
+        """Start so that the staircase and its turnaround are centred in the travel.
+
+        Raises
+        ------
+        ValueError
+            The staircase and its turnaround need more than 90 % of the travel.
+        """
         stairs = self.stairs
         extent = stairs.travel_rad + stairs.turnaround_rad
         middle = (self.travel_min_rad + self.travel_max_rad) / 2
@@ -77,7 +104,20 @@ class Spec(TravelSpec):
 
 
 def excitation(spec: Spec, *, position_rad: float) -> list[Excitation]:
-    """A position move from ``position_rad`` to the start, then the velocity staircase."""
+    """A position move from ``position_rad`` to the start, then the velocity staircase.
+
+    Parameters
+    ----------
+    spec : Spec
+        The protocol's spec.
+    position_rad : float
+        Where the axis is now.
+
+    Returns
+    -------
+    list of Excitation
+        The move to :attr:`Spec.start_rad`, then the staircase (velocity mode).
+    """
     return [
         spec.move_to_start(position_rad, hold_s=0.2),
         Excitation(
@@ -92,6 +132,26 @@ def excitation(spec: Spec, *, position_rad: float) -> list[Excitation]:
 def analyse(
     time_s: np.ndarray, position_rad: np.ndarray, torque_nm: np.ndarray, spec: Spec
 ) -> StribeckResult:
+    """T_s, v_s (and T_c, B) from the staircase's steady steps.
+
+    Parameters
+    ----------
+    time_s, position_rad, torque_nm : ndarray
+        The staircase's recording on the command grid (see
+        :func:`hil.suite.travel.on_command_grid`).
+    spec : Spec
+        The protocol's spec (staircase, settling).
+
+    Returns
+    -------
+    StribeckResult
+        See :func:`hil.identify.stribeck.identify_stribeck`.
+
+    Raises
+    ------
+    IdentificationError
+        The recording is shorter than the staircase.
+    """
     return identify_stribeck(
         time_s=time_s,
         position_rad=position_rad,
@@ -102,7 +162,18 @@ def analyse(
 
 
 def finite_or_none(value: float) -> float | None:
-    """JSON has no NaN or infinity: a stick-slip speed has no friction value."""
+    """JSON has no NaN or infinity: a stick-slip speed has no friction value.
+
+    Parameters
+    ----------
+    value : float
+        A friction value or its uncertainty.
+
+    Returns
+    -------
+    float or None
+        ``value`` if finite, else ``None``.
+    """
     return value if math.isfinite(value) else None
 
 
@@ -110,7 +181,22 @@ def cross_check(result: StribeckResult, calibration: CalibrationRun) -> dict[str
     """Compare T_c and B with the sine protocol's, when it ran: normalised error
     ``|Δ| / √(U₁² + U₂²)`` (≤ 1: consistent within the expanded uncertainties). The sine's
     T_c excludes the cable loop's half-width h (taken out there), the staircase's sliding
-    friction includes it: when h was measured it is added to the sine's side."""
+    friction includes it: when h was measured it is added to the sine's side.
+
+    Parameters
+    ----------
+    result : StribeckResult
+        This protocol's result.
+    calibration : CalibrationRun
+        The calibration in progress (earlier results); a normalised error above 1 is
+        logged as a warning.
+
+    Returns
+    -------
+    dict of str to object
+        Per sine result measured (``coulomb_nm``, ``viscous_nm_s_rad``): the staircase's
+        value, the sine's and the normalised error; empty when the sine did not run.
+    """
     ours = {e.name: e for e in (result.coulomb, result.viscous)}
     loop = calibration.result("cable_hysteresis_nm")
     checks: dict[str, object] = {}

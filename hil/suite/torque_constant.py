@@ -35,6 +35,8 @@ NAME = "torque_constant"
 
 @dataclass(frozen=True, slots=True, kw_only=True)
 class Spec:
+    """Locked-rotor torque staircases, one per locked angle."""
+
     angles_rad: tuple[float, ...]
     peak_torque_nm: float
     levels: int  # per direction
@@ -46,6 +48,24 @@ class Spec:
 
     @classmethod
     def from_profile(cls, profile: UnitProfile, info: DriveInfo) -> Spec:
+        """The spec from the profile's ``[protocols.torque_constant]`` table and the drive.
+
+        Parameters
+        ----------
+        profile : UnitProfile
+            The unit's profile.
+        info : DriveInfo
+            The drive: its limits and its highest sample rate.
+
+        Returns
+        -------
+        Spec
+
+        Raises
+        ------
+        ProfileError
+            A missing, mistyped or unknown key.
+        """
         settings = profile.settings(NAME)
         kv = profile.unit.get("kv_rpm_per_v")
         limit = min(info.limits.torque_nm, info.rated_torque_nm)
@@ -64,10 +84,12 @@ class Spec:
 
     @property
     def level_samples(self) -> int:
+        """Samples per torque level."""
         return round(self.level_s * self.fs_hz)
 
     @property
     def settle_samples(self) -> int:
+        """Samples discarded at the start of each level (and of the closing zero level)."""
         return math.ceil(self.settle_s * self.fs_hz)
 
     @property
@@ -78,6 +100,22 @@ class Spec:
 
 
 def move(spec: Spec, *, position_rad: float, angle_rad: float) -> Excitation:
+    """The position move from ``position_rad`` to a locked angle, then a 0.1 s hold.
+
+    Parameters
+    ----------
+    spec : Spec
+        The protocol's spec (rate, move speed).
+    position_rad : float
+        Where the axis is now.
+    angle_rad : float
+        The angle the rotor is locked at next.
+
+    Returns
+    -------
+    Excitation
+        A position-mode excitation.
+    """
     return move_excitation(
         f"move_to_{angle_rad:+.3f}rad",
         position_rad,
@@ -89,7 +127,21 @@ def move(spec: Spec, *, position_rad: float, angle_rad: float) -> Excitation:
 
 
 def sweep(spec: Spec, *, angle_rad: float) -> Excitation:
-    """Torque staircase for a locked rotor, ending with a short zero level (not analysed)."""
+    """Torque staircase for a locked rotor, ending with a short zero level (not analysed).
+
+    Parameters
+    ----------
+    spec : Spec
+        The protocol's spec (levels, durations).
+    angle_rad : float
+        The locked angle (names the excitation).
+
+    Returns
+    -------
+    Excitation
+        A torque-mode excitation: :attr:`Spec.torque_levels_nm` held ``level_samples``
+        each, then ``settle_samples`` of zero.
+    """
     command = np.concatenate(
         [np.repeat(spec.torque_levels_nm, spec.level_samples), np.zeros(spec.settle_samples)]
     )
@@ -102,6 +154,29 @@ def sweep(spec: Spec, *, angle_rad: float) -> Excitation:
 
 
 def analyse_sweep(recording: Recording, spec: Spec, *, angle_rad: float) -> LockedSweep:
+    """Level means of current, shaft and reported torque, and their lines, of one sweep.
+
+    Parameters
+    ----------
+    recording : Recording
+        The locked sweep's recording (with ``current_a`` and ``load_torque_nm``).
+    spec : Spec
+        The protocol's spec (levels, durations).
+    angle_rad : float
+        The locked angle.
+
+    Returns
+    -------
+    LockedSweep
+        See :func:`hil.identify.torque_constant.analyse_locked_sweep`.
+
+    Raises
+    ------
+    KeyError
+        The recording lacks the current or the shaft torque column.
+    IdentificationError
+        Fewer than 4 levels of different current.
+    """
     columns = recording.columns
     return analyse_locked_sweep(
         columns["current_a"],
@@ -115,6 +190,22 @@ def analyse_sweep(recording: Recording, spec: Spec, *, angle_rad: float) -> Lock
 
 
 def estimates(result: TorqueConstantResult, spec: Spec) -> dict[str, Estimate]:
+    """The protocol's declared measurements by name.
+
+    Parameters
+    ----------
+    result : TorqueConstantResult
+        K_t, linearity and reported-torque gain error.
+    spec : Spec
+        The protocol's spec: its ``kv_rpm_per_v`` adds the datasheet deviation.
+
+    Returns
+    -------
+    dict of str to Estimate
+        ``torque_constant_nm_a``, ``torque_linearity_pct``,
+        ``reported_torque_gain_error_pct`` and, when the datasheet KV is known,
+        ``torque_constant_vs_datasheet_pct``.
+    """
     found = {e.name: e for e in (result.torque_constant, result.linearity, result.gain_error)}
     if spec.kv_rpm_per_v is not None:
         found["torque_constant_vs_datasheet_pct"] = datasheet_deviation(
