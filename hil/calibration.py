@@ -17,7 +17,14 @@ from pathlib import Path
 from hil.drives.base import Drive, DriveInfo
 from hil.errors import DriveError
 from hil.identify.estimate import Estimate
-from hil.measurement import Measurement, Outcome, judge, with_method_accuracy
+from hil.measurement import (
+    Measurement,
+    MethodBiasMap,
+    Outcome,
+    judge,
+    load_method_bias,
+    with_method_terms,
+)
 from hil.motion import Excitation
 from hil.profile import UnitProfile
 from hil.recording import Recording, write_recording
@@ -66,6 +73,7 @@ class CalibrationRun:
         unit_serial: str,
         out_dir: Path,
         drive_kind: str,
+        method_bias: MethodBiasMap | None = None,
     ) -> None:
         if not re.fullmatch(r"[A-Za-z0-9][A-Za-z0-9._-]{0,63}", unit_serial):
             raise ValueError(
@@ -74,6 +82,7 @@ class CalibrationRun:
         self.profile = profile
         self.unit_serial = unit_serial
         self.drive_kind = drive_kind
+        self.method_bias = method_bias or load_method_bias(axis=profile.axis)
         self.unit_dir = out_dir / unit_serial
         self.started = datetime.now(UTC)
         self.drive_info: DriveInfo | None = None
@@ -117,7 +126,7 @@ class CalibrationRun:
         Returns
         -------
         Estimate or None
-            The estimate as recorded (method accuracy included), or ``None`` when no
+            The estimate as recorded (method bias corrected, budget complete), or ``None`` when no
             protocol has measured it in this run.
         """
         for measurement in self.measurements:
@@ -143,9 +152,11 @@ class CalibrationRun:
         return None if any(e is None for e in found) else tuple(e for e in found if e)
 
     def record(self, protocol: str, estimate: Estimate) -> Measurement:
-        """Judge ``estimate`` against the profile's declared measurement of the same name."""
+        """Judge ``estimate`` against the profile's declared measurement of the same name,
+        after the method's known bias is corrected and its budget completed
+        (:func:`hil.measurement.with_method_terms`)."""
         spec = self.profile.measurement(estimate.name)
-        estimate = with_method_accuracy(estimate, spec)
+        estimate = with_method_terms(estimate, spec, self.method_bias.entries.get(spec.name))
         measurement = Measurement(
             protocol=protocol, spec=spec, estimate=estimate, outcome=judge(estimate, spec)
         )

@@ -21,7 +21,7 @@ from hil.drives.connect import open_drive
 from hil.drives.kinds import SIMULATED_KINDS
 from hil.errors import HilError
 from hil.gum import rounded_pair
-from hil.measurement import Outcome
+from hil.measurement import MethodBiasMap, Outcome, load_method_bias
 from hil.profile import UnitProfile, load_profile
 
 log = logging.getLogger(__name__)
@@ -68,8 +68,18 @@ def calibration(pytestconfig: pytest.Config, profile: UnitProfile) -> Calibratio
             unit_serial=serial,
             out_dir=Path(pytestconfig.getoption("--out")),
             drive_kind=kind,
+            method_bias=_method_bias(pytestconfig.getoption("--method-bias"), profile),
         )
     return pytestconfig.stash[RUN_KEY]
+
+
+def _method_bias(option: str | None, profile: UnitProfile) -> MethodBiasMap | None:
+    """The map ``--method-bias`` names: ``None`` for the shipped one, empty for ``off``."""
+    if option is None:
+        return None
+    if option == "off":
+        return MethodBiasMap(source="off", sha256="", entries={})
+    return load_method_bias(Path(option), axis=profile.axis)
 
 
 @pytest.fixture(scope="session")

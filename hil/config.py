@@ -185,11 +185,11 @@ class ConfigTable:
 
     def tables(self, key: str) -> dict[str, ConfigTable]:
         """The sub-tables of ``key`` by name (``[key.NAME]``); none when absent."""
-        parent = self.table_at(key, required=False)
-        out = {}
-        for name in parent.values:
-            out[name] = parent.table_at(name)
-        return out
+        return self.table_at(key, required=False).tables_here()
+
+    def tables_here(self) -> dict[str, ConfigTable]:
+        """Every key of this table as a sub-table (``[this.NAME]``), by name."""
+        return {name: self.table_at(name) for name in self.values}
 
     def table_list(self, key: str) -> list[ConfigTable]:
         """An array of inline tables (``key = [{...}, {...}]``); empty when absent."""

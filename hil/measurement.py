@@ -5,13 +5,19 @@ A tolerance miss is an outcome, not an exception.
 
 from __future__ import annotations
 
+import hashlib
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass
 from enum import StrEnum
+from pathlib import Path
 
+from hil.config import ConfigTable, builtin_fixture, read_toml
 from hil.gum import format_result
-from hil.identify.estimate import Estimate, combine_linear
+from hil.identify.estimate import Component, Estimate
 from hil.profile import MeasurementSpec
+
+METHOD_BIAS_FILE = "method_bias.toml"
 
 DECISION_RULE = (
     "Simple acceptance with the expanded uncertainty U (k≈2, ~95 %) stated (ILAC-G8:09/2019 "
@@ -66,6 +72,18 @@ class Measurement:
             "lower_limit": self.spec.lower_limit,
             "upper_limit": self.spec.upper_limit,
             "outcome": self.outcome.value,
+            "budget": [
+                {
+                    "component": c.source,
+                    "type": c.kind,
+                    "standard_uncertainty": c.standard_uncertainty,
+                    "unit": c.unit,
+                    "sensitivity": c.sensitivity,
+                    "contribution": c.contribution,
+                    "degrees_of_freedom": c.dof if math.isfinite(c.dof) else None,
+                }
+                for c in e.components()
+            ],
         }
 
 
@@ -83,21 +101,122 @@ def judge(estimate: Estimate, spec: MeasurementSpec) -> Outcome:
     return Outcome.MARGINAL if near_limit or straddles else Outcome.PASS
 
 
-def with_method_accuracy(estimate: Estimate, spec: MeasurementSpec) -> Estimate:
-    """Add the method's validated accuracy (profile ``accuracy_pct``) as a Type B component,
-    rectangular: ``u_B = a·|value|/√3``; Welch–Satterthwaite dof."""
-    if spec.accuracy_rel is None:
-        return estimate
-    u_b = spec.accuracy_rel * abs(estimate.value) / math.sqrt(3)
-    _, u_c, dof = combine_linear(
-        [1.0, 1.0], [estimate.value, 0.0], [estimate.standard_uncertainty, u_b],
-        [estimate.dof, math.inf],
+@dataclass(frozen=True, slots=True, kw_only=True)
+class MethodBias:
+    """A method's error over a simulated population of units (``bench_coverage.py``).
+
+    Attributes
+    ----------
+    name : str
+        The declared measurement.
+    relative : bool
+        ``bias`` and ``scatter`` are fractions of the value (else in its unit).
+    bias : float
+        Mean error ``x − truth`` (relative: over the truth): corrected, not covered.
+    scatter : float
+        Standard deviation of the error from unit to unit beyond what Type A states, with
+        the correction's own uncertainty: a Type B line of the budget.
+    units : int
+        Population size behind the figures.
+    """
+
+    name: str
+    relative: bool
+    bias: float
+    scatter: float
+    units: int
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class MethodBiasMap:
+    """The method corrections a calibration applies, and the file they came from."""
+
+    source: str
+    sha256: str
+    entries: Mapping[str, MethodBias]
+
+
+def load_method_bias(path: Path | None = None, *, axis: str = "") -> MethodBiasMap:
+    """Read a method-bias map (default: the one shipped, ``fixtures/method_bias.toml``).
+
+    Parameters
+    ----------
+    path : Path or None
+        The map's file.
+    axis : str
+        The profile's ``[unit] axis``: the map holds one table of results per axis
+        (``[results.elevation.NAME]``), since a method's error depends on the physics of
+        the axis it measures. An axis the map lacks gets no corrections.
+
+    Returns
+    -------
+    MethodBiasMap
+
+    Raises
+    ------
+    ProfileError
+        A missing, mistyped or unknown key in any table, naming file, table and key.
+    """
+    path = path or builtin_fixture(METHOD_BIAS_FILE)
+    document, payload = read_toml(path)
+    root = ConfigTable.root(document, source=str(path))
+    root.string("population")
+    by_axis = {
+        kind: {name: _method_bias(name, table) for name, table in results.tables_here().items()}
+        for kind, results in root.tables("results").items()
+    }
+    root.done()
+    return MethodBiasMap(source=str(path), sha256=hashlib.sha256(payload).hexdigest(),
+                         entries=by_axis.get(axis, {}))
+
+
+def _method_bias(name: str, table: ConfigTable) -> MethodBias:
+    bias = MethodBias(
+        name=name,
+        relative=table.choice("scale", ("relative", "absolute")) == "relative",
+        bias=table.number("bias"),
+        scatter=table.non_negative("scatter"),
+        units=table.integer("units"),
     )
-    return Estimate(
-        name=estimate.name,
-        value=estimate.value,
-        standard_uncertainty=u_c,
-        unit=estimate.unit,
-        dof=dof,
-        cramer_rao_std=estimate.cramer_rao_std,
-    )
+    table.done()
+    return bias
+
+
+def with_method_terms(
+    estimate: Estimate, spec: MeasurementSpec, bias: MethodBias | None
+) -> Estimate:
+    """Correct the method's known bias and add the budget lines the data cannot show.
+
+    Parameters
+    ----------
+    estimate : Estimate
+        As the protocol's analysis gives it.
+    spec : MeasurementSpec
+        Its declaration; ``allowance_rel`` adds a rectangular line for physics the
+        simulator lacks.
+    bias : MethodBias or None
+        The method's error over the simulated population, when measured.
+
+    Returns
+    -------
+    Estimate
+        Value corrected by the population's mean error; budget with the error's
+        unit-to-unit scatter and the allowance as named Type B lines.
+    """
+    value, added = estimate.value, []
+    if bias is not None:
+        value = value / (1 + bias.bias) if bias.relative else value - bias.bias
+        scatter = bias.scatter * abs(value) if bias.relative else bias.scatter
+        sign = "+" if bias.bias >= 0 else "−"
+        size = f"{100 * abs(bias.bias):.2g} %" if bias.relative else f"{abs(bias.bias):.2g}"
+        added.append(Component(
+            source=f"method: error over {bias.units} simulated units beyond Type A "
+                   f"(mean {sign}{size} corrected)",
+            kind="B", standard_uncertainty=scatter, unit=estimate.unit))
+    if spec.allowance_rel:
+        added.append(Component(
+            source="allowance for physics the simulator lacks (profile allowance_pct, "
+                   "rectangular)",
+            kind="B", standard_uncertainty=spec.allowance_rel * abs(value) / math.sqrt(3),
+            unit=estimate.unit))
+    return estimate.with_components(*added, value=value)

@@ -53,6 +53,12 @@ def pytest_addoption(parser: pytest.Parser) -> None:
         help="station TOML for real drives (interface, node id, EDS, register map)",
     )
     group.addoption("--seed", default=0, type=int, help="simulator seed (sim and emulators)")
+    group.addoption(
+        "--method-bias",
+        default=None,
+        help="method-bias map (TOML) the results are corrected with; 'off' for none "
+        "(default: the one shipped, measured by benchmarks/bench_coverage.py)",
+    )
 
 
 def pytest_configure(config: pytest.Config) -> None:

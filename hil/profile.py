@@ -21,8 +21,10 @@ class MeasurementSpec:
     """A declared measurement: acceptance limits around a nominal value.
 
     ``marginal_fraction``: the part of the distance from the nominal to each limit, next to
-    that limit, in which a value is MARGINAL; ``accuracy_rel`` is what the method claims
-    (tests hold it to it).
+    that limit, in which a value is MARGINAL; ``accuracy_rel`` is the largest error the
+    method claims on validation data (the project's tests hold it to it; not part of the
+    uncertainty); ``allowance_rel`` is a hand-set allowance for physics the simulator lacks,
+    a named rectangular Type B line of the budget when given.
     """
 
     name: str
@@ -32,6 +34,7 @@ class MeasurementSpec:
     upper_limit: float
     marginal_fraction: float = 0.1
     accuracy_rel: float | None = None
+    allowance_rel: float | None = None
     description: str = ""
 
 
@@ -169,6 +172,7 @@ def _measurement(name: str, table: ConfigTable) -> MeasurementSpec:
     if not lower < upper:
         raise table.error("upper", f"lower limit {lower} is not below upper limit {upper}")
     accuracy = table.non_negative("accuracy_pct") if "accuracy_pct" in table else None
+    allowance = table.non_negative("allowance_pct") if "allowance_pct" in table else None
     spec = MeasurementSpec(
         name=name,
         unit=table.string("unit", ""),
@@ -177,6 +181,7 @@ def _measurement(name: str, table: ConfigTable) -> MeasurementSpec:
         upper_limit=upper,
         marginal_fraction=table.non_negative("marginal_pct", 10.0) / 100.0,
         accuracy_rel=None if accuracy is None else accuracy / 100.0,
+        allowance_rel=None if allowance is None else allowance / 100.0,
         description=table.string("description", ""),
     )
     table.done()

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from pathlib import Path
 
@@ -9,7 +10,15 @@ import pytest
 
 from hil.errors import ProfileError
 from hil.identify.estimate import Estimate, coverage_factor
-from hil.measurement import Measurement, Outcome, judge, with_method_accuracy
+from hil.measurement import (
+    Measurement,
+    MethodBias,
+    MethodBiasMap,
+    Outcome,
+    judge,
+    load_method_bias,
+    with_method_terms,
+)
 from hil.profile import MeasurementSpec, builtin_profile_path, load_profile
 
 SPEC = MeasurementSpec(
@@ -63,11 +72,48 @@ def test_coverage_factor_follows_student_t_for_few_degrees_of_freedom() -> None:
     assert coverage_factor(2) == pytest.approx(4.53, abs=0.01)
 
 
-def test_method_accuracy_enters_as_rectangular_type_b() -> None:
+def test_allowance_enters_as_a_named_rectangular_type_b_line() -> None:
     estimate = Estimate(name="x", value=2.0, standard_uncertainty=0.01, unit="N·m", dof=7)
-    combined = with_method_accuracy(estimate, SPEC)
+    spec = dataclasses.replace(SPEC, allowance_rel=0.03)
+    combined = with_method_terms(estimate, spec, None)
     assert combined.standard_uncertainty == pytest.approx(math.hypot(0.01, 0.06 / math.sqrt(3)))
     assert combined.dof > estimate.dof
+    sources = [c.source for c in combined.budget]
+    assert sources[0].startswith("measurement noise")
+    assert "allowance" in sources[1]
+
+
+def test_validated_accuracy_claim_is_not_an_uncertainty() -> None:
+    estimate = Estimate(name="x", value=2.0, standard_uncertainty=0.01, unit="N·m", dof=7)
+    assert SPEC.accuracy_rel
+    assert with_method_terms(estimate, SPEC, None).standard_uncertainty == 0.01
+
+
+@pytest.mark.parametrize(("relative", "expected"), [(True, 2.0 / 1.05), (False, 2.0 - 0.05)])
+def test_known_method_bias_is_corrected_and_its_scatter_budgeted(
+    relative: bool, expected: float
+) -> None:
+    estimate = Estimate(name="x", value=2.0, standard_uncertainty=0.01, unit="N·m", dof=7)
+    bias = MethodBias(name="x", relative=relative, bias=0.05, scatter=0.02, units=200)
+    corrected = with_method_terms(estimate, SPEC, bias)
+    assert corrected.value == pytest.approx(expected)
+    u_method = 0.02 * expected if relative else 0.02
+    assert corrected.standard_uncertainty == pytest.approx(math.hypot(0.01, u_method))
+    assert [c.kind for c in corrected.budget] == ["A", "B"]
+    assert "200 simulated units" in corrected.budget[1].source
+
+
+def test_method_bias_map_refuses_a_misspelt_key(tmp_path: Path) -> None:
+    path = tmp_path / "bias.toml"
+    path.write_text('population = "p"\n[results.azimuth.x]\nscale = "relative"\nbias = 0.1\n'
+                    'scater = 0.01\nunits = 3\n', encoding="utf-8")
+    with pytest.raises(ProfileError, match=r"\[results.azimuth.x\] lacks 'scatter'"):
+        load_method_bias(path, axis="elevation")  # every axis' table is checked
+
+
+def test_shipped_method_bias_map_loads() -> None:
+    shipped = load_method_bias()
+    assert all(e.units > 0 and e.scatter >= 0 for e in shipped.entries.values())
 
 
 def _profile_text() -> str:
@@ -164,16 +210,17 @@ def test_earlier_results_are_looked_up_by_name(tmp_path: Path) -> None:
     from hil.calibration import CalibrationRun
     from hil.profile import load_profile
 
-    run = CalibrationRun(
-        profile=load_profile(), unit_serial="X", out_dir=tmp_path, drive_kind="sim"
-    )
+    bias = MethodBiasMap(source="test", sha256="", entries={"inertia_kg_m2": MethodBias(
+        name="inertia_kg_m2", relative=True, bias=0.01, scatter=0.005, units=10)})
+    run = CalibrationRun(profile=load_profile(), unit_serial="X", out_dir=tmp_path,
+                         drive_kind="sim", method_bias=bias)
     assert run.result("inertia_kg_m2") is None
     inertia = Estimate(name="inertia_kg_m2", value=0.0036, standard_uncertainty=1e-5,
                        unit="kg·m²")
     run.record("inertia_friction", inertia)
     found = run.result("inertia_kg_m2")
     assert found is not None
-    assert found.value == 0.0036
-    assert found.standard_uncertainty > 1e-5  # as recorded: the method accuracy added
+    assert found.value == pytest.approx(0.0036 / 1.01)  # as recorded: bias corrected
+    assert found.standard_uncertainty > 1e-5  # and the method's scatter added
     assert run.results("inertia_kg_m2", "coulomb_nm") is None
     assert run.results("inertia_kg_m2") == (found,)

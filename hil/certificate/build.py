@@ -86,6 +86,7 @@ def build_certificate(
                 }
                 for name, record in run.protocols.items()
             },
+            "method_bias": {"file": run.method_bias.source, "sha256": run.method_bias.sha256},
             "details": run.details,
         },
         "machine_time": {

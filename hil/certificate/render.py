@@ -36,6 +36,7 @@ def render_text(cert: dict[str, Any]) -> str:
             f"{r['parameter']:<32}{value:>13}{expanded:>11} ({r['coverage_factor']:.2f}) "
             f"{r['unit']:<11}{limits:<25}{r['outcome']}"
         )
+    lines += _budgets(cert["results"])
     lines += ["", "Protocols:"]
     for name, p in cert["method"]["protocols"].items():
         lines.append(f"  {name:<24}{p['outcome']:<14}motion {p['motion_time_s']:.1f} s")
@@ -53,3 +54,21 @@ def render_text(cert: dict[str, Any]) -> str:
         "",
     ]
     return "\n".join(lines)
+
+
+def _budgets(results: list[dict[str, Any]]) -> list[str]:
+    """Per result its uncertainty budget (GUM 8): each input's u(xᵢ), sensitivity cᵢ,
+    contribution |cᵢ|·u(xᵢ) in the result's unit and its share of u²."""
+    lines = ["", "Uncertainty budgets (standard uncertainties, k = 1; share of u²):"]
+    for r in results:
+        u = r["standard_uncertainty"]
+        lines.append(f"  {r['parameter']} (u = {u:.2g} {r['unit']}, "
+                     f"U = {r['expanded_uncertainty']:.2g}, k = {r['coverage_factor']:.2f})")
+        for line in r.get("budget", []):
+            share = (line["contribution"] / u) ** 2 if u else 0.0
+            lines.append(
+                f"    {line['type']}  u(x) = {line['standard_uncertainty']:<9.2g}"
+                f"{line['unit']:<11} c = {line['sensitivity']:<8.3g}"
+                f"→ {line['contribution']:<9.2g}{100 * share:>4.0f} %  {line['component']}"
+            )
+    return lines

@@ -1,9 +1,13 @@
-"""An identified value with its standard uncertainty (GUM), and linear propagation helpers."""
+"""An identified value with its standard uncertainty (GUM), its budget, and linear
+propagation helpers."""
 
 from __future__ import annotations
 
+import dataclasses
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import Literal
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -32,6 +36,40 @@ def coverage_factor(dof: float) -> float:
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
+class Component:
+    """One line of an uncertainty budget (GUM 8): an input's standard uncertainty and how
+    strongly the result depends on it.
+
+    Attributes
+    ----------
+    source : str
+        What the input is (``"torque noise: scatter of the per-period components"``).
+    kind : {"A", "B"}
+        Type A (evaluated from this measurement's data) or Type B (other evidence).
+    standard_uncertainty : float
+        ``u(xᵢ)`` of the input, in ``unit``.
+    unit : str
+        The input's unit.
+    sensitivity : float
+        ``cᵢ = ∂y/∂xᵢ`` (result units per input unit).
+    dof : float
+        Degrees of freedom of ``u(xᵢ)`` (``inf`` for a Type B component).
+    """
+
+    source: str
+    kind: Literal["A", "B"]
+    standard_uncertainty: float
+    unit: str
+    sensitivity: float = 1.0
+    dof: float = math.inf
+
+    @property
+    def contribution(self) -> float:
+        """``|cᵢ|·u(xᵢ)``: this input's share of the result's standard uncertainty."""
+        return abs(self.sensitivity) * self.standard_uncertainty
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
 class Estimate:
     """An identified value with its standard uncertainty (GUM): ``value ± k·u`` in ``unit``.
 
@@ -47,6 +85,9 @@ class Estimate:
     cramer_rao_std : float or None
         The bound on the standard deviation of any unbiased estimator given the same data,
         when known.
+    budget : tuple of Component
+        The named inputs behind ``standard_uncertainty`` (empty: one Type A component,
+        the data's scatter as the estimator evaluated it).
     """
 
     name: str
@@ -55,6 +96,7 @@ class Estimate:
     unit: str
     dof: float = math.inf
     cramer_rao_std: float | None = None
+    budget: tuple[Component, ...] = ()
 
     @property
     def coverage_factor(self) -> float:
@@ -67,6 +109,32 @@ class Estimate:
     @property
     def relative_uncertainty(self) -> float:
         return self.standard_uncertainty / abs(self.value) if self.value else math.inf
+
+    def components(self) -> tuple[Component, ...]:
+        """The budget; an estimate without one is a single Type A component."""
+        if self.budget:
+            return self.budget
+        return (Component(source=TYPE_A_SOURCE, kind="A", unit=self.unit,
+                          standard_uncertainty=self.standard_uncertainty, dof=self.dof),)
+
+    def with_components(self, *added: Component, value: float | None = None) -> Estimate:
+        """This estimate with more budget lines (and, for a correction, a new value).
+
+        Parameters
+        ----------
+        *added : Component
+            Inputs to add; zero contributions are kept off the budget.
+        value : float or None
+            The corrected value, when the inputs include a correction.
+
+        Returns
+        -------
+        Estimate
+            ``u`` the root sum of squares of every contribution, Welch–Satterthwaite dof.
+        """
+        kept = tuple(c for c in added if c.contribution > 0)
+        return with_budget(self, (*self.components(), *kept),
+                           value=self.value if value is None else value)
 
 
 def combine_linear(
@@ -98,3 +166,32 @@ def combine_linear(
     denominator = float(np.sum(contributions**2 / nu))
     dof = variance**2 / denominator if denominator > 0 else math.inf
     return float(w @ x), math.sqrt(variance), dof
+
+
+TYPE_A_SOURCE = "measurement noise: scatter of the data (Type A)"
+
+
+def with_budget(estimate: Estimate, budget: Sequence[Component], *, value: float) -> Estimate:
+    """``estimate`` with ``value`` and the uncertainty the budget's lines combine to.
+
+    Parameters
+    ----------
+    estimate : Estimate
+        Its name, unit and Cramér–Rao bound are kept.
+    budget : sequence of Component
+        Independent inputs.
+    value : float
+        The result's value.
+
+    Returns
+    -------
+    Estimate
+        ``u = √Σ(cᵢuᵢ)²``, dof by Welch–Satterthwaite (:func:`combine_linear`).
+    """
+    lines = tuple(budget)
+    _, u, dof = combine_linear(
+        [c.sensitivity for c in lines], [0.0] * len(lines),
+        [c.standard_uncertainty for c in lines], [c.dof for c in lines],
+    )
+    return dataclasses.replace(estimate, value=value, standard_uncertainty=u, dof=dof,
+                               budget=lines)

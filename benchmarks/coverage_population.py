@@ -1,0 +1,301 @@
+"""A population of simulated units, calibrated, against the truth each result claims.
+
+Shared by ``bench_coverage.py`` (the benchmark) and ``tests/test_coverage.py`` (its small
+version). A unit is one of the demo profiles with every ``[plant]`` parameter drawn across
+its measurement's tolerance range (parameters without a declared measurement: ±20 %),
+every effect on, and its own noise seed. It is calibrated through the command line, as a
+test engineer would (``gimbal-hil calibrate --drive sim``), and each certificate result
+is compared with the truth of the drawn plant. No identified value is ever read as truth.
+
+Truth map (``truths``): what each result claims to measure, from the plant parameters.
+The drive converts current with the nominal K_t, so a torque the shaft feels as ``T`` is
+reported as ``T / g`` with ``g = 1 + torque_constant_error_rel``; results identified from
+the reported torque are in those units.
+
+=================================  ==========================================================
+result                             truth
+=================================  ==========================================================
+current_loop_time_constant_ms      ``1000·current_loop_time_constant_s``
+gravity_mge_nm                     ``gravity_mge_nm / g``
+gravity_phase_rad                  ``gravity_phase_rad``
+eccentricity_mm                    ``1000·gravity_mge_nm / (g·mass_kg·9.80665)`` (reported)
+cable_stiffness_nm_rad             ``cable_stiffness_nm_rad / g``
+cable_hysteresis_nm                ``cable_hysteresis_nm / g``
+inertia_kg_m2                      ``(J_motor + J_load + J_elevation·cos²(el)) / g``
+viscous_nm_s_rad                   ``viscous_nm_s_rad / g``
+coulomb_nm                         ``coulomb_nm / g``
+static_friction_nm                 ``(static_friction_nm + cable_hysteresis_nm) / g``
+stribeck_velocity_rad_s            ``stribeck_velocity_rad_s``
+cogging_peak_nm                    largest cogging amplitude ``/ g``
+kt_ripple_peak_pct                 ``100·`` largest K_t ripple amplitude (a ratio: no ``g``)
+torque_constant_nm_a               ``torque_constant_nm_a·g`` (the shaft sensor sees true K_t)
+reported_torque_gain_error_pct     ``100·(g − 1)``
+torque_constant_vs_datasheet_pct   ``100·(torque_constant_nm_a·g / (9.5493/kv) − 1)``
+resonance_frequency_hz             two-mass resonance of the drawn shaft (``crb_frf``)
+antiresonance_frequency_hz         two-mass anti-resonance
+resonance_damping_ratio            two-mass resonance damping
+azimuth_inertia_level_kg_m2        ``J_motor + J_load + J_elevation`` (shaft-torque units)
+azimuth_inertia_zenith_kg_m2       ``J_motor + J_load``
+azimuth_inertia_ratio              level / zenith
+=================================  ==========================================================
+
+Results with no truth of the plant's (``inertia_amplitude_spread_pct``,
+``torque_linearity_pct``, ``resonance_to_bandwidth_ratio``) are checked by repeatability:
+the same unit calibrated with two noise seeds, ``(x₁ − x₂)/√(u₁² + u₂²)``.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import subprocess
+import sys
+import tomllib
+from collections.abc import Iterable, Mapping, Sequence
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import tomli_w
+
+from hil.profile import builtin_profile_path, load_profile
+from plant_sim.params import PlantParams
+
+STANDARD_GRAVITY_M_S2 = 9.80665
+PROFILES = ("demo_gimbal_elevation", "demo_gimbal_azimuth")
+NUISANCE_SPREAD = 0.2  # ± relative spread of plant parameters with no declared measurement
+
+# plant parameter → the measurement whose tolerance sets its spread
+MEASURED_BY = {
+    "inertia_kg_m2": "inertia_kg_m2",
+    "load_inertia_kg_m2": "inertia_kg_m2",
+    "viscous_nm_s_rad": "viscous_nm_s_rad",
+    "coulomb_nm": "coulomb_nm",
+    "static_friction_nm": "static_friction_nm",
+    "stribeck_velocity_rad_s": "stribeck_velocity_rad_s",
+    "gravity_mge_nm": "gravity_mge_nm",
+    "cable_stiffness_nm_rad": "cable_stiffness_nm_rad",
+    "current_loop_time_constant_s": "current_loop_time_constant_ms",
+    "shaft_stiffness_nm_rad": "antiresonance_frequency_hz",
+}
+# not varied: they define the station or the experiment, not the unit
+FIXED = {"torque_limit_nm", "encoder_counts_per_rev", "elevation_rad", "substeps",
+         "exact_torque_hold", "locked_rotor", "position_kp_1_s", "cable_zero_rad",
+         "coulomb_neg_nm", "viscous_neg_nm_s_rad", "torque_offset_nm"}
+NO_TRUTH = ("inertia_amplitude_spread_pct", "torque_linearity_pct",
+            "resonance_to_bandwidth_ratio")
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class Unit:
+    """One drawn unit: its profile file, seed and serial."""
+
+    profile_path: Path
+    serial: str
+    seed: int
+
+
+def _relative_spread(profile_raw: Mapping[str, Any], measurement: str) -> float:
+    spec = profile_raw.get("measurements", {}).get(measurement, {})
+    return 0.9 * float(spec.get("tolerance_pct", 100 * NUISANCE_SPREAD)) / 100
+
+
+def draw_plant(profile_raw: Mapping[str, Any], rng: np.random.Generator) -> dict[str, Any]:
+    """The ``[plant]`` table of a new unit: every scalar drawn across its range."""
+    plant = dict(profile_raw["plant"])
+    drawn: dict[str, Any] = {}
+    for key, value in plant.items():
+        if key in FIXED or isinstance(value, bool):
+            drawn[key] = value
+        elif key in ("cogging", "kt_ripple"):
+            drawn[key] = [
+                {**h, "amplitude": h["amplitude"] * rng.uniform(0.4, 1.8),
+                 "phase_rad": rng.uniform(-math.pi, math.pi)}
+                for h in value
+            ]
+        elif key == "torque_constant_error_rel":
+            drawn[key] = rng.uniform(-0.04, 0.04)
+        elif key == "gravity_phase_rad":
+            drawn[key] = rng.uniform(-0.08, 0.08)
+        elif key == "cable_hysteresis_nm":
+            drawn[key] = value * rng.uniform(0.4, 1.8)
+        elif isinstance(value, int | float):
+            spread = _relative_spread(profile_raw, MEASURED_BY.get(key, ""))
+            drawn[key] = value * rng.uniform(1 - spread, 1 + spread)
+        else:
+            drawn[key] = value
+    if "gravity_mge_nm" in drawn and "gravity_phase_rad" not in drawn:
+        drawn["gravity_phase_rad"] = rng.uniform(-0.08, 0.08)
+    return drawn
+
+
+def write_population(
+    directory: Path, *, units_per_profile: int, seed: int, profiles: Sequence[str] = PROFILES
+) -> list[Unit]:
+    """Draw ``units_per_profile`` units of each profile; one TOML file each."""
+    rng = np.random.default_rng(seed)
+    directory.mkdir(parents=True, exist_ok=True)
+    units = []
+    for name in profiles:
+        raw = tomllib.loads(builtin_profile_path(name).read_text(encoding="utf-8"))
+        for i in range(units_per_profile):
+            serial = f"{name.removeprefix('demo_gimbal_')[:3].upper()}-{i:04d}"
+            path = directory / f"{serial}.toml"
+            path.write_text(tomli_w.dumps({**raw, "plant": draw_plant(raw, rng)}),
+                            encoding="utf-8")
+            units.append(Unit(profile_path=path, serial=serial,
+                              seed=int(rng.integers(1, 2**31 - 1))))
+    return units
+
+
+def calibrate(unit: Unit, out_dir: Path, *, seed: int | None = None) -> dict[str, dict[str, Any]]:
+    """Calibrate one unit through ``gimbal-hil calibrate``; its results by parameter."""
+    seed = unit.seed if seed is None else seed
+    serial = f"{unit.serial}-s{seed}"
+    subprocess.run(
+        [sys.executable, "-m", "hil.cli", "calibrate", "--drive", "sim",
+         "--profile", str(unit.profile_path), "--unit-serial", serial,
+         "--seed", str(seed), "--out", str(out_dir)],
+        capture_output=True, check=False, env={**os.environ, "PYTHONHASHSEED": "0"},
+    )
+    path = out_dir / serial / "certificate.json"
+    if not path.is_file():
+        return {}
+    certificate = json.loads(path.read_text(encoding="utf-8"))
+    return {r["parameter"]: r for r in certificate["results"]}
+
+
+def truths(unit: Unit) -> dict[str, float]:
+    """What each result claims to measure, for the drawn plant (module docstring's map)."""
+    profile = load_profile(unit.profile_path)
+    plant = profile.plant
+    assert plant is not None
+    g = 1.0 + plant.torque_constant_error_rel
+    truth: dict[str, float] = {
+        "current_loop_time_constant_ms": 1000 * plant.current_loop_time_constant_s,
+        "gravity_mge_nm": plant.gravity_mge_nm / g,
+        "gravity_phase_rad": plant.gravity_phase_rad,
+        "cable_stiffness_nm_rad": plant.cable_stiffness_nm_rad / g,
+        "cable_hysteresis_nm": plant.cable_hysteresis_nm / g,
+        "inertia_kg_m2": _total_inertia(plant, plant.elevation_rad) / g,
+        "viscous_nm_s_rad": plant.viscous_nm_s_rad / g,
+        "coulomb_nm": plant.coulomb_nm / g,
+        "static_friction_nm": (plant.static_friction_nm + plant.cable_hysteresis_nm) / g,
+        "stribeck_velocity_rad_s": plant.stribeck_velocity_rad_s,
+        "cogging_peak_nm": max((h.amplitude for h in plant.cogging), default=0.0) / g,
+        "kt_ripple_peak_pct": 100 * max((h.amplitude for h in plant.kt_ripple), default=0.0),
+        "torque_constant_nm_a": plant.torque_constant_nm_a * g,
+        "reported_torque_gain_error_pct": 100 * (g - 1),
+    }
+    mass_kg = profile.unit.get("mass_kg")
+    if isinstance(mass_kg, int | float):
+        weight_n = mass_kg * STANDARD_GRAVITY_M_S2
+        truth["eccentricity_mm"] = 1000 * truth["gravity_mge_nm"] / weight_n
+    kv = profile.unit.get("kv_rpm_per_v")
+    if isinstance(kv, int | float):
+        datasheet = 60 / (2 * math.pi) / kv
+        truth["torque_constant_vs_datasheet_pct"] = 100 * (plant.torque_constant_nm_a * g
+                                                           / datasheet - 1)
+    if plant.load_inertia_kg_m2 > 0:
+        sys.path.insert(0, str(Path(__file__).resolve().parent))
+        from crb_frf import two_mass_truth
+
+        model = two_mass_truth(plant)
+        truth["resonance_frequency_hz"] = model.resonance_hz
+        truth["antiresonance_frequency_hz"] = model.antiresonance_hz
+        truth["resonance_damping_ratio"] = model.resonance_damping
+    if plant.inertia_elevation_kg_m2 > 0:
+        level, zenith = _total_inertia(plant, 0.0), _total_inertia(plant, math.pi / 2)
+        truth["azimuth_inertia_level_kg_m2"] = level
+        truth["azimuth_inertia_zenith_kg_m2"] = zenith
+        truth["azimuth_inertia_ratio"] = level / zenith
+    return {k: v for k, v in truth.items() if k in profile.measurements}
+
+
+def _total_inertia(plant: PlantParams, elevation_rad: float) -> float:
+    return (plant.inertia_kg_m2 + plant.load_inertia_kg_m2
+            + plant.inertia_elevation_kg_m2 * math.cos(elevation_rad) ** 2)
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class Row:
+    """One result of one calibrated unit against its truth."""
+
+    unit: str
+    parameter: str
+    value: float
+    truth: float
+    standard_uncertainty: float
+    expanded_uncertainty: float
+
+    @property
+    def normalised_error(self) -> float:
+        return (self.value - self.truth) / self.standard_uncertainty
+
+    @property
+    def covered(self) -> bool:
+        return abs(self.value - self.truth) <= self.expanded_uncertainty
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class Summary:
+    """Per result: how the stated uncertainty describes the errors over the population."""
+
+    parameter: str
+    n: int
+    bias_rel: float  # mean (x − truth)/|truth|
+    rms_normalised: float
+    coverage: float
+    median_u_rel: float
+
+
+def run_population(units: Sequence[Unit], out_dir: Path, *, workers: int = 2,
+                   seed_offset: int = 0) -> list[Row]:
+    """Calibrate every unit (``workers`` at a time); one row per result with a truth."""
+
+    def one(unit: Unit) -> list[Row]:
+        results = calibrate(unit, out_dir, seed=unit.seed + seed_offset)
+        truth = truths(unit)
+        return [
+            Row(unit=unit.serial, parameter=name, value=float(r["value"]),
+                truth=truth[name], standard_uncertainty=float(r["standard_uncertainty"]),
+                expanded_uncertainty=float(r["expanded_uncertainty"]))
+            for name, r in results.items() if name in truth and r["standard_uncertainty"]
+        ]
+
+    with ThreadPoolExecutor(max_workers=workers) as pool:
+        return [row for rows in pool.map(one, units) for row in rows]
+
+
+def summarise(rows: Iterable[Row]) -> list[Summary]:
+    """Bias, RMS normalised error and coverage per result."""
+    by_parameter: dict[str, list[Row]] = {}
+    for row in rows:
+        by_parameter.setdefault(row.parameter, []).append(row)
+    summaries = []
+    for name, group in by_parameter.items():
+        z = np.array([r.normalised_error for r in group])
+        scale = np.array([abs(r.truth) or r.standard_uncertainty for r in group])
+        rel = np.array([(r.value - r.truth) for r in group]) / scale
+        summaries.append(Summary(
+            parameter=name, n=len(group), bias_rel=float(np.mean(rel)),
+            rms_normalised=float(np.sqrt(np.mean(z**2))),
+            coverage=float(np.mean([r.covered for r in group])),
+            median_u_rel=float(np.median([r.standard_uncertainty for r in group] / scale)),
+        ))
+    return summaries
+
+
+def repeatability(first: Mapping[str, Mapping[str, Any]],
+                  second: Mapping[str, Mapping[str, Any]]) -> dict[str, float]:
+    """``(x₁ − x₂)/√(u₁² + u₂²)`` per result of the same unit under two noise seeds."""
+    return {
+        name: (float(a["value"]) - float(second[name]["value"]))
+        / math.hypot(float(a["standard_uncertainty"]),
+                     float(second[name]["standard_uncertainty"]))
+        for name, a in first.items()
+        if name in second and a["standard_uncertainty"]
+    }
