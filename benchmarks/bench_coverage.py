@@ -20,11 +20,13 @@ from dataclasses import asdict
 from pathlib import Path
 
 import numpy as np
+import tomli_w
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from coverage_population import (
     NO_TRUTH,
+    bias_map,
     calibrate,
     repeatability,
     run_population,
@@ -32,6 +34,12 @@ from coverage_population import (
     write_population,
 )
 
+BIAS_MAP_HEADER = """\
+# Each method's error over a simulated population of units, per axis, written by
+# benchmarks/bench_coverage.py --write-bias-map (see benchmarks/RESULTS.md). A calibration
+# corrects the mean error (bias) and states the unit-to-unit scatter beyond Type A as a
+# named Type B line of its budget. `--method-bias off` calibrates without it.
+"""
 GOAL_COVERAGE = (0.93, 0.98)
 GOAL_RMS = (0.7, 1.3)
 
@@ -43,27 +51,41 @@ def main() -> int:
     parser.add_argument("--workers", type=int, default=2)
     parser.add_argument("--seed", type=int, default=2026)
     parser.add_argument("--out", type=Path, default=Path("coverage-run"))
+    parser.add_argument("--method-bias", default=None,
+                        help="map the calibrations use ('off': none; default: shipped)")
+    parser.add_argument("--write-bias-map", type=Path, default=None,
+                        help="write the map these results show (run with --method-bias off)")
     args = parser.parse_args()
 
     started = time.perf_counter()
     units = write_population(args.out / "units", units_per_profile=args.units, seed=args.seed)
-    rows = run_population(units, args.out / "certificates", workers=args.workers)
+    rows = run_population(units, args.out / "certificates", workers=args.workers,
+                          method_bias=args.method_bias)
     summaries = summarise(rows)
     print(f"{len(units)} units, {len(rows)} results, {time.perf_counter() - started:.0f} s\n")
-    print("| result | n | bias % | RMS (x−truth)/u | coverage ±U | median u/truth % | goal |")
-    print("|---|---|---|---|---|---|---|")
-    for s in sorted(summaries, key=lambda s: s.parameter):
+    if args.write_bias_map:
+        population = (f"bench_coverage.py --units {args.units} --seed {args.seed} "
+                      f"--method-bias {args.method_bias}: {len(units)} units")
+        args.write_bias_map.write_text(
+            BIAS_MAP_HEADER + tomli_w.dumps(bias_map(rows, population=population)),
+            encoding="utf-8")
+    print("| axis | result | n | bias % | RMS (x−truth)/u | coverage ±U | median u/truth % "
+          "| goal |")
+    print("|---|---|---|---|---|---|---|---|")
+    for s in summaries:
         ok = (GOAL_COVERAGE[0] <= s.coverage <= GOAL_COVERAGE[1]
               and GOAL_RMS[0] <= s.rms_normalised <= GOAL_RMS[1])
-        print(f"| {s.parameter} | {s.n} | {100 * s.bias_rel:+.2f} | {s.rms_normalised:.2f} | "
+        print(f"| {s.axis} | {s.parameter} | {s.n} | {100 * s.bias_rel:+.2f} | "
+              f"{s.rms_normalised:.2f} | "
               f"{100 * s.coverage:.1f} % | {100 * s.median_u_rel:.2f} | "
               f"{'met' if ok else 'MISSED'} |")
 
     pairs = [u for u in units if int(u.serial.split("-")[1]) < args.pairs]
     z: dict[str, list[float]] = {}
     for unit in pairs:
-        first = calibrate(unit, args.out / "certificates")
-        second = calibrate(unit, args.out / "pairs", seed=unit.seed + 1)
+        first = calibrate(unit, args.out / "certificates", method_bias=args.method_bias)
+        second = calibrate(unit, args.out / "pairs", seed=unit.seed + 1,
+                           method_bias=args.method_bias)
         for name, value in repeatability(first, second).items():
             z.setdefault(name, []).append(value)
     print("\n| result (repeatability, two seeds) | pairs | RMS (x₁−x₂)/√(u₁²+u₂²) |")

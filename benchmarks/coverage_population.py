@@ -96,6 +96,7 @@ class Unit:
     profile_path: Path
     serial: str
     seed: int
+    axis: str
 
 
 def _relative_spread(profile_raw: Mapping[str, Any], measurement: str) -> float:
@@ -146,19 +147,22 @@ def write_population(
             path = directory / f"{serial}.toml"
             path.write_text(tomli_w.dumps({**raw, "plant": draw_plant(raw, rng)}),
                             encoding="utf-8")
-            units.append(Unit(profile_path=path, serial=serial,
+            units.append(Unit(profile_path=path, serial=serial, axis=raw["unit"]["axis"],
                               seed=int(rng.integers(1, 2**31 - 1))))
     return units
 
 
-def calibrate(unit: Unit, out_dir: Path, *, seed: int | None = None) -> dict[str, dict[str, Any]]:
-    """Calibrate one unit through ``gimbal-hil calibrate``; its results by parameter."""
+def calibrate(unit: Unit, out_dir: Path, *, seed: int | None = None,
+              method_bias: str | None = None) -> dict[str, dict[str, Any]]:
+    """Calibrate one unit through ``gimbal-hil calibrate``; its results by parameter
+    (``method_bias``: a map file or ``off``; default the shipped one)."""
     seed = unit.seed if seed is None else seed
     serial = f"{unit.serial}-s{seed}"
+    extra = [] if method_bias is None else ["--", "--method-bias", method_bias]
     subprocess.run(
         [sys.executable, "-m", "hil.cli", "calibrate", "--drive", "sim",
          "--profile", str(unit.profile_path), "--unit-serial", serial,
-         "--seed", str(seed), "--out", str(out_dir)],
+         "--seed", str(seed), "--out", str(out_dir), *extra],
         capture_output=True, check=False, env={**os.environ, "PYTHONHASHSEED": "0"},
     )
     path = out_dir / serial / "certificate.json"
@@ -225,6 +229,7 @@ class Row:
     """One result of one calibrated unit against its truth."""
 
     unit: str
+    axis: str
     parameter: str
     value: float
     truth: float
@@ -244,6 +249,7 @@ class Row:
 class Summary:
     """Per result: how the stated uncertainty describes the errors over the population."""
 
+    axis: str
     parameter: str
     n: int
     bias_rel: float  # mean (x − truth)/|truth|
@@ -253,14 +259,14 @@ class Summary:
 
 
 def run_population(units: Sequence[Unit], out_dir: Path, *, workers: int = 2,
-                   seed_offset: int = 0) -> list[Row]:
+                   method_bias: str | None = None) -> list[Row]:
     """Calibrate every unit (``workers`` at a time); one row per result with a truth."""
 
     def one(unit: Unit) -> list[Row]:
-        results = calibrate(unit, out_dir, seed=unit.seed + seed_offset)
+        results = calibrate(unit, out_dir, method_bias=method_bias)
         truth = truths(unit)
         return [
-            Row(unit=unit.serial, parameter=name, value=float(r["value"]),
+            Row(unit=unit.serial, axis=unit.axis, parameter=name, value=float(r["value"]),
                 truth=truth[name], standard_uncertainty=float(r["standard_uncertainty"]),
                 expanded_uncertainty=float(r["expanded_uncertainty"]))
             for name, r in results.items() if name in truth and r["standard_uncertainty"]
@@ -271,17 +277,17 @@ def run_population(units: Sequence[Unit], out_dir: Path, *, workers: int = 2,
 
 
 def summarise(rows: Iterable[Row]) -> list[Summary]:
-    """Bias, RMS normalised error and coverage per result."""
-    by_parameter: dict[str, list[Row]] = {}
+    """Bias, RMS normalised error and coverage per axis and result."""
+    groups: dict[tuple[str, str], list[Row]] = {}
     for row in rows:
-        by_parameter.setdefault(row.parameter, []).append(row)
+        groups.setdefault((row.axis, row.parameter), []).append(row)
     summaries = []
-    for name, group in by_parameter.items():
+    for (axis, name), group in sorted(groups.items()):
         z = np.array([r.normalised_error for r in group])
         scale = np.array([abs(r.truth) or r.standard_uncertainty for r in group])
         rel = np.array([(r.value - r.truth) for r in group]) / scale
         summaries.append(Summary(
-            parameter=name, n=len(group), bias_rel=float(np.mean(rel)),
+            axis=axis, parameter=name, n=len(group), bias_rel=float(np.mean(rel)),
             rms_normalised=float(np.sqrt(np.mean(z**2))),
             coverage=float(np.mean([r.covered for r in group])),
             median_u_rel=float(np.median([r.standard_uncertainty for r in group] / scale)),
@@ -299,3 +305,33 @@ def repeatability(first: Mapping[str, Mapping[str, Any]],
         for name, a in first.items()
         if name in second and a["standard_uncertainty"]
     }
+
+
+def bias_map(rows: Iterable[Row], *, population: str) -> dict[str, Any]:
+    """The method-bias map (``fixtures/method_bias.toml``) the rows show, per axis.
+
+    Per result: the mean error (relative to the truth when every truth is positive, else
+    absolute) and the standard deviation of the error beyond what the stated (Type A)
+    uncertainties cover, ``√max(var(e) − mean(u²), 0)``, with the mean's own standard
+    error ``sd(e)/√n`` added in quadrature. Computed on results calibrated with
+    ``--method-bias off``.
+    """
+    groups: dict[tuple[str, str], list[Row]] = {}
+    for row in rows:
+        groups.setdefault((row.axis, row.parameter), []).append(row)
+    results: dict[str, dict[str, Any]] = {}
+    for (axis, name), group in sorted(groups.items()):
+        truth = np.array([r.truth for r in group])
+        relative = bool(np.all(truth > 0))
+        scale = truth if relative else np.ones_like(truth)
+        errors = (np.array([r.value for r in group]) - truth) / scale
+        u = np.array([r.standard_uncertainty for r in group]) / scale
+        excess = max(float(np.var(errors, ddof=1) - np.mean(u**2)), 0.0)
+        scatter = math.sqrt(excess + float(np.var(errors, ddof=1)) / len(group))
+        results.setdefault(axis, {})[name] = {
+            "scale": "relative" if relative else "absolute",
+            "bias": float(np.mean(errors)),
+            "scatter": scatter,
+            "units": len(group),
+        }
+    return {"population": population, "results": results}

@@ -9,10 +9,7 @@ import pytest
 
 from hil.calibration import CalibrationRun
 from hil.drives.base import Drive
-from hil.identify.inertia_friction import (
-    InertiaFrictionResult,
-    inertia_amplitude_spread,
-)
+from hil.identify.estimate import Estimate
 from hil.profile import UnitProfile
 from hil.suite.inertia_friction import (
     NAME,
@@ -29,13 +26,13 @@ pytestmark = pytest.mark.protocol(NAME)
 @pytest.fixture(scope="module")
 def result(
     drive: Drive, calibration: CalibrationRun, profile: UnitProfile
-) -> InertiaFrictionResult:
+) -> dict[str, Estimate]:
     spec = Spec.from_profile(profile, drive.info)
     if spec.centre_rad is not None:
         move = move_to_centre(spec, spec.centre_rad, position_rad=drive.status().position_rad)
         calibration.run(drive, move, protocol=NAME)
     recordings = [calibration.run(drive, e, protocol=NAME) for e in excitation(spec)]
-    analysed, corrections = analyse_in_calibration(recordings, spec, calibration)
+    analysed, estimates, corrections = analyse_in_calibration(recordings, spec, calibration)
     calibration.details[NAME] = {
         "method": spec.method,
         **corrections,
@@ -51,14 +48,12 @@ def result(
             for r in analysed.runs
         ],
     }
-    return analysed
+    return estimates
 
 
 @pytest.mark.parametrize("parameter", MEASUREMENTS)
 def test_inertia_friction(
-    parameter: str, result: InertiaFrictionResult, calibration: CalibrationRun
+    parameter: str, result: dict[str, Estimate], calibration: CalibrationRun
 ) -> None:
-    estimates = {e.name: e for e in (result.inertia, result.viscous, result.coulomb)}
-    estimates["inertia_amplitude_spread_pct"] = inertia_amplitude_spread(result)
-    measurement = calibration.record(NAME, estimates[parameter])
+    measurement = calibration.record(NAME, result[parameter])
     assert measurement.conforms, measurement.verdict()

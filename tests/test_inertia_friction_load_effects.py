@@ -100,7 +100,11 @@ def test_cable_hysteresis_biases_b_and_removing_the_measured_loop_restores_it() 
     assert clean.viscous.value == pytest.approx(plant.viscous_nm_s_rad, rel=0.05)
     assert clean.inertia.value == pytest.approx(plant.inertia_kg_m2, rel=0.01)
     assert clean.coulomb.value == pytest.approx(plant.coulomb_nm, rel=0.02)
-    widened = protocol.with_cable_loop_uncertainty(
-        clean, recordings, spec, current_loop_lag_s=0.0, loop=loop
-    )
-    assert widened.viscous.standard_uncertainty > clean.viscous.standard_uncertainty
+    widened = protocol.with_earlier_inputs(recordings, spec, lag=None, loop=loop)
+    viscous = widened["viscous_nm_s_rad"]
+    assert viscous.value == clean.viscous.value
+    assert viscous.standard_uncertainty > clean.viscous.standard_uncertainty
+    (line,) = (c for c in viscous.budget if c.source.startswith("cable hysteresis loop"))
+    assert line.standard_uncertainty == loop.half_width_u_nm
+    # B falls as more of the loop is taken out: the sensitivity's sign is the physics'
+    assert line.sensitivity < 0

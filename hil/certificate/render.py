@@ -68,7 +68,7 @@ def _budgets(results: list[dict[str, Any]]) -> list[str]:
             share = (line["contribution"] / u) ** 2 if u else 0.0
             lines.append(
                 f"    {line['type']}  u(x) = {line['standard_uncertainty']:<9.2g}"
-                f"{line['unit']:<11} c = {line['sensitivity']:<8.3g}"
+                f"{line['unit']:<11} c = {line['sensitivity']:<9.3g} "
                 f"→ {line['contribution']:<9.2g}{100 * share:>4.0f} %  {line['component']}"
             )
     return lines

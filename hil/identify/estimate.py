@@ -68,6 +68,15 @@ class Component:
         """``|cᵢ|·u(xᵢ)``: this input's share of the result's standard uncertainty."""
         return abs(self.sensitivity) * self.standard_uncertainty
 
+    @classmethod
+    def from_change(cls, *, source: str, standard_uncertainty: float, unit: str,
+                    change: float) -> Component:
+        """A Type B input whose sensitivity is found numerically (GUM 5.1.3): the result
+        re-evaluated with the input at ``x + u(x)`` moved by ``change``."""
+        sensitivity = change / standard_uncertainty if standard_uncertainty > 0 else 0.0
+        return cls(source=source, kind="B", standard_uncertainty=standard_uncertainty,
+                   unit=unit, sensitivity=sensitivity)
+
 
 @dataclass(frozen=True, slots=True, kw_only=True)
 class Estimate:

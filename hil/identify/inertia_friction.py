@@ -36,7 +36,7 @@ from typing import Literal
 import numpy as np
 
 from hil.errors import IdentificationError
-from hil.identify.estimate import Estimate, combine_linear
+from hil.identify.estimate import Component, Estimate
 from hil.identify.harmonic_fit import fit_harmonics, polynomial_columns
 from hil.identify.sine_run import FloatArray, SineRun, synchronous_average
 
@@ -268,19 +268,28 @@ def stiffness_corrected_inertia(
 
     A load torque ``L(θ)`` (gravity, cable spring) adds ``K·x`` with ``x = −V/ω·cos ωt`` to
     the torque, in the same quadrature as ``J·α``: the sine sees ``J − K/ω²``.
+
+    Parameters
+    ----------
+    inertia : Estimate
+        J as the sine saw it (kg·m²).
+    stiffness : Estimate
+        ``K`` (N·m/rad), from an earlier measurement.
+    frequency_hz : float
+        The sine's frequency.
+
+    Returns
+    -------
+    Estimate
+        ``J + K/ω²`` with ``u(K)`` a budget line of sensitivity ``1/ω²``.
     """
     omega_sq = (2 * math.pi * frequency_hz) ** 2
-    value, u, dof = combine_linear(
-        [1.0, 1.0 / omega_sq],
-        [inertia.value, stiffness.value],
-        [inertia.standard_uncertainty, stiffness.standard_uncertainty],
-        [inertia.dof, stiffness.dof],
-    )
-    return Estimate(
-        name=inertia.name,
-        value=value,
-        standard_uncertainty=u,
-        unit=inertia.unit,
-        dof=dof,
-        cramer_rao_std=inertia.cramer_rao_std,
+    return inertia.with_components(
+        Component(
+            source="load stiffness dL/dθ at the sines' centre (gravity_cable: m·g·e, φ, "
+                   "k_cable)",
+            kind="B", standard_uncertainty=stiffness.standard_uncertainty,
+            unit=stiffness.unit, sensitivity=1.0 / omega_sq, dof=stiffness.dof,
+        ),
+        value=inertia.value + stiffness.value / omega_sq,
     )

@@ -14,13 +14,14 @@ import numpy as np
 
 from hil.calibration import CalibrationRun
 from hil.drives.base import DriveInfo
-from hil.identify.estimate import Estimate, combine_linear
+from hil.identify.estimate import Component, Estimate
 from hil.identify.gravity_cable import CableLoop, load_stiffness
 from hil.identify.inertia_friction import (
     HARMONICS,
     InertiaFrictionResult,
     Method,
     identify_inertia_friction,
+    inertia_amplitude_spread,
     stiffness_corrected_inertia,
 )
 from hil.identify.sine_run import analyse_sine_run, torque_hold_samples, without_cable_loop
@@ -213,53 +214,74 @@ def measured_cable_loop(calibration: CalibrationRun) -> CableLoop | None:
     )
 
 
-def with_cable_loop_uncertainty(
-    result: InertiaFrictionResult,
-    recordings: list[Recording],
-    spec: Spec,
-    *,
-    current_loop_lag_s: float,
-    loop: CableLoop,
-) -> InertiaFrictionResult:
-    """Add the effect of the loop width's standard uncertainty (re-analysed at h + u(h)).
+def sine_estimates(result: InertiaFrictionResult) -> dict[str, Estimate]:
+    """The protocol's results by name: J, B, T_c and the spread of J over the amplitudes.
 
     Parameters
     ----------
     result : InertiaFrictionResult
-        The analysis with ``loop`` taken out.
-    recordings : list of Recording
-        The runs ``result`` came from.
-    spec : Spec
-        The protocol's spec.
-    current_loop_lag_s : float
-        As for :func:`analyse`.
-    loop : CableLoop
-        The loop taken out.
+        An analysis.
 
     Returns
     -------
-    InertiaFrictionResult
-        ``result`` with J, B and T_c widened by ``|Δ|`` at ``h + u(h)`` (in quadrature,
-        infinite degrees of freedom for the added term; Welch–Satterthwaite).
+    dict of str to Estimate
     """
-    shifted = dataclasses.replace(loop, half_width_nm=loop.half_width_nm + loop.half_width_u_nm)
-    other = analyse(recordings, spec, current_loop_lag_s=current_loop_lag_s, cable_loop=shifted)
+    found = (result.inertia, result.viscous, result.coulomb, inertia_amplitude_spread(result))
+    return {e.name: e for e in found}
 
-    def widened(mine: Estimate, theirs: Estimate) -> Estimate:
-        u_b = abs(theirs.value - mine.value)
-        return dataclasses.replace(
-            mine,
-            standard_uncertainty=math.hypot(mine.standard_uncertainty, u_b),
-            dof=combine_linear([1, 1], [0, 0], [mine.standard_uncertainty, u_b],
-                               [mine.dof, math.inf])[2],
-        )
 
-    return dataclasses.replace(
-        result,
-        inertia=widened(result.inertia, other.inertia),
-        viscous=widened(result.viscous, other.viscous),
-        coulomb=widened(result.coulomb, other.coulomb),
-    )
+def with_earlier_inputs(
+    recordings: list[Recording],
+    spec: Spec,
+    *,
+    lag: Estimate | None,
+    loop: CableLoop | None,
+) -> dict[str, Estimate]:
+    """Every result with the uncertainty of what earlier protocols measured and this one
+    takes out as named budget lines: the sines re-analysed with the current loop's lag at
+    ``τ + u(τ)`` and the cable loop's half-width at ``h + u(h)`` (GUM 5.1.3, numerically).
+
+    Parameters
+    ----------
+    recordings : list of Recording
+        One per amplitude, as :func:`excitation` ordered them.
+    spec : Spec
+        The protocol's spec.
+    lag : Estimate or None
+        The current loop's time constant (seconds), if measured.
+    loop : CableLoop or None
+        The cable's hysteresis loop, if measured.
+
+    Returns
+    -------
+    dict of str to Estimate
+        :func:`sine_estimates` of the analysis at the measured inputs, each with one
+        Type B line per input.
+    """
+    lag_s = 0.0 if lag is None else lag.value
+
+    def at(lag_s: float, loop: CableLoop | None) -> dict[str, Estimate]:
+        return sine_estimates(analyse(recordings, spec, current_loop_lag_s=lag_s,
+                                      cable_loop=loop))
+
+    base = at(lag_s, loop)
+    inputs: list[tuple[str, float, str, dict[str, Estimate]]] = []
+    if lag is not None and lag.standard_uncertainty > 0:
+        inputs.append(("current-loop time constant τ taken out (current_loop)",
+                       lag.standard_uncertainty, "s",
+                       at(lag_s + lag.standard_uncertainty, loop)))
+    if loop is not None and loop.half_width_u_nm > 0:
+        wider = dataclasses.replace(loop, half_width_nm=loop.half_width_nm + loop.half_width_u_nm)
+        inputs.append(("cable hysteresis loop h taken out (gravity_cable)",
+                       loop.half_width_u_nm, "N·m", at(lag_s, wider)))
+    return {
+        name: estimate.with_components(*(
+            Component.from_change(source=source, standard_uncertainty=u, unit=unit,
+                                  change=shifted[name].value - estimate.value)
+            for source, u, unit, shifted in inputs
+        ))
+        for name, estimate in base.items()
+    }
 
 
 def measured_load_stiffness(calibration: CalibrationRun, *, position_rad: float) -> Estimate | None:
@@ -285,8 +307,8 @@ def measured_load_stiffness(calibration: CalibrationRun, *, position_rad: float)
     return load_stiffness(mge=mge, phase=phase, cable_stiffness=cable, position_rad=position_rad)
 
 
-def measured_current_loop_lag_s(calibration: CalibrationRun) -> float:
-    """The current-loop time constant if that protocol ran earlier, else 0.
+def measured_current_loop_lag(calibration: CalibrationRun) -> Estimate | None:
+    """The current-loop time constant in seconds, if that protocol ran earlier.
 
     Parameters
     ----------
@@ -295,19 +317,23 @@ def measured_current_loop_lag_s(calibration: CalibrationRun) -> float:
 
     Returns
     -------
-    float
-        τ in seconds (from ``current_loop_time_constant_ms``), or 0.
+    Estimate or None
+        τ in seconds (from ``current_loop_time_constant_ms``), or ``None``.
     """
     tau = calibration.result("current_loop_time_constant_ms")
-    return 0.0 if tau is None else tau.value / 1000.0
+    if tau is None:
+        return None
+    return dataclasses.replace(tau, value=tau.value / 1000, unit="s", budget=(),
+                               standard_uncertainty=tau.standard_uncertainty / 1000)
 
 
 def analyse_in_calibration(
     recordings: list[Recording], spec: Spec, calibration: CalibrationRun
-) -> tuple[InertiaFrictionResult, dict[str, object]]:
-    """J, B, T_c with what earlier protocols measured taken out: the current loop's lag,
-    the cable's hysteresis loop (its uncertainty propagated) and the load's stiffness at
-    the sines' centre. Also returns what was applied, for the certificate's details.
+) -> tuple[InertiaFrictionResult, dict[str, Estimate], dict[str, object]]:
+    """J, B, T_c and the amplitude spread with what earlier protocols measured taken out:
+    the current loop's lag and the cable's hysteresis loop (their uncertainties as budget
+    lines, :func:`with_earlier_inputs`) and the load's stiffness at the sines' centre.
+    Also returns what was applied, for the certificate's details.
 
     Parameters
     ----------
@@ -321,7 +347,10 @@ def analyse_in_calibration(
     Returns
     -------
     result : InertiaFrictionResult
-        J (stiffness-corrected when the load's stiffness is known), B, T_c.
+        The analysis at the measured inputs (its runs and fit, for the details).
+    estimates : dict of str to Estimate
+        The protocol's results by name, J stiffness-corrected when the load's stiffness
+        is known.
     applied : dict of str to object
         The centre, the load stiffness, the cable loop and the lag taken out.
 
@@ -330,21 +359,18 @@ def analyse_in_calibration(
     IdentificationError
         As for :func:`analyse`.
     """
-    lag_s = measured_current_loop_lag_s(calibration)
+    lag = measured_current_loop_lag(calibration)
+    lag_s = 0.0 if lag is None else lag.value
     loop = measured_cable_loop(calibration)
     analysed = analyse(recordings, spec, current_loop_lag_s=lag_s, cable_loop=loop)
-    if loop is not None:
-        analysed = with_cable_loop_uncertainty(
-            analysed, recordings, spec, current_loop_lag_s=lag_s, loop=loop
-        )
+    estimates = with_earlier_inputs(recordings, spec, lag=lag, loop=loop)
     centre_rad = float(np.mean([np.mean(r.position) for r in recordings]))
     stiffness = measured_load_stiffness(calibration, position_rad=centre_rad)
     if stiffness is not None:
-        corrected = stiffness_corrected_inertia(
-            analysed.inertia, stiffness=stiffness, frequency_hz=spec.frequency_hz
+        estimates["inertia_kg_m2"] = stiffness_corrected_inertia(
+            estimates["inertia_kg_m2"], stiffness=stiffness, frequency_hz=spec.frequency_hz
         )
-        analysed = dataclasses.replace(analysed, inertia=corrected)
-    return analysed, {
+    return analysed, estimates, {
         "centre_rad": centre_rad,
         "load_stiffness_nm_rad": None if stiffness is None else stiffness.value,
         "cable_loop_removed": None if loop is None else dataclasses.asdict(loop),
