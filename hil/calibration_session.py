@@ -156,12 +156,19 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
 
 
 def pytest_runtest_setup(item: pytest.Item) -> None:
-    """A protocol the unit's profile does not configure is skipped, with the reason."""
+    """A protocol the unit's profile does not configure, or a result it does not declare
+    (``gravity_phase_rad`` on an axis without gravity), is skipped, with the reason."""
     name = _protocol_name(item)
     if name is None:
         return
-    if name not in item.config.stash[PROFILE_KEY].protocols:
+    profile = item.config.stash[PROFILE_KEY]
+    if name not in profile.protocols:
         pytest.skip(f"the unit profile has no [protocols.{name}] table: not calibrated here")
+    callspec = getattr(item, "callspec", None)
+    parameter = callspec.params.get("parameter") if callspec is not None else None
+    if isinstance(parameter, str) and parameter not in profile.measurements:
+        pytest.skip(f"the unit profile declares no [measurements.{parameter}]: not measured "
+                    "on this unit")
 
 
 @pytest.hookimpl(wrapper=True)

@@ -1,0 +1,97 @@
+"""The stated uncertainties describe the errors: a small population of simulated units,
+calibrated as a user would, against the truth each result claims (the benchmark
+``benchmarks/bench_coverage.py`` at 30 units; its truth map is in ``coverage_population``).
+
+A result fails when its k = 2 interval covers the truth in fewer than 80 % of the units or
+the RMS of ``(x − truth)/u`` leaves 0.5–2.0 (both a 95 %-coverage uncertainty would meet
+with n = 30 except with a probability below 0.2 %). Results with no truth of the plant's
+are judged by repeatability: the same unit under two noise seeds,
+``(x₁ − x₂)/√(u₁² + u₂²)``. The population is drawn with its own seed, not the one the
+shipped method-bias map was measured on.
+"""
+
+from __future__ import annotations
+
+import math
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
+
+from coverage_population import (  # noqa: E402
+    NO_TRUTH,
+    Row,
+    Summary,
+    calibrate,
+    repeatability,
+    run_population,
+    write_population,
+)
+
+UNITS_PER_PROFILE = 15
+PAIRS_PER_PROFILE = 5
+POPULATION_SEED = 7  # the shipped map: seed 2026 (benchmarks/RESULTS.md)
+MIN_COVERAGE = 0.80
+RMS_RANGE = (0.5, 2.0)
+
+pytestmark = pytest.mark.slow
+
+
+@pytest.fixture(scope="module")
+def population(tmp_path_factory: pytest.TempPathFactory) -> tuple[list[Row], dict[str, list[float]]]:
+    directory = tmp_path_factory.mktemp("coverage")
+    units = write_population(directory / "units", units_per_profile=UNITS_PER_PROFILE,
+                             seed=POPULATION_SEED)
+    rows = run_population(units, directory / "certificates")
+    paired: dict[str, list[float]] = {}
+    for unit in [u for u in units if int(u.serial.split("-")[1]) < PAIRS_PER_PROFILE]:
+        first = calibrate(unit, directory / "certificates")
+        second = calibrate(unit, directory / "pairs", seed=unit.seed + 1)
+        for name, z in repeatability(first, second).items():
+            paired.setdefault(name, []).append(z)
+    return rows, paired
+
+
+def pooled(rows: list[Row]) -> dict[str, Summary]:
+    """Coverage and RMS normalised error per result, both profiles together."""
+    out = {}
+    for name in sorted({r.parameter for r in rows}):
+        group = [r for r in rows if r.parameter == name]
+        z = np.array([r.normalised_error for r in group])
+        out[name] = Summary(axis="both", parameter=name, n=len(group), bias_rel=math.nan,
+                            rms_normalised=float(np.sqrt(np.mean(z**2))),
+                            coverage=float(np.mean([r.covered for r in group])),
+                            median_u_rel=math.nan)
+    return out
+
+
+def test_every_unit_was_calibrated(
+    population: tuple[list[Row], dict[str, list[float]]],
+) -> None:
+    rows, _ = population
+    assert len({r.unit for r in rows}) == 2 * UNITS_PER_PROFILE
+
+
+def test_intervals_cover_the_truth(population: tuple[list[Row], dict[str, list[float]]]) -> None:
+    rows, _ = population
+    summaries = pooled(rows)
+    assert len(summaries) >= 20
+    misses = {
+        name: f"coverage {s.coverage:.0%}, RMS (x−truth)/u {s.rms_normalised:.2f}, n {s.n}"
+        for name, s in summaries.items()
+        if s.coverage < MIN_COVERAGE or not RMS_RANGE[0] <= s.rms_normalised <= RMS_RANGE[1]
+    }
+    assert not misses, misses
+
+
+def test_results_without_a_truth_repeat_within_their_uncertainty(
+    population: tuple[list[Row], dict[str, list[float]]],
+) -> None:
+    _, paired = population
+    for name in NO_TRUTH:
+        assert name in paired, f"{name}: never calibrated twice"
+        rms = float(np.sqrt(np.mean(np.square(paired[name]))))
+        assert RMS_RANGE[0] <= rms <= RMS_RANGE[1], f"{name}: RMS {rms:.2f} over {paired[name]}"
