@@ -67,9 +67,9 @@ def quantisation_step(position: FloatArray) -> float:
     Returns
     -------
     float
-        The first candidate (25th, 10th, 5th, 1st percentile) that more than 95 % of the
-        nonzero steps are within 0.1 of a multiple of, in position units; 0 when none is,
-        or when there are fewer than 10 nonzero steps.
+        The first candidate (25th, 10th, 5th, 1st percentile) of which more than 95 % of
+        the nonzero steps are a multiple (within a tenth of the candidate), in position
+        units; 0 when none is, or when there are fewer than 10 nonzero steps.
     """
     steps = np.abs(np.diff(position))
     steps = steps[steps > 0]
