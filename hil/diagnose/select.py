@@ -96,8 +96,9 @@ class Gain:
     delta_bic : float
         ``BIC(extended) − BIC(current)`` on the training rows.
     wald_statistic, wald_threshold : float
-        Wald statistic of the effect's new parameters being zero (for the current-loop
-        lag ``(τ / std(τ))²``) and its χ² quantile at :data:`CONFIDENCE`.
+        Wald statistic of the effect's key coefficients being zero (see
+        :meth:`Evaluator.candidate`; for the current-loop lag ``(τ / std(τ))²``) and its
+        χ² quantile at :data:`CONFIDENCE`.
     plausible : bool
         The fit is within the effect's physical constraints (see :func:`plausible`).
     """
