@@ -17,6 +17,14 @@ log = logging.getLogger(__name__)
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """Add ``diagnose``'s arguments to ``parser``.
+
+    Parameters
+    ----------
+    parser : argparse.ArgumentParser
+        Gets ``recording``, ``--validate``, ``--json`` (required), ``--plots``,
+        ``--profile-out`` and ``--cutoff-hz``.
+    """
     parser.add_argument("recording", help="recording to explain (.csv or .csv.gz)")
     parser.add_argument("--validate", metavar="OTHER",
                         help="second recording of the same axis: judge every gain on it")
@@ -30,6 +38,19 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    """Diagnose, write the JSON report (and the profile and plots when asked), print a line.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        Parsed by a parser that :func:`add_arguments` set up.
+
+    Returns
+    -------
+    int
+        The exit code: 0, found causes or not; 2 after printing a :class:`HilError` on
+        stderr (a bad file, data that cannot support the fit).
+    """
     # heavy imports here, so that `gimbal-hil --help` stays fast
     from hil.diagnose.core import diagnose
     from hil.diagnose.profile_out import write_profile
@@ -59,6 +80,18 @@ def run(args: argparse.Namespace) -> int:
 
 
 def main(argv: list[str] | None = None) -> int:
+    """``gimbal-hil diagnose`` as a stand-alone program (warnings logged to stderr).
+
+    Parameters
+    ----------
+    argv : list of str, optional
+        The arguments; default ``sys.argv[1:]``.
+
+    Returns
+    -------
+    int
+        The exit code (see :func:`run`).
+    """
     parser = argparse.ArgumentParser(prog="gimbal-hil diagnose", description=__doc__)
     add_arguments(parser)
     logging.basicConfig(level=logging.WARNING, format="%(levelname)s %(name)s: %(message)s")

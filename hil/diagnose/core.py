@@ -36,7 +36,28 @@ HOLD_SAMPLES = 0.5
 
 @dataclass(frozen=True, slots=True, kw_only=True)
 class Diagnosis:
-    """Everything ``gimbal-hil diagnose`` found (laid out by :func:`report.report`)."""
+    """Everything ``gimbal-hil diagnose`` found (laid out by :func:`report.report`).
+
+    Attributes
+    ----------
+    recording : Recording
+        The log diagnosed.
+    signals : Signals
+        ``recording`` prepared (see :func:`hil.diagnose.signals.prepare`).
+    heldout, train : DataSet
+        The rows that judge every gain and the rows every model is fitted on.
+    selection : Selection
+        The base fit, the causes accepted and every candidate evaluated.
+    issues : tuple of DataIssue
+        Problems of the data itself (see :func:`hil.diagnose.data_issues.find_issues`).
+    residual : dict of str to Any
+        Analysis of the base fit's residual over ``recording`` (see
+        :func:`hil.diagnose.residual.analyse`).
+    split : str
+        How training and held-out rows were chosen, in words.
+    designer : Designer
+        The design-matrix builder the fits used (its caches are kept).
+    """
 
     recording: Recording
     signals: Signals
@@ -50,29 +71,62 @@ class Diagnosis:
 
     @property
     def base(self) -> Fit:
+        """The base model ``J·α + B·ω + T_c·sgn(ω)`` fitted on the training rows."""
         return self.selection.base
 
     @property
     def causes(self) -> tuple[Candidate, ...]:
+        """The causes named, ranked (:attr:`Selection.accepted`)."""
         return self.selection.accepted
 
     @property
     def final(self) -> Fit:
+        """The extended model: the last cause's fit, or the base fit when none was named."""
         return self.selection.final
 
     @property
     def cause_names(self) -> list[str]:
+        """The effects of :attr:`causes`, in rank order."""
         return [c.effect for c in self.causes]
 
     def heldout_prediction(self, fit: Fit) -> tuple[np.ndarray, np.ndarray]:
-        """Measured (filtered) and predicted effort on the held-out rows."""
+        """Measured (filtered) and predicted effort on the held-out rows.
+
+        Parameters
+        ----------
+        fit : Fit
+            A model fitted on the training rows.
+
+        Returns
+        -------
+        measured, predicted : ndarray
+            ``effort_filtered`` of the held-out signals and ``fit``'s prediction there, on
+            the held-out rows (N·m, or N on a linear axis).
+        """
         rows = self.heldout.rows
         signals = self.heldout.signals
         return signals.effort_filtered[rows], self.designer.predict(fit, signals)[rows]
 
 
 def block_split(signals: Signals) -> tuple[DataSet, DataSet]:
-    """Interleaved blocks: every third 0.25 s block is held out."""
+    """Interleaved blocks: every third 0.25 s block is held out.
+
+    Parameters
+    ----------
+    signals : Signals
+        The prepared recording.
+
+    Returns
+    -------
+    train, heldout : DataSet
+        Valid, decimated rows (see :meth:`Signals.rows`) outside and inside the held-out
+        blocks. A block is 0.25 s, and at least 50 samples.
+
+    Raises
+    ------
+    IdentificationError
+        Either side has fewer than 50 rows.
+    """
     length = max(50, round(BLOCK_S * signals.fs_hz))
     held = (np.arange(len(signals)) // length) % HELDOUT_EVERY == HELDOUT_EVERY - 1
     train, test = signals.rows(~held), signals.rows(held)
@@ -112,7 +166,8 @@ def diagnose(
     Raises
     ------
     IdentificationError
-        The data cannot support the fit (too short, too few usable samples).
+        The data cannot support the fit (too short, too few usable samples), or
+        ``validate`` is of another axis kind than ``recording``.
     """
     signals = prepare(recording, cutoff_hz=cutoff_hz)
     if validate is not None:
@@ -147,7 +202,22 @@ def diagnose(
 
 
 def summary_metrics(diagnosis: Diagnosis, fit: Fit) -> dict[str, float]:
-    """Residual RMS and fit % of ``fit`` on the training and the held-out rows."""
+    """Residual RMS and fit % of ``fit`` on the training and the held-out rows.
+
+    Parameters
+    ----------
+    diagnosis : Diagnosis
+        Gives the rows and the design-matrix builder.
+    fit : Fit
+        The model to score, e.g. :attr:`Diagnosis.base` or :attr:`Diagnosis.final`.
+
+    Returns
+    -------
+    dict of str to float
+        ``train_rms_nm``, ``train_fit_pct``, ``heldout_rms_nm``, ``heldout_fit_pct``:
+        RMS of filtered effort minus prediction (N·m, or N on a linear axis) and
+        :func:`hil.diagnose.model.fit_percent` (%).
+    """
     out: dict[str, float] = {}
     for name, data in (("train", diagnosis.train), ("heldout", diagnosis.heldout)):
         target = data.signals.effort_filtered[data.rows]
@@ -158,6 +228,20 @@ def summary_metrics(diagnosis: Diagnosis, fit: Fit) -> dict[str, float]:
 
 
 def base_parameters(diagnosis: Diagnosis) -> dict[str, Any]:
+    """The base fit's named parameters, their uncertainties and the effort's lead.
+
+    Parameters
+    ----------
+    diagnosis : Diagnosis
+
+    Returns
+    -------
+    dict of str to Any
+        ``parameters``: ``inertia_kg_m2``, ``viscous_nm_s_rad``, ``coulomb_nm`` and their
+        values (see :func:`hil.diagnose.interpret.base_parameters`); ``uncertainty``: each
+        one's :meth:`FittedParameter.as_dict`; ``hold_samples``: the base model's
+        ``shift_s`` in sample periods.
+    """
     estimates = interpret.base_parameters(diagnosis.base)
     return {
         "parameters": {name: e.value for name, e in estimates.items()},
@@ -167,4 +251,14 @@ def base_parameters(diagnosis: Diagnosis) -> dict[str, Any]:
 
 
 def finite_or_none(value: float) -> float | None:
+    """``value`` if finite, else ``None`` (JSON has no NaN or infinity).
+
+    Parameters
+    ----------
+    value : float
+
+    Returns
+    -------
+    float or None
+    """
     return value if math.isfinite(value) else None

@@ -27,12 +27,28 @@ MAX_LAG_SAMPLES = 60
 
 @dataclass(frozen=True, slots=True, kw_only=True)
 class DataIssue:
+    """One problem of the data, as the report lists it.
+
+    Attributes
+    ----------
+    kind : str
+        ``saturation``, ``gaps``, ``irregular_sampling``, ``quantisation``,
+        ``velocity_filter_lag`` or ``effort_noise``.
+    severity : str
+        ``"warning"`` (affects the data used) or ``"info"``.
+    message : str
+        One line for a reader.
+    values : dict of str to Any
+        The numbers behind the message (see :func:`find_issues`).
+    """
+
     kind: str  # saturation, gaps, irregular_sampling, quantisation, velocity_filter_lag, ...
     severity: str  # "warning" (affects the data used) or "info"
     message: str
     values: dict[str, Any] = field(default_factory=dict)
 
     def as_dict(self) -> dict[str, Any]:
+        """``kind``, ``severity``, ``message`` and the :attr:`values` in one flat dict."""
         return {"kind": self.kind, "severity": self.severity, "message": self.message,
                 **self.values}
 
@@ -42,6 +58,18 @@ def quantisation_step(position: FloatArray) -> float:
 
     Candidates are low percentiles of the nonzero steps, largest first; a few tiny steps
     (rounding in a file) do not hide the encoder's count. 0 when none fits (continuous).
+
+    Parameters
+    ----------
+    position : ndarray
+        The recorded position (rad, or m on a linear axis).
+
+    Returns
+    -------
+    float
+        The first candidate (25th, 10th, 5th, 1st percentile) of which more than 95 % of
+        the nonzero steps are a multiple (within a tenth of the candidate), in position
+        units; 0 when none is, or when there are fewer than 10 nonzero steps.
     """
     steps = np.abs(np.diff(position))
     steps = steps[steps > 0]
@@ -56,7 +84,21 @@ def quantisation_step(position: FloatArray) -> float:
 
 
 def velocity_delay_samples(signals: Signals) -> float:
-    """Delay of the reported velocity behind the zero-phase derivative (samples)."""
+    """Delay of the reported velocity behind the zero-phase derivative (samples).
+
+    Parameters
+    ----------
+    signals : Signals
+        Gives ``velocity_reported``, the zero-phase ``velocity`` and the valid samples.
+
+    Returns
+    -------
+    float
+        The lag within ±60 samples that maximises their correlation over every fourth
+        valid sample, refined by a parabola through the peak; positive when the reported
+        velocity trails. 0 when fewer than 100 samples are usable or the reported
+        velocity is constant on them.
+    """
     reported = signals.velocity_reported
     reference = signals.velocity
     valid = signals.valid
@@ -77,7 +119,25 @@ def velocity_delay_samples(signals: Signals) -> float:
 
 
 def find_issues(recording: Recording, signals: Signals) -> list[DataIssue]:
-    """Every data problem of ``recording`` (as prepared into ``signals``)."""
+    """Every data problem of ``recording`` (as prepared into ``signals``).
+
+    Parameters
+    ----------
+    recording : Recording
+        The log as read (timestamps, position and effort before resampling).
+    signals : Signals
+        ``recording`` prepared (see :func:`hil.diagnose.signals.prepare`).
+
+    Returns
+    -------
+    list of DataIssue
+        In this order, when present: ``saturation`` (values ``samples``, ``level``),
+        ``gaps`` (``count``), ``irregular_sampling`` (``period_spread``,
+        ``resampled_hz``), ``quantisation`` (``step``, ``counts_per_rev`` (None on a
+        linear axis), ``acceleration_noise``), ``velocity_filter_lag`` (``delay_samples``,
+        ``equivalent_cutoff_hz``, for a delay above one sample); always last
+        ``effort_noise`` (``std``, effort units).
+    """
     issues: list[DataIssue] = []
     if signals.saturated_count:
         issues.append(DataIssue(

@@ -55,7 +55,21 @@ TWO_MASS_BAND = 0.6
 
 
 class Context:
-    """The training data and the current model fitted on it."""
+    """The training data and the current model fitted on it.
+
+    Parameters
+    ----------
+    designer : Designer
+    signals : Signals
+    rows : ndarray of intp
+        The training rows.
+    current : Fit
+        The current model on them.
+    counts_per_rev : int, optional
+        Encoder counts per revolution (bounds the harmonic orders searched).
+    memory : dict of str to Model, optional
+        Models proposed in earlier rounds, by effect; :func:`propose` adds to it.
+    """
 
     def __init__(self, *, designer: Designer, signals: Signals, rows: IndexArray, current: Fit,
                  counts_per_rev: int | None = None,
@@ -70,7 +84,14 @@ class Context:
         self._basis: tuple[FloatArray, FloatArray] | None = None
 
     def basis(self) -> tuple[FloatArray, FloatArray]:
-        """Orthonormal basis of the current design (training rows) and its residual."""
+        """Orthonormal basis of the current design (training rows) and its residual.
+
+        Returns
+        -------
+        q, residual : ndarray
+            ``Q`` of the design's QR decomposition, and the filtered effort minus its
+            projection onto ``Q`` (computed once, then cached).
+        """
         if self._basis is None:
             matrix = self.designer.design(self.current.model, self.signals, self.rows)
             q, _ = np.linalg.qr(matrix)
@@ -80,7 +101,27 @@ class Context:
 
 
 def propose(effect: str, ctx: Context) -> Model | None:
-    """The current model extended with ``effect`` (searched on the training rows)."""
+    """The current model extended with ``effect`` (searched on the training rows).
+
+    Parameters
+    ----------
+    effect : str
+        One of :data:`EFFECTS`.
+    ctx : Context
+        The training data and current model; the proposal is stored in its ``memory``.
+
+    Returns
+    -------
+    Model or None
+        ``None`` when the current model has ``effect``, when ``effect`` is rotary-only on
+        a linear axis, or when it does not apply. Effects in :data:`REUSABLE` proposed in
+        an earlier round keep the parameters searched then.
+
+    Raises
+    ------
+    KeyError
+        ``effect`` is not in :data:`EFFECTS`.
+    """
     if ctx.current.model.has(effect):
         return None
     if effect in ROTARY_ONLY and ctx.signals.axis_kind != "rotary":
@@ -165,7 +206,18 @@ MIN_DIRECTION_FRACTION = 0.10
 
 
 def both_directions(ctx: Context) -> bool:
-    """Whether the training rows move both ways enough to tell a constant from friction."""
+    """Whether the training rows move both ways enough to tell a constant from friction.
+
+    Parameters
+    ----------
+    ctx : Context
+
+    Returns
+    -------
+    bool
+        Each direction holds at least :data:`MIN_DIRECTION_FRACTION` of the moving
+        training rows (see :func:`hil.diagnose.model.friction_direction`).
+    """
     direction = friction_direction(ctx.signals)[ctx.rows]
     moving = np.count_nonzero(direction)
     if moving == 0:
@@ -274,6 +326,18 @@ def _cable(ctx: Context) -> Model | None:
 
 # -- one nonlinear parameter -------------------------------------------------------------
 def stribeck_term(velocity_scale: float) -> Term:
+    """The Stribeck column ``exp(−(ω/v_s)²)·sgn(ω)``, coefficient ``stribeck_delta``.
+
+    Parameters
+    ----------
+    velocity_scale : float
+        ``v_s`` (rad/s, or m/s on a linear axis).
+
+    Returns
+    -------
+    Term
+        Effect ``"stribeck"``; ``v_s`` is its nonlinear ``stribeck_velocity``.
+    """
     def build(s: Signals) -> FloatArray:
         ratio = s.velocity / velocity_scale
         return np.exp(-(ratio**2)) * friction_direction(s)
@@ -296,7 +360,19 @@ def _stribeck(ctx: Context) -> Model | None:
 
 
 def search_shift(ctx: Context, model: Model) -> Model:
-    """Best effort/motion alignment within one sample period (training RSS)."""
+    """Best effort/motion alignment within one sample period (training RSS).
+
+    Parameters
+    ----------
+    ctx : Context
+    model : Model
+
+    Returns
+    -------
+    Model
+        ``model`` with the ``shift_s`` in ``[−1/fs, 1/fs]`` that minimises the training
+        RSS (a 9-point grid, refined by a bounded search).
+    """
     period = 1.0 / ctx.signals.fs_hz
     grid = np.linspace(-period, period, 9)
     _, best = _search(ctx, lambda d: replace(model, shift_s=d), grid, log_scale=False)
@@ -312,6 +388,23 @@ def _current_lag(ctx: Context) -> Model | None:
 
 
 def two_mass_term(antiresonance_hz: float, damping: float) -> Term:
+    """A load on a compliant shaft: the column is load minus motor acceleration.
+
+    The load acceleration is the motor acceleration through
+    ``(2ζωs + ω²)/(s² + 2ζωs + ω²)``, ``ω = 2π·antiresonance_hz`` (bilinear transform,
+    causal, per segment); the coefficient is ``load_inertia``.
+
+    Parameters
+    ----------
+    antiresonance_hz : float
+    damping : float
+        Damping ratio ζ.
+
+    Returns
+    -------
+    Term
+        Effect ``"two_mass"``, nonlinear ``antiresonance_hz`` and ``damping_ratio``.
+    """
     omega = 2 * math.pi * antiresonance_hz
 
     def build(s: Signals) -> FloatArray:
@@ -348,6 +441,25 @@ def _two_mass(ctx: Context) -> Model | None:
 # -- harmonics of the angle ----------------------------------------------------------------
 def harmonic_term(effect: str, orders: tuple[int, ...],
                   weight: Callable[[Signals], FloatArray] | None, key: str) -> Term:
+    """Harmonics of the angle: columns ``w·sin(kθ)``, ``w·cos(kθ)`` for each order ``k``.
+
+    Parameters
+    ----------
+    effect : str
+        ``"cogging"`` (labels ``cog_sin{k}``, ``cog_cos{k}``), else ``kt_sin{k}``,
+        ``kt_cos{k}``.
+    orders : tuple of int
+        Periods per revolution; each counts as a searched parameter.
+    weight : callable or None
+        ``Signals -> ndarray`` giving ``w`` (for K_t ripple the predicted effort);
+        ``None`` for ``w = 1``.
+    key : str
+        Tells weights apart in the term's cache key.
+
+    Returns
+    -------
+    Term
+    """
     prefix = "cog" if effect == "cogging" else "kt"
     labels = tuple(f"{prefix}_{part}{k}" for k in orders for part in ("sin", "cos"))
 

@@ -37,13 +37,41 @@ MAX_ORDER = 200
 
 @dataclass(frozen=True, slots=True, kw_only=True)
 class Periodogram:
+    """Per-order power of a residual against angle.
+
+    Attributes
+    ----------
+    orders : ndarray of int64
+        Periods per revolution.
+    power : ndarray
+        RSS reduction per order (effort units squared); 0 where the order's sine and
+        cosine are not separable.
+    chi2 : ndarray
+        Power over the residual variance, times the fraction of independent samples.
+    """
+
     orders: IntArray
     power: FloatArray  # RSS reduction per order (effort units squared)
     chi2: FloatArray  # power over the residual variance per effective sample
 
 
 def order_range(position_rad: FloatArray, counts_per_rev: int | None) -> tuple[int, int]:
-    """Orders with at least two periods over the travel, resolvable by the encoder."""
+    """Orders with at least two periods over the travel, resolvable by the encoder.
+
+    Parameters
+    ----------
+    position_rad : ndarray
+        The positions the residual is taken at.
+    counts_per_rev : int or None
+        Encoder counts per revolution; when given, orders are capped at
+        ``counts_per_rev // 16``.
+
+    Returns
+    -------
+    low, high : int
+        The inclusive range: ``low = max(2, ⌈4π / travel⌉)``, ``high`` at most 200. An
+        empty range (``high < low``) when the position does not move.
+    """
     travel = float(np.ptp(position_rad))
     if travel <= 0:
         return (2, 1)
@@ -117,6 +145,23 @@ def periodogram(
 
     ``independence`` is the fraction of samples that are statistically independent; it
     scales the χ² statistic.
+
+    Parameters
+    ----------
+    residual : ndarray
+        Effort residual (N·m).
+    position_rad : ndarray
+        Angle at each residual sample.
+    weight : ndarray, optional
+        ``w`` per sample; default 1.
+    orders : (int, int)
+        Inclusive range of orders (see :func:`order_range`).
+    independence : float
+
+    Returns
+    -------
+    Periodogram
+        Empty when the range is.
     """
     if orders[1] < orders[0]:
         empty = np.zeros(0)
@@ -139,6 +184,16 @@ def find_orders(
     from the order's leakage),
     significant (effective χ²(2) above the Bonferroni threshold for 200 orders at 1 %),
     at least 2 % of the first order's power, and at most six orders in all.
+
+    Parameters
+    ----------
+    residual, position_rad, weight, orders, independence
+        As for :func:`periodogram`.
+
+    Returns
+    -------
+    list of int
+        The orders taken, in the order taken; empty when none is (or the range is empty).
     """
     if orders[1] < orders[0]:
         return []

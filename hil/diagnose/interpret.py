@@ -23,13 +23,26 @@ Z99 = 2.5758293035489004
 
 @dataclass(frozen=True, slots=True, kw_only=True)
 class FittedParameter:
-    """A parameter of a fitted model with its standard deviation from the fit's covariance
-    (not a calibration result: those are :class:`hil.identify.estimate.Estimate`)."""
+    """A parameter of a fitted model with its standard deviation from the fit's covariance.
+
+    Not a calibration result: those are :class:`hil.identify.estimate.Estimate`.
+
+    Attributes
+    ----------
+    value : float
+    std : float
+        Standard deviation; infinite when the fit is rank-deficient, NaN when not
+        estimated (a searched parameter).
+    """
 
     value: float
     std: float
 
     def as_dict(self) -> dict[str, float | list[float] | None]:
+        """``value``, ``std`` and the 99 % interval ``ci99`` (``value ± 2.576·std``).
+
+        ``std`` and ``ci99`` are ``None`` when ``std`` is not finite.
+        """
         finite = math.isfinite(self.std)
         return {
             "value": self.value,
@@ -60,7 +73,17 @@ def _amplitude(fit: Fit, sin_label: str, cos_label: str) -> tuple[FittedParamete
 
 
 def units(axis_kind: AxisKind) -> dict[str, str]:
-    """Unit of every reported quantity for this kind of axis."""
+    """Unit of every reported quantity for this kind of axis.
+
+    Parameters
+    ----------
+    axis_kind : {"rotary", "linear"}
+
+    Returns
+    -------
+    dict of str to str
+        Unit by reported name (or group of names).
+    """
     rotary = axis_kind == "rotary"
     effort = "N·m" if rotary else "N"
     position = "rad" if rotary else "m"
@@ -79,6 +102,18 @@ def units(axis_kind: AxisKind) -> dict[str, str]:
 
 
 def base_parameters(fit: Fit) -> dict[str, FittedParameter]:
+    """J, B and T_c of ``fit``.
+
+    Parameters
+    ----------
+    fit : Fit
+        A model with the base terms.
+
+    Returns
+    -------
+    dict of str to FittedParameter
+        ``inertia_kg_m2``, ``viscous_nm_s_rad``, ``coulomb_nm``.
+    """
     return {
         "inertia_kg_m2": _linear(fit, {"inertia": 1.0}),
         "viscous_nm_s_rad": _linear(fit, {"viscous": 1.0}),
@@ -104,7 +139,32 @@ def _harmonics(fit: Fit, effect: str) -> list[dict[str, float]]:
 
 
 def effect_parameters(effect: str, fit: Fit, *, lag_std_s: float = math.nan) -> dict[str, Any]:
-    """Named parameters of ``effect`` in ``fit``: values and :class:`FittedParameter` s."""
+    """Named parameters of ``effect`` in ``fit``: values and :class:`FittedParameter` s.
+
+    Parameters
+    ----------
+    effect : str
+        One of :data:`hil.diagnose.effects.EFFECTS`; any other name gives empty tables.
+    fit : Fit
+        A model that contains ``effect``.
+    lag_std_s : float
+        Standard deviation of the current-loop time constant, s (used for
+        ``current_lag``).
+
+    Returns
+    -------
+    dict of str to Any
+        ``parameters``: every named value (report names, see ``docs/diagnose.md``),
+        including those without an uncertainty (phases, orders, the two-mass fields);
+        ``uncertainty``: :meth:`FittedParameter.as_dict` of those with one; ``note``, when
+        a Coulomb asymmetry is not separable from the offset.
+
+    Raises
+    ------
+    ValueError
+        ``fit`` lacks the effect's coefficients (``IndexError`` for ``cogging`` and
+        ``kt_ripple``).
+    """
     estimates: dict[str, FittedParameter] = {}
     extra: dict[str, Any] = {}
     values = fit.as_dict()
@@ -171,6 +231,20 @@ def effect_parameters(effect: str, fit: Fit, *, lag_std_s: float = math.nan) -> 
 
 
 def two_mass_parameters(fit: Fit) -> dict[str, float]:
+    """The two-mass plant behind a fitted ``two_mass`` term.
+
+    Parameters
+    ----------
+    fit : Fit
+
+    Returns
+    -------
+    dict of str to float
+        ``resonance_hz`` (NaN unless the motor inertia is positive), ``antiresonance_hz``,
+        ``motor_inertia_kg_m2`` (J minus the load inertia), ``shaft_stiffness_nm_rad``,
+        ``shaft_damping_nm_s_rad``, ``damping_ratio``; empty when ``fit`` has no
+        ``two_mass`` term.
+    """
     term = fit.model.term("two_mass")
     if term is None:
         return {}

@@ -36,6 +36,27 @@ class Term:
     ``build(signals)`` returns an ``(n, len(labels))`` array. ``nonlinear`` holds the
     parameters fixed by a search (they count in the BIC penalty); ``key`` identifies the
     columns for caching (equal keys mean equal columns).
+
+    Attributes
+    ----------
+    effect : str
+        The effect the columns belong to (``"base"`` or one of
+        :data:`hil.diagnose.effects.EFFECTS`).
+    labels : tuple of str
+        The columns' coefficient names.
+    build : callable
+        ``Signals -> ndarray``: the columns over the whole recording, shape
+        ``(len(signals), len(labels))`` (1-D for one column).
+    key : str
+        Identifies the columns in the :class:`Designer`'s caches.
+    nonlinear : mapping of str to float
+        The searched parameters fixed inside the columns.
+    extra_params : int
+        Search dimensions beyond ``nonlinear`` (e.g. chosen harmonic orders).
+    filtered : bool
+        The columns are already band-limited; otherwise the designer low-passes them.
+    lagged : bool
+        The columns pass through the current-loop lag.
     """
 
     effect: str
@@ -56,6 +77,14 @@ class Model:
     (a drive holds the torque it reports at ``t_k`` over the following period, so the
     motion it causes is centred up to a period later; how much depends on where the drive
     samples position). It is a property of the data, bounded to one sample period.
+
+    Attributes
+    ----------
+    terms : tuple of Term
+    lag_s : float
+        Current-loop time constant τ, s; 0 for no lag.
+    shift_s : float
+        Time by which the effort leads the motion, s.
     """
 
     terms: tuple[Term, ...]
@@ -64,10 +93,12 @@ class Model:
 
     @property
     def labels(self) -> tuple[str, ...]:
+        """Every coefficient's name, term by term (the design matrix's column order)."""
         return tuple(label for term in self.terms for label in term.labels)
 
     @property
     def effects(self) -> tuple[str, ...]:
+        """Each term's effect, then ``"current_lag"`` when ``lag_s > 0``."""
         names = [term.effect for term in self.terms]
         if self.lag_s > 0:
             names.append("current_lag")
@@ -75,14 +106,20 @@ class Model:
 
     @property
     def n_params(self) -> int:
-        """Coefficients plus searched parameters (the BIC's k)."""
+        """Coefficients plus searched parameters (the BIC's k).
+
+        ``len(labels)``, plus every term's ``nonlinear`` and ``extra_params``, plus 1 when
+        ``lag_s > 0``, plus 1.
+        """
         searched = sum(len(t.nonlinear) + t.extra_params for t in self.terms)
         return len(self.labels) + searched + (1 if self.lag_s > 0 else 0) + 1
 
     def has(self, effect: str) -> bool:
+        """Whether ``effect`` is among :attr:`effects`."""
         return effect in self.effects
 
     def term(self, effect: str) -> Term | None:
+        """The first term of ``effect``, or ``None`` when the model has none."""
         for term in self.terms:
             if term.effect == effect:
                 return term
@@ -91,7 +128,24 @@ class Model:
 
 @dataclass(frozen=True, slots=True, kw_only=True)
 class Fit:
-    """Least-squares fit of a model on some rows of one recording."""
+    """Least-squares fit of a model on some rows of one recording.
+
+    Attributes
+    ----------
+    model : Model
+    coefficients : ndarray
+        One per label of ``model``, in :attr:`Model.labels` order.
+    covariance : ndarray
+        ``σ²(ΦᵀΦ)⁻¹``; infinite everywhere when the design is (nearly) rank-deficient.
+    rss : float
+        Residual sum of squares on the fitted rows (effort units squared).
+    n : int
+        Rows fitted.
+    sigma2 : float
+        ``rss / (n − coefficients)``.
+    n_effective : float
+        Statistically independent rows (the BIC's sample count).
+    """
 
     model: Model
     coefficients: FloatArray
@@ -107,24 +161,71 @@ class Fit:
         return bic(self.rss * self.n_effective / self.n, self.n_effective, self.model.n_params)
 
     def coef(self, label: str) -> float:
+        """The coefficient of ``label``.
+
+        Raises
+        ------
+        ValueError
+            ``label`` is not in the model.
+        """
         return float(self.coefficients[self.model.labels.index(label)])
 
     def std(self, label: str) -> float:
+        """Standard deviation of the coefficient of ``label`` (infinite when rank-deficient).
+
+        Raises
+        ------
+        ValueError
+            ``label`` is not in the model.
+        """
         index = self.model.labels.index(label)
         return float(math.sqrt(max(self.covariance[index, index], 0.0)))
 
     def block(self, labels: tuple[str, ...]) -> tuple[FloatArray, FloatArray]:
-        """Coefficients and covariance of ``labels``."""
+        """Coefficients and covariance of ``labels``.
+
+        Parameters
+        ----------
+        labels : tuple of str
+            Coefficient names of the model.
+
+        Returns
+        -------
+        values, covariance : ndarray
+            Shapes ``(len(labels),)`` and ``(len(labels), len(labels))``, in the order of
+            ``labels``.
+
+        Raises
+        ------
+        ValueError
+            A label is not in the model.
+        """
         index = [self.model.labels.index(label) for label in labels]
         return self.coefficients[index], self.covariance[np.ix_(index, index)]
 
     def as_dict(self) -> dict[str, float]:
+        """Every coefficient by its label."""
         return {label: float(v) for label, v in zip(self.model.labels, self.coefficients,
                                                      strict=True)}
 
 
 def bic(rss: float, n: float, k: int) -> float:
-    """Bayesian information criterion of a Gaussian LS fit."""
+    """Bayesian information criterion of a Gaussian LS fit.
+
+    Parameters
+    ----------
+    rss : float
+        Residual sum of squares (floored at 1e-300).
+    n : float
+        Sample count.
+    k : int
+        Parameter count.
+
+    Returns
+    -------
+    float
+        ``n·ln(rss/n) + k·ln(n)``.
+    """
     return n * math.log(max(rss, 1e-300) / n) + k * math.log(n)
 
 
@@ -137,7 +238,24 @@ class Designer:
         self._shift_cache: dict[tuple[int, str, bool, float], FloatArray] = {}
 
     def columns(self, term: Term, signals: Signals) -> FloatArray:
-        """A term's (low-passed) columns over the whole recording, cached."""
+        """A term's (low-passed) columns over the whole recording, cached.
+
+        Parameters
+        ----------
+        term : Term
+            Its columns are low-passed by :meth:`Signals.lowpass` unless ``filtered``.
+        signals : Signals
+
+        Returns
+        -------
+        ndarray
+            Shape ``(len(signals), len(term.labels))``.
+
+        Raises
+        ------
+        IdentificationError
+            ``term.build`` returned another shape.
+        """
         key = (id(signals), term.key)
         if key not in self._cache:
             block = np.asarray(term.build(signals), dtype=np.float64)
@@ -160,6 +278,16 @@ class Designer:
 
         The extra low-pass keeps the derivative of acceleration (jerk) from amplifying the
         position's quantisation noise: regressor noise would bias the lag towards zero.
+
+        Parameters
+        ----------
+        term : Term
+        signals : Signals
+
+        Returns
+        -------
+        ndarray
+            Shape ``(len(signals), len(term.labels))``, per second.
         """
         key = (id(signals), term.key)
         if key not in self._lag_cache:
@@ -173,7 +301,20 @@ class Designer:
         return self._lag_cache[key]
 
     def lead(self, model: Model, signals: Signals, rows: IndexArray) -> FloatArray:
-        """Time derivative of the lagged columns on ``rows`` (zeros where not lagged)."""
+        """Time derivative of the lagged columns on ``rows`` (zeros where not lagged).
+
+        Parameters
+        ----------
+        model : Model
+            Its ``shift_s`` applies; its ``lag_s`` does not.
+        signals : Signals
+        rows : ndarray of intp
+
+        Returns
+        -------
+        ndarray
+            Shape ``(len(rows), len(model.labels))``.
+        """
         shifted = replace(model, lag_s=0.0, terms=tuple(
             replace(term, key=f"lead:{term.key}", build=_lead_builder(self, term), filtered=True)
             if term.lagged
@@ -201,6 +342,18 @@ class Designer:
 
         The shift is linear, so shifted columns and shifted leads are cached separately
         and combined as ``X(t + δ) + τ·Ẋ(t + δ)``.
+
+        Parameters
+        ----------
+        model : Model
+        signals : Signals
+        rows : ndarray of intp, optional
+            Default: every sample.
+
+        Returns
+        -------
+        ndarray
+            Shape ``(len(rows), len(model.labels))``.
         """
         index = np.arange(len(signals)) if rows is None else rows
         if not model.terms:
@@ -215,13 +368,45 @@ class Designer:
         return np.hstack(blocks)
 
     def fit(self, model: Model, signals: Signals, rows: IndexArray) -> Fit:
-        """Least squares on ``rows`` with covariance ``σ²(ΦᵀΦ)⁻¹``."""
+        """Least squares on ``rows`` with covariance ``σ²(ΦᵀΦ)⁻¹``.
+
+        The target is ``signals.effort_filtered``; the effective sample count is
+        ``len(rows)·min(1, independence·decimation)``.
+
+        Parameters
+        ----------
+        model : Model
+        signals : Signals
+        rows : ndarray of intp
+
+        Returns
+        -------
+        Fit
+
+        Raises
+        ------
+        IdentificationError
+            No more rows than coefficients, or a term built columns of the wrong shape.
+        """
         matrix = self.design(model, signals, rows)
         target = signals.effort_filtered[rows]
         independent = min(1.0, signals.independence * signals.decimation)
         return solve(model, matrix, target, n_effective=rows.size * independent)
 
     def predict(self, fit: Fit, signals: Signals) -> FloatArray:
+        """The fitted model's effort on every sample of ``signals``.
+
+        Parameters
+        ----------
+        fit : Fit
+        signals : Signals
+            The recording fitted, or another one of the same axis.
+
+        Returns
+        -------
+        ndarray
+            ``len(signals)`` values (N·m, or N on a linear axis).
+        """
         return self.design(fit.model, signals) @ fit.coefficients
 
 
@@ -230,6 +415,20 @@ def fractional_shift(matrix: FloatArray, samples: float, rows: IndexArray) -> Fl
 
     Stencils that leave the array repeat the edge value; those rows lie in the margins
     that :func:`hil.diagnose.signals.prepare` marks invalid.
+
+    Parameters
+    ----------
+    matrix : ndarray
+        Shape ``(n, m)``, one row per sample.
+    samples : float
+        The shift in sample periods (fractional, either sign).
+    rows : ndarray of intp
+        The rows wanted.
+
+    Returns
+    -------
+    ndarray
+        Shape ``(len(rows), m)``.
     """
     whole = math.floor(samples)
     u = samples - whole
@@ -248,7 +447,30 @@ def fractional_shift(matrix: FloatArray, samples: float, rows: IndexArray) -> Fl
 
 
 def solve(model: Model, matrix: FloatArray, target: FloatArray, *, n_effective: float) -> Fit:
-    """Column-scaled least squares; rank deficiency gives infinite variances."""
+    """Column-scaled least squares; rank deficiency gives infinite variances.
+
+    Parameters
+    ----------
+    model : Model
+        The model whose design ``matrix`` is.
+    matrix : ndarray
+        Shape ``(n, p)``.
+    target : ndarray
+        Shape ``(n,)``.
+    n_effective : float
+        Stored in the fit for its BIC.
+
+    Returns
+    -------
+    Fit
+        Its covariance is infinite when the scaled matrix has rank below ``p`` or a
+        singular value below 1e-10 of the largest.
+
+    Raises
+    ------
+    IdentificationError
+        ``n <= p``.
+    """
     n, p = matrix.shape
     if n <= p:
         raise IdentificationError(f"{n} samples cannot determine {p} coefficients")
@@ -278,7 +500,18 @@ def _zero_builder(term: Term) -> Callable[[Signals], FloatArray]:
 
 
 def fit_percent(target: FloatArray, prediction: FloatArray) -> float:
-    """``100·(1 − NRMSE)`` with NRMSE = ‖y − ŷ‖ / ‖y − mean(y)‖."""
+    """``100·(1 − NRMSE)`` with NRMSE = ‖y − ŷ‖ / ‖y − mean(y)‖.
+
+    Parameters
+    ----------
+    target, prediction : ndarray
+        ``y`` and ``ŷ``.
+
+    Returns
+    -------
+    float
+        Fit in %, NaN when ``target`` is constant.
+    """
     spread = float(np.linalg.norm(target - target.mean()))
     if spread == 0.0:
         return float("nan")
@@ -286,11 +519,24 @@ def fit_percent(target: FloatArray, prediction: FloatArray) -> float:
 
 
 def rms(values: FloatArray) -> float:
+    """Root mean square of ``values``."""
     return float(np.sqrt(np.mean(values**2)))
 
 
 def friction_direction(signals: Signals) -> FloatArray:
-    """sgn(velocity) with a small standstill band (on the smoothed velocity)."""
+    """sgn(velocity) with a small standstill band (on the smoothed velocity).
+
+    Parameters
+    ----------
+    signals : Signals
+        Gives :attr:`Signals.velocity`.
+
+    Returns
+    -------
+    ndarray
+        −1, 0 or 1 per sample; 0 where ``|velocity|`` is at most
+        :data:`STANDSTILL_FRACTION` of its 99th percentile.
+    """
     velocity = signals.velocity
     band = STANDSTILL_FRACTION * float(np.percentile(np.abs(velocity), 99))
     out = np.sign(velocity)
@@ -299,7 +545,14 @@ def friction_direction(signals: Signals) -> FloatArray:
 
 
 def base_terms() -> tuple[Term, ...]:
-    """``J·α + B·ω + T_c·sgn(ω)``."""
+    """``J·α + B·ω + T_c·sgn(ω)``.
+
+    Returns
+    -------
+    tuple of Term
+        ``inertia`` (acceleration), ``viscous`` (velocity) and ``coulomb``
+        (:func:`friction_direction`, low-passed by the designer), all of effect ``"base"``.
+    """
     return (
         Term(effect="base", labels=("inertia",), key="inertia",
              build=lambda s: s.acceleration, filtered=True),

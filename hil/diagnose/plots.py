@@ -14,7 +14,25 @@ if TYPE_CHECKING:
 
 
 def write_plots(diagnosis: Diagnosis, directory: str | Path) -> list[Path]:
-    """Residual time series, against position and velocity, spectrum, correlations."""
+    """Residual time series, against position and velocity, spectrum, correlations.
+
+    Parameters
+    ----------
+    diagnosis : Diagnosis
+    directory : str or Path
+        Created when missing.
+
+    Returns
+    -------
+    list of Path
+        ``residual_time.png``, ``residual_vs_position.png``, ``residual_vs_velocity.png``,
+        ``residual_spectrum.png`` and ``residual_correlations.png`` in ``directory``.
+
+    Raises
+    ------
+    InputError
+        matplotlib is not installed.
+    """
     try:
         import matplotlib
 

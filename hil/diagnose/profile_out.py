@@ -32,7 +32,20 @@ def _positive(value: float) -> float:
 
 
 def model_fields(fit: Fit) -> dict[str, Any]:
-    """``PlantParams`` fields of a fitted model (mechanics only)."""
+    """``PlantParams`` fields of a fitted model (mechanics only).
+
+    Parameters
+    ----------
+    fit : Fit
+
+    Returns
+    -------
+    dict of str to Any
+        The base fields and those of every effect in ``fit``. Friction, stiffness and
+        hysteresis are clipped at 0; with a ``two_mass`` term ``inertia_kg_m2`` is the
+        motor's; an inertia that is not positive is replaced by ``|J|`` (or 1e-9) to keep
+        the profile loadable.
+    """
     values = fit.as_dict()
     inertia = values["inertia"]
     fields: dict[str, Any] = {
@@ -87,7 +100,19 @@ def model_fields(fit: Fit) -> dict[str, Any]:
 
 
 def velocity_pi_gains(recording: Recording) -> tuple[float, float] | None:
-    """``(kp, ki)`` of ``T = kp·e + ki·∫e dt``, ``e = v_cmd − v``, when that explains T."""
+    """``(kp, ki)`` of ``T = kp·e + ki·∫e dt``, ``e = v_cmd − v``, when that explains T.
+
+    Parameters
+    ----------
+    recording : Recording
+        Its velocity command, reported velocity, effort and timestamps.
+
+    Returns
+    -------
+    (float, float) or None
+        ``kp``, ``ki`` by least squares; ``None`` without a velocity command, when they
+        explain less than 90 % of the effort's variance, or when ``kp ≤ 0`` or ``ki < 0``.
+    """
     command = recording.velocity_cmd
     if command is None:
         return None
@@ -105,7 +130,19 @@ def velocity_pi_gains(recording: Recording) -> tuple[float, float] | None:
 
 
 def data_fields(diagnosis: Diagnosis) -> dict[str, Any]:
-    """Simulator fields for the data effects measured in the recording."""
+    """Simulator fields for the data effects measured in the recording.
+
+    Parameters
+    ----------
+    diagnosis : Diagnosis
+
+    Returns
+    -------
+    dict of str to Any
+        From the data issues, when found: ``encoder_counts_per_rev``,
+        ``torque_noise_nm``, ``velocity_filter_hz`` (when finite), ``torque_limit_nm``;
+        from :func:`velocity_pi_gains`: ``velocity_kp_nm_s_rad``, ``velocity_ki_nm_rad``.
+    """
     fields: dict[str, Any] = {}
     for issue in diagnosis.issues:
         values = issue.values
@@ -125,7 +162,23 @@ def data_fields(diagnosis: Diagnosis) -> dict[str, Any]:
 
 
 def extended_plant(diagnosis: Diagnosis) -> dict[str, Any]:
-    """The ``[plant]`` table of the extended model (validated by ``plant_sim``)."""
+    """The ``[plant]`` table of the extended model (validated by ``plant_sim``).
+
+    Parameters
+    ----------
+    diagnosis : Diagnosis
+
+    Returns
+    -------
+    dict of str to Any
+        :func:`model_fields` of :attr:`Diagnosis.final` and :func:`data_fields`, as
+        ``plant_sim`` writes them.
+
+    Raises
+    ------
+    ProfileError
+        They do not make a valid plant.
+    """
     fields = model_fields(diagnosis.final)
     fields.update(data_fields(diagnosis))
     try:
@@ -135,7 +188,24 @@ def extended_plant(diagnosis: Diagnosis) -> dict[str, Any]:
 
 
 def extended_profile(diagnosis: Diagnosis) -> dict[str, Any]:
-    """A complete unit profile around :func:`extended_plant`."""
+    """A complete unit profile around :func:`extended_plant`.
+
+    Parameters
+    ----------
+    diagnosis : Diagnosis
+
+    Returns
+    -------
+    dict of str to Any
+        ``unit``, ``limits`` (1.5 × the largest recorded speed, the plant's torque limit
+        or 1.5 × the largest effort, the recorded travel widened by 5 % of its span on
+        each side), ``drive``, ``plant`` and an empty ``measurements``.
+
+    Raises
+    ------
+    ProfileError
+        The extended model is not a valid plant.
+    """
     recording = diagnosis.recording
     position = np.asarray(recording.position)
     margin = 0.05 * float(np.ptp(position)) + 1e-6
@@ -163,7 +233,24 @@ def extended_profile(diagnosis: Diagnosis) -> dict[str, Any]:
 
 
 def write_profile(diagnosis: Diagnosis, path: str | Path) -> Path:
-    """Write the extended profile as TOML; it is checked by the profile loader first."""
+    """Write the extended profile as TOML; it is checked by the profile loader first.
+
+    Parameters
+    ----------
+    diagnosis : Diagnosis
+    path : str or Path
+        Its directory is created when missing.
+
+    Returns
+    -------
+    Path
+        ``path``.
+
+    Raises
+    ------
+    ProfileError
+        The profile does not load.
+    """
     data = extended_profile(diagnosis)
     path = Path(path)
     profile_from_mapping(data, source=str(path))

@@ -19,7 +19,20 @@ FORMAT = "gimbal-hil-diagnose/1"
 
 
 def model_parameters(fit: Fit, lag_std_s: float = math.nan) -> dict[str, Any]:
-    """Every named parameter of a fitted model (base and each effect)."""
+    """Every named parameter of a fitted model (base and each effect).
+
+    Parameters
+    ----------
+    fit : Fit
+    lag_std_s : float
+        Standard deviation of the current-loop time constant, s, when known.
+
+    Returns
+    -------
+    dict of str to Any
+        The base names (``inertia_kg_m2``, ...), then ``"{effect}.{name}"`` for each
+        effect's parameters (see :func:`hil.diagnose.interpret.effect_parameters`).
+    """
     out: dict[str, Any] = {n: e.value for n, e in interpret.base_parameters(fit).items()}
     for effect in fit.model.effects:
         if effect == "base":
@@ -62,7 +75,22 @@ def _cause(rank: int, candidate: Candidate) -> dict[str, Any]:
 
 
 def report(diagnosis: Diagnosis) -> dict[str, Any]:
-    """The report as plain JSON-able data (NaN and infinities become ``null``)."""
+    """The report as plain JSON-able data (NaN and infinities become ``null``).
+
+    Parameters
+    ----------
+    diagnosis : Diagnosis
+
+    Returns
+    -------
+    dict of str to Any
+        Layout in ``docs/diagnose.md`` (format :data:`FORMAT`).
+
+    Raises
+    ------
+    ProfileError
+        The extended model is not a valid plant.
+    """
     from hil.diagnose.core import base_parameters, summary_metrics
 
     signals = diagnosis.signals
@@ -131,6 +159,23 @@ def _clean(value: Any) -> Any:
 
 
 def write_json(diagnosis: Diagnosis, path: str | Path) -> dict[str, Any]:
+    """Write :func:`report` as UTF-8 JSON to ``path`` (its directory created when missing).
+
+    Parameters
+    ----------
+    diagnosis : Diagnosis
+    path : str or Path
+
+    Returns
+    -------
+    dict of str to Any
+        The report written.
+
+    Raises
+    ------
+    ProfileError
+        The extended model is not a valid plant.
+    """
     data = report(diagnosis)
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)

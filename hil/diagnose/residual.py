@@ -35,7 +35,23 @@ def _normalised(values: FloatArray) -> FloatArray:
 
 def residual_tests(residual: FloatArray, inputs: FloatArray, *, input_name: str
                    ) -> dict[str, Any]:
-    """Autocorrelation, cross-correlation with ``inputs`` and Ljung–Box on ``residual``."""
+    """Autocorrelation, cross-correlation with ``inputs`` and Ljung–Box on ``residual``.
+
+    Parameters
+    ----------
+    residual, inputs : ndarray
+        Same length, on the analysis rows.
+    input_name : str
+        Names ``inputs`` in the result.
+
+    Returns
+    -------
+    dict of str to Any
+        ``samples``; ``bound_99``; ``autocorrelation`` (``lags`` 1..25, ``values``,
+        ``outside_bound``, ``white``); ``cross_correlation`` (``input``, ``lags``
+        −25..25, ``values``, ``outside_bound``, ``independent``); ``ljung_box``
+        (``lags``, ``q``, ``p_value``, ``white_at_1pct``).
+    """
     n = len(residual)
     e = _normalised(residual)
     u = _normalised(inputs)
@@ -72,7 +88,19 @@ def residual_tests(residual: FloatArray, inputs: FloatArray, *, input_name: str
 
 
 def binned(x: FloatArray, y: FloatArray, bins: int = BINS) -> dict[str, list[float]]:
-    """Mean and standard deviation of ``y`` in equal-width bins of ``x``."""
+    """Mean and standard deviation of ``y`` in equal-width bins of ``x``.
+
+    Parameters
+    ----------
+    x, y : ndarray
+    bins : int
+        Number of bins over ``[min(x), max(x)]``.
+
+    Returns
+    -------
+    dict of str to list
+        ``centre``, ``mean``, ``std`` (population) and ``count`` of the non-empty bins.
+    """
     edges = np.linspace(float(np.min(x)), float(np.max(x)), bins + 1)
     index = np.clip(np.digitize(x, edges) - 1, 0, bins - 1)
     count = np.bincount(index, minlength=bins).astype(np.float64)
@@ -88,7 +116,23 @@ def binned(x: FloatArray, y: FloatArray, bins: int = BINS) -> dict[str, list[flo
 
 
 def spectrum(signals: Signals, residual: FloatArray, peaks: int = 5) -> dict[str, Any]:
-    """Welch spectrum of the residual (invalid samples zeroed) and its strongest peaks."""
+    """Welch spectrum of the residual (invalid samples zeroed) and its strongest peaks.
+
+    Parameters
+    ----------
+    signals : Signals
+        Gives the sample rate, the valid samples and the band.
+    residual : ndarray
+        Over every sample of ``signals``.
+    peaks : int
+        How many local maxima to report.
+
+    Returns
+    -------
+    dict of str to Any
+        ``frequency_hz`` and ``psd`` (effort units²/Hz) up to ``signals.cutoff_hz``;
+        ``peaks_hz``: the strongest local maxima, in ascending frequency.
+    """
     values = np.where(signals.valid, residual, 0.0)
     nperseg = int(min(len(values), 2 ** int(math.log2(max(signals.fs_hz * 2, 256)))))
     freq, power = welch(values, fs=signals.fs_hz, nperseg=nperseg)
@@ -105,7 +149,24 @@ def spectrum(signals: Signals, residual: FloatArray, peaks: int = 5) -> dict[str
 
 def analyse(signals: Signals, prediction: FloatArray, *,
             velocity_cmd: FloatArray | None) -> dict[str, Any]:
-    """Residual tests, spectrum and residual against position and velocity."""
+    """Residual tests, spectrum and residual against position and velocity.
+
+    Parameters
+    ----------
+    signals : Signals
+    prediction : ndarray
+        A model's effort on every sample; the residual is ``effort_filtered`` minus it.
+    velocity_cmd : ndarray or None
+        The velocity command on the same grid: the input the residual is
+        cross-correlated with; ``None`` uses ``signals.velocity``.
+
+    Returns
+    -------
+    dict of str to Any
+        ``tests`` (:func:`residual_tests` plus ``decimation``), ``spectrum``
+        (:func:`spectrum`), ``against_position`` and ``against_velocity``
+        (:func:`binned`). Tests and bins use the valid, decimated rows.
+    """
     residual = signals.effort_filtered - prediction
     rows = signals.rows()
     if velocity_cmd is not None:

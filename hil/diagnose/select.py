@@ -69,7 +69,14 @@ DECISION_RULE = {
 
 @dataclass(frozen=True, slots=True, kw_only=True)
 class DataSet:
-    """Rows of one recording's signals."""
+    """Rows of one recording's signals.
+
+    Attributes
+    ----------
+    signals : Signals
+    rows : ndarray of intp
+        Indices into ``signals``.
+    """
 
     signals: Signals
     rows: IndexArray
@@ -77,6 +84,25 @@ class DataSet:
 
 @dataclass(frozen=True, slots=True, kw_only=True)
 class Gain:
+    """What adding an effect to the current model gains, and the tests it is judged by.
+
+    Attributes
+    ----------
+    rms_before_nm, rms_after_nm : float
+        Held-out residual RMS of the current and the extended model (N·m, or N on a
+        linear axis).
+    fit_before_pct, fit_after_pct : float
+        Held-out fit % of the current and the extended model.
+    delta_bic : float
+        ``BIC(extended) − BIC(current)`` on the training rows.
+    wald_statistic, wald_threshold : float
+        Wald statistic of the effect's key coefficients being zero (see
+        :meth:`Evaluator.candidate`; for the current-loop lag ``(τ / std(τ))²``) and its
+        χ² quantile at :data:`CONFIDENCE`.
+    plausible : bool
+        The fit is within the effect's physical constraints (see :func:`plausible`).
+    """
+
     rms_before_nm: float
     rms_after_nm: float
     fit_before_pct: float
@@ -88,14 +114,17 @@ class Gain:
 
     @property
     def rms_reduction(self) -> float:
+        """``1 − rms_after_nm / rms_before_nm`` (0 when ``rms_before_nm`` is 0)."""
         return 1.0 - self.rms_after_nm / self.rms_before_nm if self.rms_before_nm > 0 else 0.0
 
     @property
     def confident(self) -> bool:
+        """The Wald statistic exceeds its threshold: the new parameters are not zero."""
         return self.wald_statistic > self.wald_threshold
 
     @property
     def significant(self) -> bool:
+        """Plausible, and all three tests of the decision rule hold (module docstring)."""
         return (
             self.plausible
             and self.delta_bic <= DELTA_BIC_MAX
@@ -106,6 +135,21 @@ class Gain:
 
 @dataclass(frozen=True, slots=True, kw_only=True)
 class Candidate:
+    """An effect proposed on top of the current model, fitted and judged.
+
+    Attributes
+    ----------
+    effect : str
+    fit : Fit
+        The extended model on the training rows.
+    gain : Gain
+        Against the model it extends.
+    added_params : int
+        Growth of :attr:`Model.n_params`, at least 1.
+    lag_std_s : float
+        Standard deviation of the current-loop time constant, s (NaN for other effects).
+    """
+
     effect: str
     fit: Fit  # on the training rows
     gain: Gain
@@ -115,17 +159,41 @@ class Candidate:
 
 @dataclass(frozen=True, slots=True, kw_only=True)
 class Selection:
+    """The outcome of :func:`select`.
+
+    Attributes
+    ----------
+    base : Fit
+        The base model on the training rows, with the effort's lead applied.
+    accepted : tuple of Candidate
+        The causes, ranked, each gain measured against the model with the causes before
+        it.
+    rounds : tuple of tuple of Candidate
+        Every candidate evaluated, per round (before pruning).
+    """
+
     base: Fit
     accepted: tuple[Candidate, ...]
     rounds: tuple[tuple[Candidate, ...], ...]  # every candidate evaluated, per round
 
     @property
     def final(self) -> Fit:
+        """The last cause's fit, or :attr:`base` when none was accepted."""
         return self.accepted[-1].fit if self.accepted else self.base
 
 
 class Evaluator:
-    """Fits on the training set, scores on the held-out set."""
+    """Fits on the training set, scores on the held-out set.
+
+    Parameters
+    ----------
+    designer : Designer
+    train, test : DataSet
+        The rows to fit on and the held-out rows.
+    counts_per_rev : int or None
+        Encoder counts per revolution, when the position is quantised (bounds the
+        harmonic orders searched).
+    """
 
     def __init__(self, designer: Designer, train: DataSet, test: DataSet,
                  counts_per_rev: int | None) -> None:
@@ -136,16 +204,45 @@ class Evaluator:
         self.band_hz = TWO_MASS_BAND * train.signals.cutoff_hz
 
     def fit(self, model: Model) -> Fit:
+        """``model`` fitted on the training rows (see :meth:`Designer.fit`).
+
+        Raises
+        ------
+        IdentificationError
+            No more training rows than coefficients.
+        """
         return self.designer.fit(model, self.train.signals, self.train.rows)
 
     def heldout(self, fit: Fit) -> tuple[float, float]:
-        """Residual RMS and fit % on the held-out rows."""
+        """Residual RMS and fit % on the held-out rows.
+
+        Parameters
+        ----------
+        fit : Fit
+
+        Returns
+        -------
+        rms_nm, fit_pct : float
+            RMS of filtered effort minus prediction (N·m, or N on a linear axis) and
+            :func:`hil.diagnose.model.fit_percent` (%).
+        """
         target = self.test.signals.effort_filtered[self.test.rows]
         prediction = self.designer.predict(fit, self.test.signals)[self.test.rows]
         return rms(target - prediction), fit_percent(target, prediction)
 
     def lag_std(self, fit: Fit) -> float:
-        """Gauss–Newton standard deviation of the current-loop time constant."""
+        """Gauss–Newton standard deviation of the current-loop time constant.
+
+        Parameters
+        ----------
+        fit : Fit
+            A model with a current-loop lag, on the training rows.
+
+        Returns
+        -------
+        float
+            In s; infinite when the Gauss–Newton normal matrix is singular.
+        """
         signals, rows = self.train.signals, self.train.rows
         matrix = self.designer.design(fit.model, signals, rows)
         lead = self.designer.lead(fit.model, signals, rows)
@@ -159,6 +256,23 @@ class Evaluator:
         return float(math.sqrt(max(fit.sigma2 * inverse[-1, -1], 0.0)) / scale[-1])
 
     def candidate(self, effect: str, model: Model, current: Fit) -> Candidate:
+        """Fit ``model`` and judge what ``effect`` gains over ``current``.
+
+        Parameters
+        ----------
+        effect : str
+            The effect ``model`` adds.
+        model : Model
+            ``current``'s model extended with ``effect``.
+        current : Fit
+            The model it extends, on the training rows.
+
+        Returns
+        -------
+        Candidate
+            The Wald test is on :data:`KEY_LABELS` of ``effect`` (else on the labels
+            ``model`` adds); for ``current_lag`` on τ with :meth:`lag_std`.
+        """
         fit = self.fit(model)
         rms_before, fit_before = self.heldout(current)
         rms_after, fit_after = self.heldout(fit)
@@ -187,7 +301,26 @@ class Evaluator:
 
 
 def plausible(effect: str, fit: Fit, fs_hz: float, band_hz: float) -> bool:
-    """Physical sign constraints: a fit outside them describes something else."""
+    """Physical sign constraints: a fit outside them describes something else.
+
+    Parameters
+    ----------
+    effect : str
+    fit : Fit
+        The model extended with ``effect``.
+    fs_hz : float
+        Sample rate.
+    band_hz : float
+        Highest resonance that counts as resolved.
+
+    Returns
+    -------
+    bool
+        ``stribeck``: static friction above Coulomb. ``two_mass``: a load between
+        :data:`MIN_LOAD_FRACTION` of the inertia and all of it, and a resonance at most
+        ``band_hz``. ``cable_spring``: positive stiffness and non-negative hysteresis.
+        ``current_lag``: τ at least :data:`MIN_LAG_SAMPLES` sample periods. Else True.
+    """
     values = fit.as_dict()
     if effect == "stribeck":
         return values["stribeck_delta"] > 0  # static friction above Coulomb
@@ -208,12 +341,36 @@ def plausible(effect: str, fit: Fit, fs_hz: float, band_hz: float) -> bool:
 
 
 def chi2_quantile(probability: float, dof: int) -> float:
-    """Quantile of the χ² distribution (``scipy.stats.chi2.ppf`` without its import cost)."""
+    """Quantile of the χ² distribution (``scipy.stats.chi2.ppf`` without its import cost).
+
+    Parameters
+    ----------
+    probability : float
+    dof : int
+        Degrees of freedom.
+
+    Returns
+    -------
+    float
+    """
     return float(chdtri(dof, 1.0 - probability))
 
 
 def wald(fit: Fit, labels: tuple[str, ...]) -> tuple[float, float]:
-    """Wald statistic of ``labels`` being zero and its χ² threshold at :data:`CONFIDENCE`."""
+    """Wald statistic of ``labels`` being zero and its χ² threshold at :data:`CONFIDENCE`.
+
+    Parameters
+    ----------
+    fit : Fit
+    labels : tuple of str
+        Coefficients tested jointly.
+
+    Returns
+    -------
+    statistic, threshold : float
+        ``cᵀC⁻¹c`` (0 when the covariance is not finite or singular) and the χ² quantile
+        with ``len(labels)`` degrees of freedom.
+    """
     values, covariance = fit.block(labels)
     threshold = chi2_quantile(CONFIDENCE, len(labels))
     if not np.all(np.isfinite(covariance)):
@@ -232,6 +389,27 @@ def select(evaluator: Evaluator, base_model: Model, *,
     ``hold_samples`` is the time, in sample periods, by which the effort leads the motion
     it causes (0.5 for a drive that holds each torque sample over the following period);
     ``None`` estimates it within ±1 sample (it is then confounded with a current lag).
+
+    Parameters
+    ----------
+    evaluator : Evaluator
+        The training and held-out data.
+    base_model : Model
+        The model every cause extends.
+    effects : tuple of str
+        The effects proposed (default :data:`hil.diagnose.effects.EFFECTS`).
+    hold_samples : float or None
+        The effort's lead, in sample periods, or ``None`` to search it.
+
+    Returns
+    -------
+    Selection
+        At most :data:`MAX_CAUSES` causes, pruned by :func:`prune`.
+
+    Raises
+    ------
+    IdentificationError
+        No more training rows than coefficients.
     """
     if hold_samples is None:
         ctx = Context(designer=evaluator.designer, signals=evaluator.train.signals,
@@ -284,6 +462,20 @@ def prune(evaluator: Evaluator, base: Fit,
     confidence region includes zero); the held-out test is not repeated here, so a cause
     whose gain was shown when it was accepted stays. The survivors' gains are measured
     again, in order, each against the model with the causes before it.
+
+    Parameters
+    ----------
+    evaluator : Evaluator
+    base : Fit
+        The base fit the first cause extends.
+    accepted : tuple of Candidate
+        The causes in the order accepted.
+
+    Returns
+    -------
+    tuple of Candidate
+        ``accepted`` itself when no cause is dropped, else the survivors with their gains
+        measured again.
     """
     kept = list(accepted)
     changed = True

@@ -45,17 +45,43 @@ class Signals:
 
     Attributes
     ----------
-    time_s : uniform sample times, s.
-    position : measured position (interpolated when resampled), rad or m.
-    velocity, acceleration : zero-phase derivatives of position (rad/s, rad/s² or m/s, m/s²).
-    velocity_slow : velocity smoothed further, for friction switching (sgn, Stribeck).
-    effort : measured torque (N·m) or force (N).
-    effort_filtered : ``effort`` through the same zero-phase low-pass as position; fits
-        compare it with regressors filtered alike ("parallel filtering"), so the filter's
-        passband droop does not bias inertia.
-    velocity_reported : the drive's velocity column on the same grid.
-    valid : samples allowed in fits and metrics.
-    segments : ``(start, stop)`` index ranges without gaps (filters run per segment).
+    source : str
+        The recording's source.
+    axis_kind : {"rotary", "linear"}
+    fs_hz : float
+        Sample rate of the grid: the inverse of the median sample period.
+    cutoff_hz : float
+        Bandwidth of the zero-phase low-pass behind every derivative and regressor.
+    time_s : ndarray
+        Uniform sample times, s.
+    position : ndarray
+        Measured position (interpolated when resampled), rad or m.
+    velocity, acceleration : ndarray
+        Zero-phase derivatives of position (rad/s, rad/s² or m/s, m/s²).
+    velocity_slow : ndarray
+        Velocity smoothed further: the derivative of position low-passed at
+        ``cutoff_hz / 8``.
+    effort : ndarray
+        Measured torque (N·m) or force (N).
+    effort_filtered : ndarray
+        ``effort`` through the same zero-phase low-pass as position; fits compare it with
+        regressors filtered alike ("parallel filtering"), so the filter's passband droop
+        does not bias inertia.
+    velocity_reported : ndarray
+        The drive's velocity column on the same grid.
+    valid : ndarray of bool
+        Samples allowed in fits and metrics.
+    segments : tuple of (int, int)
+        ``(start, stop)`` index ranges without gaps (filters run per segment).
+    resampled : bool
+        The timestamps were irregular or had gaps, so every column was interpolated onto
+        the grid.
+    gap_count : int
+        Gaps longer than :data:`hil.recording.GAP_FACTOR` median sample periods.
+    saturated_count : int
+        Samples of the recording (before resampling) at the effort clip value.
+    saturation_level : float
+        Largest ``|effort|`` among the saturated grid samples; 0 when there are none.
     """
 
     source: str
@@ -91,7 +117,18 @@ class Signals:
         return max(1, int(self.fs_hz / (2.5 * self.cutoff_hz)))
 
     def rows(self, mask: BoolArray | None = None) -> NDArray[np.intp]:
-        """Valid (and ``mask``) sample indices, decimated by :attr:`decimation`."""
+        """Valid (and ``mask``) sample indices, decimated by :attr:`decimation`.
+
+        Parameters
+        ----------
+        mask : ndarray of bool, optional
+            Samples to keep besides :attr:`valid`, ``len(self)`` long.
+
+        Returns
+        -------
+        ndarray of intp
+            Indices that are valid, in ``mask`` and multiples of :attr:`decimation`.
+        """
         keep = self.valid.copy()
         if mask is not None:
             keep &= mask
@@ -99,12 +136,35 @@ class Signals:
         return np.flatnonzero(keep)
 
     def lowpass(self, values: FloatArray) -> FloatArray:
-        """Zero-phase low-pass of ``values`` at :attr:`cutoff_hz`, segment by segment."""
+        """Zero-phase low-pass of ``values`` at :attr:`cutoff_hz`, segment by segment.
+
+        Parameters
+        ----------
+        values : ndarray
+            A column on this grid.
+
+        Returns
+        -------
+        ndarray
+            See :func:`zero_phase_lowpass`.
+        """
         return zero_phase_lowpass(values, fs_hz=self.fs_hz, cutoff_hz=self.cutoff_hz,
                                   segments=self.segments)
 
     def derivative(self, values: FloatArray) -> FloatArray:
-        """Five-point central-difference time derivative (zero phase), per segment."""
+        """Five-point central-difference time derivative (zero phase), per segment.
+
+        Parameters
+        ----------
+        values : ndarray
+            A column on this grid.
+
+        Returns
+        -------
+        ndarray
+            ``d(values)/dt`` (per second); two-point differences at a segment's first and
+            last two samples, 0 outside every segment.
+        """
         out = np.zeros_like(values)
         for start, stop in self.segments:
             out[start:stop] = _first_derivative(values[start:stop], 1.0 / self.fs_hz)
@@ -118,7 +178,25 @@ def zero_phase_lowpass(
     cutoff_hz: float,
     segments: tuple[tuple[int, int], ...],
 ) -> FloatArray:
-    """4th-order Butterworth applied forward and backward (no phase), per segment."""
+    """4th-order Butterworth applied forward and backward (no phase), per segment.
+
+    Parameters
+    ----------
+    values : ndarray
+        The column to filter.
+    fs_hz : float
+        Its sample rate.
+    cutoff_hz : float
+        Cutoff of the 2nd-order Butterworth run in each direction.
+    segments : tuple of (int, int)
+        ``(start, stop)`` index ranges filtered separately.
+
+    Returns
+    -------
+    ndarray
+        A filtered copy of ``values``; segments of 30 samples or fewer, and samples
+        outside every segment, are copied unfiltered.
+    """
     sos = butter(2, cutoff_hz, fs=fs_hz, output="sos")  # doubled by filtfilt: 4th order
     out = np.array(values, dtype=np.float64, copy=True)
     for start, stop in segments:
@@ -132,13 +210,24 @@ def prepare(recording: Recording, *, cutoff_hz: float | None = None) -> Signals:
 
     Parameters
     ----------
-    recording : the measured log.
-    cutoff_hz : derivative bandwidth in Hz; default ``fs/8`` (fs: median sample rate).
+    recording : Recording
+        The measured log.
+    cutoff_hz : float, optional
+        Derivative bandwidth in Hz; default ``fs/8`` (fs: median sample rate).
+
+    Returns
+    -------
+    Signals
+        On the recording's own timestamps, or on a uniform grid at the median sample
+        period when they are irregular or have gaps. Invalid: samples in a gap, within
+        two samples of a saturated one, and within ``max(3, ⌈2·fs/cutoff_hz⌉)`` samples
+        of a segment's ends.
 
     Raises
     ------
     IdentificationError
-        When fewer than 200 usable samples remain.
+        When ``cutoff_hz`` is not in ``(0, fs/2)``, or fewer than 200 usable samples
+        remain.
     """
     time_raw = np.asarray(recording.time_s, dtype=np.float64)
     steps = np.diff(time_raw)
