@@ -21,7 +21,7 @@ import pytest
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
 
-from coverage_population import (  # noqa: E402
+from coverage_population import (
     NO_TRUTH,
     Row,
     Summary,
