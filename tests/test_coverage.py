@@ -40,8 +40,11 @@ RMS_RANGE = (0.5, 2.0)
 pytestmark = pytest.mark.slow
 
 
+Population = tuple[list[Row], dict[str, list[float]]]
+
+
 @pytest.fixture(scope="module")
-def population(tmp_path_factory: pytest.TempPathFactory) -> tuple[list[Row], dict[str, list[float]]]:
+def population(tmp_path_factory: pytest.TempPathFactory) -> Population:
     directory = tmp_path_factory.mktemp("coverage")
     units = write_population(directory / "units", units_per_profile=UNITS_PER_PROFILE,
                              seed=POPULATION_SEED)
@@ -69,13 +72,13 @@ def pooled(rows: list[Row]) -> dict[str, Summary]:
 
 
 def test_every_unit_was_calibrated(
-    population: tuple[list[Row], dict[str, list[float]]],
+    population: Population,
 ) -> None:
     rows, _ = population
     assert len({r.unit for r in rows}) == 2 * UNITS_PER_PROFILE
 
 
-def test_intervals_cover_the_truth(population: tuple[list[Row], dict[str, list[float]]]) -> None:
+def test_intervals_cover_the_truth(population: Population) -> None:
     rows, _ = population
     summaries = pooled(rows)
     assert len(summaries) >= 20
@@ -88,7 +91,7 @@ def test_intervals_cover_the_truth(population: tuple[list[Row], dict[str, list[f
 
 
 def test_results_without_a_truth_repeat_within_their_uncertainty(
-    population: tuple[list[Row], dict[str, list[float]]],
+    population: Population,
 ) -> None:
     _, paired = population
     for name in NO_TRUTH:
