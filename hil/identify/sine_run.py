@@ -79,7 +79,8 @@ class SineRun:
     time_s : array
         Sample times from the recording's first sample (s).
     velocity_rad_s, acceleration_rad_s2 : array
-        Phase-free ω (rad/s) and α (rad/s²), taken where each row's torque acts.
+        Phase-free ω (rad/s) and α (rad/s²), taken ``hold_samples`` after each row
+        (where its torque acts).
     torque_nm : array
         The reported torque (N·m).
     period : array of int
