@@ -46,6 +46,20 @@ COMPENSATION_FORMAT = "gimbal-hil cogging compensation 1"
 
 @dataclass(frozen=True, slots=True, kw_only=True)
 class HarmonicEstimate:
+    """One position harmonic ``A·sin(n·θ + φ)`` of cogging or K_t ripple.
+
+    Attributes
+    ----------
+    order : int
+        ``n``, cycles per revolution of the motor position θ.
+    amplitude : float
+        ``A``: N·m for cogging, relative (a fraction of K_t) for K_t ripple.
+    phase_rad : float
+        ``φ``, with θ the motor position (rad, encoder zero).
+    amplitude_u : float
+        Standard uncertainty of ``amplitude``, in its unit.
+    """
+
     order: int
     amplitude: float  # N·m for cogging, relative for K_t ripple
     phase_rad: float
@@ -54,6 +68,27 @@ class HarmonicEstimate:
 
 @dataclass(frozen=True, slots=True, kw_only=True)
 class CoggingResult:
+    """Cogging and K_t ripple separated by two constant-velocity passes.
+
+    Attributes
+    ----------
+    cogging : tuple of HarmonicEstimate
+        Cogging harmonics (N·m), one per order found.
+    kt_ripple : tuple of HarmonicEstimate
+        K_t ripple harmonics (relative) at the same orders.
+    cogging_peak : Estimate
+        ``cogging_peak_nm``: the largest cogging amplitude (N·m).
+    kt_ripple_peak : Estimate
+        ``kt_ripple_peak_pct``: the largest K_t ripple amplitude (%).
+    torque_levels_nm : tuple of float
+        Mean smooth torque of each pass, in the order of the passes (N·m).
+    noise_rms_nm : float
+        Residual torque RMS of the noisier pass, at least the torque's quantisation
+        ``LSB/√12`` (N·m).
+    orders_scanned : tuple of int
+        ``(min_order, max_order)`` of the order scan.
+    """
+
     cogging: tuple[HarmonicEstimate, ...]
     kt_ripple: tuple[HarmonicEstimate, ...]
     cogging_peak: Estimate  # largest cogging harmonic, N·m
@@ -184,8 +219,9 @@ def identify_cogging(
     Raises
     ------
     IdentificationError
-        Not two passes, torque levels too close to separate ripple from cogging, or no
-        harmonic above the noise.
+        Not two passes, torque levels too close to separate ripple from cogging, no
+        harmonic above the noise, or a cogging amplitude below an undithered torque
+        resolution (:func:`check_resolution`).
     """
     if len(passes) != 2:
         raise IdentificationError(f"need two passes at different torque levels, got {len(passes)}")
@@ -266,8 +302,21 @@ def identify_cogging(
 
 
 def compensation_table(result: CoggingResult, *, significance: float = 3.0) -> dict[str, object]:
-    """The documented JSON compensation table (harmonics at least ``significance`` standard
-    uncertainties above zero)."""
+    """The documented JSON compensation table (module docstring).
+
+    Parameters
+    ----------
+    result : CoggingResult
+        The identified harmonics.
+    significance : float
+        A harmonic is kept when its amplitude exceeds this many standard uncertainties.
+
+    Returns
+    -------
+    dict
+        ``format``, ``model``, ``angle``, and the kept ``cogging`` (N·m) and ``kt_ripple``
+        (relative) harmonics as lists of dicts, ready for ``json.dump``.
+    """
     return {
         "format": COMPENSATION_FORMAT,
         "model": "T_ff(θ) = Σ cogging A_n·sin(n·θ + φ_n);  "

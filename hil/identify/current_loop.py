@@ -79,8 +79,20 @@ TREND_ORDER = 1  # constant + linear (the carrier) with each block's sine: highe
 
 @dataclass(frozen=True, slots=True, kw_only=True)
 class TorqueHold:
-    """How the drive holds the torque it reports: over ``hold_s`` per sample, each reported
-    value the mean of ``mean_samples`` such held samples (1: a point sample)."""
+    """How the drive holds the torque it reports.
+
+    Attributes
+    ----------
+    hold_s : float
+        Period over which the drive holds each torque sample (s): its control period.
+    mean_samples : int
+        Each reported value is the mean of this many held samples (1: a point sample).
+
+    Raises
+    ------
+    ValueError
+        ``mean_samples`` below 1.
+    """
 
     hold_s: float
     mean_samples: int = 1
@@ -91,8 +103,7 @@ class TorqueHold:
 
 
 def torque_hold_s(metadata: Mapping[str, str], *, fs_hz: float) -> TorqueHold:
-    """The period over which the drive held each reported torque sample (s), and how many
-    such samples each reported value is the mean of (``TorqueHold.mean_samples``).
+    """How the drive held the torque a recording reports (module docstring, "Which hold").
 
     Recordings that do not describe their torque sampling (``torque_sample`` absent: the
     simulator, CSV files) hold it over their own sample period ``1/fs_hz``. A decimated
@@ -102,10 +113,27 @@ def torque_hold_s(metadata: Mapping[str, str], *, fs_hz: float) -> TorqueHold:
     sample period (``torque_mean_period_s``, if stated, must be it) of the torque held per
     control period; ``mean_samples = T_s/T_c``.
 
+    Parameters
+    ----------
+    metadata : mapping of str to str
+        The recording's metadata: ``torque_sample``, ``torque_mean_period_s``,
+        ``control_period_s``, ``command_interpolation``.
+    fs_hz : float
+        The recording's sample rate (Hz).
+
+    Returns
+    -------
+    TorqueHold
+        The period over which the drive held each reported torque sample (s), and how many
+        such samples each reported value is the mean of.
+
     Raises
     ------
     IdentificationError
-        The metadata does not say what is needed, or states a sampling that biases τ.
+        The metadata does not say what is needed, or states a sampling that biases τ: a
+        sampling other than ``"instantaneous"`` or ``"mean"``, a mean over other than the
+        sample period, no ``control_period_s``, a sample period that is not a whole number
+        of control periods, or decimation without linear command interpolation.
     """
     sample_s = 1.0 / fs_hz
     if "torque_sample" not in metadata:
@@ -161,14 +189,20 @@ def sampled_response(
 
     Parameters
     ----------
-    frequency_hz
+    frequency_hz : float or array
         Excitation frequencies (Hz), below ``fs_hz/2``.
-    fs_hz
+    fs_hz : float
         Sample rate of the drive (Hz): the hold period is ``1/fs_hz``.
-    inertia_kg_m2, viscous_over_inertia_1_s, time_constant_s
+    inertia_kg_m2, viscous_over_inertia_1_s, time_constant_s : float
         J (kg·m²), B/J (1/s) and the current-loop time constant τ (s).
-    mean_samples
+    mean_samples : int
         N: each reported torque is the mean of the last N samples held over ``1/fs_hz``.
+
+    Returns
+    -------
+    ndarray of complex, shape (len(frequency_hz),)
+        ``G_d`` (rad/N·m) at each frequency, ``IMAGES`` aliases summed on each side; one
+        element for a scalar ``frequency_hz``.
     """
     omega = 2 * math.pi * np.atleast_1d(np.asarray(frequency_hz, dtype=np.float64))
     step_s = 1.0 / fs_hz
@@ -184,8 +218,21 @@ def sampled_response(
 
 
 def boxcar(omega_step: FloatArray, n: int) -> ComplexArray:
-    """``B = (1/n)·Σ_{i<n} e^{−j·i·ωT}`` at ``omega_step = ωT``: the mean of the last n
-    samples of a sampled sine, relative to the newest (delay ``(n−1)T/2``)."""
+    """``B = (1/n)·Σ_{i<n} e^{−j·i·ωT}``: the mean of the last n samples of a sampled sine,
+    relative to the newest (delay ``(n−1)T/2``).
+
+    Parameters
+    ----------
+    omega_step : array
+        ``ωT``: angular frequency times the sample period (rad).
+    n : int
+        Samples averaged.
+
+    Returns
+    -------
+    ndarray of complex
+        ``B`` at each ``ωT`` (at least one-dimensional).
+    """
     i = np.arange(n)
     terms = np.exp(-1j * np.multiply.outer(np.atleast_1d(omega_step), i))
     return np.asarray(terms.mean(axis=-1), dtype=np.complex128)
@@ -193,7 +240,25 @@ def boxcar(omega_step: FloatArray, n: int) -> ComplexArray:
 
 @dataclass(frozen=True, slots=True, kw_only=True)
 class FrequencyPoint:
-    """One frequency: the measured sampled response and the phase the current loop adds."""
+    """One frequency: the measured sampled response and the phase the current loop adds.
+
+    Attributes
+    ----------
+    frequency_hz : float
+        The sine's frequency (Hz).
+    response_rad_nm : complex
+        Position over reported torque (rad/N·m), H1 over the blocks: ``Σ P·T* / Σ |T|²``.
+    lag_phase_rad : float
+        Phase of the response relative to the rigid, lag-free sampled model (rad; < 0: lag).
+    lag_phase_u_rad : float
+        Its standard uncertainty from the scatter of the block phases (rad).
+    inertia_kg_m2 : float
+        J from the magnitude against the rigid, lag-free model (kg·m²).
+    torque_amplitude_nm : float
+        Mean torque amplitude over the blocks (N·m).
+    blocks : int
+        Blocks of whole periods used.
+    """
 
     frequency_hz: float
     response_rad_nm: complex  # H1 over the blocks: Σ P·T* / Σ |T|²
@@ -206,6 +271,22 @@ class FrequencyPoint:
 
 @dataclass(frozen=True, slots=True, kw_only=True)
 class CurrentLoopResult:
+    """Current-loop time constant τ and B/J fitted to the lag phases.
+
+    Attributes
+    ----------
+    points : tuple of FrequencyPoint
+        The frequencies fitted.
+    time_constant : Estimate
+        ``current_loop_time_constant_ms``: τ (ms).
+    viscous_over_inertia_1_s : float
+        The fitted B/J (1/s).
+    inertia_kg_m2 : float
+        Median J from the magnitudes against the fitted model (kg·m²; informational).
+    chi2_per_dof : float
+        χ² of the phase fit per degree of freedom (frequencies − 2).
+    """
+
     points: tuple[FrequencyPoint, ...]
     time_constant: Estimate  # current_loop_time_constant_ms
     viscous_over_inertia_1_s: float
@@ -216,7 +297,23 @@ class CurrentLoopResult:
 def block_phasors(
     time_s: FloatArray, signals: Sequence[FloatArray], *, omega: float
 ) -> list[complex]:
-    """Complex amplitude ``c − j·s`` of each signal at ``omega`` (plus a polynomial trend)."""
+    """Complex amplitude of each signal at ``omega``, fitted with a polynomial trend.
+
+    Parameters
+    ----------
+    time_s : array
+        Sample times of the block (s).
+    signals : sequence of array
+        Signals sampled at ``time_s``.
+    omega : float
+        Angular frequency (rad/s).
+
+    Returns
+    -------
+    list of complex
+        ``c − j·s`` per signal, with ``c`` and ``s`` its amplitudes along ``cos(ω·t)`` and
+        ``sin(ω·t)`` (a constant and a linear trend fitted alongside).
+    """
     centred = time_s - time_s.mean()
     scale = max(float(np.ptp(centred)), 1e-12)
     fit = fit_harmonics(
@@ -249,12 +346,24 @@ def analyse_frequency(
     fs_hz
         The recording's sample rate (Hz).
     blocks
-        Number of blocks of whole periods the segment is cut into (≥ 2).
+        Number of blocks of whole periods the segment is cut into (≥ 2; at most one per
+        whole period).
     hold_s
         The period over which the drive held each reported torque (s): :func:`torque_hold_s`;
         ``None``: ``1/fs_hz``.
     mean_samples
         Each reported torque is the mean of this many held samples (:func:`torque_hold_s`).
+
+    Returns
+    -------
+    FrequencyPoint
+        The H1 response, the lag phase with its block-scatter uncertainty, J from the
+        magnitude, the torque amplitude and the number of blocks.
+
+    Raises
+    ------
+    IdentificationError
+        Fewer than two whole periods, or a block without torque at the frequency.
     """
     hold_fs_hz = fs_hz if hold_s is None else 1.0 / hold_s
     n_mean = mean_samples
@@ -308,11 +417,27 @@ def fit_current_loop_lag(
     hold_s: float | None = None,
     mean_samples: int = 1,
 ) -> CurrentLoopResult:
-    """Weighted least-squares fit of τ and B/J to the lag phases of ``points`` (≥ 3).
+    """Weighted least-squares fit of τ and B/J to the lag phases of ``points``.
 
-    ``fs_hz``, ``hold_s`` and ``mean_samples`` as for :func:`analyse_frequency` (the same
-    values).
-    Returns τ as ``current_loop_time_constant_ms`` (Estimate in ms).
+    Parameters
+    ----------
+    points : sequence of FrequencyPoint
+        At least three frequencies (:func:`analyse_frequency`).
+    fs_hz, hold_s, mean_samples
+        As for :func:`analyse_frequency` (the same values).
+
+    Returns
+    -------
+    CurrentLoopResult
+        τ as ``current_loop_time_constant_ms`` (Estimate in ms; its uncertainty scaled by
+        ``√(χ²/ν)`` when above one, with ``ν`` degrees of freedom then, else those of the
+        block scatter), B/J, J from the magnitudes and χ²/ν.
+
+    Raises
+    ------
+    IdentificationError
+        Fewer than three points, the fit did not converge, or τ and B/J are not separable
+        over the frequencies.
     """
     n_mean = mean_samples
     fs_hz = fs_hz if hold_s is None else 1.0 / hold_s  # the model only needs the hold

@@ -45,6 +45,13 @@ class SweepPlan:
     ``up`` and ``down``: the full-travel passes. Then a fast ``rewind`` back up (slowing to
     the probe speed for its last quarter probe length) and the slow downward ``probe``,
     whose hysteresis is in transient while ``down`` at the same positions had long settled.
+
+    Attributes
+    ----------
+    command_rad_s : array
+        Velocity command (rad/s), one value per sample.
+    up, down, probe : tuple of int
+        ``(start, stop)`` sample indices of each pass, ``stop`` exclusive.
     """
 
     command_rad_s: FloatArray
@@ -60,7 +67,33 @@ def sweep_plan(
     """``start → stop → start`` at ``speed_rad_s`` (``start < stop``), back up to
     ``stop − probe_rad`` at ``rewind_speed_rad_s`` and down again over ``probe_rad`` at
     ``probe_speed_rad_s`` (slow, so the loop settles within a small part of the transient;
-    the friction's change with speed is a constant the hysteresis fit absorbs)."""
+    the friction's change with speed is a constant the hysteresis fit absorbs).
+
+    Parameters
+    ----------
+    start_rad, stop_rad : float
+        Ends of the sweep (rad), ``start < stop``.
+    speed_rad_s : float
+        Speed of the full-travel passes (rad/s).
+    rewind_speed_rad_s : float
+        Speed of the rewind (rad/s).
+    probe_rad : float
+        Length of the probe pass (rad).
+    probe_speed_rad_s : float
+        Speed of the probe pass and of the approach before it (rad/s).
+    fs_hz : float
+        Command sample rate (Hz).
+
+    Returns
+    -------
+    SweepPlan
+        The velocity command and the sample ranges of its passes.
+
+    Raises
+    ------
+    IdentificationError
+        ``stop_rad − start_rad`` not more than three probe lengths.
+    """
     if not stop_rad - start_rad > 3 * probe_rad:
         raise IdentificationError("sweep must be longer than three probe lengths")
     n = round((stop_rad - start_rad) / speed_rad_s * fs_hz)
@@ -79,6 +112,38 @@ def sweep_plan(
 
 @dataclass(frozen=True, slots=True, kw_only=True)
 class GravityCableResult:
+    """Gravity unbalance, cable stiffness and hysteresis from a two-way sweep.
+
+    Attributes
+    ----------
+    mge : Estimate
+        ``gravity_mge_nm``: m·g·e (N·m).
+    phase : Estimate
+        ``gravity_phase_rad``: φ in ``m·g·e·cos(θ + φ)`` (rad).
+    stiffness : Estimate
+        ``cable_stiffness_nm_rad``: k_cable (N·m/rad).
+    offset_nm : float
+        The load's constant ``c`` (N·m).
+    hysteresis : Estimate
+        ``cable_hysteresis_nm``: h, the half width of the cable's loop (N·m).
+    hysteresis_angle_rad : float
+        s₀, the travel over which the hysteresis turns over (rad).
+    friction_nm : float
+        Sliding friction at the sweep speed, loop half width − h (N·m).
+    loop_half_width_nm : float
+        F + h: the mean half difference of the passes over the bins (N·m).
+    bins : int
+        Position bins both passes covered (the load fit's points).
+    residual_rms_nm : float
+        RMS residual of the load fit (N·m).
+    bin_centres_rad : array
+        Centre of each of those bins (rad).
+    load_nm : array
+        Half sum of the passes per bin (N·m).
+    half_difference_nm : array
+        Half difference of the passes per bin, F + hysteresis (N·m).
+    """
+
     mge: Estimate  # N·m
     phase: Estimate  # rad
     stiffness: Estimate  # N·m/rad
@@ -96,7 +161,17 @@ class GravityCableResult:
 
 @dataclass(frozen=True, slots=True, kw_only=True)
 class CableLoop:
-    """The cable's Dahl hysteresis as ``gravity_cable`` measured it."""
+    """The cable's Dahl hysteresis as ``gravity_cable`` measured it.
+
+    Attributes
+    ----------
+    half_width_nm : float
+        h, the loop's half width (N·m).
+    half_width_u_nm : float
+        Standard uncertainty of h (N·m).
+    angle_rad : float
+        s₀, the travel over which the loop turns over (rad).
+    """
 
     half_width_nm: float
     half_width_u_nm: float
@@ -109,7 +184,22 @@ def cable_loop_torque_nm(
 ) -> FloatArray:
     """The cable's hysteresis torque along a measured path: the Dahl loop this module fits,
     ``dT/ds = (h·sgn(ds) − T)/s₀`` over the travel ``s``, solved exactly per step from a
-    relaxed (zero) state."""
+    relaxed (zero) state.
+
+    Parameters
+    ----------
+    position_rad : array
+        The path (rad), in sample order.
+    half_width_nm : float
+        h (N·m).
+    angle_rad : float
+        s₀ (rad, > 0).
+
+    Returns
+    -------
+    ndarray
+        The hysteresis torque at each sample (N·m).
+    """
     steps = np.diff(position_rad, prepend=position_rad[0])
     target = half_width_nm * np.sign(steps)
     decay = np.exp(-np.abs(steps) / angle_rad)
@@ -125,7 +215,21 @@ def load_stiffness(
     *, mge: Estimate, phase: Estimate, cable_stiffness: Estimate, position_rad: float
 ) -> Estimate:
     """``K = dL/dθ = k_cable − m·g·e·sin(θ + φ)`` at ``position_rad``: the spring rate the
-    load adds to small motions there (first-order propagation, independent inputs)."""
+    load adds to small motions there.
+
+    Parameters
+    ----------
+    mge, phase, cable_stiffness : Estimate
+        m·g·e (N·m), φ (rad) and k_cable (N·m/rad) of a :class:`GravityCableResult`.
+    position_rad : float
+        The position θ (rad).
+
+    Returns
+    -------
+    Estimate
+        ``load_stiffness_nm_rad`` (N·m/rad), first-order propagation with the inputs taken
+        as independent.
+    """
     angle = position_rad + phase.value
     weights = [1.0, -math.sin(angle), -mge.value * math.cos(angle)]
     _, u, dof = combine_linear(
@@ -144,7 +248,20 @@ def load_stiffness(
 
 
 def eccentricity_mm(mge: Estimate, *, mass_kg: float) -> Estimate:
-    """Centre-of-mass offset ``e = m·g·e / (m·g)`` in mm (mass taken as exact)."""
+    """Centre-of-mass offset ``e = m·g·e / (m·g)``.
+
+    Parameters
+    ----------
+    mge : Estimate
+        m·g·e (N·m).
+    mass_kg : float
+        The unbalanced mass (kg), taken as exact.
+
+    Returns
+    -------
+    Estimate
+        ``eccentricity_mm`` (mm), with the degrees of freedom of ``mge``.
+    """
     scale = 1000.0 / (mass_kg * STANDARD_GRAVITY_M_S2)
     return Estimate(name="eccentricity_mm", value=mge.value * scale,
                     standard_uncertainty=mge.standard_uncertainty * scale, unit="mm",
@@ -164,15 +281,17 @@ def identify_gravity_cable(
 
     Parameters
     ----------
-    position_rad, torque_nm
-        The recording of ``plan.command_rad_s``.
-    exclude_rad
-        Travel left out at each end of the passes for the load fit (start-up and
+    position_rad, torque_nm : array
+        The recording of ``plan.command_rad_s``: position (rad) and torque (N·m).
+    plan : SweepPlan
+        The commanded sweep.
+    exclude_rad : float
+        Travel left out at each end of the passes for the load fit (rad; start-up and
         hysteresis transients).
-    bins
+    bins : int
         Number of position bins for the load fit.
-    settle_rad
-        Travel after the probe's reversal skipped (velocity-loop transient).
+    settle_rad : float
+        Travel after the probe's reversal skipped (rad; velocity-loop transient).
 
     Returns
     -------
@@ -180,6 +299,12 @@ def identify_gravity_cable(
         m·g·e, its phase φ, the cable stiffness and the hysteresis half-width h as
         estimates; the offset, the loop's angle s₀, the sliding friction at sweep speed and
         the binned load and half-difference curves.
+
+    Raises
+    ------
+    IdentificationError
+        The recording's length is not the plan's, the usable sweep is under 1 rad, fewer
+        than 8 bins hold both passes, or too few samples after the probe's reversal.
     """
     if len(position_rad) != len(plan.command_rad_s):
         raise IdentificationError(

@@ -69,7 +69,13 @@ class HarmonicFit:
     trend: FloatArray
 
     def interleaved(self) -> FloatArray:
-        """``cos_1, sin_1, cos_2, sin_2, …`` stacked along the first axis."""
+        """The amplitudes as one array, order by order.
+
+        Returns
+        -------
+        ndarray, shape (2·len(orders),) + y.shape[1:]
+            ``cos_1, sin_1, cos_2, sin_2, …`` stacked along the first axis.
+        """
         return np.stack([self.cos, self.sin], axis=1).reshape(-1, *self.cos.shape[1:])
 
 

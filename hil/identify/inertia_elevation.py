@@ -24,6 +24,24 @@ from hil.identify.estimate import Estimate
 
 @dataclass(frozen=True, slots=True, kw_only=True)
 class InertiaElevationResult:
+    """Azimuth inertia across elevation, ``J(el) = J_zenith + ΔJ·cos²(el)``.
+
+    Attributes
+    ----------
+    elevations_rad : tuple of float
+        Elevation of the other axis at each measurement (rad).
+    inertias_kg_m2 : tuple of float
+        J measured there (kg·m²).
+    level : Estimate
+        ``azimuth_inertia_level_kg_m2``: J at el = 0 (kg·m²).
+    zenith : Estimate
+        ``azimuth_inertia_zenith_kg_m2``: J at el = π/2 (kg·m²).
+    ratio : Estimate
+        ``azimuth_inertia_ratio``: J level / J zenith (max/min over elevation).
+    chi2_per_dof : float
+        χ² of the weighted fit per degree of freedom (elevations − 2).
+    """
+
     elevations_rad: tuple[float, ...]
     inertias_kg_m2: tuple[float, ...]
     level: Estimate  # azimuth_inertia_level_kg_m2
@@ -48,7 +66,14 @@ def fit_inertia_elevation(
     -------
     InertiaElevationResult
         J level (el = 0), J zenith and their ratio (max/min over elevation) as estimates,
-        and the fit's χ²/dof.
+        and the fit's χ²/dof. When χ²/dof exceeds one the uncertainties are scaled by its
+        square root and carry ``elevations − 2`` degrees of freedom; otherwise infinite.
+
+    Raises
+    ------
+    IdentificationError
+        Fewer than three elevations or a length mismatch, elevations spanning less than
+        0.3 of cos²(el), or a J without a positive standard uncertainty.
     """
     if len(elevations_rad) != len(inertias) or len(inertias) < 3:
         raise IdentificationError("need J at 3 or more elevations")
@@ -92,8 +117,23 @@ def _ratio(zenith: float, delta: float, covariance: NDArray[np.float64], dof: fl
 
 
 def scale_by_gain(estimate: Estimate, *, gain: float, gain_u: float) -> Estimate:
-    """J in shaft-torque units: ``J_reported · gain``, gain = shaft torque / reported torque
-    (the torque-constant protocol's result), uncertainties combined in quadrature."""
+    """J in shaft-torque units: ``J_reported · gain``.
+
+    Parameters
+    ----------
+    estimate : Estimate
+        J from the reported torque.
+    gain : float
+        Shaft torque / reported torque (the torque-constant protocol's result).
+    gain_u : float
+        Standard uncertainty of ``gain``.
+
+    Returns
+    -------
+    Estimate
+        ``estimate`` times ``gain``, relative uncertainties combined in quadrature; name,
+        unit and degrees of freedom of ``estimate``.
+    """
     value = estimate.value * gain
     relative = math.hypot(estimate.relative_uncertainty, gain_u / gain)
     return Estimate(name=estimate.name, value=value, standard_uncertainty=abs(value) * relative,

@@ -47,6 +47,29 @@ HARMONICS = 1  # harmonics the orthogonal correlation uses (the article: the fun
 
 @dataclass(frozen=True, slots=True, kw_only=True)
 class InertiaFrictionResult:
+    """J, B and T_c from sine runs at several amplitudes.
+
+    Attributes
+    ----------
+    inertia : Estimate
+        ``inertia_kg_m2``: J (kg·m²).
+    viscous : Estimate
+        ``viscous_nm_s_rad``: B (N·m·s/rad).
+    coulomb : Estimate
+        ``coulomb_nm``: T_c (N·m).
+    runs : tuple of SineRun
+        The runs fitted.
+    method : {"least_squares", "orthogonal"}
+        The estimator used.
+    fit_pct : float
+        Share of the periodic torque of the moving samples that ``J·α + B·ω + T_c·sgn(ω)``
+        explains (%; constant torques excluded).
+    lack_of_fit_rms_nm : float
+        RMS of the periodic torque the model leaves unexplained (N·m).
+    noise_rms_nm : float
+        RMS over the runs of their non-periodic torque (N·m).
+    """
+
     inertia: Estimate  # kg·m²
     viscous: Estimate  # N·m·s/rad
     coulomb: Estimate  # N·m
@@ -131,8 +154,26 @@ Block = tuple[FloatArray, FloatArray]  # (AᵀA, Aᵀy) of one period
 
 
 def regressors(run: SineRun, index: int, n_runs: int) -> FloatArray:
-    """``[α, ω, sgn ω, 1 for run ``index``]`` for every sample of ``run``; one constant per run
-    absorbs torques that do not change within it (gravity at that position, offsets)."""
+    """The regressors of every sample of ``run``: α, ω, sgn ω and one constant per run.
+
+    The constant of each run absorbs torques that do not change within it (gravity at that
+    position, offsets).
+
+    Parameters
+    ----------
+    run : SineRun
+        The run.
+    index : int
+        Its position among the ``n_runs`` runs fitted together.
+    n_runs : int
+        Number of runs fitted together.
+
+    Returns
+    -------
+    ndarray, shape (samples, 3 + n_runs)
+        Columns α (rad/s²), ω (rad/s), sgn ω, then one column per run: 1 in column
+        ``3 + index``, 0 in the others.
+    """
     constants = np.zeros((len(run.time_s), n_runs))
     constants[:, index] = 1.0
     return np.column_stack(
@@ -142,8 +183,22 @@ def regressors(run: SineRun, index: int, n_runs: int) -> FloatArray:
 
 def instruments(run: SineRun, index: int, n_runs: int) -> FloatArray:
     """The regressors with α and ω replaced by their first ``INSTRUMENT_HARMONICS``
-    harmonics of the excitation: the periodic motion without the encoder's quantisation
-    noise, which the derivatives amplify at high frequency (instrumental variables)."""
+    harmonics of the excitation.
+
+    The harmonics (least-squares fit with a constant) are the periodic motion without the
+    encoder's quantisation noise, which the derivatives amplify at high frequency
+    (instrumental variables).
+
+    Parameters
+    ----------
+    run, index, n_runs
+        As for :func:`regressors`.
+
+    Returns
+    -------
+    ndarray, shape (samples, 3 + n_runs)
+        The columns of :func:`regressors`, the first two smoothed.
+    """
     columns = regressors(run, index, n_runs)
     omega_t = 2 * math.pi * run.frequency_hz * run.time_s
     basis = np.column_stack(
@@ -217,8 +272,23 @@ def _jackknife(blocks: list[Block]) -> tuple[FloatArray, FloatArray, float]:
 
 
 def cramer_rao_std(runs: Sequence[SineRun], *, noise_rms_nm: float) -> FloatArray:
-    """Bound on the standard deviation of (J, B, T_c) from the samples the estimator uses,
-    for white torque noise of ``noise_rms_nm``: ``sqrt(diag(σ²·(ΦᵀΦ)⁻¹))``."""
+    """Bound on the standard deviation of (J, B, T_c) from the samples the estimator uses.
+
+    ``sqrt(diag(σ²·(ΦᵀΦ)⁻¹))`` over the moving samples of all runs, with the regressors
+    Φ of :func:`regressors` (the per-run constants as nuisance parameters).
+
+    Parameters
+    ----------
+    runs : sequence of SineRun
+        The runs fitted together.
+    noise_rms_nm : float
+        σ, the white torque noise (N·m).
+
+    Returns
+    -------
+    ndarray, shape (3,)
+        The bounds for J (kg·m²), B (N·m·s/rad) and T_c (N·m).
+    """
     information = np.zeros((3 + len(runs), 3 + len(runs)))
     for index, run in enumerate(runs):
         phi = regressors(run, index, len(runs))[run.moving]
@@ -244,9 +314,23 @@ def _model_fit(runs: Sequence[SineRun], theta: FloatArray) -> tuple[float, float
 
 
 def inertia_amplitude_spread(result: InertiaFrictionResult) -> Estimate:
-    """Spread of the per-amplitude inertias ``c/(V·2πf)`` in % of their mean: a
-    position-dependent torque (cogging, cable) commensurate with the sine's travel biases
-    each amplitude differently and shows up here."""
+    """Spread of the per-amplitude inertias ``c/(V·2πf)`` in % of their mean.
+
+    A position-dependent torque (cogging, cable) commensurate with the sine's travel biases
+    each amplitude differently and shows up here.
+
+    Parameters
+    ----------
+    result : InertiaFrictionResult
+        The fit whose runs are compared.
+
+    Returns
+    -------
+    Estimate
+        ``inertia_amplitude_spread_pct`` (%): largest minus smallest per-run J over their
+        mean; the runs' ``c`` uncertainties combined in quadrature, degrees of freedom of
+        the run with the fewest periods (periods − 1).
+    """
     per_run = np.array([r.inertia_kg_m2 for r in result.runs])
     scale = (
         2 * math.pi * np.array([r.velocity_amplitude_rad_s * r.frequency_hz for r in result.runs])
@@ -272,11 +356,11 @@ def stiffness_corrected_inertia(
     Parameters
     ----------
     inertia : Estimate
-        J as the sine saw it (kg·m²).
+        J measured by the sine (kg·m²).
     stiffness : Estimate
-        ``K`` (N·m/rad), from an earlier measurement.
+        K at the sine's centre (N·m/rad; :func:`hil.identify.gravity_cable.load_stiffness`).
     frequency_hz : float
-        The sine's frequency.
+        The sine's frequency (Hz).
 
     Returns
     -------

@@ -26,14 +26,19 @@ def phase_free_derivatives(
     position : array
         Encoder position (rad).
     time_s : array
-        Sample times; irregular times are resampled as above.
+        Sample times (s); irregular times are resampled as above.
     window_s : float
-        Width of the Savitzky–Golay window.
+        Width of the Savitzky–Golay window (s).
 
     Returns
     -------
     velocity, acceleration : array
         At the input's samples (rad/s, rad/s²).
+
+    Raises
+    ------
+    ValueError
+        The window (at least 7 samples) is not shorter than ``position``.
     """
     steps = np.diff(time_s)
     step = float(np.median(steps))

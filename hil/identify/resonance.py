@@ -40,6 +40,22 @@ HALF_POWER = 1.0 / math.sqrt(2.0)
 
 @dataclass(frozen=True, slots=True, kw_only=True)
 class TwoMassModel:
+    """The motor side of a two-mass axis with the current-loop lag (module docstring).
+
+    Attributes
+    ----------
+    inertia_kg_m2 : float
+        J, the total inertia (kg·m²).
+    antiresonance_hz, antiresonance_damping : float
+        f_a (Hz) and ζ_a.
+    resonance_hz, resonance_damping : float
+        f_r (Hz) and ζ_r.
+    viscous_over_inertia_1_s : float
+        B/J (1/s).
+    time_constant_s : float
+        τ, the current loop's time constant (s).
+    """
+
     inertia_kg_m2: float  # total
     antiresonance_hz: float
     antiresonance_damping: float
@@ -49,12 +65,31 @@ class TwoMassModel:
     time_constant_s: float  # current loop
 
     def as_vector(self) -> FloatArray:
+        """The fit's parameter vector.
+
+        Returns
+        -------
+        ndarray, shape (7,)
+            Natural logarithms of the fields in declaration order, B/J taken as at least
+            1e-3 1/s and τ as at least 1e-6 s.
+        """
         return np.log([self.inertia_kg_m2, self.antiresonance_hz, self.antiresonance_damping,
                        self.resonance_hz, self.resonance_damping,
                        max(self.viscous_over_inertia_1_s, 1e-3), max(self.time_constant_s, 1e-6)])
 
     @classmethod
     def from_vector(cls, x: FloatArray) -> TwoMassModel:
+        """The model from a parameter vector.
+
+        Parameters
+        ----------
+        x : array, shape (7,)
+            Logarithms of the fields, as :meth:`as_vector` gives them.
+
+        Returns
+        -------
+        TwoMassModel
+        """
         v = np.exp(x)
         return cls(inertia_kg_m2=float(v[0]), antiresonance_hz=float(v[1]),
                    antiresonance_damping=float(v[2]), resonance_hz=float(v[3]),
@@ -64,7 +99,22 @@ class TwoMassModel:
 
 def two_mass_response(model: TwoMassModel, frequency_hz: FloatArray, *, fs_hz: float
                       ) -> ComplexArray:
-    """Sampled position over held torque (rad/N·m) of ``model`` at ``frequency_hz``."""
+    """Sampled position over held torque of ``model`` (exact zero-order-hold response).
+
+    Parameters
+    ----------
+    model : TwoMassModel
+        The model.
+    frequency_hz : array
+        Frequencies (Hz), below ``fs_hz/2``.
+    fs_hz : float
+        The sample rate (Hz): the hold period and the aliases summed.
+
+    Returns
+    -------
+    ndarray of complex, shape (len(frequency_hz),)
+        The response (rad/N·m).
+    """
     omega = 2 * math.pi * np.atleast_1d(np.asarray(frequency_hz, dtype=np.float64))
     images = 2 * math.pi * fs_hz * np.arange(-IMAGES, IMAGES + 1)
     s = 1j * (omega[:, None] + images[None, :])
@@ -79,6 +129,25 @@ def two_mass_response(model: TwoMassModel, frequency_hz: FloatArray, *, fs_hz: f
 
 @dataclass(frozen=True, slots=True, kw_only=True)
 class FrfPoint:
+    """One stepped-sine frequency of the FRF.
+
+    Attributes
+    ----------
+    frequency_hz : float
+        The sine's frequency (Hz).
+    frf_rad_nm : complex
+        P/T (rad/N·m), H1 over the blocks: ``Σ P·T* / Σ |T|²``.
+    relative_u : float
+        Standard error of the mean of the block ratios P/T (their complex scatter),
+        relative to ``|frf_rad_nm|``.
+    coherence : float
+        γ² over the blocks, 1 for a perfectly linear noise-free response.
+    closed_loop : complex
+        ``jω·P / V``, motor velocity over velocity command, the mean over the blocks.
+    blocks : int
+        Blocks of whole periods used.
+    """
+
     frequency_hz: float
     frf_rad_nm: complex  # P/T, H1 over the blocks: Σ P·T* / Σ |T|²
     relative_u: float  # standard error of |P/T| relative to |P/T| (block scatter)
@@ -90,7 +159,31 @@ class FrfPoint:
 def frf_point(time_s: FloatArray, position_rad: FloatArray, torque_nm: FloatArray,
               command_rad_s: FloatArray, *, frequency_hz: float, fs_hz: float,
               blocks: int) -> FrfPoint:
-    """One stepped-sine frequency (settled samples, whole periods) → :class:`FrfPoint`."""
+    """One stepped-sine frequency (settled samples, whole periods) → :class:`FrfPoint`.
+
+    Parameters
+    ----------
+    time_s, position_rad, torque_nm, command_rad_s : array
+        Samples of the segment: time (s), encoder position (rad), reported torque (N·m)
+        and velocity command (rad/s).
+    frequency_hz : float
+        The sine's frequency (Hz).
+    fs_hz : float
+        The recording's sample rate (Hz).
+    blocks : int
+        Number of blocks of whole periods the segment is cut into (≥ 2; at most one per
+        whole period).
+
+    Returns
+    -------
+    FrfPoint
+        The H1 FRF, its relative standard error, the coherence and the closed loop.
+
+    Raises
+    ------
+    IdentificationError
+        Fewer than two whole periods, or a block without torque at the frequency.
+    """
     periods = math.floor((time_s[-1] - time_s[0] + 1.0 / fs_hz) * frequency_hz + 1e-6)
     blocks = min(blocks, periods)
     if blocks < 2:
@@ -122,6 +215,28 @@ def frf_point(time_s: FloatArray, position_rad: FloatArray, torque_nm: FloatArra
 
 @dataclass(frozen=True, slots=True, kw_only=True)
 class ResonanceResult:
+    """The two-mass fit to a stepped-sine FRF.
+
+    Attributes
+    ----------
+    points : tuple of FrfPoint
+        The FRF fitted.
+    model : TwoMassModel
+        The fitted model.
+    resonance : Estimate
+        ``resonance_frequency_hz``: f_r (Hz).
+    antiresonance : Estimate
+        ``antiresonance_frequency_hz``: f_a (Hz).
+    damping : Estimate
+        ``resonance_damping_ratio``: ζ_r.
+    bandwidth_hz : float
+        The velocity loop's bandwidth, −3 dB of the closed loop (Hz).
+    ratio : Estimate
+        ``resonance_to_bandwidth_ratio``: f_r over the bandwidth.
+    chi2_per_dof : float
+        χ² of the fit per degree of freedom (2 × frequencies − 7).
+    """
+
     points: tuple[FrfPoint, ...]
     model: TwoMassModel
     resonance: Estimate  # resonance_frequency_hz
@@ -133,7 +248,23 @@ class ResonanceResult:
 
 
 def velocity_loop_bandwidth_hz(points: Sequence[FrfPoint]) -> float:
-    """First frequency where ``|closed loop|`` falls below 1/√2 (log-log interpolation)."""
+    """First frequency where ``|closed loop|`` falls below 1/√2 (log-log interpolation).
+
+    Parameters
+    ----------
+    points : sequence of FrfPoint
+        The FRF, in increasing frequency.
+
+    Returns
+    -------
+    float
+        The velocity loop's −3 dB bandwidth (Hz).
+
+    Raises
+    ------
+    IdentificationError
+        No point falls below 1/√2, or the first already does.
+    """
     freqs = np.array([p.frequency_hz for p in points])
     gain = np.abs([p.closed_loop for p in points])
     below = np.flatnonzero(gain < HALF_POWER)
@@ -170,15 +301,25 @@ def identify_resonance(points: Sequence[FrfPoint], *, fs_hz: float,
     points : sequence of FrfPoint
         The stepped-sine FRF, at least 6 frequencies.
     fs_hz : float
-        The recording's sample rate: the model's zero-order hold and its images.
+        The recording's sample rate (Hz): the model's zero-order hold and its images.
     time_constant_s : float
-        Start value of the current-loop lag (the current-loop protocol's τ when measured).
+        Start value of the current-loop lag (s; the current-loop protocol's τ when
+        measured).
 
     Returns
     -------
     ResonanceResult
         f_res, f_anti, damping and f_res over the velocity-loop bandwidth as estimates, the
         fitted :class:`TwoMassModel`, the bandwidth, the points and the fit's χ²/dof.
+        Uncertainties from the fit covariance, scaled by ``√(χ²/ν)`` when above one; the
+        ratio's from f_r's alone.
+
+    Raises
+    ------
+    IdentificationError
+        Fewer than 6 points, no resonance peak or anti-resonance below it inside the band,
+        a failed fit or one without ``f_first < f_a < f_r``, or a band that does not
+        bracket the velocity loop's −3 dB point.
     """
     if len(points) < 6:
         raise IdentificationError(f"{len(points)} frequencies, need at least 6")

@@ -36,6 +36,20 @@ def orthogonal_components(
     Computed as least-squares amplitudes of cos, sin and a constant: identical to the sums
     for uniform sampling over whole periods, and still unbiased for irregular timestamps
     or a subset of samples.
+
+    Parameters
+    ----------
+    signal : array
+        The samples.
+    time_s : array
+        Their times (s).
+    frequency_hz : float
+        The frequency (Hz).
+
+    Returns
+    -------
+    c, s : float
+        Amplitudes along ``cos(2πft)`` and ``sin(2πft)``, in the unit of ``signal``.
     """
     fit = fit_harmonics(
         2 * math.pi * frequency_hz * time_s, signal, trend=polynomial_columns(time_s, 0)
@@ -45,7 +59,37 @@ def orthogonal_components(
 
 @dataclass(frozen=True, slots=True, kw_only=True)
 class SineRun:
-    """One sine run over its analysis window: the article's components and the samples."""
+    """One sine run over its analysis window: the article's components and the samples.
+
+    Attributes
+    ----------
+    frequency_hz : float
+        The sine's frequency f (Hz).
+    velocity_amplitude_rad_s : float
+        V: √2 × the RMS of the analysed velocity (rad/s).
+    quadrature_nm, quadrature_u_nm : float
+        c, the torque along cos of the measured velocity phase, mean over the periods, and
+        its standard uncertainty from their scatter (N·m).
+    in_phase_nm, in_phase_u_nm : float
+        s, the torque along the measured velocity, likewise (N·m).
+    periods : int
+        Whole periods analysed.
+    noise_rms_nm : float
+        RMS of the non-periodic torque: noise, loop jitter (N·m).
+    time_s : array
+        Sample times from the recording's first sample (s).
+    velocity_rad_s, acceleration_rad_s2 : array
+        Phase-free ω (rad/s) and α (rad/s²), taken ``hold_samples`` after each row
+        (where its torque acts).
+    torque_nm : array
+        The reported torque (N·m).
+    period : array of int
+        Period index of each sample, ``0..periods − 1``.
+    phase_bin : array of int
+        Phase bin of each sample within its period, ``0..PHASE_BINS − 1``.
+    moving : array of bool
+        Outside the reversal band: ``|ω| > REVERSAL_BAND·V``.
+    """
 
     frequency_hz: float
     velocity_amplitude_rad_s: float
@@ -65,15 +109,28 @@ class SineRun:
 
     @property
     def inertia_kg_m2(self) -> float:
-        """J of this run alone, ``c / (V·2πf)``."""
+        """J of this run alone, ``c / (V·2πf)`` (kg·m²)."""
         return self.quadrature_nm / (
             self.velocity_amplitude_rad_s * 2 * math.pi * self.frequency_hz
         )
 
 
 def synchronous_average(signal: FloatArray, phase_bin: NDArray[np.intp]) -> FloatArray:
-    """Each sample replaced by the mean of its phase bin over all periods (the periodic
-    part of ``signal``); what is left over is noise and non-periodic motion."""
+    """Each sample replaced by the mean of its phase bin over all periods.
+
+    Parameters
+    ----------
+    signal : array
+        The samples.
+    phase_bin : array of int
+        Phase bin of each sample, ``0..PHASE_BINS − 1`` (:attr:`SineRun.phase_bin`).
+
+    Returns
+    -------
+    ndarray
+        The periodic part of ``signal``, sample by sample; what is left over is noise and
+        non-periodic motion.
+    """
     counts = np.bincount(phase_bin, minlength=PHASE_BINS)
     sums = np.bincount(phase_bin, weights=signal, minlength=PHASE_BINS)
     means = np.divide(sums, counts, out=np.zeros(PHASE_BINS), where=counts > 0)
@@ -99,17 +156,25 @@ def analyse_sine_run(
     recording : Recording
         A velocity-mode sine run.
     frequency_hz : float
-        The sine's frequency.
+        The sine's frequency (Hz).
     settle_periods : int
         Periods discarded at the start.
     hold_samples : float
-        See above.
+        See above (samples).
 
     Returns
     -------
     SineRun
         The article's components ``c`` and ``s`` with their uncertainties, the noise, and
         the analysed samples with their phase-free kinematics, period and phase bin.
+
+    Raises
+    ------
+    IdentificationError
+        Fewer than two whole periods after settling.
+    ValueError
+        The derivative window is not shorter than the recording
+        (:func:`hil.identify.kinematics.phase_free_derivatives`).
     """
     time_s = recording.time_s - recording.time_s[0]
     dt = float(np.median(np.diff(time_s)))
@@ -175,12 +240,28 @@ def _along_velocity(
 
 
 def torque_hold_samples(recording: Recording, *, current_loop_lag_s: float) -> float:
-    """How many of the recording's samples after its position sample the torque of the same
-    row acts on the shaft, plus the current loop's lag. An instantaneous torque sample is
-    held over the drive's control period (the recording's own period unless
-    ``control_period_s`` says otherwise): half of it. A torque averaged over the row period
-    ``T_s`` (``torque_sample = "mean"``) has its centroid ``T_c − T_s/2`` after the position
-    sample, which is taken a control period ``T_c`` before the row."""
+    """How many samples after its position sample the torque of the same row acts on the
+    shaft, plus the current loop's lag.
+
+    An instantaneous torque sample is held over the drive's control period (the
+    recording's own period unless ``control_period_s`` says otherwise): half of it. A
+    torque averaged over the row period ``T_s`` (``torque_sample = "mean"``) has its
+    centroid ``T_c − T_s/2`` after the position sample, which is taken a control period
+    ``T_c`` before the row.
+
+    Parameters
+    ----------
+    recording : Recording
+        The run; its metadata says how the torque was sampled.
+    current_loop_lag_s : float
+        The current loop's lag (s), e.g. its time constant τ.
+
+    Returns
+    -------
+    float
+        The delay in samples of the recording's median step (``hold_samples`` of
+        :func:`analyse_sine_run`).
+    """
     step_s = float(np.median(np.diff(recording.time_s)))
     control_s = float(recording.metadata.get("control_period_s", step_s))
     if recording.metadata.get("torque_sample") == "mean":
@@ -192,7 +273,22 @@ def torque_hold_samples(recording: Recording, *, current_loop_lag_s: float) -> f
 
 
 def without_cable_loop(recording: Recording, loop: CableLoop | None) -> Recording:
-    """The recording with the cable's measured hysteresis torque taken out of the effort."""
+    """The recording with the cable's measured hysteresis torque taken out of the effort.
+
+    Parameters
+    ----------
+    recording : Recording
+        The run.
+    loop : CableLoop or None
+        The cable's loop (:func:`hil.identify.gravity_cable.cable_loop_torque_nm` along the
+        recorded position); ``None``: no correction.
+
+    Returns
+    -------
+    Recording
+        A copy whose ``torque_nm`` column is the effort minus the loop's torque, or
+        ``recording`` itself when ``loop`` is ``None``.
+    """
     if loop is None:
         return recording
     torque = recording.effort - cable_loop_torque_nm(

@@ -36,7 +36,23 @@ RESOLVED_FRACTION = 0.6  # a clean speed at or below this fraction of v_s is req
 
 @dataclass(frozen=True, slots=True, kw_only=True)
 class Staircase:
-    """Velocity command of a two-way staircase and where each step lies (sample indices)."""
+    """Velocity command of a two-way staircase and where each step lies (sample indices).
+
+    Attributes
+    ----------
+    command_rad_s : array
+        Velocity command (rad/s), one value per sample.
+    speeds_rad_s : tuple of float
+        The step speeds, fast → slow (rad/s, positive).
+    forward_steps : tuple of (int, int)
+        ``(start, stop)`` sample indices of each speed's forward step, ``stop`` exclusive.
+    backward_steps : tuple of (int, int)
+        The same for the backward pass, in the same order of speeds.
+    travel_rad : float
+        Net forward travel of the staircase, without the turnaround (rad).
+    turnaround_rad : float
+        Travel out (and back) of the turnaround, as sampled (rad).
+    """
 
     command_rad_s: FloatArray
     speeds_rad_s: tuple[float, ...]
@@ -60,6 +76,31 @@ def staircase(
 
     Each step lasts ``2·settle_s`` plus the time to cover ``step_travel_rad`` at its speed,
     so the settled parts of the forward and the backward step overlap by ``step_travel_rad``.
+
+    Parameters
+    ----------
+    speeds_rad_s : sequence of float
+        The step speeds (rad/s): at least four, non-zero; signs and order are ignored.
+    fs_hz : float
+        Command sample rate (Hz).
+    step_travel_rad : float
+        Travel of each step after settling (rad).
+    settle_s : float
+        Settling time (s); each step lasts twice this plus its travel time.
+    turnaround_rad : float
+        Travel beyond the last forward step before turning back (rad).
+    turnaround_speed_rad_s : float
+        Speed of the turnaround (rad/s).
+
+    Returns
+    -------
+    Staircase
+        The velocity command and the sample ranges of its steps.
+
+    Raises
+    ------
+    IdentificationError
+        Fewer than four speeds, or a zero speed.
     """
     speeds = tuple(sorted((abs(float(v)) for v in speeds_rad_s), reverse=True))
     if len(speeds) < 4 or min(speeds) <= 0:
@@ -95,7 +136,31 @@ def staircase(
 
 @dataclass(frozen=True, slots=True, kw_only=True)
 class SpeedPoint:
-    """The friction magnitude at one staircase speed."""
+    """The friction magnitude at one staircase speed.
+
+    Attributes
+    ----------
+    speed_rad_s : float
+        Mean measured speed of both passes over the matched range (rad/s); the commanded
+        speed when no range matched.
+    friction_nm : float
+        Half difference of the two directions' mean torques (N·m); NaN when no range
+        matched.
+    friction_u_nm : float
+        Its Type A standard uncertainty from the scatter of the sub-window differences
+        (N·m); ``inf`` with fewer than two sub-windows.
+    load_nm : float
+        Half sum: the position-dependent torque averaged over the range (N·m).
+    matched_rad : float
+        Width of the position range both passes covered after settling (rad).
+    stick_slip : bool
+        Flagged as stick-slip and left out of the fit: a velocity window stalled, the
+        velocity's coefficient of variation reached ``JUMP_CV``, or fewer than half the
+        sub-windows hold samples of both passes.
+    velocity_cv : float
+        Coefficient of variation of the short-window velocities, the larger of the two
+        passes (``inf`` where a window stalled or none fit).
+    """
 
     speed_rad_s: float  # mean measured speed of both passes over the matched range
     friction_nm: float  # half difference of the two directions' mean torques
@@ -108,6 +173,26 @@ class SpeedPoint:
 
 @dataclass(frozen=True, slots=True, kw_only=True)
 class StribeckResult:
+    """The Stribeck curve fitted through the clean staircase speeds.
+
+    Attributes
+    ----------
+    static : Estimate
+        ``static_friction_nm``: T_s (N·m).
+    stribeck_velocity : Estimate
+        ``stribeck_velocity_rad_s``: v_s (rad/s).
+    coulomb : Estimate
+        ``stribeck_coulomb_nm``: T_c (N·m).
+    viscous : Estimate
+        ``stribeck_viscous_nm_s_rad``: B (N·m·s/rad).
+    points : tuple of SpeedPoint
+        Every speed, those flagged as stick-slip included.
+    residual_rms_nm : float
+        RMS of the clean points' friction about the fitted curve (N·m).
+    lowest_clean_speed_rad_s : float
+        The slowest speed fitted (rad/s).
+    """
+
     static: Estimate  # T_s, N·m
     stribeck_velocity: Estimate  # v_s, rad/s
     coulomb: Estimate  # T_c, N·m
@@ -153,8 +238,31 @@ def speed_point(
     counts_per_window: float,
     resolution_rad: float,
 ) -> SpeedPoint:
-    """Reduce one speed's forward and backward steps, each ``(time_s, position_rad,
-    torque_nm)``, to a friction magnitude over the position range both passes covered."""
+    """Reduce one speed's forward and backward steps to a friction magnitude over the
+    position range both passes covered.
+
+    Each step is used from where every velocity window after ``settle_s`` stays within
+    20 % of the commanded speed; the matched range is cut into ``BLOCKS`` sub-windows.
+
+    Parameters
+    ----------
+    forward, backward : tuple of array
+        ``(time_s, position_rad, torque_nm)`` of each step (s, rad, N·m).
+    speed_rad_s : float
+        The commanded speed (rad/s, positive).
+    settle_s : float
+        Minimum time discarded at the start of each step (s).
+    counts_per_window : float
+        Encoder steps per velocity window (the window lasts at least 20 ms).
+    resolution_rad : float
+        The encoder's step (rad).
+
+    Returns
+    -------
+    SpeedPoint
+        Flagged as stick-slip, with NaN friction, when too little of a step settled or no
+        sub-window holds samples of both passes.
+    """
     window_s = max(0.02, counts_per_window * resolution_rad / speed_rad_s)
     ranges, cvs = [], []
     for (t, p, _), sign in ((forward, 1.0), (backward, -1.0)):
@@ -214,7 +322,24 @@ def stribeck_curve(
     speed_rad_s: FloatArray, *, coulomb_nm: float, static_nm: float,
     stribeck_velocity_rad_s: float, viscous_nm_s_rad: float,
 ) -> FloatArray:
-    """``T_c + (T_s − T_c)·exp(−(v/v_s)²) + B·v`` for ``v ≥ 0``."""
+    """``T_c + (T_s − T_c)·exp(−(v/v_s)²) + B·v`` for ``v ≥ 0``.
+
+    Parameters
+    ----------
+    speed_rad_s : array
+        v (rad/s).
+    coulomb_nm, static_nm : float
+        T_c and T_s (N·m).
+    stribeck_velocity_rad_s : float
+        v_s (rad/s).
+    viscous_nm_s_rad : float
+        B (N·m·s/rad).
+
+    Returns
+    -------
+    ndarray
+        The friction magnitude (N·m) at each speed.
+    """
     v = np.asarray(speed_rad_s, dtype=np.float64)
     return (coulomb_nm + (static_nm - coulomb_nm) * np.exp(-((v / stribeck_velocity_rad_s) ** 2))
             + viscous_nm_s_rad * v)
@@ -230,10 +355,26 @@ def _linear_fit(v: FloatArray, f: FloatArray, w: FloatArray, vs: float) -> tuple
 def fit_stribeck(points: Sequence[SpeedPoint]) -> StribeckResult:
     """Separable weighted least squares of the Stribeck curve through the clean points.
 
+    Clean points are those not flagged as stick-slip with a finite friction, weighted by
+    ``1/u`` (``u`` at least a tenth of the median). The uncertainties are from the fit
+    covariance, scaled by ``√(χ²/ν)`` when above one, ``ν`` = clean points − 4.
+
+    Parameters
+    ----------
+    points : sequence of SpeedPoint
+        One per staircase speed (:func:`speed_point`).
+
+    Returns
+    -------
+    StribeckResult
+        T_s, v_s, T_c and B as estimates, the points, the residual and the lowest clean
+        speed.
+
     Raises
     ------
     IdentificationError
-        Fewer than six clean speeds, or none below the fitted ``v_s``.
+        Fewer than six clean speeds, or the lowest clean speed above
+        ``RESOLVED_FRACTION`` × the fitted ``v_s``.
     """
     clean = [p for p in points if not p.stick_slip and math.isfinite(p.friction_nm)]
     if len(clean) < 6:
@@ -312,7 +453,7 @@ def identify_stribeck(
     stairs : Staircase
         The commanded staircase (speeds, both directions, sample ranges).
     settle_s : float
-        Time discarded at the start of each step.
+        Time discarded at the start of each step (s).
     counts_per_window : float
         Encoder steps per stick-slip test window.
 
@@ -322,6 +463,11 @@ def identify_stribeck(
         T_s, v_s (and the sliding T_c, B) with uncertainties, the per-speed points (each
         says whether it was flagged as stick-slip and left out), the fit's residual and the
         lowest clean speed.
+
+    Raises
+    ------
+    IdentificationError
+        The recording's length is not the staircase's, or :func:`fit_stribeck` fails.
     """
     if len(time_s) != len(stairs.command_rad_s):
         raise IdentificationError(

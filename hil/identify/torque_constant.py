@@ -32,7 +32,23 @@ KV_TO_KT = 60.0 / (2.0 * math.pi)  # K_t [N·m/A] = 9.5493 / KV [rpm/V]
 
 
 def datasheet_torque_constant_nm_a(kv_rpm_per_v: float) -> float:
-    """K_t of an ideal sine-commutated motor from its speed constant KV (rpm/V)."""
+    """K_t of an ideal sine-commutated motor from its speed constant KV.
+
+    Parameters
+    ----------
+    kv_rpm_per_v : float
+        KV (rpm/V).
+
+    Returns
+    -------
+    float
+        ``K_t = 60/(2π·KV)`` (N·m/A).
+
+    Raises
+    ------
+    ValueError
+        ``kv_rpm_per_v`` not positive.
+    """
     if not kv_rpm_per_v > 0:
         raise ValueError(f"kv_rpm_per_v must be > 0, got {kv_rpm_per_v}")
     return KV_TO_KT / kv_rpm_per_v
@@ -40,7 +56,24 @@ def datasheet_torque_constant_nm_a(kv_rpm_per_v: float) -> float:
 
 @dataclass(frozen=True, slots=True, kw_only=True)
 class LockedSweep:
-    """Level means of one locked-angle sweep."""
+    """Level means of one locked-angle sweep.
+
+    Attributes
+    ----------
+    angle_rad : float
+        The rotor angle the sweep was locked at (rad).
+    current_a, sensor_torque_nm, reported_torque_nm : array
+        Per level: mean measured current (A), shaft sensor torque and the drive's
+        reported torque (N·m).
+    slope_nm_a, slope_u_nm_a : float
+        K, the slope of the sensor torque over the current, and its standard error (N·m/A).
+    intercept_nm : float
+        The line's intercept ``c``: what the clamp carries at this angle (N·m).
+    gain : float
+        Slope of the sensor torque over the reported torque.
+    max_residual_nm : float
+        Largest deviation of a level from the line (N·m).
+    """
 
     angle_rad: float
     current_a: FloatArray
@@ -55,6 +88,21 @@ class LockedSweep:
 
 @dataclass(frozen=True, slots=True, kw_only=True)
 class TorqueConstantResult:
+    """K_t, linearity and reported-torque gain error over the locked angles.
+
+    Attributes
+    ----------
+    sweeps : tuple of LockedSweep
+        One per locked angle.
+    torque_constant : Estimate
+        ``torque_constant_nm_a``: K_t (N·m/A).
+    linearity : Estimate
+        ``torque_linearity_pct``: largest level deviation from its angle's line, in % of
+        the full-scale sensor torque.
+    gain_error : Estimate
+        ``reported_torque_gain_error_pct``: ``slope(T_sensor vs T_rep) − 1`` (%).
+    """
+
     sweeps: tuple[LockedSweep, ...]
     torque_constant: Estimate  # torque_constant_nm_a
     linearity: Estimate  # torque_linearity_pct
@@ -64,7 +112,31 @@ class TorqueConstantResult:
 def level_means(
     signal: FloatArray, *, level_samples: int, settle_samples: int, levels: int
 ) -> FloatArray:
-    """Mean of ``signal`` over each level after its first ``settle_samples``."""
+    """Mean of ``signal`` over each level after its first ``settle_samples``.
+
+    Parameters
+    ----------
+    signal : array
+        The sweep's samples, starting at its first level.
+    level_samples : int
+        Samples per level.
+    settle_samples : int
+        Samples discarded at the start of each level.
+    levels : int
+        Number of levels.
+
+    Returns
+    -------
+    ndarray, shape (levels,)
+        The level means, in the unit of ``signal``.
+
+    Raises
+    ------
+    ValueError
+        ``settle_samples`` not below ``level_samples``.
+    IdentificationError
+        ``signal`` shorter than ``levels × level_samples``.
+    """
     if settle_samples >= level_samples:
         raise ValueError("settle_samples must be below level_samples")
     if signal.size < levels * level_samples:
@@ -101,9 +173,10 @@ def analyse_locked_sweep(
     Parameters
     ----------
     current_a, sensor_torque_nm, reported_torque_nm : array
-        The sweep's samples, starting at its first level.
+        The sweep's samples, starting at its first level: current (A), shaft sensor
+        torque and reported torque (N·m).
     angle_rad : float
-        The rotor angle the sweep was locked at.
+        The rotor angle the sweep was locked at (rad).
     level_samples : int
         Samples per current level.
     settle_samples : int
@@ -116,6 +189,13 @@ def analyse_locked_sweep(
     LockedSweep
         The level means, K_t (slope of shaft torque over current) with its standard
         uncertainty, the intercept, the reported-torque gain and the largest residual.
+
+    Raises
+    ------
+    IdentificationError
+        Too few samples, fewer than 4 levels, or no spread of the current.
+    ValueError
+        ``settle_samples`` not below ``level_samples``.
     """
     i = level_means(current_a, level_samples=level_samples, settle_samples=settle_samples,
                     levels=levels)
@@ -134,7 +214,19 @@ def analyse_locked_sweep(
 
 
 def ripple_factor(angle_rad: float, ripple: Sequence[tuple[int, float, float]]) -> float:
-    """``1 + Σ a_n·sin(n·θ + ψ_n)`` for ``ripple`` = ``(order, amplitude, phase_rad)``."""
+    """``1 + Σ a_n·sin(n·θ + ψ_n)``: K_t at ``angle_rad`` relative to its mean.
+
+    Parameters
+    ----------
+    angle_rad : float
+        θ, the motor position (rad).
+    ripple : sequence of (int, float, float)
+        ``(order, relative amplitude, phase_rad)`` per harmonic.
+
+    Returns
+    -------
+    float
+    """
     return 1.0 + sum(a * math.sin(n * angle_rad + psi) for n, a, psi in ripple)
 
 
@@ -145,11 +237,25 @@ def identify_torque_constant(
 
     Parameters
     ----------
-    sweeps
+    sweeps : sequence of LockedSweep
         One analysed sweep per locked angle.
-    ripple
+    ripple : sequence of (int, float, float)
         Known K_t ripple harmonics ``(order, relative amplitude, phase_rad)`` in motor
-        position; each angle's slope is divided by its ripple factor. Empty: none known.
+        position; each angle's slope and gain are divided by its ripple factor. Empty:
+        none known.
+
+    Returns
+    -------
+    TorqueConstantResult
+        K_t, the mean of the slopes, its standard uncertainty the larger of their scatter
+        and the RMS within-fit standard error, over √angles (angles − 1 degrees of
+        freedom); the linearity, its uncertainty from the within-fit noise at full-scale
+        current; the gain error from the gains likewise (scatter only).
+
+    Raises
+    ------
+    IdentificationError
+        Fewer than two sweeps.
     """
     if len(sweeps) < 2:
         raise IdentificationError(f"{len(sweeps)} locked angle(s), need at least 2")
@@ -179,7 +285,26 @@ def identify_torque_constant(
 
 
 def datasheet_deviation(torque_constant: Estimate, *, kv_rpm_per_v: float) -> Estimate:
-    """``100·(K_t / K_t,datasheet − 1)`` in %, K_t,datasheet = 9.5493/KV (KV exact)."""
+    """``100·(K_t / K_t,datasheet − 1)``, K_t,datasheet = 9.5493/KV.
+
+    Parameters
+    ----------
+    torque_constant : Estimate
+        The measured K_t (N·m/A).
+    kv_rpm_per_v : float
+        The datasheet's KV (rpm/V), taken as exact.
+
+    Returns
+    -------
+    Estimate
+        ``torque_constant_vs_datasheet_pct`` (%), with the degrees of freedom of
+        ``torque_constant``.
+
+    Raises
+    ------
+    ValueError
+        ``kv_rpm_per_v`` not positive.
+    """
     reference = datasheet_torque_constant_nm_a(kv_rpm_per_v)
     return Estimate(
         name="torque_constant_vs_datasheet_pct",
