@@ -11,6 +11,7 @@ when the scatter about the line exceeds the stated uncertainties.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -19,7 +20,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from hil.errors import IdentificationError
-from hil.identify.estimate import Estimate
+from hil.identify.estimate import Component, Estimate, with_budget
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -131,10 +132,12 @@ def scale_by_gain(estimate: Estimate, *, gain: float, gain_u: float) -> Estimate
     Returns
     -------
     Estimate
-        ``estimate`` times ``gain``, relative uncertainties combined in quadrature; name,
-        unit and degrees of freedom of ``estimate``.
+        ``estimate`` times ``gain``: every budget line of ``estimate`` scaled by ``gain``
+        and the gain's own line (sensitivity ``J_reported``).
     """
-    value = estimate.value * gain
-    relative = math.hypot(estimate.relative_uncertainty, gain_u / gain)
-    return Estimate(name=estimate.name, value=value, standard_uncertainty=abs(value) * relative,
-                    unit=estimate.unit, dof=estimate.dof)
+    scaled = [dataclasses.replace(c, sensitivity=c.sensitivity * gain)
+              for c in estimate.components()]
+    gain_line = Component(source="torque-reporting gain, shaft/reported (torque_constant)",
+                          kind="B", standard_uncertainty=gain_u, unit="1",
+                          sensitivity=estimate.value)
+    return with_budget(estimate, [*scaled, gain_line], value=estimate.value * gain)
