@@ -69,16 +69,15 @@ def main() -> int:
         args.write_bias_map.write_text(
             BIAS_MAP_HEADER + tomli_w.dumps(bias_map(rows, population=population)),
             encoding="utf-8")
-    print("| axis | result | n | bias % | RMS (x−truth)/u | coverage ±U | median u/truth % "
-          "| goal |")
+    print("| axis | result | n | bias | RMS (x−truth)/u | coverage ±U | median u | goal |")
     print("|---|---|---|---|---|---|---|---|")
     for s in summaries:
         ok = (GOAL_COVERAGE[0] <= s.coverage <= GOAL_COVERAGE[1]
               and GOAL_RMS[0] <= s.rms_normalised <= GOAL_RMS[1])
-        print(f"| {s.axis} | {s.parameter} | {s.n} | {100 * s.bias_rel:+.2f} | "
-              f"{s.rms_normalised:.2f} | "
-              f"{100 * s.coverage:.1f} % | {100 * s.median_u_rel:.2f} | "
-              f"{'met' if ok else 'MISSED'} |")
+        bias, u = ((f"{100 * s.bias:+.2f} %", f"{100 * s.median_u:.2g} %") if s.relative
+                   else (f"{s.bias:+.2g}", f"{s.median_u:.2g}"))
+        print(f"| {s.axis} | {s.parameter} | {s.n} | {bias} | {s.rms_normalised:.2f} | "
+              f"{100 * s.coverage:.1f} % | {u} | {'met' if ok else 'MISSED'} |")
 
     pairs = [u for u in units if int(u.serial.split("-")[1]) < args.pairs]
     z: dict[str, list[float]] = {}

@@ -53,17 +53,18 @@ import subprocess
 import sys
 import tomllib
 from collections.abc import Iterable, Mapping, Sequence
-from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import tomli_w
+from numpy.typing import NDArray
 
 from hil.profile import builtin_profile_path, load_profile
 from plant_sim.params import PlantParams
 
+FloatArray = NDArray[np.float64]
 STANDARD_GRAVITY_M_S2 = 9.80665
 PROFILES = ("demo_gimbal_elevation", "demo_gimbal_azimuth")
 NUISANCE_SPREAD = 0.2  # ± relative spread of plant parameters with no declared measurement
@@ -252,45 +253,42 @@ class Summary:
     axis: str
     parameter: str
     n: int
-    bias_rel: float  # mean (x − truth)/|truth|
+    relative: bool  # bias and median_u as fractions of the truth (else in the result's unit)
+    bias: float  # mean (x − truth)
     rms_normalised: float
     coverage: float
-    median_u_rel: float
+    median_u: float
 
 
-def run_population(units: Sequence[Unit], out_dir: Path, *, workers: int = 2,
-                   method_bias: str | None = None) -> list[Row]:
-    """Calibrate every unit (``workers`` at a time); one row per result with a truth."""
+def errors_of(group: Sequence[Row]) -> tuple[bool, FloatArray, FloatArray]:
+    """Errors ``x − truth`` and stated ``u``, relative to the truth when every truth is
+    positive, else absolute: ``(relative, errors, u)``."""
+    truth = np.array([r.truth for r in group])
+    relative = bool(np.all(truth > 0))
+    scale = truth if relative else np.ones_like(truth)
+    errors = (np.array([r.value for r in group]) - truth) / scale
+    return relative, errors, np.array([r.standard_uncertainty for r in group]) / scale
 
-    def one(unit: Unit) -> list[Row]:
-        results = calibrate(unit, out_dir, method_bias=method_bias)
-        truth = truths(unit)
-        return [
-            Row(unit=unit.serial, axis=unit.axis, parameter=name, value=float(r["value"]),
-                truth=truth[name], standard_uncertainty=float(r["standard_uncertainty"]),
-                expanded_uncertainty=float(r["expanded_uncertainty"]))
-            for name, r in results.items() if name in truth and r["standard_uncertainty"]
-        ]
 
-    with ThreadPoolExecutor(max_workers=workers) as pool:
-        return [row for rows in pool.map(one, units) for row in rows]
+def by_result(rows: Iterable[Row]) -> dict[tuple[str, str], list[Row]]:
+    """Rows grouped by (axis, result)."""
+    groups: dict[tuple[str, str], list[Row]] = {}
+    for row in rows:
+        groups.setdefault((row.axis, row.parameter), []).append(row)
+    return dict(sorted(groups.items()))
 
 
 def summarise(rows: Iterable[Row]) -> list[Summary]:
     """Bias, RMS normalised error and coverage per axis and result."""
-    groups: dict[tuple[str, str], list[Row]] = {}
-    for row in rows:
-        groups.setdefault((row.axis, row.parameter), []).append(row)
     summaries = []
-    for (axis, name), group in sorted(groups.items()):
-        z = np.array([r.normalised_error for r in group])
-        scale = np.array([abs(r.truth) or r.standard_uncertainty for r in group])
-        rel = np.array([(r.value - r.truth) for r in group]) / scale
+    for (axis, name), group in by_result(rows).items():
+        relative, errors, u = errors_of(group)
         summaries.append(Summary(
-            axis=axis, parameter=name, n=len(group), bias_rel=float(np.mean(rel)),
-            rms_normalised=float(np.sqrt(np.mean(z**2))),
+            axis=axis, parameter=name, n=len(group), relative=relative,
+            bias=float(np.mean(errors)),
+            rms_normalised=float(np.sqrt(np.mean((errors / u) ** 2))),
             coverage=float(np.mean([r.covered for r in group])),
-            median_u_rel=float(np.median([r.standard_uncertainty for r in group] / scale)),
+            median_u=float(np.median(u)),
         ))
     return summaries
 
@@ -316,16 +314,9 @@ def bias_map(rows: Iterable[Row], *, population: str) -> dict[str, Any]:
     error ``sd(e)/√n`` added in quadrature. Computed on results calibrated with
     ``--method-bias off``.
     """
-    groups: dict[tuple[str, str], list[Row]] = {}
-    for row in rows:
-        groups.setdefault((row.axis, row.parameter), []).append(row)
     results: dict[str, dict[str, Any]] = {}
-    for (axis, name), group in sorted(groups.items()):
-        truth = np.array([r.truth for r in group])
-        relative = bool(np.all(truth > 0))
-        scale = truth if relative else np.ones_like(truth)
-        errors = (np.array([r.value for r in group]) - truth) / scale
-        u = np.array([r.standard_uncertainty for r in group]) / scale
+    for (axis, name), group in by_result(rows).items():
+        relative, errors, u = errors_of(group)
         excess = max(float(np.var(errors, ddof=1) - np.mean(u**2)), 0.0)
         scatter = math.sqrt(excess + float(np.var(errors, ddof=1)) / len(group))
         results.setdefault(axis, {})[name] = {

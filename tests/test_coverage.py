@@ -64,10 +64,10 @@ def pooled(rows: list[Row]) -> dict[str, Summary]:
     for name in sorted({r.parameter for r in rows}):
         group = [r for r in rows if r.parameter == name]
         z = np.array([r.normalised_error for r in group])
-        out[name] = Summary(axis="both", parameter=name, n=len(group), bias_rel=math.nan,
-                            rms_normalised=float(np.sqrt(np.mean(z**2))),
+        out[name] = Summary(axis="both", parameter=name, n=len(group), relative=False,
+                            bias=math.nan, rms_normalised=float(np.sqrt(np.mean(z**2))),
                             coverage=float(np.mean([r.covered for r in group])),
-                            median_u_rel=math.nan)
+                            median_u=math.nan)
     return out
 
 
