@@ -26,11 +26,8 @@ import hil.suite.gravity_cable as gravity_protocol
 import hil.suite.stribeck as stribeck_protocol
 from hil.errors import IdentificationError
 from hil.identify.cogging import _design
-from hil.identify.stribeck import (
-    BLOCKS,
-    _settled_start,
-    encoder_step_rad,
-)
+from hil.identify.quantisation import quantisation_step
+from hil.identify.stribeck import BLOCKS, _settled_start
 from hil.profile import UnitProfile
 from plant_sim.params import PlantParams
 
@@ -127,7 +124,7 @@ def stribeck(
         except IdentificationError:
             return None
         plan = spec.stairs
-        resolution = encoder_step_rad(rec.position)
+        resolution = quantisation_step(rec.position)
         speeds, info = [], []
         for point, v, (a, b), (c, d) in zip(
             found.points, plan.speeds_rad_s, plan.forward_steps, plan.backward_steps, strict=True

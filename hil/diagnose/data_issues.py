@@ -15,6 +15,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from hil.diagnose.signals import Signals, _noise_std
+from hil.identify.quantisation import quantisation_step
 from hil.recording import Recording
 
 FloatArray = NDArray[np.float64]
@@ -51,36 +52,6 @@ class DataIssue:
         """``kind``, ``severity``, ``message`` and the :attr:`values` in one flat dict."""
         return {"kind": self.kind, "severity": self.severity, "message": self.message,
                 **self.values}
-
-
-def quantisation_step(position: FloatArray) -> float:
-    """Position resolution: the largest step of which (nearly) every step is a multiple.
-
-    Candidates are low percentiles of the nonzero steps, largest first; a few tiny steps
-    (rounding in a file) do not hide the encoder's count. 0 when none fits (continuous).
-
-    Parameters
-    ----------
-    position : ndarray
-        The recorded position (rad, or m on a linear axis).
-
-    Returns
-    -------
-    float
-        The first candidate (25th, 10th, 5th, 1st percentile) of which more than 95 % of
-        the nonzero steps are a multiple (within a tenth of the candidate), in position
-        units; 0 when none is, or when there are fewer than 10 nonzero steps.
-    """
-    steps = np.abs(np.diff(position))
-    steps = steps[steps > 0]
-    if steps.size < 10:
-        return 0.0
-    for percentile in (25, 10, 5, 1):
-        candidate = float(np.percentile(steps, percentile))
-        ratio = steps / candidate
-        if float(np.mean(np.abs(ratio - np.round(ratio)) < 0.1)) > 0.95:
-            return candidate
-    return 0.0
 
 
 def velocity_delay_samples(signals: Signals) -> float:

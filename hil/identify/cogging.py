@@ -39,6 +39,7 @@ from numpy.typing import NDArray
 from hil.errors import IdentificationError
 from hil.identify.estimate import Estimate
 from hil.identify.harmonic_fit import harmonic_columns, polynomial_columns
+from hil.identify.quantisation import quantisation_step
 
 FloatArray = NDArray[np.float64]
 COMPENSATION_FORMAT = "gimbal-hil cogging compensation 1"
@@ -140,20 +141,6 @@ def scan_orders(
     return sorted(n for _, n in sorted(picks, reverse=True)[:max_orders])
 
 
-def torque_resolution_nm(torque_nm: FloatArray) -> float:
-    """The reported torque's quantisation step (N·m) read off the data: the smallest step
-    between distinct values when every value lies on that grid, else 0 (not quantised)."""
-    values = np.unique(np.asarray(torque_nm, dtype=np.float64))
-    if values.size < 2:
-        return 0.0
-    step = float(np.min(np.diff(values)))
-    scale = max(float(np.max(np.abs(values))), 1e-30)
-    if step <= 1e-9 * scale:
-        return 0.0
-    grid = values / step
-    return step if bool(np.all(np.abs(grid - np.round(grid)) < 1e-3)) else 0.0
-
-
 def check_resolution(torque_nm: FloatArray, *, noise_rms_nm: float, amplitude_nm: float) -> float:
     """Refuse a sub-LSB amplitude when the quantisation is not dithered; returns the LSB.
 
@@ -167,7 +154,7 @@ def check_resolution(torque_nm: FloatArray, *, noise_rms_nm: float, amplitude_nm
     IdentificationError
         σ < LSB/2 and ``amplitude_nm`` < LSB.
     """
-    lsb = torque_resolution_nm(torque_nm)
+    lsb = quantisation_step(torque_nm)
     if lsb > 0 and noise_rms_nm < 0.5 * lsb and amplitude_nm < lsb:
         raise IdentificationError(
             f"torque resolution {lsb:.3g} N·m with noise σ = {noise_rms_nm:.3g} N·m (< LSB/2): "
@@ -243,7 +230,7 @@ def identify_cogging(
             f"{threshold:g}× above the floor (torque noise σ = {smooth_sigma:.3g} N·m over "
             f"{n_min} samples a pass: white-noise floor ≈ {white_floor:.2g} N·m)"
         )
-    lsb = torque_resolution_nm(all_torque)
+    lsb = quantisation_step(all_torque)
     order_array = np.array(orders, dtype=np.float64)
     z, zu, levels, noise = [], [], [], []
     for time_s, theta, torque in passes:

@@ -26,6 +26,7 @@ from scipy.optimize import minimize_scalar
 
 from hil.errors import IdentificationError
 from hil.identify.estimate import Estimate
+from hil.identify.quantisation import quantisation_step
 
 FloatArray = NDArray[np.float64]
 BLOCKS = 8  # sub-windows per matched range, for the Type A scatter
@@ -311,13 +312,6 @@ def speed_point(
     )
 
 
-def encoder_step_rad(position_rad: FloatArray) -> float:
-    """The smallest non-zero position change in the data (the encoder's step, or less)."""
-    steps = np.abs(np.diff(position_rad))
-    steps = steps[steps > 0]
-    return float(steps.min()) if steps.size else 0.0
-
-
 def stribeck_curve(
     speed_rad_s: FloatArray, *, coulomb_nm: float, static_nm: float,
     stribeck_velocity_rad_s: float, viscous_nm_s_rad: float,
@@ -473,7 +467,7 @@ def identify_stribeck(
         raise IdentificationError(
             f"recording has {len(time_s)} samples, the staircase {len(stairs.command_rad_s)}"
         )
-    resolution_rad = encoder_step_rad(position_rad)
+    resolution_rad = quantisation_step(position_rad)
     points = []
     for v, (a, b), (c, d) in zip(stairs.speeds_rad_s, stairs.forward_steps,
                                  stairs.backward_steps, strict=True):

@@ -168,7 +168,7 @@ def test_undithered_coarse_quantisation_is_refused() -> None:
 
 
 def test_a_fine_torque_object_is_not_quantised() -> None:
-    from hil.identify.cogging import torque_resolution_nm
+    from hil.identify.quantisation import quantisation_step
 
-    assert torque_resolution_nm(np.array([0.0, 0.0005, 0.0015, -0.001])) == pytest.approx(0.0005)
-    assert torque_resolution_nm(np.random.default_rng(0).normal(0, 1e-3, 1000)) == 0.0
+    assert quantisation_step(np.array([0.0, 0.0005, 0.0015, -0.001])) == pytest.approx(0.0005)
+    assert quantisation_step(np.random.default_rng(0).normal(0, 1e-3, 1000)) == 0.0
