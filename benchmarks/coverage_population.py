@@ -2,7 +2,8 @@
 
 Shared by ``bench_coverage.py`` (the benchmark) and ``tests/test_coverage.py`` (its small
 version). A unit is one of the demo profiles with every ``[plant]`` parameter drawn across
-its measurement's tolerance range (parameters without a declared measurement: ±20 %),
+its measurement's tolerance range (parameters without a declared measurement: ±20 %;
+``T_s`` as ``T_c·(1.1 … 1.5)``, so that every unit has the Stribeck peak ``v_s`` describes),
 every effect on, and its own noise seed. It is calibrated through the command line, as a
 test engineer would (``gimbal-hil calibrate --drive sim``), and each certificate result
 is compared with the truth of the drawn plant. No identified value is ever read as truth.
@@ -68,6 +69,7 @@ FloatArray = NDArray[np.float64]
 STANDARD_GRAVITY_M_S2 = 9.80665
 PROFILES = ("demo_gimbal_elevation", "demo_gimbal_azimuth")
 NUISANCE_SPREAD = 0.2  # ± relative spread of plant parameters with no declared measurement
+STRIBECK_RISE = (1.1, 1.5)  # T_s / T_c: a peak of 10–50 % (below ~10 % v_s is not defined)
 
 # plant parameter → the measurement whose tolerance sets its spread
 MEASURED_BY = {
@@ -131,6 +133,8 @@ def draw_plant(profile_raw: Mapping[str, Any], rng: np.random.Generator) -> dict
             drawn[key] = value
     if "gravity_mge_nm" in drawn and "gravity_phase_rad" not in drawn:
         drawn["gravity_phase_rad"] = rng.uniform(-0.08, 0.08)
+    if "static_friction_nm" in drawn:  # v_s exists only with a Stribeck peak above T_c
+        drawn["static_friction_nm"] = drawn["coulomb_nm"] * rng.uniform(*STRIBECK_RISE)
     return drawn
 
 
