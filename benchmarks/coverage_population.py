@@ -282,6 +282,24 @@ def by_result(rows: Iterable[Row]) -> dict[tuple[str, str], list[Row]]:
     return dict(sorted(groups.items()))
 
 
+def run_population(units: Sequence[Unit], out_dir: Path, *, workers: int = 2,
+                   method_bias: str | None = None) -> list[Row]:
+    """Calibrate every unit (``workers`` at a time); one row per result with a truth."""
+
+    def one(unit: Unit) -> list[Row]:
+        results = calibrate(unit, out_dir, method_bias=method_bias)
+        truth = truths(unit)
+        return [
+            Row(unit=unit.serial, axis=unit.axis, parameter=name, value=float(r["value"]),
+                truth=truth[name], standard_uncertainty=float(r["standard_uncertainty"]),
+                expanded_uncertainty=float(r["expanded_uncertainty"]))
+            for name, r in results.items() if name in truth and r["standard_uncertainty"]
+        ]
+
+    with ThreadPoolExecutor(max_workers=workers) as pool:
+        return [row for rows in pool.map(one, units) for row in rows]
+
+
 def summarise(rows: Iterable[Row]) -> list[Summary]:
     """Bias, RMS normalised error and coverage per axis and result."""
     summaries = []
