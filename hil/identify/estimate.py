@@ -126,6 +126,14 @@ class Estimate:
         return (Component(source=TYPE_A_SOURCE, kind="A", unit=self.unit,
                           standard_uncertainty=self.standard_uncertainty, dof=self.dof),)
 
+    def scaled(self, factor: float, *, name: str, unit: str) -> Estimate:
+        """``factor · self`` as another result (``name``, ``unit``), every budget line
+        kept with its sensitivity scaled."""
+        lines = [dataclasses.replace(c, sensitivity=c.sensitivity * factor)
+                 for c in self.components()]
+        renamed = dataclasses.replace(self, name=name, unit=unit, cramer_rao_std=None)
+        return with_budget(renamed, lines, value=self.value * factor)
+
     def with_components(self, *added: Component, value: float | None = None) -> Estimate:
         """This estimate with more budget lines (and, for a correction, a new value).
 

@@ -260,12 +260,10 @@ def eccentricity_mm(mge: Estimate, *, mass_kg: float) -> Estimate:
     Returns
     -------
     Estimate
-        ``eccentricity_mm`` (mm), with the degrees of freedom of ``mge``.
+        ``eccentricity_mm`` (mm): ``mge``'s budget, each line scaled.
     """
-    scale = 1000.0 / (mass_kg * STANDARD_GRAVITY_M_S2)
-    return Estimate(name="eccentricity_mm", value=mge.value * scale,
-                    standard_uncertainty=mge.standard_uncertainty * scale, unit="mm",
-                    dof=mge.dof)
+    return mge.scaled(1000.0 / (mass_kg * STANDARD_GRAVITY_M_S2), name="eccentricity_mm",
+                      unit="mm")
 
 
 def identify_gravity_cable(

@@ -11,7 +11,6 @@ when the scatter about the line exceeds the stated uncertainties.
 
 from __future__ import annotations
 
-import dataclasses
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -20,7 +19,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from hil.errors import IdentificationError
-from hil.identify.estimate import Component, Estimate, with_budget
+from hil.identify.estimate import Component, Estimate
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -135,9 +134,8 @@ def scale_by_gain(estimate: Estimate, *, gain: float, gain_u: float) -> Estimate
         ``estimate`` times ``gain``: every budget line of ``estimate`` scaled by ``gain``
         and the gain's own line (sensitivity ``J_reported``).
     """
-    scaled = [dataclasses.replace(c, sensitivity=c.sensitivity * gain)
-              for c in estimate.components()]
     gain_line = Component(source="torque-reporting gain, shaft/reported (torque_constant)",
                           kind="B", standard_uncertainty=gain_u, unit="1",
                           sensitivity=estimate.value)
-    return with_budget(estimate, [*scaled, gain_line], value=estimate.value * gain)
+    return estimate.scaled(gain, name=estimate.name, unit=estimate.unit).with_components(
+        gain_line)
