@@ -53,6 +53,8 @@ def main() -> int:
     parser.add_argument("--out", type=Path, default=Path("coverage-run"))
     parser.add_argument("--method-bias", default=None,
                         help="map the calibrations use ('off': none; default: shipped)")
+    parser.add_argument("--reuse", action="store_true",
+                        help="read the certificates already under --out instead of calibrating")
     parser.add_argument("--write-bias-map", type=Path, default=None,
                         help="write the map these results show (run with --method-bias off)")
     args = parser.parse_args()
@@ -60,7 +62,7 @@ def main() -> int:
     started = time.perf_counter()
     units = write_population(args.out / "units", units_per_profile=args.units, seed=args.seed)
     rows = run_population(units, args.out / "certificates", workers=args.workers,
-                          method_bias=args.method_bias)
+                          method_bias=args.method_bias, reuse=args.reuse)
     summaries = summarise(rows)
     print(f"{len(units)} units, {len(rows)} results, {time.perf_counter() - started:.0f} s\n")
     if args.write_bias_map:
@@ -82,7 +84,8 @@ def main() -> int:
     pairs = [u for u in units if int(u.serial.split("-")[1]) < args.pairs]
     z: dict[str, list[float]] = {}
     for unit in pairs:
-        first = calibrate(unit, args.out / "certificates", method_bias=args.method_bias)
+        first = calibrate(unit, args.out / "certificates", method_bias=args.method_bias,
+                          reuse=True)
         second = calibrate(unit, args.out / "pairs", seed=unit.seed + 1,
                            method_bias=args.method_bias)
         for name, value in repeatability(first, second).items():

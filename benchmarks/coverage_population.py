@@ -62,6 +62,7 @@ from typing import Any
 import numpy as np
 import tomli_w
 from numpy.typing import NDArray
+from scipy.optimize import brentq
 
 from hil.profile import builtin_profile_path, load_profile
 from plant_sim.params import PlantParams
@@ -159,11 +160,15 @@ def write_population(
 
 
 def calibrate(unit: Unit, out_dir: Path, *, seed: int | None = None,
-              method_bias: str | None = None) -> dict[str, dict[str, Any]]:
+              method_bias: str | None = None, reuse: bool = False) -> dict[str, dict[str, Any]]:
     """Calibrate one unit through ``gimbal-hil calibrate``; its results by parameter
-    (``method_bias``: a map file or ``off``; default the shipped one)."""
+    (``method_bias``: a map file or ``off``; default the shipped one; ``reuse``: read a
+    certificate already in ``out_dir`` instead)."""
     seed = unit.seed if seed is None else seed
     serial = f"{unit.serial}-s{seed}"
+    path = out_dir / serial / "certificate.json"
+    if reuse and path.is_file():
+        return {r["parameter"]: r for r in json.loads(path.read_text("utf-8"))["results"]}
     extra = [] if method_bias is None else ["--", "--method-bias", method_bias]
     subprocess.run(
         [sys.executable, "-m", "hil.cli", "calibrate", "--drive", "sim",
@@ -171,7 +176,6 @@ def calibrate(unit: Unit, out_dir: Path, *, seed: int | None = None,
          "--seed", str(seed), "--out", str(out_dir), *extra],
         capture_output=True, check=False, env={**os.environ, "PYTHONHASHSEED": "0"},
     )
-    path = out_dir / serial / "certificate.json"
     if not path.is_file():
         return {}
     certificate = json.loads(path.read_text(encoding="utf-8"))
@@ -284,11 +288,11 @@ def by_result(rows: Iterable[Row]) -> dict[tuple[str, str], list[Row]]:
 
 
 def run_population(units: Sequence[Unit], out_dir: Path, *, workers: int = 2,
-                   method_bias: str | None = None) -> list[Row]:
+                   method_bias: str | None = None, reuse: bool = False) -> list[Row]:
     """Calibrate every unit (``workers`` at a time); one row per result with a truth."""
 
     def one(unit: Unit) -> list[Row]:
-        results = calibrate(unit, out_dir, method_bias=method_bias)
+        results = calibrate(unit, out_dir, method_bias=method_bias, reuse=reuse)
         truth = truths(unit)
         return [
             Row(unit=unit.serial, axis=unit.axis, parameter=name, value=float(r["value"]),
@@ -331,21 +335,39 @@ def repeatability(first: Mapping[str, Mapping[str, Any]],
 def bias_map(rows: Iterable[Row], *, population: str) -> dict[str, Any]:
     """The method-bias map (``fixtures/method_bias.toml``) the rows show, per axis.
 
-    Per result: the mean error (relative to the truth when every truth is positive, else
-    absolute) and the standard deviation of the error beyond what the stated (Type A)
-    uncertainties cover, ``√max(var(e) − mean(u²), 0)``, with the mean's own standard
-    error ``sd(e)/√n`` added in quadrature. Computed on results calibrated with
-    ``--method-bias off``.
+    Per result, with errors ``e`` relative to the truth when every truth is positive (else
+    absolute) and the stated (Type A) ``u``: the scatter ``s`` beyond what ``u`` covers is
+    the maximum-likelihood one, ``mean((e − b)²/(u² + s²)) = 1`` (zero when the stated
+    ``u`` already covers the errors), the bias ``b`` the mean of ``e`` weighted by
+    ``1/(u² + s²)``; the bias's own standard error is added to ``s``. Units whose ``u``
+    differs a lot (an ill-determined cable loop) then count by their own ``u``, which a
+    moment estimate ``var(e) − mean(u²)`` would not do. Computed on results calibrated
+    with ``--method-bias off``.
     """
     results: dict[str, dict[str, Any]] = {}
     for (axis, name), group in by_result(rows).items():
         relative, errors, u = errors_of(group)
-        excess = max(float(np.var(errors, ddof=1) - np.mean(u**2)), 0.0)
-        scatter = math.sqrt(excess + float(np.var(errors, ddof=1)) / len(group))
+        bias, scatter = float(np.mean(errors)), 0.0
+        for _ in range(20):
+            scatter = _excess_scatter(errors - bias, u)
+            weights = 1 / (u**2 + scatter**2)
+            bias = float(np.sum(weights * errors) / np.sum(weights))
         results.setdefault(axis, {})[name] = {
             "scale": "relative" if relative else "absolute",
-            "bias": float(np.mean(errors)),
-            "scatter": scatter,
+            "bias": bias,
+            "scatter": math.hypot(scatter, 1 / math.sqrt(float(np.sum(weights)))),
             "units": len(group),
         }
     return {"population": population, "results": results}
+
+
+def _excess_scatter(errors: FloatArray, u: FloatArray) -> float:
+    """``s ≥ 0`` with ``mean(e²/(u² + s²)) = 1``."""
+
+    def excess(s: float) -> float:
+        return float(np.mean(errors**2 / (u**2 + s**2))) - 1.0
+
+    if excess(0.0) <= 0:
+        return 0.0
+    high = float(np.sqrt(np.mean(errors**2))) + 1e-300
+    return float(brentq(excess, 0.0, high))
