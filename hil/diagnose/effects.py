@@ -21,9 +21,9 @@ from numpy.typing import NDArray
 from scipy.optimize import minimize_scalar
 from scipy.signal import bilinear, lfilter
 
-from hil.diagnose.harmonics import find_orders, order_range
 from hil.diagnose.model import Designer, Fit, IndexArray, Model, Term, friction_direction
 from hil.diagnose.signals import Signals
+from hil.identify.orders import PursuitLimits, Segment, matching_pursuit, order_range
 
 log = logging.getLogger(__name__)
 
@@ -39,6 +39,13 @@ EFFECTS = (
     "cable_spring",
     "current_lag",
     "two_mass",
+)
+#: When the matching pursuit (:func:`hil.identify.orders.matching_pursuit`) takes an order
+#: of cogging or K_t ripple: power ≥ 4.5 × the periodogram's median away from the order's
+#: leakage, effective χ²(2) above the Bonferroni threshold for 200 orders at 1 %, at least
+#: 2 % of the first order's power; six orders at most.
+ORDER_LIMITS = PursuitLimits(
+    prominence=4.5, min_chi2=-2.0 * math.log(0.01 / 200), relative_power=0.02, max_orders=6
 )
 #: Effects whose searched parameters are kept from the round they were first searched in
 #: (the harmonic orders are searched again: the weight of K_t ripple is the current model).
@@ -488,8 +495,9 @@ def _harmonic(ctx: Context, effect: str) -> Model | None:
         weight_rows = weight_fn(signals)[rows]
     residual = signals.effort_filtered[rows] - designer.predict(ctx.current, signals)[rows]
     orders = order_range(signals.position[rows], ctx.counts_per_rev)
-    found = find_orders(residual, signals.position[rows], weight=weight_rows, orders=orders,
-                        independence=min(1.0, signals.independence * signals.decimation))
+    segment = Segment(residual=residual, position_rad=signals.position[rows], weight=weight_rows)
+    found = matching_pursuit([segment], orders=orders, limits=ORDER_LIMITS,
+                             independence=min(1.0, signals.independence * signals.decimation))
     if not found:
         return None
     key = f"{id(prediction_fit)}" if effect == "kt_ripple" else "1"

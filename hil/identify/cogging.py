@@ -10,10 +10,12 @@ the same in both passes, K_t ripple scales with the torque. Two passes with diff
     R_n = −(C₊ − C₋)/(T̄₊ − T̄₋),      G_n = C₊ + T̄₊·R_n
 
 Complex amplitudes ``z = A·e^{iφ}`` stand for ``A·sin(nθ + φ)`` (the simulator's
-convention). Orders are found by a scan over integer orders of the single-harmonic fit
-amplitude (local maxima above ``threshold`` times the median floor), then fitted jointly
-with a polynomial for the smooth part. Orders below ``min_order`` (a few cycles over the
-travel) cannot be told from the smooth load and are not sought.
+convention). Orders are found by the matching pursuit of :mod:`hil.identify.orders` over
+the two passes' residuals about their smooth trend, each pass a segment with its own
+amplitude and phase (K_t ripple flips sign between the passes, so they cannot be
+concatenated), then fitted jointly with a polynomial for the smooth part. Orders below
+``min_order`` (a few cycles over the travel) cannot be told from the smooth load and are
+not sought.
 
 Compensation table (JSON, written by the protocol next to the certificate)::
 
@@ -39,10 +41,24 @@ from numpy.typing import NDArray
 from hil.errors import IdentificationError
 from hil.identify.estimate import Estimate
 from hil.identify.harmonic_fit import harmonic_columns, polynomial_columns
+from hil.identify.orders import PursuitLimits, Segment, matching_pursuit
 from hil.identify.quantisation import quantisation_step
 
 FloatArray = NDArray[np.float64]
 COMPENSATION_FORMAT = "gimbal-hil cogging compensation 1"
+#: An order is taken when its power, summed over the two passes, is at least this many
+#: times the median power (away from its leakage). The two passes' noise adds up in the
+#: sum (σ²·χ²(4), median 3.36 σ²): an order carried by one pass alone, as K_t ripple is
+#: when one torque level is near zero, then stands 1.228/1.678 × as far above the floor as
+#: it would over one pass (median of the larger of two χ²(2) over the median of their sum),
+#: and ``64 × 1.228/1.678 ≈ 47`` keeps the detection limit of an amplitude 8 × the median
+#: in the stronger pass; an order in both passes stands out more.
+PROMINENCE = 48.0
+#: An order enters only with at least this fraction of the strongest order's power. The
+#: K_t ripple scales with the whole torque, not only its mean level: the smooth load along
+#: the travel modulates it into sidebands (``n ± 1, n ± 2``) a fraction of a percent of its
+#: power, which stand far above a low noise floor but are not orders of their own.
+RELATIVE_POWER = 0.01
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -113,34 +129,6 @@ def _smooth_residual(theta: FloatArray, torque: FloatArray, poly: int, centre: f
     return np.asarray(torque - design @ coef, dtype=np.float64)
 
 
-def scan_orders(
-    passes: list[tuple[FloatArray, FloatArray]], *, min_order: int, max_order: int,
-    threshold: float, poly: int, max_orders: int,
-) -> list[int]:
-    """Integer orders whose single-harmonic amplitude (largest over the passes) is a local
-    maximum (±2 orders) above ``threshold`` × the median over the scan."""
-    lo = min(float(t.min()) for t, _ in passes)
-    hi = max(float(t.max()) for t, _ in passes)
-    centre, scale = (lo + hi) / 2, (hi - lo) / 2
-    orders = np.arange(min_order, max_order + 1)
-    amplitude = np.zeros(orders.size)
-    for theta, torque in passes:
-        residual = _smooth_residual(theta, torque, poly, centre, scale)
-        # correlation amplitude 2/N·|Σ r·e^{−inθ}| (a periodogram over the travel)
-        step = np.exp(-1j * theta)
-        wave = np.exp(-1j * min_order * theta) * residual
-        for i in range(orders.size):
-            amplitude[i] = max(amplitude[i], 2 * abs(wave.sum()) / theta.size)
-            wave *= step
-    floor = float(np.median(amplitude))
-    picks = []
-    for i in range(orders.size):
-        window = amplitude[max(i - 2, 0):i + 3]
-        if amplitude[i] >= window.max() and amplitude[i] > threshold * floor:
-            picks.append((amplitude[i], int(orders[i])))
-    return sorted(n for _, n in sorted(picks, reverse=True)[:max_orders])
-
-
 def check_resolution(torque_nm: FloatArray, *, noise_rms_nm: float, amplitude_nm: float) -> float:
     """Refuse a sub-LSB amplitude when the quantisation is not dithered; returns the LSB.
 
@@ -170,7 +158,8 @@ def identify_cogging(
     inertia_kg_m2: float,
     min_order: int,
     max_order: int,
-    threshold: float = 8.0,
+    prominence: float = PROMINENCE,
+    relative_power: float = RELATIVE_POWER,
     poly: int = 6,
     max_orders: int = 8,
 ) -> CoggingResult:
@@ -190,8 +179,13 @@ def identify_cogging(
         J for the acceleration correction (measured, or the declared nominal).
     min_order, max_order : int
         The orders per revolution scanned.
-    threshold : float
-        An order is taken when its amplitude exceeds this many times the scan's median.
+    prominence : float
+        An order is taken when its power, summed over the passes, is at least this many
+        times the median power (see :data:`PROMINENCE` and
+        :class:`~hil.identify.orders.PursuitLimits`) ...
+    relative_power : float
+        ... and at least this fraction of the strongest order's power (see
+        :data:`RELATIVE_POWER`).
     poly : int
         Order of the smooth (friction, gravity, cable) trend removed against position.
     max_orders : int
@@ -213,22 +207,26 @@ def identify_cogging(
     if len(passes) != 2:
         raise IdentificationError(f"need two passes at different torque levels, got {len(passes)}")
     angle_torque = [(theta, torque) for _, theta, torque in passes]
-    orders = scan_orders(angle_torque, min_order=min_order, max_order=max_order,
-                         threshold=threshold, poly=poly, max_orders=max_orders)
     lo = min(float(t.min()) for t, _ in angle_torque)
     hi = max(float(t.max()) for t, _ in angle_torque)
     centre, scale = (lo + hi) / 2, (hi - lo) / 2
-    smooth_sigma = max(float(np.std(_smooth_residual(theta, torque, poly, centre, scale)))
-                       for theta, torque in angle_torque)
+    segments = [Segment(residual=_smooth_residual(theta, torque, poly, centre, scale),
+                        position_rad=theta) for theta, torque in angle_torque]
+    limits = PursuitLimits(prominence=prominence, relative_power=relative_power,
+                           max_orders=max_orders)
+    orders = sorted(matching_pursuit(segments, orders=(min_order, max_order), limits=limits))
+    smooth_sigma = max(float(np.std(s.residual)) for s in segments)
     all_torque = np.concatenate([torque for _, torque in angle_torque])
     if not orders:
         check_resolution(all_torque, noise_rms_nm=smooth_sigma, amplitude_nm=0.0)
         n_min = min(len(t) for t, _ in angle_torque)
-        white_floor = 1.67 * smooth_sigma / math.sqrt(n_min)  # median Rayleigh amplitude
+        # median of the summed power σ²·χ²(4) of two passes, as an RMS amplitude
+        white_floor = 1.83 * smooth_sigma / math.sqrt(n_min)
         raise IdentificationError(
             f"no position harmonic of order {min_order}-{max_order} stands "
-            f"{threshold:g}× above the floor (torque noise σ = {smooth_sigma:.3g} N·m over "
-            f"{n_min} samples a pass: white-noise floor ≈ {white_floor:.2g} N·m)"
+            f"{prominence:g}× above the floor in power (torque noise σ = {smooth_sigma:.3g} "
+            f"N·m over {n_min} samples a pass: white-noise floor ≈ {white_floor:.2g} N·m, "
+            "RMS over the passes)"
         )
     lsb = quantisation_step(all_torque)
     order_array = np.array(orders, dtype=np.float64)

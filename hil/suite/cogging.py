@@ -29,9 +29,10 @@ NAME = "cogging"
 COMPENSATION_FILE = "cogging_compensation.json"
 
 
-# Below this the demo unit's 0.4 mN·m cogging sinks under the 8× detection floor at its
-# reported-torque noise: 399 samples a pass over Modbus (100 Hz) found nothing; the 4 kHz
-# sim (28 500) finds it at 18–20× the floor.
+# Below this the demo unit's 0.4 mN·m cogging sinks under the detection floor
+# (hil.identify.cogging.PROMINENCE) at its reported-torque noise: 399 samples a pass over
+# Modbus (100 Hz) found nothing; the 4 kHz sim (16 000–38 000 a pass) finds it at 300–700×
+# the floor in power (the ratio grows with the samples N).
 MIN_SAMPLES_PER_PASS = 4000
 
 
