@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import math
 import re
 from pathlib import Path
 
@@ -60,6 +61,16 @@ def test_calibration_writes_a_passing_certificate(
             r["coverage_factor"] * r["standard_uncertainty"]
         )
         assert r["lower_limit"] <= r["value"] <= r["upper_limit"]
+        # the budget is what u is made of: its contributions add in quadrature to u
+        lines = r["budget"]
+        assert lines[0]["type"] == "A"
+        assert math.hypot(*(line["contribution"] for line in lines)) == pytest.approx(
+            r["standard_uncertainty"]
+        )
+    assert any(line["component"].startswith("method: error over") for line in
+               params["inertia_kg_m2"]["budget"])
+    assert len(cert["method"]["method_bias"]["sha256"]) == 64
+    assert "Uncertainty budgets" in (out / "GMB-0042" / "certificate.txt").read_text()
     plant = load_profile().plant
     assert plant is not None
     # torque-based results are in the drive's reported-torque units (what the loop commands)
