@@ -43,6 +43,7 @@ from hil.identify.estimate import Estimate
 from hil.identify.harmonic_fit import harmonic_columns, polynomial_columns
 from hil.identify.orders import PursuitLimits, Segment, matching_pursuit
 from hil.identify.quantisation import quantisation_step
+from hil.identify.regression import newey_west_covariance, newey_west_lags
 
 FloatArray = NDArray[np.float64]
 COMPENSATION_FORMAT = "gimbal-hil cogging compensation 1"
@@ -238,7 +239,13 @@ def identify_cogging(
         dof = len(torque) - design.shape[1]
         # dithered quantisation is in the residual already; never claim less than it
         sigma2 = max(float(residual @ residual) / dof, lsb**2 / 12)
-        cov = sigma2 * np.linalg.inv(design.T @ design)
+        # the torque left after the fit is mostly the velocity loop's chatter on the
+        # encoder's steps, anti-correlated from sample to sample: an autocorrelation-
+        # consistent covariance (white: 4 × too wide over simulated units), never below
+        # what dithered quantisation alone leaves (LSB²/12 white)
+        cov = newey_west_covariance(design, residual, lags=newey_west_lags(len(residual)))
+        floor = lsb**2 / 12 * np.diag(np.linalg.inv(design.T @ design))
+        cov[np.diag_indices_from(cov)] = np.maximum(np.diag(cov), floor)
         harmonic = coef[poly + 1:]
         var = np.diag(cov)[poly + 1:]
         # position ripple about the trend, in the same θ-harmonic basis
@@ -263,7 +270,10 @@ def identify_cogging(
     ripple = -(z[0] - z[1]) / spread
     ripple_u = np.hypot(zu[0], zu[1]) / abs(spread)
     cogging = z[0] + levels[0] * ripple
-    cogging_u = np.hypot(zu[0], abs(levels[0]) * ripple_u)
+    # cogging = z₀·(1 − a) + z₁·a with a = T̄₊/(T̄₊ − T̄₋): the two passes' independent
+    # errors, not z₀'s and the ripple's as if they were independent (1.7 × too wide)
+    share = levels[0] / spread
+    cogging_u = np.hypot((1 - share) * zu[0], share * zu[1])
     cog = tuple(HarmonicEstimate(order=n, amplitude=float(abs(c)), phase_rad=float(np.angle(c)),
                                  amplitude_u=float(u))
                 for n, c, u in zip(orders, cogging, cogging_u, strict=True))
