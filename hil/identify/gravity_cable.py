@@ -32,9 +32,10 @@ from scipy.optimize import minimize_scalar
 
 from hil.errors import IdentificationError
 from hil.identify.estimate import Estimate, combine_linear
-from hil.identify.regression import newey_west_covariance, newey_west_lags
+from hil.identify.regression import newey_west_covariance
 
 FloatArray = NDArray[np.float64]
+BIN_PATTERN_LAGS = 5  # Bartlett window of the bin fit's covariance (bins)
 STANDARD_GRAVITY_M_S2 = 9.80665
 REFERENCE_SAMPLES = 4  # settled-pass samples averaged against each probe bin, at least
 
@@ -339,10 +340,12 @@ def identify_gravity_cable(
     coef = np.linalg.lstsq(design, y, rcond=None)[0]
     residual = y - design @ coef
     dof = len(y) - 4
-    # bins alias what cogging leaves into a short-period pattern the smooth load terms
-    # cannot follow: autocorrelation-consistent covariance, not the white-residual one
-    # (which overstated u(k_cable) 1.35 × over a population of simulated units)
-    cov = newey_west_covariance(design, residual, lags=newey_west_lags(len(y)))
+    # bins alias what cogging leaves into a short-period pattern (about three bins) the
+    # smooth load terms cannot follow: autocorrelation-consistent covariance, with a
+    # Bartlett window spanning more than one period of it. Over 50 simulated units the
+    # RMS of (x − truth)/u was, white: m·g·e 0.30, k 0.53; 3 lags: 0.56, 0.94; 5 lags:
+    # 0.82, 1.19; 12 lags: 0.98, 1.54
+    cov = newey_west_covariance(design, residual, lags=BIN_PATTERN_LAGS)
     a, b, k_cable, offset = (float(c) for c in coef)
     mge = math.hypot(a, b)
     # m·g·e·cos(θ + φ) = a·cos θ + b·sin θ with a = mge·cos φ, b = −mge·sin φ
