@@ -82,7 +82,8 @@ class CalibrationRun:
         self.profile = profile
         self.unit_serial = unit_serial
         self.drive_kind = drive_kind
-        self.method_bias = method_bias or load_method_bias(axis=profile.axis)
+        self.method_bias = (load_method_bias(axis=profile.axis) if method_bias is None
+                            else method_bias)
         self.unit_dir = out_dir / unit_serial
         self.started = datetime.now(UTC)
         self.drive_info: DriveInfo | None = None

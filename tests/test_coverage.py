@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import math
 import sys
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -30,6 +31,7 @@ from coverage_population import (
     calibrate,
     repeatability,
     run_population,
+    summarise,
     write_population,
 )
 
@@ -62,15 +64,7 @@ def population(tmp_path_factory: pytest.TempPathFactory) -> Population:
 
 def pooled(rows: list[Row]) -> dict[str, Summary]:
     """Coverage and RMS normalised error per result, both profiles together."""
-    out = {}
-    for name in sorted({r.parameter for r in rows}):
-        group = [r for r in rows if r.parameter == name]
-        z = np.array([r.normalised_error for r in group])
-        out[name] = Summary(axis="both", parameter=name, n=len(group), relative=False,
-                            bias=math.nan, rms_normalised=float(np.sqrt(np.mean(z**2))),
-                            coverage=float(np.mean([r.covered for r in group])),
-                            median_u=math.nan)
-    return out
+    return {s.parameter: s for s in summarise([replace(r, axis="both") for r in rows])}
 
 
 def test_every_unit_was_calibrated(

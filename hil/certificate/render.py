@@ -62,13 +62,13 @@ def _budgets(results: list[dict[str, Any]]) -> list[str]:
     lines = ["", "Uncertainty budgets (standard uncertainties, k = 1; share of u²):"]
     for r in results:
         u = r["standard_uncertainty"]
-        lines.append(f"  {r['parameter']} (u = {u:.2g} {r['unit']}, "
-                     f"U = {r['expanded_uncertainty']:.2g}, k = {r['coverage_factor']:.2f})")
+        lines.append(f"  {r['parameter']} (u = {u:#.2g} {r['unit']}, "
+                     f"U = {r['expanded_uncertainty']:#.2g}, k = {r['coverage_factor']:.2f})")
         for line in r.get("budget", []):
             share = (line["contribution"] / u) ** 2 if u else 0.0
             lines.append(
-                f"    {line['type']}  u(x) = {line['standard_uncertainty']:<9.2g}"
+                f"    {line['type']}  u(x) = {line['standard_uncertainty']:<#9.2g}"
                 f"{line['unit']:<11} c = {line['sensitivity']:<9.3g} "
-                f"→ {line['contribution']:<9.2g}{100 * share:>4.0f} %  {line['component']}"
+                f"→ {line['contribution']:<#9.2g}{100 * share:>4.0f} %  {line['component']}"
             )
     return lines
