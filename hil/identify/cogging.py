@@ -39,9 +39,14 @@ import numpy as np
 from numpy.typing import NDArray
 
 from hil.errors import IdentificationError
-from hil.identify.estimate import Estimate
+from hil.identify.estimate import Component, Estimate
 from hil.identify.harmonic_fit import harmonic_columns, polynomial_columns
-from hil.identify.orders import PursuitLimits, Segment, matching_pursuit
+from hil.identify.orders import (
+    PursuitLimits,
+    Segment,
+    matching_pursuit,
+    segment_amplitudes,
+)
 from hil.identify.quantisation import quantisation_step
 from hil.identify.regression import newey_west_covariance, newey_west_lags
 
@@ -60,6 +65,15 @@ PROMINENCE = 48.0
 #: the travel modulates it into sidebands (``n ± 1, n ± 2``) a fraction of a percent of its
 #: power, which stand far above a low noise floor but are not orders of their own.
 RELATIVE_POWER = 0.01
+#: K_t ripple is looked for where the two passes differ: it flips sign with the torque,
+#: cogging does not. Per order, ``Q = |z₊ − z₋|²`` (each pass's own harmonic) is, without
+#: ripple, exponential about the local noise mean (its median over nearby orders / ln 2);
+#: an order is taken when ``Q`` exceeds ``ln(M/α)`` times that mean, ``M`` the orders
+#: scanned, so that a unit without ripple shows a false one with probability ``α``.
+RIPPLE_FALSE_ALARM = 0.01
+#: Orders either side whose median sets an order's local noise mean (the loop's chatter
+#: is not white: its floor changes with the order).
+RIPPLE_FLOOR_WINDOW = 20
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -153,6 +167,107 @@ def check_resolution(torque_nm: FloatArray, *, noise_rms_nm: float, amplitude_nm
     return lsb
 
 
+@dataclass(frozen=True, slots=True, kw_only=True)
+class RippleScan:
+    """Orders where the two passes' harmonics differ beyond their noise (K_t ripple).
+
+    Attributes
+    ----------
+    orders : tuple of int
+        The orders taken, strongest first.
+    detection_limit_nm : float
+        The difference ``|z₊ − z₋|`` (N·m) found with 95 % probability at the noisiest
+        order scanned: a ripple ``r`` (relative) shows as ``r·|T̄₊ − T̄₋|``.
+    """
+
+    orders: tuple[int, ...]
+    detection_limit_nm: float
+
+
+def ripple_scan(segments: list[Segment], *, taken: list[int], orders: tuple[int, int],
+                max_orders: int, false_alarm: float = RIPPLE_FALSE_ALARM) -> RippleScan:
+    """K_t ripple orders from the difference of the two passes' harmonics.
+
+    The pursuit's orders (cogging, strong ripple) are first fitted out of each pass with
+    their own amplitudes, and they and their next neighbours left out. Then, order by order, ``Q = |z₊ − z₋|²`` against the local
+    noise mean, greedily: the strongest order above ``ln(M/α)`` times its mean is taken,
+    the orders within three resolutions ``2π/travel`` of it (its leakage) left out, and so
+    on (see :data:`RIPPLE_FALSE_ALARM`).
+
+    Parameters
+    ----------
+    segments : list of Segment
+        The two passes' residuals about their smooth trend.
+    taken : list of int
+        Orders the matching pursuit already took.
+    orders : (int, int)
+        Inclusive range scanned.
+    max_orders : int
+        At most this many ripple orders.
+    false_alarm : float
+        ``α``, the probability of a false order on a unit without ripple.
+
+    Returns
+    -------
+    RippleScan
+    """
+    left = []
+    for segment in segments:
+        columns = harmonic_columns(segment.position_rad, taken)
+        residual = segment.residual
+        if taken:
+            residual = residual - columns @ np.linalg.lstsq(columns, residual, rcond=None)[0]
+        left.append(Segment(residual=residual, position_rad=segment.position_rad))
+    ks, z = segment_amplitudes(left, orders=orders)
+    if ks.size == 0:
+        return RippleScan(orders=(), detection_limit_nm=math.inf)
+    q = np.abs(z[0] - z[1]) ** 2
+    travel = min(float(np.ptp(s.position_rad)) for s in segments)
+    reach = 3 * 2 * math.pi / max(travel, 1e-12)
+    # the taken orders are fitted out of each pass exactly, leakage included; what they
+    # leave in the difference is at their own order (the loop's acceleration flips with
+    # the direction) and the next
+    free = np.ones(ks.size, dtype=bool)
+    for k in taken:
+        free &= np.abs(ks - k) > 1
+    if np.count_nonzero(free) < 10:
+        return RippleScan(orders=(), detection_limit_nm=math.inf)
+    mean = np.array([np.median(q[free & (np.abs(ks - k) <= RIPPLE_FLOOR_WINDOW)])
+                     if np.count_nonzero(free & (np.abs(ks - k) <= RIPPLE_FLOOR_WINDOW)) >= 10
+                     else np.median(q[free]) for k in ks]) / math.log(2)
+    threshold = math.log(np.count_nonzero(free) / false_alarm)
+    # |Δz| found 95 % of the time: the threshold's amplitude plus 1.645 noise SDs of |Δz|;
+    # a ripple may sit at any order, so the bound is the worst order's (the lowest orders,
+    # near the smooth trend, are the noisiest)
+    local = np.sqrt(threshold * mean) + 1.645 * np.sqrt(mean / 2)
+    limit = float(np.max(local[free]))
+    chosen: list[int] = []
+    candidate = free & (q > threshold * mean)
+    while len(chosen) < max_orders and np.any(candidate):
+        best = int(np.argmax(np.where(candidate, q / mean, -np.inf)))
+        chosen.append(int(ks[best]))
+        candidate &= np.abs(ks - ks[best]) > reach
+    return RippleScan(orders=tuple(chosen), detection_limit_nm=limit)
+
+
+def _ripple_peak(ripple: tuple[HarmonicEstimate, ...], *, detection_limit: float) -> Estimate:
+    """``kt_ripple_peak_pct``: the largest significant ripple harmonic or, when none stands
+    out of its noise, a value known only to lie between 0 and the detection limit
+    (rectangular: ``D/2 ± D/√12``)."""
+    significance = math.sqrt(2 * math.log(max(len(ripple), 1) / RIPPLE_FALSE_ALARM))
+    found = [h for h in ripple if h.amplitude > significance * h.amplitude_u]
+    if found:
+        top = max(found, key=lambda h: h.amplitude)
+        return Estimate(name="kt_ripple_peak_pct", value=100 * top.amplitude,
+                        standard_uncertainty=100 * top.amplitude_u, unit="%")
+    limit_pct = 100 * detection_limit
+    bound = Component(source=f"no K_t ripple above the detection limit {limit_pct:.2g} % "
+                             "(rectangular between 0 and it)",
+                      kind="B", standard_uncertainty=limit_pct / math.sqrt(12), unit="%")
+    return Estimate(name="kt_ripple_peak_pct", value=limit_pct / 2,
+                    standard_uncertainty=bound.standard_uncertainty, unit="%", budget=(bound,))
+
+
 def identify_cogging(
     passes: list[tuple[FloatArray, FloatArray, FloatArray]],
     *,
@@ -215,7 +330,10 @@ def identify_cogging(
                         position_rad=theta) for theta, torque in angle_torque]
     limits = PursuitLimits(prominence=prominence, relative_power=relative_power,
                            max_orders=max_orders)
-    orders = sorted(matching_pursuit(segments, orders=(min_order, max_order), limits=limits))
+    taken = matching_pursuit(segments, orders=(min_order, max_order), limits=limits)
+    scan = ripple_scan(segments, taken=taken, orders=(min_order, max_order),
+                       max_orders=max_orders)
+    orders = sorted({*taken, *scan.orders})
     smooth_sigma = max(float(np.std(s.residual)) for s in segments)
     all_torque = np.concatenate([torque for _, torque in angle_torque])
     if not orders:
@@ -281,15 +399,13 @@ def identify_cogging(
                                  amplitude_u=float(u))
                 for n, r, u in zip(orders, ripple, ripple_u, strict=True))
     top_cog = max(cog, key=lambda h: h.amplitude)
-    top_rip = max(rip, key=lambda h: h.amplitude)
     check_resolution(all_torque, noise_rms_nm=float(max(noise)), amplitude_nm=top_cog.amplitude)
     return CoggingResult(
         cogging=cog,
         kt_ripple=rip,
         cogging_peak=Estimate(name="cogging_peak_nm", value=top_cog.amplitude,
                               standard_uncertainty=top_cog.amplitude_u, unit="N·m"),
-        kt_ripple_peak=Estimate(name="kt_ripple_peak_pct", value=100 * top_rip.amplitude,
-                                standard_uncertainty=100 * top_rip.amplitude_u, unit="%"),
+        kt_ripple_peak=_ripple_peak(rip, detection_limit=scan.detection_limit_nm / abs(spread)),
         torque_levels_nm=(levels[0], levels[1]),
         noise_rms_nm=float(max(noise)),
         orders_scanned=(min_order, max_order),

@@ -228,6 +228,46 @@ def periodogram(
     return _gram(bases, [s.residual for s in segments], weights, independence)
 
 
+def segment_amplitudes(
+    segments: Sequence[Segment], *, orders: tuple[int, int]
+) -> tuple[IntArray, NDArray[np.complex128]]:
+    """Each segment's least-squares harmonic per order, fitted one order at a time.
+
+    Parameters
+    ----------
+    segments : sequence of Segment
+        The residual, in one or more segments.
+    orders : (int, int)
+        Inclusive range of orders (see :func:`order_range`).
+
+    Returns
+    -------
+    orders : ndarray of int64
+        The orders.
+    amplitudes : ndarray of complex, shape (segments, orders)
+        ``β + iα`` of ``w·(α·cos kθ + β·sin kθ)``, so that ``|z|`` is the amplitude and
+        ``arg z`` the phase of ``w·A·sin(kθ + φ)``; 0 where the order's sine and cosine are
+        not separable in a segment.
+    """
+    if orders[1] < orders[0] or not segments:
+        return np.zeros(0, dtype=np.int64), np.zeros((len(segments), 0), dtype=np.complex128)
+    weights = _weights(segments)
+    rows = []
+    basis = None
+    for segment, weight in zip(segments, weights, strict=True):
+        basis = _basis(segment.position_rad, weight, orders)
+        s_wr = _binned(weight * segment.residual, basis.index, basis.size)[basis.used]
+        b1, b2 = basis.sin @ s_wr, basis.cos @ s_wr
+        a11, a12, a22 = basis.a11, basis.a12, basis.a22
+        det = a11 * a22 - a12 * a12
+        ok = det > 1e-12 * np.maximum(a11 * a22, 1e-300)
+        safe = np.where(ok, det, 1.0)
+        z = ((a22 * b1 - a12 * b2) + 1j * (a11 * b2 - a12 * b1)) / safe
+        rows.append(np.where(ok, z, 0.0))
+    assert basis is not None
+    return basis.orders, np.asarray(rows, dtype=np.complex128)
+
+
 def matching_pursuit(
     segments: Sequence[Segment],
     *,
