@@ -189,10 +189,11 @@ def ripple_scan(segments: list[Segment], *, taken: list[int], orders: tuple[int,
     """K_t ripple orders from the difference of the two passes' harmonics.
 
     The pursuit's orders (cogging, strong ripple) are first fitted out of each pass with
-    their own amplitudes, and they and their next neighbours left out. Then, order by order, ``Q = |z₊ − z₋|²`` against the local
-    noise mean, greedily: the strongest order above ``ln(M/α)`` times its mean is taken,
-    the orders within three resolutions ``2π/travel`` of it (its leakage) left out, and so
-    on (see :data:`RIPPLE_FALSE_ALARM`).
+    their own amplitudes, and they and their next neighbours left out. Then, order by
+    order, ``Q = |z₊ − z₋|²`` against the local noise mean, greedily: the strongest
+    order above ``ln(M/α)`` times its mean is taken, the orders within three resolutions
+    ``2π/travel`` of it (its leakage) left out, and so on (see
+    :data:`RIPPLE_FALSE_ALARM`).
 
     Parameters
     ----------

@@ -4,22 +4,27 @@ several elevations of the other axis.
 A payload with principal inertias ``I_a`` (about the axis that is vertical when level) and
 ``I_b`` (the one that turns vertical at the zenith) presents ``I_a·cos²(el) + I_b·sin²(el)``
 to the azimuth axis, i.e. ``I_b + (I_a − I_b)·cos²(el)``: linear in ``cos²(el)``. Weighted
-least squares on the per-elevation J and their standard uncertainties; the results are J
-level (el = 0) and at the zenith (el = π/2) with the fit covariance, scaled by ``√(χ²/ν)``
-when the scatter about the line exceeds the stated uncertainties.
+least squares on the per-elevation J, weighted by what differs between elevations (each
+J's Type A); the results are J level (el = 0), at the zenith (el = π/2) and their ratio,
+with the fit covariance, scaled by ``√(χ²/ν)`` when the scatter about the line exceeds
+those uncertainties. The Type B lines every J shares (the current loop's lag and the cable
+loop taken out, the torque-reporting gain) are propagated through the fit as common
+inputs, once and fully correlated: in the ratio they largely cancel.
 """
 
 from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from numpy.typing import NDArray
 
 from hil.errors import IdentificationError
-from hil.identify.estimate import Component, Estimate
+from hil.identify.estimate import TYPE_A_SOURCE, Component, Estimate, with_budget
+
+FloatArray = NDArray[np.float64]
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -81,39 +86,67 @@ def fit_inertia_elevation(
     if float(np.ptp(c2)) < 0.3:
         raise IdentificationError("the elevations do not span enough of cos²(el)")
     j = np.array([e.value for e in inertias])
-    u = np.array([e.standard_uncertainty for e in inertias])
+    u = np.array([_independent_u(e) for e in inertias])
     if np.any(u <= 0):
         raise IdentificationError("every J needs a positive standard uncertainty")
-    design = np.column_stack([np.ones_like(c2), c2]) / u[:, None]
-    coefficients, *_ = np.linalg.lstsq(design, j / u, rcond=None)
-    residual = j / u - design @ coefficients
+    design = np.column_stack([np.ones_like(c2), c2])
+    weighted = design / u[:, None]
+    coefficients, *_ = np.linalg.lstsq(weighted, j / u, rcond=None)
+    residual = j / u - weighted @ coefficients
     dof = len(j) - 2
     chi2_per_dof = float(residual @ residual) / dof if dof > 0 else math.nan
-    covariance = np.linalg.inv(design.T @ design) * (max(1.0, chi2_per_dof) if dof > 0 else 1.0)
-    at_level = np.array([1.0, 1.0])
+    normal_inverse = np.linalg.inv(weighted.T @ weighted)
+    covariance = normal_inverse * (max(1.0, chi2_per_dof) if dof > 0 else 1.0)
     zenith_value, delta = float(coefficients[0]), float(coefficients[1])
     effective_dof = float(dof) if dof > 0 and chi2_per_dof > 1.0 else math.inf
+    # d(coefficients)/d(J_i): how an input common to every J moves the fit
+    response = normal_inverse @ weighted.T / u[None, :]
+    shared = _shared_inputs(inertias)
+    results = {
+        "azimuth_inertia_level_kg_m2": (zenith_value + delta, np.array([1.0, 1.0]), "kg·m²"),
+        "azimuth_inertia_zenith_kg_m2": (zenith_value, np.array([1.0, 0.0]), "kg·m²"),
+        # (J_zenith + ΔJ)/J_zenith, the max/min inertia a fixed velocity-loop gain sees
+        "azimuth_inertia_ratio": (1.0 + delta / zenith_value,
+                                  np.array([-delta / zenith_value**2, 1.0 / zenith_value]), "1"),
+    }
+    estimates = {}
+    for name, (value, gradient, unit) in results.items():
+        lines = [Component(source=TYPE_A_SOURCE, kind="A", unit=unit, dof=effective_dof,
+                           standard_uncertainty=math.sqrt(float(gradient @ covariance
+                                                                @ gradient)))]
+        lines += [replace(line, sensitivity=float(gradient @ response @ sensitivities))
+                  for line, sensitivities in shared]
+        estimates[name] = with_budget(
+            Estimate(name=name, value=value, standard_uncertainty=0.0, unit=unit),
+            [line for line in lines if line.contribution > 0], value=value)
     return InertiaElevationResult(
         elevations_rad=tuple(float(e) for e in elevations_rad),
         inertias_kg_m2=tuple(float(v) for v in j),
-        level=Estimate(name="azimuth_inertia_level_kg_m2", value=zenith_value + delta,
-                       standard_uncertainty=math.sqrt(float(at_level @ covariance @ at_level)),
-                       unit="kg·m²", dof=effective_dof),
-        zenith=Estimate(name="azimuth_inertia_zenith_kg_m2", value=zenith_value,
-                        standard_uncertainty=math.sqrt(float(covariance[0, 0])), unit="kg·m²",
-                        dof=effective_dof),
-        ratio=_ratio(zenith_value, delta, covariance, effective_dof),
+        level=estimates["azimuth_inertia_level_kg_m2"],
+        zenith=estimates["azimuth_inertia_zenith_kg_m2"],
+        ratio=estimates["azimuth_inertia_ratio"],
         chi2_per_dof=chi2_per_dof,
     )
 
 
-def _ratio(zenith: float, delta: float, covariance: NDArray[np.float64], dof: float) -> Estimate:
-    """``(J_zenith + ΔJ) / J_zenith``, the max/min inertia a fixed velocity-loop gain sees
-    (the loop's crossover moves by the same factor); first-order propagation."""
-    gradient = np.array([-delta / zenith**2, 1.0 / zenith])
-    return Estimate(name="azimuth_inertia_ratio", value=1.0 + delta / zenith,
-                    standard_uncertainty=math.sqrt(float(gradient @ covariance @ gradient)),
-                    unit="1", dof=dof)
+def _independent_u(inertia: Estimate) -> float:
+    """The part of J's uncertainty its own sines' data give (Type A): what differs from
+    one elevation to the next."""
+    return math.sqrt(sum(c.contribution**2 for c in inertia.components() if c.kind == "A"))
+
+
+def _shared_inputs(inertias: Sequence[Estimate]) -> list[tuple[Component, FloatArray]]:
+    """The Type B lines: earlier results (lag, cable loop, gain) every J takes out alike,
+    each with its sensitivity at every elevation (0 where a J lacks it). Counted once,
+    fully correlated; in the ratio they largely cancel."""
+    lines: dict[str, tuple[Component, FloatArray]] = {}
+    for i, inertia in enumerate(inertias):
+        for line in inertia.components():
+            if line.kind == "B":
+                _, sensitivities = lines.setdefault(
+                    line.source, (line, np.zeros(len(inertias))))
+                sensitivities[i] = line.sensitivity
+    return list(lines.values())
 
 
 def scale_by_gain(estimate: Estimate, *, gain: float, gain_u: float) -> Estimate:

@@ -62,6 +62,32 @@ def test_uncertainty_follows_the_inputs() -> None:
     assert 0.7 < float(np.median(us)) / float(np.std(levels, ddof=1)) < 1.5
 
 
+def test_a_shared_input_counts_once_and_cancels_in_the_ratio() -> None:
+    """A gain error common to every J (one torque-constant result scales them all) moves
+    level and zenith by the same fraction and the ratio not at all: over 400 draws of the
+    common gain and the independent noise, the stated u of each result matches the
+    scatter of its errors, which a fit treating the gain line as independent per
+    elevation gets wrong both ways (too small for level, too large for the ratio)."""
+    rng = np.random.default_rng(3)
+    elevations = [-1.2, -0.6, 0.0, 0.6, 1.2]
+    truth = [0.0065 + 0.0015 * math.cos(e) ** 2 for e in elevations]
+    errors: dict[str, list[float]] = {"level": [], "zenith": [], "ratio": []}
+    stated: dict[str, list[float]] = {"level": [], "zenith": [], "ratio": []}
+    for _ in range(400):
+        gain = 1.0 + rng.normal(0, 0.01)
+        inertias = [scale_by_gain(_j(t + rng.normal(0, 2e-5), 2e-5), gain=gain, gain_u=0.01)
+                    for t in truth]
+        result = fit_inertia_elevation(elevations, inertias)
+        for name, estimate, true in (("level", result.level, 0.008),
+                                     ("zenith", result.zenith, 0.0065),
+                                     ("ratio", result.ratio, 0.008 / 0.0065)):
+            errors[name].append(estimate.value - true)
+            stated[name].append(estimate.standard_uncertainty)
+    for name in errors:
+        ratio = float(np.std(errors[name])) / float(np.median(stated[name]))
+        assert 0.85 < ratio < 1.15, (name, ratio)
+
+
 def test_elevations_without_spread_are_refused() -> None:
     with pytest.raises(IdentificationError, match="span"):
         fit_inertia_elevation([0.0, 0.05, 0.1], [_j(0.008)] * 3)
