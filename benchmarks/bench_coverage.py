@@ -16,6 +16,7 @@ import argparse
 import json
 import sys
 import time
+import tomllib
 from dataclasses import asdict
 from pathlib import Path
 
@@ -26,11 +27,13 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from coverage_population import (
     NO_TRUTH,
+    Summary,
     bias_map,
     calibrate,
     repeatability,
     run_population,
     summarise,
+    with_validation,
     write_population,
 )
 
@@ -42,6 +45,20 @@ BIAS_MAP_HEADER = """\
 """
 GOAL_COVERAGE = (0.93, 0.98)
 GOAL_RMS = (0.7, 1.3)
+
+
+def verdict(s: Summary) -> str:
+    """``met``: coverage and RMS inside the goal; ``consistent``: not both, but the 95 %
+    interval of each overlaps its goal (the population cannot tell it from a result that
+    meets it); ``MISSED``: an interval lies wholly outside."""
+    inside = (GOAL_COVERAGE[0] <= s.coverage <= GOAL_COVERAGE[1]
+              and GOAL_RMS[0] <= s.rms_normalised <= GOAL_RMS[1])
+    if inside:
+        return "met"
+    overlaps = (s.coverage_interval[0] <= GOAL_COVERAGE[1]
+                and s.coverage_interval[1] >= GOAL_COVERAGE[0]
+                and s.rms_interval[0] <= GOAL_RMS[1] and s.rms_interval[1] >= GOAL_RMS[0])
+    return "consistent" if overlaps else "MISSED"
 
 
 def main() -> int:
@@ -57,6 +74,9 @@ def main() -> int:
                         help="read the certificates already under --out instead of calibrating")
     parser.add_argument("--write-bias-map", type=Path, default=None,
                         help="write the map these results show (run with --method-bias off)")
+    parser.add_argument("--write-validation", type=Path, default=None,
+                        help="add each result's coverage here to the map the calibrations "
+                             "used (a population not used to build it)")
     args = parser.parse_args()
 
     started = time.perf_counter()
@@ -71,15 +91,25 @@ def main() -> int:
         args.write_bias_map.write_text(
             BIAS_MAP_HEADER + tomli_w.dumps(bias_map(rows, population=population)),
             encoding="utf-8")
-    print("| axis | result | n | bias | RMS (x−truth)/u | coverage ±U | median u | goal |")
+    if args.write_validation:
+        document = tomllib.loads(args.write_validation.read_text(encoding="utf-8"))
+        args.write_validation.write_text(
+            BIAS_MAP_HEADER + tomli_w.dumps(with_validation(document, summaries)),
+            encoding="utf-8")
+    print("| axis | result | n | bias | RMS (x−truth)/u [95 %] | coverage ±U [95 %] | "
+          "median u | goal |")
     print("|---|---|---|---|---|---|---|---|")
     for s in summaries:
-        ok = (GOAL_COVERAGE[0] <= s.coverage <= GOAL_COVERAGE[1]
-              and GOAL_RMS[0] <= s.rms_normalised <= GOAL_RMS[1])
         bias, u = ((f"{100 * s.bias:+.2f} %", f"{100 * s.median_u:.2g} %") if s.relative
                    else (f"{s.bias:+.2g}", f"{s.median_u:.2g}"))
-        print(f"| {s.axis} | {s.parameter} | {s.n} | {bias} | {s.rms_normalised:.2f} | "
-              f"{100 * s.coverage:.1f} % | {u} | {'met' if ok else 'MISSED'} |")
+        (c_lo, c_hi), (r_lo, r_hi) = s.coverage_interval, s.rms_interval
+        print(f"| {s.axis} | {s.parameter} | {s.n} | {bias} | {s.rms_normalised:.2f} "
+              f"[{r_lo:.2f}, {r_hi:.2f}] | {100 * s.coverage:.1f} % [{100 * c_lo:.0f}, "
+              f"{100 * c_hi:.0f}] | {u} | {verdict(s)} |")
+    counts = {v: sum(verdict(s) == v for s in summaries) for v in ("met", "consistent",
+                                                                   "MISSED")}
+    print(f"\n{counts['met']} met, {counts['consistent']} consistent with the goal, "
+          f"{counts['MISSED']} missed, of {len(summaries)}.")
 
     pairs = [u for u in units if int(u.serial.split("-")[1]) < args.pairs]
     z: dict[str, list[float]] = {}

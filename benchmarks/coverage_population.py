@@ -267,6 +267,25 @@ class Summary:
     rms_normalised: float
     coverage: float
     median_u: float
+    coverage_interval: tuple[float, float]  # Wilson 95 % for the coverage over n units
+    rms_interval: tuple[float, float]  # 95 %, from the mean of z² and its standard error
+
+
+def wilson_interval(successes: int, n: int, z: float = 1.96) -> tuple[float, float]:
+    """95 % interval of a proportion (Wilson score): what ``n`` units can tell of it."""
+    p = successes / n
+    centre = (p + z * z / (2 * n)) / (1 + z * z / n)
+    half = z * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / (1 + z * z / n)
+    return max(centre - half, 0.0), min(centre + half, 1.0)
+
+
+def rms_interval(normalised: FloatArray, z: float = 1.96) -> tuple[float, float]:
+    """95 % interval of the RMS of ``normalised`` (normal approximation for the mean of
+    its squares, with their own scatter: heavy tails widen it)."""
+    squares = normalised**2
+    mean = float(np.mean(squares))
+    error = float(np.std(squares, ddof=1)) / math.sqrt(len(squares)) if len(squares) > 1 else 0
+    return math.sqrt(max(mean - z * error, 0.0)), math.sqrt(mean + z * error)
 
 
 def errors_of(group: Sequence[Row]) -> tuple[bool, FloatArray, FloatArray]:
@@ -310,12 +329,15 @@ def summarise(rows: Iterable[Row]) -> list[Summary]:
     summaries = []
     for (axis, name), group in by_result(rows).items():
         relative, errors, u = errors_of(group)
+        covered = sum(r.covered for r in group)
         summaries.append(Summary(
             axis=axis, parameter=name, n=len(group), relative=relative,
             bias=float(np.mean(errors)),
             rms_normalised=float(np.sqrt(np.mean((errors / u) ** 2))),
-            coverage=float(np.mean([r.covered for r in group])),
+            coverage=covered / len(group),
             median_u=float(np.median(u)),
+            coverage_interval=wilson_interval(covered, len(group)),
+            rms_interval=rms_interval(errors / u),
         ))
     return summaries
 
@@ -359,6 +381,20 @@ def bias_map(rows: Iterable[Row], *, population: str) -> dict[str, Any]:
             "units": len(group),
         }
     return {"population": population, "results": results}
+
+
+def with_validation(document: Mapping[str, Any], summaries: Iterable[Summary]
+                    ) -> dict[str, Any]:
+    """The map ``document`` with each result's coverage on this (out-of-sample)
+    population: ``validated_coverage`` and ``validated_units`` (notes are kept)."""
+    results = {axis: {name: dict(entry) for name, entry in table.items()}
+               for axis, table in document["results"].items()}
+    for s in summaries:
+        entry = results.get(s.axis, {}).get(s.parameter)
+        if entry is not None:
+            entry["validated_coverage"] = round(s.coverage, 4)
+            entry["validated_units"] = s.n
+    return {**document, "results": results}
 
 
 def _excess_scatter(errors: FloatArray, u: FloatArray) -> float:

@@ -157,9 +157,11 @@ class CalibrationRun:
         after the method's known bias is corrected and its budget completed
         (:func:`hil.measurement.with_method_terms`)."""
         spec = self.profile.measurement(estimate.name)
-        estimate = with_method_terms(estimate, spec, self.method_bias.entries.get(spec.name))
+        bias = self.method_bias.entries.get(spec.name)
+        estimate = with_method_terms(estimate, spec, bias)
         measurement = Measurement(
-            protocol=protocol, spec=spec, estimate=estimate, outcome=judge(estimate, spec)
+            protocol=protocol, spec=spec, estimate=estimate, outcome=judge(estimate, spec),
+            validation=None if bias is None else bias.validation(),
         )
         self.measurements = [m for m in self.measurements if m.spec.name != spec.name]
         self.measurements.append(measurement)

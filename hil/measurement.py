@@ -42,6 +42,7 @@ class Measurement:
     spec: MeasurementSpec
     estimate: Estimate
     outcome: Outcome
+    validation: dict[str, object] | None = None  # the method-bias map's out-of-sample check
 
     @property
     def conforms(self) -> bool:
@@ -84,6 +85,7 @@ class Measurement:
                 }
                 for c in e.components()
             ],
+            "validation": self.validation,
         }
 
 
@@ -118,6 +120,13 @@ class MethodBias:
         the correction's own uncertainty: a Type B line of the budget.
     units : int
         Population size behind the figures.
+    validated_coverage : float or None
+        On a second population, not used for the figures: the fraction of units whose
+        certificate's ``value ± U`` held the truth.
+    validated_units : int or None
+        Size of that population.
+    note : str
+        What keeps a result's validated coverage from 95 %, when something does.
     """
 
     name: str
@@ -125,6 +134,16 @@ class MethodBias:
     bias: float
     scatter: float
     units: int
+    validated_coverage: float | None = None
+    validated_units: int | None = None
+    note: str = ""
+
+    def validation(self) -> dict[str, object] | None:
+        """What the certificate states of the map's out-of-sample check, if made."""
+        if self.validated_coverage is None:
+            return None
+        return {"coverage": self.validated_coverage, "units": self.validated_units,
+                "note": self.note}
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -177,6 +196,11 @@ def _method_bias(name: str, table: ConfigTable) -> MethodBias:
         bias=table.number("bias"),
         scatter=table.non_negative("scatter"),
         units=table.integer("units"),
+        validated_coverage=(table.number("validated_coverage")
+                            if "validated_coverage" in table else None),
+        validated_units=(table.integer("validated_units")
+                         if "validated_units" in table else None),
+        note=table.string("note", ""),
     )
     table.done()
     return bias

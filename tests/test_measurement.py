@@ -111,6 +111,18 @@ def test_method_bias_map_refuses_a_misspelt_key(tmp_path: Path) -> None:
         load_method_bias(path, axis="elevation")  # every axis' table is checked
 
 
+def test_validated_coverage_reaches_the_certificate(tmp_path: Path) -> None:
+    """The map's out-of-sample check, with its note, is stated with the result."""
+    path = tmp_path / "bias.toml"
+    path.write_text('population = "p"\n[results.elevation.x]\nscale = "relative"\n'
+                    'bias = 0.1\nscatter = 0.01\nunits = 3\nvalidated_coverage = 0.89\n'
+                    'validated_units = 100\nnote = "heavy tails"\n', encoding="utf-8")
+    entry = load_method_bias(path, axis="elevation").entries["x"]
+    assert entry.validation() == {"coverage": 0.89, "units": 100, "note": "heavy tails"}
+    bare = MethodBias(name="x", relative=True, bias=0.0, scatter=0.0, units=3)
+    assert bare.validation() is None
+
+
 def test_shipped_method_bias_map_loads() -> None:
     shipped = load_method_bias()
     assert all(e.units > 0 and e.scatter >= 0 for e in shipped.entries.values())

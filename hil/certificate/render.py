@@ -71,4 +71,9 @@ def _budgets(results: list[dict[str, Any]]) -> list[str]:
                 f"{line['unit']:<11} c = {line['sensitivity']:<9.3g} "
                 f"→ {line['contribution']:<#9.2g}{100 * share:>4.0f} %  {line['component']}"
             )
+        validation = r.get("validation")
+        if validation:
+            note = f": {validation['note']}" if validation.get("note") else ""
+            lines.append(f"    validated: ±U held the truth for {100 * validation['coverage']:.0f} "
+                         f"% of {validation['units']} simulated units{note}")
     return lines
