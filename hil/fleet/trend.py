@@ -1,0 +1,72 @@
+"""``trend PARAM``: every stored result of one parameter in time order."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+from datetime import datetime
+
+from hil.fleet.series import SeriesPoint, ordered, single_unit
+from hil.gum import rounded_pair
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class TrendResult:
+    """The rows of ``trend PARAM``: :meth:`table` for a person, :meth:`to_json` for tools."""
+
+    parameter: str
+    unit: str
+    points: list[SeriesPoint]
+
+    def table(self) -> str:
+        """One line per run; ``value ± U`` rounded as GUM 7.2.6 asks."""
+        head = f"{'started (UTC offset as stored)':<27}{'serial':<14}{'station':<12}" \
+               f"{'value':>14}{'U':>10}  {'outcome':<9}limits"
+        lines = [f"trend {self.parameter}{f' ({self.unit})' if self.unit else ''}: "
+                 f"{len(self.points)} runs", head]
+        for p in self.points:
+            value, u = rounded_pair(p.value, p.expanded_uncertainty)
+            low = "" if p.lower_limit is None else f"{p.lower_limit:.4g}"
+            high = "" if p.upper_limit is None else f"{p.upper_limit:.4g}"
+            lines.append(f"{p.started_at:%Y-%m-%d %H:%M:%S}{'':<8}{p.serial:<14}"
+                         f"{p.station:<12}{value:>14}{u:>10}  {p.outcome:<9}[{low}, {high}]"
+                         + ("  reference" if p.is_reference else ""))
+        return "\n".join(lines)
+
+    def to_json(self) -> dict[str, object]:
+        """Full precision."""
+        return {"parameter": self.parameter, "unit": self.unit,
+                "points": [point_dict(p) for p in self.points]}
+
+
+def point_dict(p: SeriesPoint) -> dict[str, object]:
+    """A point's attributes, JSON-ready (``started_at`` in ISO 8601)."""
+    return {"run_id": p.run_id, "certificate_id": p.certificate_id, "serial": p.serial,
+            "station": p.station, "started_at": p.started_at.isoformat(),
+            "value": float(p.value), "standard_uncertainty": float(p.standard_uncertainty),
+            "expanded_uncertainty": float(p.expanded_uncertainty), "unit": p.unit,
+            "nominal": p.nominal, "lower_limit": p.lower_limit, "upper_limit": p.upper_limit,
+            "outcome": p.outcome, "is_reference": bool(p.is_reference)}
+
+
+def trend_table(points: Sequence[SeriesPoint], *, parameter: str = "value",
+                station: str | None = None, since: datetime | None = None,
+                include_reference: bool = False) -> TrendResult:
+    """The series of one parameter, optionally one station's and from a date on.
+
+    Parameters
+    ----------
+    points : sequence of SeriesPoint
+        The parameter's results, any order.
+    station : str, optional
+        Keep this station's runs only.
+    since : datetime, optional
+        Keep runs started at or after it (compare like with like: aware or naive).
+    include_reference : bool
+        Keep reference (golden) units.
+    """
+    kept = [p for p in points
+            if (station is None or p.station == station)
+            and (since is None or p.started_at >= since)]
+    runs = ordered(kept, include_reference=include_reference)
+    return TrendResult(parameter=parameter, unit=single_unit(runs), points=runs)
