@@ -5,7 +5,8 @@ point of every window that satisfies it (a run of 10 on one side fires rule 2 at
 and 10th point). Zones are strict: "beyond 2σ" means ``|x − centre| > 2σ``; a point exactly
 on the centre line belongs to neither side; equal neighbours break a trend or an
 alternation. Rules 5 and 6 also need the completing point itself to lie beyond the zone,
-on the pattern's side.
+on the pattern's side; at the start of a series they count the points there are (two
+points beyond 2σ at runs 1 and 2 fire rule 5 at run 2).
 """
 
 from __future__ import annotations
@@ -70,14 +71,16 @@ def rule_4(z: _Array, x: _Array) -> list[int]:
 
 
 def _k_of_m(z: _Array, k: int, m: int, bound: float) -> list[int]:
-    if z.size < m:
+    """Indices i where i is beyond ``bound`` and at least k of the last m points (fewer at
+    the start of the series) are beyond it on the same side."""
+    if z.size == 0:
         return []
+    padded = np.concatenate([np.zeros(m - 1), z])  # before the first point: not beyond
     hits: list[int] = []
     for sign in (1.0, -1.0):
-        beyond = sign * z > bound
+        beyond = sign * padded > bound
         counts = sliding_window_view(beyond, m).sum(axis=1)
-        mask = (counts >= k) & beyond[m - 1:]
-        hits += _ends(mask, m)
+        hits += [int(i) for i in np.flatnonzero((counts >= k) & beyond[m - 1:])]
     return sorted(set(hits))
 
 
