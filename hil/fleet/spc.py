@@ -73,11 +73,12 @@ class SpcResult:
                 lines.append(f"  {est.name:<4}{index_text(est):<22}{est.method}")
         lim = self.limits
         source = ("frozen baseline of "
-                  f"{self.baseline.n} runs ({self.baseline.first_started_at[:10]} … "
-                  f"{self.baseline.last_started_at[:10]})" if self.baseline else
+                  f"{self.baseline.n} runs, {self.baseline.first_started_at[:10]} … "
+                  f"{self.baseline.last_started_at[:10]}" if self.baseline else
                   "this series (trial limits)")
         lines.append(f"I chart         centre {at_u(lim.centre, u)}   LCL {at_u(lim.lcl, u)}   "
-                     f"UCL {at_u(lim.ucl, u)}{unit}   (limits from {source})")
+                     f"UCL {at_u(lim.ucl, u)}{unit}")
+        lines.append(f"                limits from {source}")
         lines.append(f"MR chart        centre {at_u(lim.mr_centre, u)}   UCL "
                      f"{at_u(lim.mr_ucl, u)}{unit}")
         lines.append("Nelson rules " + ", ".join(str(r) for r in self.rules) + ":")
@@ -97,8 +98,8 @@ class SpcResult:
 
     def _where(self, indices: Sequence[int]) -> str:
         shown = [f"#{i + 1} {self.points[i].serial} {self.points[i].started_at:%Y-%m-%d}"
-                 for i in indices[:4]]
-        more = f" (+{len(indices) - 4} more)" if len(indices) > 4 else ""
+                 for i in indices[:3]]
+        more = f" (+{len(indices) - 3} more)" if len(indices) > 3 else ""
         return f"{len(indices)} point(s): " + ", ".join(shown) + more
 
     def to_json(self) -> dict[str, object]:
