@@ -36,10 +36,21 @@ def _png(fig: Any) -> bytes:
     return buffer.getvalue()
 
 
+def _onsets(rule_hits: dict[int, list[int]]) -> dict[int, list[int]]:
+    """Where each rule starts firing: the first index of every block of consecutive hits
+    (labelling every hit would bury the chart under text)."""
+    onsets: dict[int, list[int]] = {}
+    for rule, hits in sorted(rule_hits.items()):
+        for k, i in enumerate(hits):
+            if k == 0 or hits[k - 1] != i - 1:
+                onsets.setdefault(i, []).append(rule)
+    return onsets
+
+
 def histogram_png(result: SpcResult) -> bytes:
     """Histogram of the values with the specification limits, nominal and mean."""
     plt = _pyplot()
-    fig, ax = plt.subplots(figsize=(5.2, 3.2), layout="constrained")
+    fig, ax = plt.subplots(figsize=(4.2, 3.2), layout="constrained")
     x = result.values
     ax.hist(x, bins=max(5, min(30, int(np.sqrt(x.size)) + 1)), color="#9ecae1",
             edgecolor="#3182bd")
@@ -53,7 +64,7 @@ def histogram_png(result: SpcResult) -> bytes:
     ax.axvline(float(x.mean()), color="black", linewidth=1.0)
     ax.set_xlabel(f"{result.parameter} [{result.unit}]" if result.unit else result.parameter)
     ax.set_ylabel("runs")
-    ax.ticklabel_format(axis="x", style="sci", scilimits=(-3, 4), useOffset=False)
+    ax.ticklabel_format(axis="x", style="plain", useOffset=False)
     return _png(fig)
 
 
@@ -73,19 +84,17 @@ def imr_png(result: SpcResult) -> bytes:
     ax.axhline(lim.centre, color=_LIMIT, linewidth=1.0)
     for level in (lim.ucl, lim.lcl):
         ax.axhline(level, color=_LIMIT, linestyle="--", linewidth=1.0)
-    labels: dict[int, list[int]] = {}
-    for rule, hits in result.rule_hits.items():
-        for i in hits:
-            labels.setdefault(i, []).append(rule)
-    if labels:
-        index = np.array(sorted(labels))
+    marked = sorted({i for hits in result.rule_hits.values() for i in hits})
+    if marked:
+        index = np.array(marked)
         ax.plot(index + 1, result.values[index], "o", markersize=7, markerfacecolor="none",
                 markeredgecolor=_HIT, markeredgewidth=1.5, label="Nelson rule hit")
-        for i in index:
-            ax.annotate(",".join(str(r) for r in labels[int(i)]), (i + 1, result.values[i]),
-                        textcoords="offset points", xytext=(0, 7), ha="center", fontsize=7,
-                        color=_HIT)
+        for i, rules in _onsets(result.rule_hits).items():
+            ax.annotate("rule " + ",".join(str(r) for r in rules),
+                        (i + 1, result.values[i]), textcoords="offset points",
+                        xytext=(-4, 9), ha="right", fontsize=7, color=_HIT)
         ax.legend(loc="upper left", fontsize=8, frameon=False)
+    ax.margins(y=0.15)
     source = "frozen baseline" if result.baseline else "this series"
     ax.set_title(f"Individuals: centre and 3σ limits from {source}; shaded ±1σ, ±2σ",
                  fontsize=9, loc="left")
@@ -116,6 +125,6 @@ def imr_png(result: SpcResult) -> bytes:
         ax.set_ylabel(result.unit or "value")
     axes[-1].set_xlabel("run (time order)")
     for ax in axes:
-        ax.ticklabel_format(axis="y", style="sci", scilimits=(-3, 4), useOffset=False)
+        ax.ticklabel_format(axis="y", style="plain", useOffset=False)
         ax.grid(alpha=0.2)
     return _png(fig)

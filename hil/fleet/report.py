@@ -27,6 +27,7 @@ th, td { border: 1px solid #ccc; padding: 3px 8px; text-align: right; }
 th { background: #f2f2f2; } td.l, th.l { text-align: left; }
 .signal { color: #b00020; font-weight: 600; } .ok { color: #2e7d32; }
 .note { color: #555; font-size: 0.9em; } img { max-width: 100%; }
+pre { white-space: pre-wrap; font-size: 0.85em; background: #fafafa; padding: 0.5em; }
 .figs { display: flex; flex-wrap: wrap; gap: 12px; align-items: flex-start; }
 """
 

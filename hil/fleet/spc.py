@@ -86,7 +86,7 @@ class SpcResult:
             hits = self.rule_hits[rule]
             lines.append(f"  {rule}  {DESCRIPTIONS[rule]:<54}"
                          + (self._where(hits) if hits else "none"))
-        lines.append(f"  MR beyond its UCL{'':<42}"
+        lines.append(f"  {'MR beyond its UCL':<57}"
                      + (self._where(self.mr_hits) if self.mr_hits else "none"))
         if self.ewma is not None:
             e = self.ewma

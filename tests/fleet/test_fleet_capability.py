@@ -67,7 +67,8 @@ def test_within_sigma_is_the_average_moving_range_over_d2() -> None:
 def test_one_sided_limit_gives_the_one_sided_index_and_no_cp() -> None:
     x = _exact_moments(5.0, 1.0, 30)
     c = capability(x, lower_limit=None, upper_limit=11.0)
-    assert c.cp.value is None and c.pp.value is None
+    assert c.cp.value is None
+    assert c.pp.value is None
     assert c.ppk.value == pytest.approx(2.0)
     assert c.cpk.value == pytest.approx(6.0 / (3 * sigma_within(x)))
 

@@ -85,7 +85,8 @@ def test_montgomery_table_9_1_ewma_in_closed_form() -> None:
 def test_ewma_with_lambda_one_is_the_shewhart_chart(values: list[float], width: float) -> None:
     e = ewma_chart(values, centre=0.0, sigma=2.0, settings=EwmaSettings(lam=1.0, width=width))
     assert e.z.tolist() == values
-    assert np.allclose(e.ucl, 2.0 * width) and np.allclose(e.lcl, -2.0 * width)
+    assert np.allclose(e.ucl, 2.0 * width)
+    assert np.allclose(e.lcl, -2.0 * width)
 
 
 @settings(max_examples=40)

@@ -89,8 +89,10 @@ def test_spc_against_a_frozen_baseline_flags_the_drift() -> None:
     # first drifted run); rule 6 also fires twice inside the baseline (runs 21 and 23 of
     # this seed), the false-alarm price of the extra sensitivity
     for rule in (1, 2, 5):
-        assert result.rule_hits[rule] and min(result.rule_hits[rule]) >= 34
-    assert result.ewma is not None and result.ewma.signals
+        assert result.rule_hits[rule]
+        assert min(result.rule_hits[rule]) >= 34
+    assert result.ewma is not None
+    assert result.ewma.signals
     assert min(result.ewma.signals) >= 34
     document = json.loads(json.dumps(result.to_json()))
     assert document["signal"] is True
@@ -99,13 +101,15 @@ def test_spc_against_a_frozen_baseline_flags_the_drift() -> None:
     text = result.table()
     u = result.typical_u
     assert rounded_pair(result.limits.ucl, u)[0] in text
-    assert "SIGNAL" in text and "frozen baseline of 30 runs" in text
+    assert "SIGNAL" in text
+    assert "frozen baseline of 30 runs" in text
 
 
 def test_spc_leaves_reference_units_out_and_checks_its_input() -> None:
     points = series(drifting_values(40), reference_every=5)
     result = spc_report(points, parameter="p")
-    assert result.n == 32 and result.excluded_reference == 8
+    assert result.n == 32
+    assert result.excluded_reference == 8
     assert all(not p.is_reference for p in result.points)
     assert spc_report(points, parameter="p", include_reference=True).n == 40
     with pytest.raises(InputError, match="none is frozen"):
@@ -134,7 +138,8 @@ def test_trend_filters_and_rounds_as_gum_asks() -> None:
     points = series([0.0036123456, 0.0036051, 0.0036222, 0.0035999])
     everything = trend_table(list(reversed(points)), parameter="inertia_kg_m2")
     assert [p.run_id for p in everything.points] == [p.run_id for p in points]
-    assert "0.003612" in everything.table() and "0.000020" in everything.table()
+    assert "0.003612" in everything.table()
+    assert "0.000020" in everything.table()
     st2 = trend_table(points, station="ST2", since=START + timedelta(hours=3))
     assert [p.run_id for p in st2.points] == ["run-0003"]
     document = json.loads(json.dumps(everything.to_json()))
@@ -212,7 +217,8 @@ def test_fleet_report_is_one_self_contained_page(tmp_path: Path) -> None:
     images = re.findall(r"src='data:image/png;base64,([^']+)'", page)
     assert len(images) == 4  # histogram + charts for each of the two charted parameters
     assert all(base64.b64decode(data)[:8] == b"\x89PNG\r\n\x1a\n" for data in images)
-    assert "http://" not in page and "https://" not in page
+    assert "http://" not in page
+    assert "https://" not in page
     cpk = {name: spc_report(points, parameter=name).capability
            for name, points in (("inertia_kg_m2", steady), ("coulomb_friction_nm", drifting))}
     weakest_first = sorted(cpk, key=lambda name: cpk[name].cpk.value)  # type: ignore[union-attr]
@@ -220,4 +226,5 @@ def test_fleet_report_is_one_self_contained_page(tmp_path: Path) -> None:
     positions = [table.index(f"#{name}'") for name in weakest_first]
     assert positions == sorted(positions)
     assert "lonely: spc for &#x27;lonely&#x27; needs at least 2 runs" in page
-    assert "first-pass yield" in page and "ST1" in page
+    assert "first-pass yield" in page
+    assert "ST1" in page

@@ -89,7 +89,7 @@ def test_rule_7_fifteen_within_1_sigma() -> None:
     assert hits(inside, 7) == [14]
     assert hits([*inside, -0.1], 7) == [14, 15]
     # exactly 1σ is not within: index 7 at 1.0 leaves runs of 7 and 7
-    assert hits(inside[:7] + [1.0] + inside[8:], 7) == []
+    assert hits([*inside[:7], 1.0, *inside[8:]], 7) == []
 
 
 def test_rule_8_eight_beyond_1_sigma_on_both_sides() -> None:
