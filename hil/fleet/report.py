@@ -115,7 +115,7 @@ def _cpk_table(results: Sequence[SpcResult]) -> str:
         c = r.capability
         fired = [f"rule {k}: {len(v)}" for k, v in r.rule_hits.items() if v]
         if r.mr_hits:
-            fired.append(f"MR: {len(r.mr_hits)}")
+            fired.append(f"MR: {len(r.mr_hits)} (not gated)")
         if r.ewma is not None and r.ewma.signals:
             fired.append(f"EWMA: {len(r.ewma.signals)}")
         signal = (f"<span class='signal'>{html.escape('; '.join(fired))}</span>"

@@ -86,7 +86,7 @@ class SpcResult:
             hits = self.rule_hits[rule]
             lines.append(f"  {rule}  {DESCRIPTIONS[rule]:<54}"
                          + (self._where(hits) if hits else "none"))
-        lines.append(f"  {'MR beyond its UCL':<57}"
+        lines.append(f"  {'MR beyond its UCL (shown, not gated)':<57}"
                      + (self._where(self.mr_hits) if self.mr_hits else "none"))
         if self.ewma is not None:
             e = self.ewma
@@ -129,10 +129,29 @@ class SpcResult:
         }
 
 
-def has_signal(result: SpcResult) -> bool:
-    """True when any selected rule, the MR chart or the EWMA fired (the command exits 1)."""
-    return (any(result.rule_hits.values()) or bool(result.mr_hits)
-            or (result.ewma is not None and bool(result.ewma.signals)))
+def has_signal(result: SpcResult, *, last: int | None = None, include_mr: bool = False
+               ) -> bool:
+    """Whether ``spc`` should exit 1: a selected Nelson rule or the EWMA fired.
+
+    Parameters
+    ----------
+    result : SpcResult
+    last : int, optional
+        Count only hits among the newest ``last`` runs (a line gating each new unit against
+        a frozen baseline does not want last week's hits to fail today's unit).
+    include_mr : bool
+        Also gate on the moving-range chart. Off by default: with UCL = 3.267·MR̄ each
+        moving range of in-control normal data exceeds it with probability 0.009 (a third
+        of 50-run series show one), and the MR chart adds little to the individuals chart
+        (Rigdon, Cruthis & Champ 1994); it is shown, not gated.
+    """
+    first = 0 if last is None else max(result.n - last, 0)
+    hits = [i for found in result.rule_hits.values() for i in found]
+    if result.ewma is not None:
+        hits += result.ewma.signals
+    if include_mr:
+        hits += result.mr_hits
+    return any(i >= first for i in hits)
 
 
 def spc_report(

@@ -105,6 +105,26 @@ def test_spc_against_a_frozen_baseline_flags_the_drift() -> None:
     assert "frozen baseline of 30 runs" in text
 
 
+def test_the_gate_can_look_at_the_newest_runs_only() -> None:
+    """Centre 10, σ 1 frozen; ±0.3 about it with one 14.0 at index 5: rule 1 fires at 5 (4σ),
+    the moving ranges into and out of it (4.3 and 3.7) pass UCL 3.267·1.128 = 3.685, the
+    EWMA (λ = 0.2) rises to 0.8 < its 0.97 limit, nothing else fires."""
+    values = [10.0 + 0.3 * (-1) ** i for i in range(40)]
+    values[5] = 14.0
+    points = series(values, nominal=10.0, tolerance=0.5, u=0.1, unit="N·m")
+    frozen = Baseline(parameter="p", unit="N·m", n=25, centre=10.0, mr_bar=1.128,
+                      first_started_at="", last_started_at="", frozen_at="", run_ids=())
+    result = spc_report(points, parameter="p", limits_from="baseline", baseline=frozen)
+    assert result.rule_hits == {1: [5], 2: [], 5: [], 6: []}
+    assert result.mr_hits == [5, 6]
+    assert result.ewma is not None
+    assert result.ewma.signals == []
+    assert has_signal(result)
+    assert has_signal(result, last=35)  # runs 5 … 39
+    assert not has_signal(result, last=34)  # runs 6 … 39
+    assert has_signal(result, last=34, include_mr=True)
+
+
 def test_spc_leaves_reference_units_out_and_checks_its_input() -> None:
     points = series(drifting_values(40), reference_every=5)
     result = spc_report(points, parameter="p")
