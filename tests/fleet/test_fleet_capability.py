@@ -2,10 +2,10 @@
 within-σ interval's coverage measured by Monte Carlo.
 
 Montgomery, D. C., *Introduction to Statistical Quality Control*, 6th ed., Wiley 2009,
-§8.3.5 (confidence intervals on process capability ratios):
-- Example 8.5: USL = 62, LSL = 38, n = 20, s = 1.75 → Ĉp = 2.29, 95 % CI 1.57 ≤ Cp ≤ 3.01
+ch. 8, the worked examples of confidence intervals on process capability ratios:
+- Cp: USL = 62, LSL = 38, n = 20, s = 1.75 → Ĉp = 2.29, 95 % CI 1.57 ≤ Cp ≤ 3.01
   (χ²₀.₀₂₅,₁₉ = 8.91, χ²₀.₉₇₅,₁₉ = 32.85).
-- Example 8.6: n = 20, Ĉpk = 1.33 → 95 % CI 0.88 ≤ Cpk ≤ 1.78 (Bissell's approximation).
+- Cpk: n = 20, Ĉpk = 1.33 → 95 % CI 0.88 ≤ Cpk ≤ 1.78 (Bissell's approximation).
 NIST/SEMATECH e-Handbook of Statistical Methods, §6.1.6 (What is process capability?):
 USL = 20, LSL = 8, μ = 16, σ = 2 → Cp = 1, Cpk = 0.6667.
 """
@@ -28,14 +28,14 @@ from hil.fleet.capability import (
 )
 
 
-def test_montgomery_example_8_5_cp_interval() -> None:
+def test_montgomery_cp_interval_example() -> None:
     cp = (62 - 38) / (6 * 1.75)
     assert round(cp, 2) == 2.29
     low, high = cp_interval(2.29, 19, 0.95)  # the book carries the rounded Ĉp on
     assert (round(low, 2), round(high, 2)) == (1.57, 3.01)
 
 
-def test_montgomery_example_8_6_cpk_interval() -> None:
+def test_montgomery_cpk_interval_example() -> None:
     low, high = cpk_interval(1.33, 20, 19, 0.95)
     assert (round(low, 2), round(high, 2)) == (0.88, 1.78)
 

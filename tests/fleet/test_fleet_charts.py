@@ -8,7 +8,7 @@
   UCL = 52.5884, LCL = 47.4115 computed with the factor √(λ/(2−λ)) rounded to 0.4201;
   no point beyond them.
 - Montgomery, *Introduction to SQC*, 6th ed., Table 9.1 data with μ₀ = 10, σ = 1, and the
-  EWMA of §9.2 with λ = 0.1, L = 2.7 (data as reproduced in the IMSL C#/.NET manual's EWMA
+  EWMA of ch. 9 with λ = 0.1, L = 2.7 (data as reproduced in the IMSL C#/.NET manual's EWMA
   example, which cites "Montgomery 428"); the z and the exact limits are recomputed here in
   closed form, independently of the recursion under test.
 """

@@ -2,7 +2,7 @@
 
 The rules as Nelson (1984), "The Shewhart control chart — tests for special causes",
 J. Quality Technology 16(4) 237–239, states them and as Montgomery (Introduction to SQC,
-6th ed., §5.3.6), the NIST/SEMATECH e-Handbook (§6.3.2) and SAS/QC ("Tests for Special
+6th ed., ch. 5), the NIST/SEMATECH e-Handbook (§6.3.2) and SAS/QC ("Tests for Special
 Causes", SHEWHART procedure) reprint them; the only published per-rule index listing found
 (Minitab's I-MR example on EXH_QC.MTW) comes without its data, so each sequence below is
 worked by hand from the definitions: values in σ units about a centre of 0 unless said,
