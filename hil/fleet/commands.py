@@ -8,13 +8,13 @@ from __future__ import annotations
 from hil.fleet.baseline import Baseline, freeze_baseline
 from hil.fleet.charts import EwmaSettings
 from hil.fleet.export import export_rows
-from hil.fleet.fpy import YieldRow, first_pass_yield
+from hil.fleet.fpy import YieldResult, YieldRow, first_pass_yield, yield_table
 from hil.fleet.report import fleet_report_html
 from hil.fleet.spc import SpcResult, has_signal, spc_report
 from hil.fleet.trend import TrendResult, trend_table
 
 __all__ = [
-    "Baseline", "EwmaSettings", "SpcResult", "TrendResult", "YieldRow", "export_rows",
-    "first_pass_yield", "fleet_report_html", "freeze_baseline", "has_signal", "spc_report",
-    "trend_table",
+    "Baseline", "EwmaSettings", "SpcResult", "TrendResult", "YieldResult", "YieldRow",
+    "export_rows", "first_pass_yield", "fleet_report_html", "freeze_baseline", "has_signal",
+    "spc_report", "trend_table", "yield_table",
 ]

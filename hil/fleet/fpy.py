@@ -83,3 +83,34 @@ def first_pass_yield(runs: Sequence[RunRecord], *, by: str = "station",
                              failed=len(members) - outcomes.count("PASS")
                              - outcomes.count("MARGINAL")))
     return sorted(rows, key=lambda r: (r.station or "", r.day or date.min))
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class YieldResult:
+    """First-pass yield rows: :meth:`table` for a person, :meth:`to_json` for tools."""
+
+    by: str
+    rows: list[YieldRow]
+
+    def table(self) -> str:
+        """One line per group."""
+        lines = [f"first-pass yield per {self.by.replace('_', ' and ')}",
+                 f"{'station':<12}{'day':<12}{'units':>6}{'PASS':>6}{'MARG.':>6}{'FAIL':>6}"
+                 f"{'yield':>9}"]
+        for r in self.rows:
+            lines.append(f"{r.station or '':<12}{r.day.isoformat() if r.day else '':<12}"
+                         f"{r.units:>6}{r.passed:>6}{r.marginal:>6}{r.failed:>6}"
+                         f"{100 * r.first_pass_yield:>8.1f}%")
+        return "\n".join(lines)
+
+    def to_json(self) -> dict[str, object]:
+        """JSON-ready."""
+        return {"by": self.by, "rows": [r.to_dict() for r in self.rows]}
+
+
+def yield_table(runs: Sequence[RunRecord], *, by: str = "station",
+                include_aborted: bool = False, include_reference: bool = False) -> YieldResult:
+    """:func:`first_pass_yield` as a result with a table and JSON."""
+    return YieldResult(by=by, rows=first_pass_yield(runs, by=by,
+                                                    include_aborted=include_aborted,
+                                                    include_reference=include_reference))

@@ -88,6 +88,9 @@ def ordered(points: Sequence[SeriesPoint], *,
         if not np.isfinite(p.value):
             raise InputError(f"run {p.run_id} (serial {p.serial}): value {p.value} "
                              "is not finite")
+    aware = {p.started_at.tzinfo is not None for p in kept}
+    if len(aware) > 1:
+        raise InputError("the runs mix timestamps with and without a time zone")
     return sorted(kept, key=lambda p: (p.started_at, p.run_id))
 
 

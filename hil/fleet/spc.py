@@ -157,7 +157,7 @@ def has_signal(result: SpcResult, *, last: int | None = None, include_mr: bool =
 def spc_report(
     points: Sequence[SeriesPoint],
     *,
-    parameter: str = "value",
+    parameter: str | None = None,
     limits_from: str = "data",
     baseline: Mapping[str, object] | Baseline | None = None,
     rules: Iterable[int] | str = DEFAULT_RULES,
@@ -172,8 +172,9 @@ def spc_report(
     points : sequence of SeriesPoint
         The parameter's results (any order; sorted by ``started_at``). Reference units are
         left out unless ``include_reference``; the store leaves out aborted runs.
-    parameter : str
-        Its name, for the report (and checked against a baseline's).
+    parameter : str, optional
+        Its name, for the report; checked against a baseline's (default: the baseline's
+        name, else "value").
     limits_from : {"data", "baseline"}
         Trial limits from this series, or the frozen ``baseline``'s.
     baseline : dict or Baseline or None
@@ -193,13 +194,16 @@ def spc_report(
         mixed units, bad rules.
     """
     selected = parse_rules(rules)
+    frozen_in = (baseline if isinstance(baseline, Baseline) or baseline is None
+                 else Baseline.from_dict(baseline))
+    parameter = parameter or (frozen_in.parameter if frozen_in else "value")
     runs = ordered(points, include_reference=include_reference)
     excluded = len(points) - len(runs)
     if len(runs) < 2:
         raise InputError(f"spc for '{parameter}' needs at least 2 runs, got {len(runs)}")
     unit = single_unit(runs)
     x = values_of(runs)
-    frozen = _baseline(baseline, parameter, unit)
+    frozen = _baseline(frozen_in, parameter, unit)
     if limits_from == "baseline":
         if frozen is None:
             raise InputError(f"spc for '{parameter}': limits from a baseline, but none is "
@@ -232,12 +236,10 @@ def spc_report(
     )
 
 
-def _baseline(baseline: Mapping[str, object] | Baseline | None, parameter: str,
-              unit: str) -> Baseline | None:
-    if baseline is None:
+def _baseline(frozen: Baseline | None, parameter: str, unit: str) -> Baseline | None:
+    if frozen is None:
         return None
-    frozen = baseline if isinstance(baseline, Baseline) else Baseline.from_dict(baseline)
-    if parameter != "value" and frozen.parameter != parameter:
+    if frozen.parameter != parameter:
         raise InputError(f"the baseline is for '{frozen.parameter}', not '{parameter}'")
     if frozen.unit != unit:
         raise InputError(f"the baseline's unit '{frozen.unit}' is not the series' '{unit}'")

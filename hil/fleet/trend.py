@@ -6,6 +6,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from datetime import datetime
 
+from hil.errors import InputError
 from hil.fleet.series import SeriesPoint, ordered, single_unit
 from hil.gum import rounded_pair
 
@@ -65,6 +66,10 @@ def trend_table(points: Sequence[SeriesPoint], *, parameter: str = "value",
     include_reference : bool
         Keep reference (golden) units.
     """
+    if since is not None and points and (
+            (since.tzinfo is None) != (points[0].started_at.tzinfo is None)):
+        raise InputError(f"since {since.isoformat()}: give a time zone exactly when the "
+                         "stored runs have one")
     kept = [p for p in points
             if (station is None or p.station == station)
             and (since is None or p.started_at >= since)]

@@ -25,6 +25,7 @@ from hil.fleet.commands import (
     has_signal,
     spc_report,
     trend_table,
+    yield_table,
 )
 from hil.fleet.series import SERIES_FIELDS
 from hil.gum import rounded_pair
@@ -139,6 +140,8 @@ def test_spc_leaves_reference_units_out_and_checks_its_input() -> None:
     with pytest.raises(InputError, match="at least 2 runs"):
         spc_report(points[:1], parameter="p")
     frozen = freeze_baseline(points, parameter="p", frozen_at=START)
+    named = spc_report(points, limits_from="baseline", baseline=frozen.to_dict())
+    assert named.parameter == "p"  # the baseline's name when none is given
     with pytest.raises(InputError, match="not 'q'"):
         spc_report(points, parameter="q", limits_from="baseline", baseline=frozen)
     mixed = [*points[:5], replace(points[5], unit="g·m²")]
@@ -162,6 +165,11 @@ def test_trend_filters_and_rounds_as_gum_asks() -> None:
     assert "0.000020" in everything.table()
     st2 = trend_table(points, station="ST2", since=START + timedelta(hours=3))
     assert [p.run_id for p in st2.points] == ["run-0003"]
+    with pytest.raises(InputError, match="time zone"):
+        trend_table(points, since=START.replace(tzinfo=None))
+    naive = [replace(points[0], started_at=START.replace(tzinfo=None)), *points[1:]]
+    with pytest.raises(InputError, match="time zone"):
+        trend_table(naive)
     document = json.loads(json.dumps(everything.to_json()))
     assert document["points"][0]["value"] == 0.0036123456
 
@@ -223,6 +231,10 @@ def test_first_pass_yield_per_station_and_day() -> None:
     assert sum(row.failed for row in by_day) == 4
     with pytest.raises(InputError, match="grouping"):
         first_pass_yield(runs, by="week")
+    result = yield_table(runs, by="station_day")
+    assert sum(row["units"] for row in result.to_json()["rows"]) == 28  # type: ignore[index]
+    assert "first-pass yield per station and day" in result.table()
+    assert "ST2         2026-03-02" in result.table()
 
 
 def test_fleet_report_is_one_self_contained_page(tmp_path: Path) -> None:
