@@ -7,6 +7,7 @@ from dataclasses import dataclass
 from datetime import datetime
 
 from hil.errors import InputError
+from hil.fleet.fmt import at_u
 from hil.fleet.series import SeriesPoint, ordered, single_unit
 from hil.gum import rounded_pair
 
@@ -21,16 +22,17 @@ class TrendResult:
 
     def table(self) -> str:
         """One line per run; ``value ± U`` rounded as GUM 7.2.6 asks."""
-        head = f"{'started (UTC offset as stored)':<27}{'serial':<14}{'station':<12}" \
-               f"{'value':>14}{'U':>10}  {'outcome':<9}limits"
+        head = (f"{'started':<22}{'serial':<14}{'station':<12}{'value':>14}{'U':>10}  "
+                f"{'outcome':<10}limits")
         lines = [f"trend {self.parameter}{f' ({self.unit})' if self.unit else ''}: "
-                 f"{len(self.points)} runs", head]
+                 f"{len(self.points)} runs; value ± U (k ≈ 2) as GUM 7.2.6 rounds it", head]
         for p in self.points:
             value, u = rounded_pair(p.value, p.expanded_uncertainty)
-            low = "" if p.lower_limit is None else f"{p.lower_limit:.4g}"
-            high = "" if p.upper_limit is None else f"{p.upper_limit:.4g}"
-            lines.append(f"{p.started_at:%Y-%m-%d %H:%M:%S}{'':<8}{p.serial:<14}"
-                         f"{p.station:<12}{value:>14}{u:>10}  {p.outcome:<9}[{low}, {high}]"
+            low = at_u(p.lower_limit, p.expanded_uncertainty)
+            high = at_u(p.upper_limit, p.expanded_uncertainty)
+            lines.append(f"{p.started_at:%Y-%m-%d %H:%M %Z}".ljust(22)
+                         + f"{p.serial:<14}{p.station:<12}{value:>14}{u:>10}  "
+                         f"{p.outcome:<10}[{low}, {high}]"
                          + ("  reference" if p.is_reference else ""))
         return "\n".join(lines)
 
