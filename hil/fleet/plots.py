@@ -28,6 +28,13 @@ def _pyplot() -> Any:
     return plt
 
 
+def _ticker() -> Any:
+    _pyplot()
+    import matplotlib.ticker
+
+    return matplotlib.ticker
+
+
 def _png(fig: Any) -> bytes:
     plt = _pyplot()
     buffer = io.BytesIO()
@@ -65,6 +72,7 @@ def histogram_png(result: SpcResult) -> bytes:
     ax.set_xlabel(f"{result.parameter} [{result.unit}]" if result.unit else result.parameter)
     ax.set_ylabel("runs")
     ax.ticklabel_format(axis="x", style="plain", useOffset=False)
+    ax.xaxis.set_major_locator(_ticker().MaxNLocator(nbins=4))
     return _png(fig)
 
 
