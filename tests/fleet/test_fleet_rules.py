@@ -11,6 +11,8 @@ indices 0-based, each expected index derived in the comment.
 
 from __future__ import annotations
 
+import itertools
+
 import numpy as np
 import pytest
 from hypothesis import given, settings
@@ -134,3 +136,64 @@ def test_in_control_data_fire_at_the_stated_rate(seed: int) -> None:
     for rule, p in RATE.items():
         expected, sd = n * p, np.sqrt(3 * n * p)
         assert abs(len(found[rule]) - expected) <= 5 * sd, (rule, len(found[rule]), expected)
+
+
+def _oracle(z: list[float], rule: int) -> list[int]:
+    """Each rule written out as a plain loop over the definitions above (an independent
+    re-statement, not the vectorised code under test)."""
+    out = []
+    for i in range(len(z)):
+        def last(k: int, i: int = i) -> list[float]:
+            return z[max(0, i - k + 1): i + 1]
+
+        w = last({2: 9, 3: 6, 4: 14, 7: 15, 8: 8}.get(rule, 1))
+        if rule == 1:
+            fired = abs(z[i]) > 3
+        elif rule == 2:
+            fired = len(w) == 9 and (all(v > 0 for v in w) or all(v < 0 for v in w))
+        elif rule == 3:
+            steps = [b - a for a, b in itertools.pairwise(w)]
+            fired = len(w) == 6 and (all(s > 0 for s in steps) or all(s < 0 for s in steps))
+        elif rule == 4:
+            steps = [b - a for a, b in itertools.pairwise(w)]
+            fired = len(w) == 14 and all(
+                s * t < 0 for s, t in itertools.pairwise(steps))
+        elif rule in (5, 6):
+            k, m, bound = (2, 3, 2.0) if rule == 5 else (4, 5, 1.0)
+            window = last(m)
+            fired = any(
+                sign * z[i] > bound and sum(sign * v > bound for v in window) >= k
+                for sign in (1, -1))
+        elif rule == 7:
+            fired = len(w) == 15 and all(abs(v) < 1 for v in w)
+        else:
+            fired = (len(w) == 8 and all(abs(v) > 1 for v in w)
+                     and any(v > 1 for v in w) and any(v < -1 for v in w))
+        if fired:
+            out.append(i)
+    return out
+
+
+# values on a coarse grid so that ties, zone boundaries and the centre line all occur
+grid = st.integers(-7, 7).map(lambda k: k / 2)
+
+
+@settings(max_examples=300)
+@given(z=st.lists(grid, min_size=0, max_size=60))
+def test_every_rule_matches_its_definition_written_as_a_loop(z: list[float]) -> None:
+    found = nelson_rules(z, centre=0.0, sigma=1.0, rules="all")
+    for rule in range(1, 9):
+        assert found[rule] == _oracle(z, rule), rule
+
+
+@given(z=st.lists(st.floats(-5, 5), min_size=0, max_size=40),
+       scale=st.floats(0.01, 100), offset=st.floats(-1e3, 1e3))
+def test_rules_do_not_care_about_units_or_sign(z: list[float], scale: float,
+                                              offset: float) -> None:
+    """x → offset ± scale·x with the centre and σ moved alike fires at the same points."""
+    base = nelson_rules(z, centre=0.0, sigma=1.0, rules="all")
+    for sign in (1.0, -1.0):
+        x = [offset + sign * scale * v for v in z]
+        moved = nelson_rules(x, centre=offset, sigma=scale, rules="all")
+        for rule in (2, 3, 4, 7, 8):  # no boundary arithmetic: exact
+            assert moved[rule] == base[rule], (rule, sign)
