@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import io
 from contextlib import AbstractContextManager
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 from matplotlib.figure import Figure
@@ -37,7 +37,7 @@ def styled() -> AbstractContextManager[None]:
     """The plots' matplotlib settings; draw and export inside it."""
     from matplotlib import rc_context
 
-    return rc_context(STYLE)
+    return rc_context(cast(Any, STYLE))
 
 
 def new_figure(columns: int = 2, rows: int = 1, *, height_in: float = HEIGHT_IN) -> Figure:

@@ -70,9 +70,8 @@ def resonance(data: ProtocolData) -> Figure | None:
     zeta_r = data.value("resonance_damping_ratio")
     inertia = data.number("inertia_total_kg_m2")
     sine = data.recording("stepped_sine")
-    if not frf or None in (f_r, f_a, zeta_r, inertia) or sine is None:
+    if not frf or sine is None or f_r is None or f_a is None or zeta_r is None or inertia is None:
         return None
-    assert f_r is not None and f_a is not None and zeta_r is not None and inertia is not None
     fs_hz = sample_rate_hz(sine)
     model = TwoMassModel(
         inertia_kg_m2=inertia, antiresonance_hz=f_a,

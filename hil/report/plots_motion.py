@@ -70,9 +70,8 @@ def stribeck(data: ProtocolData) -> Figure | None:
     points = data.details.get("points") or []
     static, vs = data.value("static_friction_nm"), data.value("stribeck_velocity_rad_s")
     coulomb, viscous = data.number("coulomb_nm"), data.number("viscous_nm_s_rad")
-    if not points or None in (static, vs, coulomb, viscous):
+    if not points or static is None or vs is None or coulomb is None or viscous is None:
         return None
-    assert static is not None and vs is not None and coulomb is not None and viscous is not None
     fig = new_figure(columns=1)
     (ax,) = fig.axes
     for stick, marker, label in ((False, "o", "speed point ± 2u"),

@@ -12,8 +12,7 @@ from hil.gum import rounded_pair
 #: What the banner says for each overall outcome: the word, and a line under it.
 BANNER: dict[str, tuple[str, str]] = {
     "PASS": ("PASS", "every result inside its limits"),
-    "MARGINAL": ("MARGINAL", "conforms, but a result is in a marginal band or its "
-                             "uncertainty reaches a limit"),
+    "MARGINAL": ("MARGINAL", "conforms; a result is marginal or its U reaches a limit"),
     "FAIL": ("FAIL", "the unit does NOT conform"),
     "ERROR": ("NOT COMPLETED", "the calibration did not complete: NO conformity statement"),
 }
