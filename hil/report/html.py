@@ -100,10 +100,13 @@ def render_html(view: Mapping[str, Any], *, plots_png: Mapping[str, bytes]) -> s
 
 def _table(header: tuple[str, ...], rows: list[list[str]], *, numeric: set[int]) -> str:
     head = "".join(f"<th>{escape(h)}</th>" for h in header)
-    body = "".join(
-        "<tr>" + "".join(
-            f'<td{" class=n" if i in numeric else ""}>'
-            f"{escape(cell).replace(chr(10), '<br>')}</td>"
-            for i, cell in enumerate(row)) + "</tr>"
-        for row in rows)
+    body = "".join("<tr>" + "".join(_cell(cell, i in numeric) for i, cell in enumerate(row))
+                   + "</tr>" for row in rows)
     return f"<table><tr>{head}</tr>{body}</table>"
+
+
+def _cell(text: str, numeric: bool) -> str:
+    if text in COLOURS:  # an outcome: coloured as the banner
+        return f'<td style="color:{COLOURS[text]};font-weight:700">{text}</td>'
+    body = escape(text).replace("\n", "<br>")
+    return f"<td class=n>{body}</td>" if numeric else f"<td>{body}</td>"

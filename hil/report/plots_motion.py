@@ -100,9 +100,10 @@ def gravity_cable(data: ProtocolData) -> Figure | None:
     """The raw two-way sweep (torque against position: the hysteresis loop) with the load
     model ± the loop's half width, and the load per position bin with its fit."""
     sweep = data.recording("sweep")
-    mge, phase = data.value("gravity_mge_nm"), data.value("gravity_phase_rad")
-    if sweep is None or mge is None or phase is None:
+    if sweep is None or "load_nm_by_elevation_rad" not in data.details:
         return None
+    # an axis without gravity (azimuth) declares no m·g·e: its load is the cable's alone
+    mge, phase = data.value("gravity_mge_nm") or 0.0, data.value("gravity_phase_rad") or 0.0
     stiffness = data.value("cable_stiffness_nm_rad") or 0.0
     offset = data.number("offset_nm", 0.0) or 0.0
     half_width = data.number("loop_half_width_nm", 0.0) or 0.0
@@ -131,7 +132,8 @@ def gravity_cable(data: ProtocolData) -> Figure | None:
     if bins.size:
         right.plot(bins[:, 0], bins[:, 1], "o", ms=2.5, color=COLOURS[2],
                    label="half sum of the passes, per bin")
-    right.plot(grid, load(grid), color=MODEL, lw=1.4, label="m·g·e·cos(θ + φ) + k·θ + c")
+    right.plot(grid, load(grid), color=MODEL, lw=1.4,
+               label="m·g·e·cos(θ + φ) + k·θ + c" if mge else "k·θ + c")
     right.set(xlabel="position θ (rad)", ylabel="load torque (N·m)",
               title="load (gravity + cable) and its fit")
     right.legend(loc="lower center")
