@@ -28,6 +28,7 @@ CAPTIONS = {
     "cogging": "order spectrum against angle, and the ripple map against the compensation table",
     "current_loop": "lag phase per frequency and the sampled-data model with the fitted τ",
     "resonance": "frequency response (Bode) and the two-mass fit",
+    "torque_constant": "shaft torque against current at each locked angle, and its linearity",
     "inertia_elevation": "azimuth inertia per elevation and the cos² fit",
 }
 

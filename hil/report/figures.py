@@ -30,7 +30,7 @@ STYLE: dict[str, Any] = {
 }
 MEASURED = "#7f7f7f"
 MODEL = "#d62728"
-COLOURS = ("#1f77b4", "#ff7f0e", "#2ca02c", "#9467bd")
+COLOURS = ("#1f77b4", "#ff7f0e", "#2ca02c", "#9467bd", "#8c564b", "#17becf")
 
 
 def styled() -> AbstractContextManager[None]:

@@ -21,6 +21,7 @@ PLOTTERS: dict[str, Callable[[ProtocolData], Figure | None]] = {
     "stribeck": plots_motion.stribeck,
     "cogging": plots_frequency.cogging,
     "resonance": plots_frequency.resonance,
+    "torque_constant": plots_motion.torque_constant,
     "inertia_elevation": plots_motion.inertia_elevation,
 }
 

@@ -159,3 +159,38 @@ def inertia_elevation(data: ProtocolData) -> Figure | None:
            title=f"azimuth inertia across elevation: ratio {level / zenith:.4g}")
     ax.legend(loc="lower center")
     return fig
+
+
+def torque_constant(data: ProtocolData) -> Figure | None:
+    """Shaft torque against current at each locked angle with its line, and what the line
+    leaves (the linearity)."""
+    per_angle = data.details.get("per_angle") or []
+    sweeps = data.recordings_named("locked_sweep")
+    kt = data.value("torque_constant_nm_a")
+    if not per_angle or len(sweeps) != len(per_angle) or kt is None:
+        return None
+    fig = new_figure()
+    left, right = fig.axes
+    for i, ((_, recording), line) in enumerate(zip(sweeps, per_angle, strict=True)):
+        current, shaft = recording.columns["current_a"], recording.columns["load_torque_nm"]
+        fitted = line["slope_nm_a"] * current + line["intercept_nm"]
+        colour = COLOURS[i % len(COLOURS)]
+        label = f"{line['angle_rad']:+.2f} rad"
+        left.plot(*thin(current, shaft), ".", ms=1.2, color=colour, alpha=0.5)
+        order = np.argsort(current)
+        left.plot(current[order], fitted[order], color=colour, lw=1.0, label=label)
+        # per commanded level: mean current and mean deviation from the line (± 2 s.e.)
+        level = np.unique(recording.columns["torque_cmd_nm"], return_inverse=True)[1]
+        counts = np.bincount(level)
+        mean_i = np.bincount(level, current) / counts
+        mean_d = np.bincount(level, 1e3 * (shaft - fitted)) / counts
+        spread = np.sqrt(np.bincount(level, (1e3 * (shaft - fitted) - mean_d[level]) ** 2)
+                         / counts / np.maximum(counts - 1, 1))
+        right.errorbar(mean_i + 0.03 * (i - len(per_angle) / 2), mean_d, yerr=2 * spread,
+                       fmt="o-", ms=3, lw=0.8, capsize=2, color=colour, label=label)
+    left.set(xlabel="current (A)", ylabel="shaft torque (N·m)",
+             title=f"locked rotor: K_t = {kt:.6g} N·m/A")
+    right.set(xlabel="current (A)", ylabel="level mean − line (mN·m)",
+              title="what each angle's line leaves (± 2 s.e.)")
+    left.legend(loc="upper left", title="locked at")
+    return fig
