@@ -13,6 +13,7 @@ from pathlib import Path
 import pytest
 
 from hil.gum import rounded_pair
+from hil.profile import builtin_profile_path
 from hil.report.plots import PLOTTERS
 from tests.report.runs import Run, calibrate
 
@@ -175,3 +176,25 @@ def test_the_resonance_run_carries_its_bode_plot(tmp_path: Path) -> None:
     html = (run.unit_dir / "certificate.html").read_text(encoding="utf-8")
     assert re.findall(r"<figcaption>(\w+) \(", html) == ["resonance"]
     assert (run.unit_dir / "certificate.pdf").stat().st_size > 0
+
+
+@needs_poppler
+def test_an_unfinished_run_says_not_completed(tmp_path: Path) -> None:
+    """A command beyond the unit's velocity limit is refused before motion: no result."""
+    text = builtin_profile_path().read_text(encoding="utf-8")
+    profile = tmp_path / "unit.toml"
+    profile.write_text(text.replace("velocity_rad_s = 3.0", "velocity_rad_s = 0.8"),
+                       encoding="utf-8")
+    run = calibrate(tmp_path, "RPT-ERR", "--profile", str(profile), "--", "-k",
+                    "inertia_friction")
+    assert run.returncode != 0
+    assert certificate(run)["outcome"] == "ERROR"
+    pages = pdf_pages(run.unit_dir / "certificate.pdf")
+    assert "NOT COMPLETED" in pages[0]
+    assert "No results" in pages[0]
+    for page in pages:
+        footer = next(line for line in reversed(page.splitlines()) if line.strip())
+        assert "NOT COMPLETED" in footer
+    html = (run.unit_dir / "certificate.html").read_text(encoding="utf-8")
+    assert "(NOT COMPLETED)</title>" in html
+    assert "NOT COMPLETED" in run.stdout
