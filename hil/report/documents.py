@@ -10,6 +10,7 @@ from datetime import datetime
 from pathlib import Path
 from typing import Any
 
+from hil.errors import InputError
 from hil.report.data import from_certificate
 from hil.report.figures import png_bytes, styled
 from hil.report.html import render_html
@@ -31,6 +32,36 @@ CAPTIONS = {
     "torque_constant": "shaft torque against current at each locked angle, and its linearity",
     "inertia_elevation": "azimuth inertia per elevation and the cos² fit",
 }
+
+
+def certificate_file(target: Path) -> Path:
+    """The ``certificate.json`` that ``target`` names (the file, or a unit's directory).
+
+    Parameters
+    ----------
+    target : Path
+        A ``certificate.json`` or the directory holding one.
+
+    Returns
+    -------
+    Path
+        The certificate file, checked to be a gimbal-hil certificate.
+
+    Raises
+    ------
+    InputError
+        No such file, not JSON, or not a gimbal-hil certificate.
+    """
+    path = target / "certificate.json" if target.is_dir() else target
+    if not path.is_file():
+        raise InputError("no certificate.json here", source=str(target))
+    try:
+        schema = json.loads(path.read_bytes()).get("schema", "")
+    except (json.JSONDecodeError, UnicodeDecodeError, AttributeError) as exc:
+        raise InputError(f"not a JSON object ({exc})", source=str(path)) from None
+    if not str(schema).startswith("gimbal-hil/certificate/"):
+        raise InputError(f"not a gimbal-hil certificate (schema {schema!r})", source=str(path))
+    return path
 
 
 def write_documents(certificate_path: Path) -> list[str]:
