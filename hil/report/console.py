@@ -30,7 +30,18 @@ LETTERS: dict[str, tuple[str, ...]] = {
 
 
 def block_letters(word: str) -> list[str]:
-    """``word`` in five rows of block letters (unknown characters as themselves)."""
+    """``word`` in five rows of block letters.
+
+    Parameters
+    ----------
+    word : str
+        The text; characters without a glyph are written as themselves.
+
+    Returns
+    -------
+    list of str
+        Five rows.
+    """
     glyphs = [LETTERS.get(c, (c,) * 5) for c in word.upper()]
     return [" ".join(g[row] for g in glyphs).rstrip() for row in range(5)]
 

@@ -111,5 +111,16 @@ def from_run(run: CalibrationRun, name: str) -> ProtocolData:
 
 
 def sample_rate_hz(recording: Recording) -> float:
-    """The recording's median sample rate (Hz)."""
+    """The recording's median sample rate.
+
+    Parameters
+    ----------
+    recording : Recording
+        A recording.
+
+    Returns
+    -------
+    float
+        ``1 / median(Δt)`` (Hz).
+    """
     return float(1.0 / np.median(np.diff(recording.time_s)))

@@ -61,13 +61,38 @@ def new_figure(columns: int = 2, rows: int = 1, *, height_in: float = HEIGHT_IN)
 
 
 def thin(*arrays: NDArray[Any], limit: int = MAX_POINTS) -> tuple[NDArray[Any], ...]:
-    """Every k-th sample of each array, so that at most ``limit`` remain."""
+    """Every k-th sample of each array, so that at most ``limit`` remain.
+
+    Parameters
+    ----------
+    *arrays : ndarray
+        Arrays of the same length.
+    limit : int
+        Most samples kept.
+
+    Returns
+    -------
+    tuple of ndarray
+        The arrays thinned alike.
+    """
     step = max(1, int(np.ceil(len(arrays[0]) / limit)))
     return tuple(np.asarray(a)[::step] for a in arrays)
 
 
 def png_bytes(fig: Figure, *, dpi: float = 110.0) -> bytes:
-    """The figure as PNG."""
+    """The figure as PNG.
+
+    Parameters
+    ----------
+    fig : Figure
+        The figure.
+    dpi : float
+        Resolution (dots per inch).
+
+    Returns
+    -------
+    bytes
+    """
     buffer = io.BytesIO()
     with styled():
         fig.savefig(buffer, format="png", dpi=dpi)
@@ -75,7 +100,17 @@ def png_bytes(fig: Figure, *, dpi: float = 110.0) -> bytes:
 
 
 def svg_bytes(fig: Figure) -> bytes:
-    """The figure as self-contained SVG (text as paths, no fonts needed)."""
+    """The figure as self-contained SVG (text as paths, no fonts needed).
+
+    Parameters
+    ----------
+    fig : Figure
+        The figure.
+
+    Returns
+    -------
+    bytes
+    """
     buffer = io.BytesIO()
     with styled():
         fig.savefig(buffer, format="svg", metadata={"Date": None})
