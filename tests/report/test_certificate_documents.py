@@ -112,14 +112,16 @@ def test_the_console_shows_progress_and_a_banner(elevation_run: Run) -> None:
     from hil.report.console import block_letters
 
     out = elevation_run.stdout
-    assert "▶ protocol 1 of 6: current_loop" in out
-    assert "▶ protocol 6 of 6: torque_constant" in out
+    cert = certificate(elevation_run)
+    ran = [n for n, p in cert["method"]["protocols"].items() if p["outcome"] != "SKIPPED"]
+    for number, name in enumerate(ran, start=1):
+        assert f"▶ protocol {number} of {len(ran)}: {name} (" in out
     for row in block_letters("PASS"):
         assert row in out
-    for r in certificate(elevation_run)["results"]:
+    for r in cert["results"]:
         value, expanded = rounded_pair(r["value"], r["expanded_uncertainty"])
         assert f"{value} ± {expanded}" in out
-    assert re.search(r"^18 passed, 7 skipped", out, re.MULTILINE), "pytest's -q summary"
+    assert re.search(r"^\d+ passed, \d+ skipped in ", out, re.MULTILINE), "pytest's summary"
 
 
 def test_the_failed_console_banner_says_fail(failed_run: Run) -> None:
