@@ -11,7 +11,7 @@ import json
 import logging
 import time
 from collections.abc import Generator, Iterator
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 
 import pytest
@@ -45,7 +45,6 @@ class _Console:
 
     current: str | None = None
     started_s: float | None = None
-    announced: list[str] = field(default_factory=list)
 
 
 CONSOLE_KEY = pytest.StashKey[_Console]()
@@ -209,7 +208,6 @@ def pytest_runtest_protocol(item: pytest.Item, nextitem: pytest.Item | None) -> 
     line = protocol_start(name, plan,
                           done_motion_s=sum(r.motion_time_s for r in done),
                           done_wall_s=now - console.started_s)
-    console.announced.append(line)
     reporter = config.pluginmanager.get_plugin("terminalreporter")
     if reporter is not None and config.get_verbosity() >= -1:
         writer = getattr(reporter, "_tw", None)  # -q: dots run on without a module's line
