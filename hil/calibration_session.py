@@ -9,33 +9,52 @@ from __future__ import annotations
 
 import json
 import logging
+import time
 from collections.abc import Generator, Iterator
+from dataclasses import dataclass
 from pathlib import Path
 
 import pytest
 
 from hil.calibration import CalibrationRun
 from hil.certificate import write_certificate
-from hil.drives.base import Drive
+from hil.drives.base import Drive, DriveInfo
 from hil.drives.connect import open_drive
 from hil.drives.kinds import SIMULATED_KINDS
 from hil.errors import HilError
 from hil.gum import rounded_pair
 from hil.measurement import MethodBiasMap, Outcome, load_method_bias
+from hil.motion import Mode
 from hil.profile import UnitProfile, load_profile
+from hil.report import write_documents
+from hil.report.console import outcome_banner, protocol_start
+from hil.report.plan import planned_motion_s
 
 log = logging.getLogger(__name__)
 
 RUN_KEY = pytest.StashKey[CalibrationRun]()
 PROFILE_KEY = pytest.StashKey[UnitProfile]()
 CERTIFICATE_KEY = pytest.StashKey[Path]()
+DOCUMENTS_KEY = pytest.StashKey[list[str]]()
 PROTOCOL_MARK = "protocol"
+
+
+@dataclass(slots=True)
+class _Console:
+    """What the operator's console has shown: the protocol running, since when."""
+
+    current: str | None = None
+    started_s: float | None = None
+
+
+CONSOLE_KEY = pytest.StashKey[_Console]()
 
 
 def start(config: pytest.Config) -> None:
     """Check the calibration options and read the unit profile, before collection: a real
     unit without a serial, or a profile that does not load, is one usage error (exit 4)."""
     config.addinivalue_line("markers", f"{PROTOCOL_MARK}: a calibration protocol")
+    config.stash[CONSOLE_KEY] = _Console()
     kind = drive_kind(config)
     if config.getoption("--unit-serial") is None and kind not in SIMULATED_KINDS:
         raise pytest.UsageError(f"--drive {kind} (a real unit) needs --unit-serial SERIAL")
@@ -121,7 +140,8 @@ def _allure_measurements(request: pytest.FixtureRequest) -> Iterator[None]:
     before = len(run.measurements) if run else 0
     yield
     run = request.config.stash.get(RUN_KEY, None)
-    if run is None or not request.config.pluginmanager.hasplugin("allure_pytest"):
+    # allure-pytest registers its listener only when --alluredir asks for a report
+    if run is None or not request.config.pluginmanager.hasplugin("allure_listener"):
         return
     import allure
 
@@ -131,6 +151,18 @@ def _allure_measurements(request: pytest.FixtureRequest) -> Iterator[None]:
             name=measurement.spec.name,
             attachment_type=allure.attachment_type.JSON,
         )
+    name = _protocol_name(request.node)
+    if name is not None and _last_of_protocol(request.node, name):
+        from hil.report.attachments import attach_protocol
+
+        attach_protocol(run, name)
+
+
+def _last_of_protocol(item: pytest.Item, name: str) -> bool:
+    """No later test of the session belongs to protocol ``name``."""
+    items = item.session.items
+    later = items[items.index(item) + 1:] if item in items else []
+    return all(_protocol_name(other) != name for other in later)
 
 
 def _protocol_name(item: pytest.Item) -> str | None:
@@ -153,6 +185,43 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
     ordered = sorted((items[i] for i in slots), key=rank)
     for slot, item in zip(slots, ordered, strict=True):
         items[slot] = item
+
+
+@pytest.hookimpl(tryfirst=True)
+def pytest_runtest_protocol(item: pytest.Item, nextitem: pytest.Item | None) -> None:
+    """Tell the operator when a protocol starts: n of N, its motion, the time left."""
+    name = _protocol_name(item)
+    config = item.config
+    console = config.stash.get(CONSOLE_KEY, None)
+    profile = config.stash[PROFILE_KEY]
+    if console is None or name is None or name == console.current or name not in profile.protocols:
+        return
+    console.current = name
+    now = time.perf_counter()
+    if console.started_s is None:
+        console.started_s = now
+    run = config.stash.get(RUN_KEY, None)
+    info = run.drive_info if run is not None and run.drive_info else _planning_info(profile)
+    done = [r for r in run.protocols.values() if r.name != name] if run is not None else []
+    collected = {_protocol_name(other) for other in item.session.items}
+    plan = {k: v for k, v in planned_motion_s(profile, info).items() if k in collected}
+    line = protocol_start(name, plan,
+                          done_motion_s=sum(r.motion_time_s for r in done),
+                          done_wall_s=now - console.started_s)
+    reporter = config.pluginmanager.get_plugin("terminalreporter")
+    if reporter is not None and config.get_verbosity() >= -1:
+        writer = getattr(reporter, "_tw", None)  # -q: dots run on without a module's line
+        if writer is not None and writer.width_of_current_line:
+            reporter.write("\n")
+        reporter.write_line(line, bold=True)
+
+
+def _planning_info(profile: UnitProfile) -> DriveInfo:
+    """The drive as the profile describes it, for the motion plan before the drive is open."""
+    return DriveInfo(vendor="", model="", firmware_version="", serial="",
+                     rated_torque_nm=profile.limits.torque_nm, limits=profile.limits,
+                     modes=tuple(Mode), max_sample_rate_hz=profile.sample_rate_hz,
+                     has_torque_sensor=True, transport="planned")
 
 
 def pytest_runtest_setup(item: pytest.Item) -> None:
@@ -199,7 +268,9 @@ def pytest_sessionfinish(session: pytest.Session, exitstatus: int) -> None:
     if run is None or not run.active:
         return
     aborted = exitstatus == pytest.ExitCode.INTERRUPTED or session.shouldstop is not False
-    session.config.stash[CERTIFICATE_KEY] = write_certificate(run, aborted=bool(aborted))
+    path = write_certificate(run, aborted=bool(aborted))
+    session.config.stash[CERTIFICATE_KEY] = path
+    session.config.stash[DOCUMENTS_KEY] = write_documents(path)
 
 
 def pytest_terminal_summary(terminalreporter: pytest.TerminalReporter) -> None:
@@ -214,6 +285,15 @@ def pytest_terminal_summary(terminalreporter: pytest.TerminalReporter) -> None:
         terminalreporter.write_line(
             f"{m.spec.name:<32}{value:>12} ± {expanded:<9}{m.spec.unit:<11}{m.outcome.value}"
         )
-    outcome = json.loads(path.read_text(encoding="utf-8"))["outcome"]
-    terminalreporter.write_line(f"certificate: {path}")
+    cert = json.loads(path.read_text(encoding="utf-8"))
+    outcome = cert["outcome"]
+    problems = config.stash.get(DOCUMENTS_KEY, [])
+    beside = ["certificate.txt"] + [name for name in ("certificate.html", "certificate.pdf")
+                                    if not any(p.startswith(name) for p in problems)]
+    terminalreporter.write_line(f"certificate: {path} (and {', '.join(beside)} beside it)")
+    for problem in problems:
+        terminalreporter.write_line(f"not rendered: {problem}", yellow=True)
+    colour = {"PASS": "green", "MARGINAL": "yellow"}.get(outcome, "red")
+    for line in outcome_banner(outcome, aborted=bool(cert.get("aborted"))):
+        terminalreporter.write_line(line, **{colour: True, "bold": True})
     terminalreporter.write_line(f"unit {run.unit_serial}: {outcome}")

@@ -48,6 +48,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     cal.add_argument("--seed", type=int, default=0)
     cal.add_argument("pytest_args", nargs="*", help="extra pytest arguments (after --)")
 
+    render = commands.add_parser(
+        "render", help="(re)write certificate.html and certificate.pdf of written certificates")
+    render.add_argument("certificates", nargs="+", type=Path,
+                        help="certificate.json files, or the unit directories holding them")
+
     diag = commands.add_parser("diagnose", help="what does the model get wrong on a recording?")
     add_diagnose_arguments(diag)
 
@@ -61,6 +66,8 @@ def main(argv: Sequence[str] | None = None) -> int:
             return _simulate(args)
         if args.subcommand == "calibrate":
             return _calibrate(args)
+        if args.subcommand == "render":
+            return _render(args)
         return run_diagnose(args)
     except HilError as exc:
         print(f"gimbal-hil: error: {exc}", file=sys.stderr)
@@ -117,6 +124,21 @@ def _calibrate(args: argparse.Namespace) -> int:
         options += ["--station", str(args.station)]
     suite = ["-p", "no:cacheprovider", "--pyargs", "gimbal_hil_protocols", "-q"]
     return int(pytest.main([*suite, *options, *args.pytest_args]))
+
+
+def _render(args: argparse.Namespace) -> int:
+    from hil.report import certificate_file, write_documents
+
+    paths = [certificate_file(target) for target in args.certificates]
+    failed = 0
+    for path in paths:
+        problems = write_documents(path)
+        for problem in problems:
+            print(f"{path.parent}: {problem}", file=sys.stderr)
+        failed += bool(problems)
+        if not problems:
+            print(f"{path.parent}: certificate.html, certificate.pdf")
+    return 1 if failed else 0
 
 
 if __name__ == "__main__":

@@ -35,6 +35,8 @@ def result(
     analysed, estimates, corrections = analyse_in_calibration(recordings, spec, calibration)
     calibration.details[NAME] = {
         "method": spec.method,
+        "frequency_hz": spec.frequency_hz,
+        "settle_periods": spec.settle_periods,
         **corrections,
         "fit_pct": round(analysed.fit_pct, 2),
         "noise_rms_nm": analysed.noise_rms_nm,

@@ -56,6 +56,7 @@ def result(drive: Drive, calibration: CalibrationRun, profile: UnitProfile) -> R
         "model": "P/T = (s²/ωa² + 2ζa s/ωa + 1)/(s²/ωr² + 2ζr s/ωr + 1) / (J s (s + B/J)(τ s + 1))",
         "inertia_total_kg_m2": m.inertia_kg_m2,
         "antiresonance_damping_ratio": m.antiresonance_damping,
+        "viscous_over_inertia_1_s": m.viscous_over_inertia_1_s,
         "current_loop_time_constant_s": m.time_constant_s,
         "velocity_loop_bandwidth_hz": analysed.bandwidth_hz,
         "chi2_per_dof": analysed.chi2_per_dof,

@@ -1,0 +1,127 @@
+"""``certificate.html`` and ``certificate.pdf`` beside ``certificate.json``, made from it
+and the run's raw recordings. Rendering never costs the record: whatever fails is named
+and the JSON/TXT certificate stands as written."""
+
+from __future__ import annotations
+
+import json
+import logging
+from datetime import datetime
+from pathlib import Path
+from typing import Any
+
+from hil.errors import InputError
+from hil.report.data import from_certificate
+from hil.report.figures import png_bytes, styled
+from hil.report.html import render_html
+from hil.report.pdf import render_pdf
+from hil.report.plots import protocol_figure
+from hil.report.view import certificate_view
+
+log = logging.getLogger(__name__)
+
+PLOT_DPI = 160.0  # sharp in print at the text width (7.4 in), small enough for e-mail
+CAPTIONS = {
+    "inertia_friction": "the J/B/T_c sine fit against the recorded torque, and the friction "
+                        "it leaves",
+    "stribeck": "steady friction per staircase speed and the fitted Stribeck curve",
+    "gravity_cable": "the sweep's hysteresis loop, and the load per position with its fit",
+    "cogging": "order spectrum against angle, and the ripple map against the compensation table",
+    "current_loop": "lag phase per frequency and the sampled-data model with the fitted τ",
+    "resonance": "frequency response (Bode) and the two-mass fit",
+    "torque_constant": "shaft torque against current at each locked angle, and its linearity",
+    "inertia_elevation": "azimuth inertia per elevation and the cos² fit",
+}
+
+
+def certificate_file(target: Path) -> Path:
+    """The ``certificate.json`` that ``target`` names (the file, or a unit's directory).
+
+    Parameters
+    ----------
+    target : Path
+        A ``certificate.json`` or the directory holding one.
+
+    Returns
+    -------
+    Path
+        The certificate file, checked to be a gimbal-hil certificate.
+
+    Raises
+    ------
+    InputError
+        No such file, not JSON, or not a gimbal-hil certificate.
+    """
+    path = target / "certificate.json" if target.is_dir() else target
+    if not path.is_file():
+        raise InputError("no certificate.json here", source=str(target))
+    try:
+        schema = json.loads(path.read_bytes()).get("schema", "")
+    except (json.JSONDecodeError, UnicodeDecodeError, AttributeError) as exc:
+        raise InputError(f"not a JSON object ({exc})", source=str(path)) from None
+    if not str(schema).startswith("gimbal-hil/certificate/"):
+        raise InputError(f"not a gimbal-hil certificate (schema {schema!r})", source=str(path))
+    return path
+
+
+def write_documents(certificate_path: Path) -> list[str]:
+    """Write ``certificate.html`` and ``certificate.pdf`` next to ``certificate_path``.
+
+    Parameters
+    ----------
+    certificate_path : Path
+        The written ``certificate.json`` (its raw recordings beside it).
+
+    Returns
+    -------
+    list of str
+        One line per thing that could not be made (a plot, the HTML, the PDF); empty when
+        everything was written.
+    """
+    unit_dir = certificate_path.parent
+    record = certificate_path.read_bytes()
+    cert = json.loads(record)
+    problems: list[str] = []
+    view = certificate_view(cert)
+    pngs = _plots(cert, unit_dir, view, problems)
+    try:
+        html = render_html(view, plots_png=pngs)
+        (unit_dir / "certificate.html").write_text(html, encoding="utf-8")
+    except Exception as exc:  # boundary: the JSON record must survive any rendering fault
+        problems.append(f"certificate.html not written: {type(exc).__name__}: {exc}")
+    try:
+        issued = datetime.fromisoformat(cert["dates"]["issued"])
+        pdf = render_pdf(view, certificate_json=record, plots=pngs, issued=issued)
+        (unit_dir / "certificate.pdf").write_bytes(pdf)
+    except ImportError:
+        problems.append("certificate.pdf not written: the typst package is not installed "
+                        "(pip install typst)")
+    except Exception as exc:  # boundary, as above
+        problems.append(f"certificate.pdf not written: {type(exc).__name__}: {exc}")
+    for problem in problems:
+        log.warning("%s: %s", unit_dir, problem)
+    return problems
+
+
+def _plots(cert: dict[str, Any], unit_dir: Path, view: dict[str, Any], problems: list[str]
+           ) -> dict[str, bytes]:
+    """Each protocol's plot as PNG (one raster for both documents: an SVG of thousands of
+    points costs more to make than the rest of the document); sets ``plot`` and
+    ``caption`` in ``view``."""
+    pngs: dict[str, bytes] = {}
+    by_name = {p["name"]: p for p in view["protocols"]}
+    for entry in by_name.values():
+        entry["plot"], entry["caption"] = None, CAPTIONS.get(entry["name"], "")
+    for data in from_certificate(cert, unit_dir):
+        try:
+            with styled():
+                fig = protocol_figure(data)
+                if fig is None:
+                    continue
+                name = f"{data.name}.png"
+                pngs[name] = png_bytes(fig, dpi=PLOT_DPI)
+        except Exception as exc:  # boundary: one bad plot must not cost the document
+            problems.append(f"plot of {data.name} not drawn: {type(exc).__name__}: {exc}")
+            continue
+        by_name[data.name]["plot"] = name
+    return pngs

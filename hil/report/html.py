@@ -1,0 +1,112 @@
+"""The certificate as one self-contained HTML file (inline CSS, plots as base64 PNG)."""
+
+from __future__ import annotations
+
+import base64
+from collections.abc import Mapping
+from html import escape
+from typing import Any
+
+COLOURS = {"PASS": "#1a7f37", "MARGINAL": "#9a6700", "FAIL": "#cf222e", "ERROR": "#cf222e"}
+STYLE = """
+body{font-family:system-ui,-apple-system,"Segoe UI",sans-serif;max-width:1000px;margin:2em auto;
+color:#1f2328;font-size:14px;line-height:1.4;padding:0 1em}
+h1{font-size:1.5em}h2{font-size:1.2em;margin-top:1.6em;border-bottom:1px solid #d0d7de}
+table{border-collapse:collapse;margin:.5em 0}td,th{border:1px solid #d0d7de;padding:3px 7px;
+vertical-align:top}th{background:#f6f8fa;text-align:left}td.n{text-align:right;
+font-variant-numeric:tabular-nums}table.fields td{border:none;padding:2px 8px}
+table.fields td:first-child{font-weight:600;white-space:nowrap}
+.banner{border:3px solid;border-radius:6px;padding:12px 16px;margin:1em 0}
+.banner .word{font-size:2.6em;font-weight:800;letter-spacing:.04em;margin-right:.4em}
+.banner .line{font-size:1.2em;font-weight:600}
+.sha{font-family:ui-monospace,monospace;font-size:11px}figure{margin:1em 0}
+figure img{max-width:100%}figcaption{font-weight:600}.small{font-size:12px;color:#57606a}
+.watermark{position:fixed;top:40%;left:0;right:0;text-align:center;font-size:120px;
+font-weight:900;opacity:.08;transform:rotate(-30deg);pointer-events:none}
+"""
+
+
+def render_html(view: Mapping[str, Any], *, plots_png: Mapping[str, bytes]) -> str:
+    """The certificate page.
+
+    Parameters
+    ----------
+    view : mapping
+        :func:`hil.report.view.certificate_view`, each protocol's ``plot`` naming its
+        entry in ``plots_png`` (or ``None``).
+    plots_png : mapping
+        File name → PNG bytes of each plot.
+
+    Returns
+    -------
+    str
+        The HTML document.
+    """
+    colour = COLOURS.get(view["outcome"], COLOURS["ERROR"])
+    word, line = escape(view["banner"]["word"]), escape(view["banner"]["line"])
+    out = [
+        "<!DOCTYPE html>", '<html lang="en"><head><meta charset="utf-8">',
+        f"<title>{escape(view['title'])}: {escape(view['id'])} ({word})</title>",
+        f"<style>{STYLE}</style></head><body>",
+    ]
+    if not view["passed"]:
+        out.append(f'<div class="watermark" style="color:{colour}">{word}</div>')
+    out += [
+        f"<h1>{escape(view['title'])}</h1>",
+        f'<div class="banner" style="border-color:{colour};background:{colour}14">'
+        f'<span class="word" style="color:{colour}">{word}</span>'
+        f'<span class="line" style="color:{colour}">{line}</span>'
+        f"<div>{escape(view['conformity'])}</div></div>",
+        '<table class="fields">',
+        *(f"<tr><td>{escape(k)}</td><td>{escape(v)}</td></tr>" for k, v in view["fields"]),
+        "</table>", f'<p class="small">{escape(view["accreditation"])}</p>',
+        "<h2>Results</h2>",
+        "<p>Values as GUM 7.2.6 asks: U (coverage factor k, about 95 %) to two significant "
+        "digits, the value to the same decimal place; certificate.json keeps full "
+        "precision.</p>",
+        _table(("parameter", "value", "U", "k", "unit", "limits", "outcome"),
+               [[r["parameter"], r["value"], r["U"], r["k"], r["unit"], r["limits"],
+                 r["outcome"]] for r in view["results"]], numeric={1, 2, 3}),
+        f"<p><b>Decision rule.</b> {escape(view['decision_rule'])}</p>",
+        f'<p><b>Conformity statement.</b> <b style="color:{colour}">{word}:</b> '
+        f"{escape(view['conformity'])}</p>",
+        "<h2>Plots</h2>",
+    ]
+    for p in view["protocols"]:
+        if p.get("plot") and p["plot"] in plots_png:
+            data = base64.b64encode(plots_png[p["plot"]]).decode("ascii")
+            out.append(f"<figure><figcaption>{escape(p['name'])} ({escape(p['outcome'])}): "
+                       f"{escape(p.get('caption', ''))}</figcaption>"
+                       f'<img alt="{escape(p["name"])} plot" src="data:image/png;base64,{data}">'
+                       "</figure>")
+    out.append("<h2>Uncertainty budgets</h2><p>Standard uncertainties (k = 1): each input's "
+               "u(x), sensitivity c, contribution |c|·u(x) and its share of u².</p>")
+    for b in view["budgets"]:
+        out.append(f"<p><b>{escape(b['parameter'])}</b> {escape(b['summary'])}</p>")
+        out.append(_table(("component", "type", "u(x)", "c", "contribution", "share"),
+                          [[line["component"], line["type"], line["u"], line["c"],
+                            line["contribution"], line["share"]] for line in b["lines"]],
+                          numeric={2, 3, 4, 5}))
+    out.append("<h2>Protocols</h2>")
+    out.append(_table(("protocol", "outcome", "motion", "messages"),
+                      [[p["name"], p["outcome"], p["motion"], "\n".join(p["messages"])]
+                       for p in view["protocols"]], numeric={2}))
+    out.append("<h2>Raw data and derived files (SHA-256)</h2><table>")
+    out += [f'<tr><td>{escape(f["file"])}</td><td class="sha">{escape(f["sha256"])}</td></tr>'
+            for f in [*view["raw_data"], *view["artifacts"]]]
+    out.append(f"</table><p class=\"small\">Certificate {escape(view['id'])}</p></body></html>")
+    return "\n".join(out) + "\n"
+
+
+def _table(header: tuple[str, ...], rows: list[list[str]], *, numeric: set[int]) -> str:
+    head = "".join(f"<th>{escape(h)}</th>" for h in header)
+    body = "".join("<tr>" + "".join(_cell(cell, i in numeric) for i, cell in enumerate(row))
+                   + "</tr>" for row in rows)
+    return f"<table><tr>{head}</tr>{body}</table>"
+
+
+def _cell(text: str, numeric: bool) -> str:
+    if text in COLOURS:  # an outcome: coloured as the banner
+        return f'<td style="color:{COLOURS[text]};font-weight:700">{text}</td>'
+    body = escape(text).replace("\n", "<br>")
+    return f"<td class=n>{body}</td>" if numeric else f"<td>{body}</td>"

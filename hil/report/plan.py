@@ -1,0 +1,93 @@
+"""The motion each protocol plans: its excitations' commanded time, built from the unit's
+profile exactly as the protocol builds them (moves from the travel's centre). The console
+turns it into the time left."""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Callable
+
+from hil.drives.base import DriveInfo
+from hil.errors import HilError
+from hil.motion import Excitation
+from hil.profile import UnitProfile
+from hil.suite import (
+    cogging,
+    current_loop,
+    gravity_cable,
+    inertia_elevation,
+    inertia_friction,
+    resonance,
+    stribeck,
+    torque_constant,
+)
+
+log = logging.getLogger(__name__)
+
+
+def _sine(profile: UnitProfile, info: DriveInfo, at_rad: float) -> list[Excitation]:
+    spec = inertia_friction.Spec.from_profile(profile, info)
+    moves = ([] if spec.centre_rad is None
+             else [inertia_friction.move_to_centre(spec, spec.centre_rad, position_rad=at_rad)])
+    return moves + inertia_friction.excitation(spec)
+
+
+def _torque_constant(profile: UnitProfile, info: DriveInfo, at_rad: float) -> list[Excitation]:
+    spec = torque_constant.Spec.from_profile(profile, info)
+    out: list[Excitation] = []
+    for angle in spec.angles_rad:
+        out += [torque_constant.move(spec, position_rad=at_rad, angle_rad=angle),
+                torque_constant.sweep(spec, angle_rad=angle)]
+        at_rad = angle
+    return out
+
+
+def _elevation(profile: UnitProfile, info: DriveInfo, at_rad: float) -> list[Excitation]:
+    spec = inertia_elevation.Spec.from_profile(profile, info)
+    return [e for _ in spec.elevations_rad for e in inertia_friction.excitation(spec.sine)]
+
+
+PLANNERS: dict[str, Callable[[UnitProfile, DriveInfo, float], list[Excitation]]] = {
+    "current_loop": lambda p, i, at: current_loop.excitation(
+        current_loop.Spec.from_profile(p, i), position_rad=at),
+    "gravity_cable": lambda p, i, at: gravity_cable.excitation(
+        gravity_cable.Spec.from_profile(p, i), position_rad=at),
+    "inertia_friction": _sine,
+    "stribeck": lambda p, i, at: stribeck.excitation(
+        stribeck.Spec.from_profile(p, i), position_rad=at),
+    "cogging": lambda p, i, at: cogging.excitation(
+        cogging.Spec.from_profile(p, i), position_rad=at),
+    "torque_constant": _torque_constant,
+    "resonance": lambda p, i, at: resonance.excitation(
+        resonance.Spec.from_profile(p, i), position_rad=at),
+    "inertia_elevation": _elevation,
+}
+
+
+def planned_motion_s(profile: UnitProfile, info: DriveInfo) -> dict[str, float]:
+    """Commanded motion time of each protocol the profile configures, in run order.
+
+    Parameters
+    ----------
+    profile : UnitProfile
+        The unit's profile (its ``[protocols.*]`` tables, in order).
+    info : DriveInfo
+        The drive (sample rate and limits shape the excitations).
+
+    Returns
+    -------
+    dict
+        Protocol → seconds of commanded motion; 0 for one this module cannot plan (an
+        unknown protocol, or settings its protocol will refuse with an error of its own).
+    """
+    centre = (info.limits.travel_min_rad + info.limits.travel_max_rad) / 2
+    plan = {}
+    for name in profile.protocols:
+        planner = PLANNERS.get(name)
+        try:
+            excitations = planner(profile, info, centre) if planner else []
+        except (HilError, ValueError) as exc:
+            log.debug("no motion plan for %s: %s", name, exc)
+            excitations = []
+        plan[name] = sum(e.duration_s for e in excitations)
+    return plan
