@@ -169,7 +169,8 @@ def calibrate(unit: Unit, out_dir: Path, *, seed: int | None = None,
     path = out_dir / serial / "certificate.json"
     if reuse and path.is_file():
         return {r["parameter"]: r for r in json.loads(path.read_text("utf-8"))["results"]}
-    extra = [] if method_bias is None else ["--", "--method-bias", method_bias]
+    extra = ["--", "--no-documents"] + ([] if method_bias is None
+                                         else ["--method-bias", method_bias])
     subprocess.run(
         [sys.executable, "-m", "hil.cli", "calibrate", "--drive", "sim",
          "--profile", str(unit.profile_path), "--unit-serial", serial,

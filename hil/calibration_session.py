@@ -270,7 +270,8 @@ def pytest_sessionfinish(session: pytest.Session, exitstatus: int) -> None:
     aborted = exitstatus == pytest.ExitCode.INTERRUPTED or session.shouldstop is not False
     path = write_certificate(run, aborted=bool(aborted))
     session.config.stash[CERTIFICATE_KEY] = path
-    session.config.stash[DOCUMENTS_KEY] = write_documents(path)
+    if not session.config.getoption("--no-documents"):
+        session.config.stash[DOCUMENTS_KEY] = write_documents(path)
 
 
 def pytest_terminal_summary(terminalreporter: pytest.TerminalReporter) -> None:

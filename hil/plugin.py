@@ -59,6 +59,11 @@ def pytest_addoption(parser: pytest.Parser) -> None:
         help="method-bias map (TOML) the results are corrected with; 'off' for none "
         "(default: the one shipped, measured by benchmarks/bench_coverage.py)",
     )
+    group.addoption(
+        "--no-documents",
+        action="store_true",
+        help="write certificate.json/.txt only, not the HTML and PDF (population benchmarks)",
+    )
 
 
 def pytest_configure(config: pytest.Config) -> None:
