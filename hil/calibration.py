@@ -232,6 +232,12 @@ class CalibrationRun:
         suffix = "" if complete else "_PARTIAL"
         name = re.sub(r"[^A-Za-z0-9._-]+", "_", f"{protocol}__{excitation.name}{suffix}")
         path = self.unit_dir / "recordings" / f"{name}.csv.gz"
+        # an excitation run twice in one calibration keeps both recordings
+        taken = {raw.path for raw in self.raw_files}
+        repeat = 2
+        while path in taken:
+            path = self.unit_dir / "recordings" / f"{name}__{repeat}.csv.gz"
+            repeat += 1
         metadata = {
             "unit_serial": self.unit_serial,
             "unit_type": self.profile.unit_type,

@@ -12,6 +12,7 @@ Library: :mod:`hil.suite.inertia_elevation`.
 from __future__ import annotations
 
 from collections.abc import Callable
+from dataclasses import replace
 from typing import cast
 
 import pytest
@@ -51,7 +52,9 @@ def result(
         for elevation in spec.elevations_rad:
             move_elevation(elevation)
             recordings = [
-                calibration.run(drive, e, protocol=NAME) for e in sine.excitation(spec.sine)
+                calibration.run(drive, replace(e, name=f"{e.name}_el{elevation:+.2f}rad"),
+                                protocol=NAME)
+                for e in sine.excitation(spec.sine)
             ]
             inertias.append(inertia_at_elevation(recordings, spec, calibration, gain=gain))
     finally:

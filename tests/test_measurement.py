@@ -236,3 +236,26 @@ def test_earlier_results_are_looked_up_by_name(tmp_path: Path) -> None:
     assert found.standard_uncertainty > 1e-5  # and the method's scatter added
     assert run.results("inertia_kg_m2", "coulomb_nm") is None
     assert run.results("inertia_kg_m2") == (found,)
+
+
+def test_an_excitation_run_twice_keeps_both_recordings(tmp_path: Path) -> None:
+    """Raw data is never overwritten within a run (the azimuth's sines at each elevation)."""
+    import numpy as np
+
+    from hil.calibration import CalibrationRun
+    from hil.drives.sim import SimDrive
+    from hil.motion import Excitation, Mode
+
+    profile = load_profile()
+    assert profile.plant is not None
+    run = CalibrationRun(profile=profile, unit_serial="X", out_dir=tmp_path, drive_kind="sim")
+    excitation = Excitation(name="hold", mode=Mode.VELOCITY, fs_hz=profile.sample_rate_hz,
+                            command=np.zeros(40))
+    with SimDrive(profile.plant, limits=profile.limits, fs_hz=profile.sample_rate_hz,
+                  seed=0) as drive:
+        drive.enable()
+        run.run(drive, excitation, protocol="p")
+        run.run(drive, excitation, protocol="p")
+    paths = [raw.path for raw in run.raw_files]
+    assert len(set(paths)) == 2
+    assert all(path.is_file() for path in paths)
