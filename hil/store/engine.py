@@ -109,7 +109,7 @@ def open_store(url: str) -> Store:
     StoreUnavailableError
         The database cannot be reached or opened.
     """
-    parsed = _parse(url)
+    parsed = parse_store_url(url)
     engine = _engine(parsed)
     shown = parsed.render_as_string(hide_password=True)
     try:
@@ -152,7 +152,14 @@ def _revision(engine: Engine) -> str | None:
     return None if row is None else str(row[0])
 
 
-def _parse(url: str) -> URL:
+def parse_store_url(url: str) -> URL:
+    """``url`` checked: SQLite or PostgreSQL (through psycopg 3).
+
+    Raises
+    ------
+    InputError
+        Not a URL, or another database.
+    """
     try:
         parsed = make_url(url)
     except ArgumentError:

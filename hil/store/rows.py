@@ -55,12 +55,11 @@ def certificate_rows(text: str, *, source: str) -> CertificateRows:
         raise InputError("not a gimbal-hil certificate (no certificate_id)", source=source)
     get = _Reader(cert, source)
     certificate_id = get.text("certificate_id")
-    block = cert.get("run") if isinstance(cert.get("run"), dict) else {}
+    block: dict[str, Any] = cert["run"] if isinstance(cert.get("run"), dict) else {}
     dates = get.mapping("dates")
     drive = get.mapping("drive")
-    method = get.mapping("method")
     started = _time(dates, "calibration_started", source)
-    run = {
+    run: dict[str, Any] = {
         "run_id": str(block.get("id") or uuid.uuid5(_RUN_NAMESPACE, certificate_id)),
         "certificate_id": certificate_id,
         "serial": get.text("unit", "serial"),
@@ -85,7 +84,7 @@ def certificate_rows(text: str, *, source: str) -> CertificateRows:
         "certificate_path": source,
         "certificate_sha256": hashlib.sha256(text.encode("utf-8")).hexdigest(),
     }
-    run_id = run["run_id"]
+    run_id = str(run["run_id"])
     protocols = [
         {
             "run_id": run_id,
