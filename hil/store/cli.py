@@ -15,7 +15,7 @@ from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
-from sqlalchemy import distinct, select
+from sqlalchemy import select
 
 from hil.drives.station import load_station_identity
 from hil.errors import InputError
@@ -205,7 +205,7 @@ def _point_json(p: StoredResult) -> dict[str, Any]:
 
 def _known_parameter(store: Store, name: str) -> None:
     with store.engine.connect() as connection:
-        known = sorted(connection.execute(select(distinct(results.c.name))).scalars())
+        known = sorted(connection.execute(select(results.c.name).distinct()).scalars())
     if known and name not in known:
         raise InputError(f"no result '{name}' in {store.url} (known: {', '.join(known)})")
 

@@ -7,10 +7,11 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-import gimbal_hil_protocols.test_inertia_friction  # noqa: F401  (loaded before pytester's
-import pytest                                         # in-process runs snapshot sys.modules)
-from conftest import PostgresServer
+# loaded before pytester's in-process runs snapshot sys.modules (numpy's fft loads once)
+import gimbal_hil_protocols.test_inertia_friction  # noqa: F401
+import pytest
 
+from conftest import PostgresServer
 from hil.cli import main
 from hil.store import open_store
 from hil.store.outbox import pending
