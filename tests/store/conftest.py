@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import glob
 import os
+import pwd
 import shutil
 import socket
 import subprocess
@@ -83,8 +84,13 @@ def postgres() -> Iterator[PostgresServer]:
     if bin_dir is None:
         pytest.skip("no PostgreSQL server binary (/usr/lib/postgresql/*/bin/pg_ctl): "
                     "apt-get install postgresql")
-    if os.geteuid() == 0 and shutil.which("runuser") is None:
-        pytest.skip("running as root without runuser: cannot start PostgreSQL as 'postgres'")
+    if os.geteuid() == 0:
+        if shutil.which("runuser") is None:
+            pytest.skip("running as root without runuser: cannot start PostgreSQL as postgres")
+        try:
+            pwd.getpwnam("postgres")
+        except KeyError:
+            pytest.skip("running as root and no 'postgres' user to run PostgreSQL as")
     root = Path(tempfile.mkdtemp(prefix="gimbal-hil-pg-"))
     try:
         if os.geteuid() == 0:
