@@ -10,8 +10,8 @@ from pathlib import Path
 # loaded before pytester's in-process runs snapshot sys.modules (numpy's fft loads once)
 import gimbal_hil_protocols.test_inertia_friction  # noqa: F401
 import pytest
+from pg_server import PostgresServer
 
-from conftest import PostgresServer
 from hil.cli import main
 from hil.store import open_store
 from hil.store.outbox import pending
