@@ -155,6 +155,30 @@ def history(store: Store, serial: str) -> list[RunSummary]:
     return [_with_count(s, len(found)) for s in found]
 
 
+def run_summaries(
+    store: Store, *, station: str | None = None, since: datetime | None = None
+) -> list[RunSummary]:
+    """Every stored run (aborted and reference runs included: each carries its flags),
+    oldest first; for yields per station and day.
+
+    Parameters
+    ----------
+    store : Store
+        An open store.
+    station : str, optional
+        Only runs of this station id.
+    since : datetime, optional
+        Only runs started at or after it (naive times are taken as UTC).
+    """
+    query = select(*_summary_columns()).order_by(runs.c.started_at, runs.c.run_id)
+    if station is not None:
+        query = query.where(runs.c.station == station)
+    if since is not None:
+        query = query.where(runs.c.started_at >= utc(since))
+    with store.engine.connect() as connection:
+        return [_summary(row._mapping) for row in connection.execute(query)]
+
+
 def run_results(store: Store, run_id: str) -> dict[str, dict[str, Any]]:
     """One run's results by name (value, u, U, unit, limits, outcome)."""
     with store.engine.connect() as connection:

@@ -10,7 +10,7 @@ from pathlib import Path
 from sqlalchemy.exc import SQLAlchemyError
 
 from hil.errors import HilError
-from hil.store.engine import open_store
+from hil.store.engine import StoreUnavailableError, open_store
 from hil.store.ingest import ingest_certificate
 from hil.store.outbox import pending, to_outbox
 
@@ -47,7 +47,8 @@ def record_run(certificate: Path, *, out_dir: Path, url: str) -> str:
         except OSError as outbox_exc:
             return (f"results store FAILED ({exc}) and the outbox too ({outbox_exc}); the "
                     f"certificate is kept at {certificate}: `gimbal-hil results ingest` it")
-        return (f"results store UNREACHABLE ({exc}); run kept in the outbox {entry}: "
+        what = "UNREACHABLE" if isinstance(exc, StoreUnavailableError) else "FAILED"
+        return (f"results store {what} ({exc}); run kept in the outbox {entry}: "
                 f"`gimbal-hil results sync --out {out_dir}` uploads it")
     waiting = len(pending(out_dir))
     later = f"; {waiting} earlier run(s) wait in the outbox: `gimbal-hil results sync`" \

@@ -22,7 +22,7 @@ from hil.store import (
     save_baseline,
 )
 from hil.store.ingest import ingest_text
-from hil.store.query import history, run_results, units
+from hil.store.query import history, run_results, run_summaries, units
 from hil.store.schema import protocol_outcomes, recordings, results, runs
 
 
@@ -173,6 +173,12 @@ def test_result_series_filters_station_time_aborted_and_reference(
     assert first.started_at.tzinfo is not None
     assert result_series(store, "no_such_result") == []
     assert [u.serial for u in units(store)] == ["GOLD", "U-1", "U-2", "U-3", "U-4"]
+    every = run_summaries(store)
+    assert [(r.serial, r.aborted, r.is_reference) for r in every] == [
+        ("U-1", False, False), ("U-2", False, False), ("U-3", True, False),
+        ("GOLD", False, True), ("U-4", False, False)]
+    assert [r.serial for r in run_summaries(store, station="ST-2", since=since)] == \
+        ["U-2", "U-4"]
     store.close()
 
 
