@@ -124,8 +124,8 @@ def load_station_identity(path: str | Path) -> StationIdentity:
 
 def _identity(table: ConfigTable) -> StationIdentity:
     identity = StationIdentity(
-        station_id=table.string("id") if "id" in table else None,
-        store=table.string("store") if "store" in table else None,
+        station_id=table.string("id", "") or None,
+        store=table.string("store", "") or None,
         reference=table.boolean("reference", False),
     )
     table.done()
