@@ -53,8 +53,9 @@ def start(config: pytest.Config) -> None:
         config.stash[STATION_KEY] = (
             load_station_identity(station) if station is not None else StationIdentity()
         )
-        if config.getoption("--store") not in (None, "off"):
-            parse_store_url(resolve_store_url(config.getoption("--store"), out_dir=Path()))
+        if config.getoption("--store") != "off":  # a bad URL stops here, before any motion
+            parse_store_url(resolve_store_url(config.getoption("--store"), out_dir=Path(),
+                                              station_store=config.stash[STATION_KEY].store))
     except HilError as exc:
         raise pytest.UsageError(str(exc)) from None
 
