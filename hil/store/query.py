@@ -12,7 +12,7 @@ from dataclasses import dataclass
 from datetime import UTC, datetime
 from typing import Any
 
-from sqlalchemy import delete, func, insert, select
+from sqlalchemy import and_, delete, func, insert, select
 
 from hil.store.engine import Store
 from hil.store.schema import results, runs, spc_baselines
@@ -115,32 +115,32 @@ def result_series(
         query = query.where(runs.c.is_reference.is_(False))
     with store.engine.connect() as connection:
         rows = connection.execute(query).all()
+    # positional: the columns are selected in the dataclass's field order (fast for 10⁵ rows)
     return [
-        StoredResult(
-            run_id=r.run_id, certificate_id=r.certificate_id, serial=r.serial,
-            station=r.station, started_at=utc(r.started_at), value=r.value,
-            standard_uncertainty=r.standard_uncertainty,
-            expanded_uncertainty=r.expanded_uncertainty, unit=r.unit, nominal=r.nominal,
-            lower_limit=r.lower_limit, upper_limit=r.upper_limit, outcome=r.outcome,
-            is_reference=bool(r.is_reference),
-        )
+        StoredResult(r[0], r[1], r[2], r[3], utc(r[4]), r[5], r[6], r[7], r[8], r[9], r[10],
+                     r[11], r[12], bool(r[13]))
         for r in rows
     ]
 
 
 def units(store: Store) -> list[RunSummary]:
     """Every unit's latest run (with how many runs it has), by serial."""
-    ranked = select(
-        *_summary_columns(),
-        func.row_number()
-        .over(partition_by=runs.c.serial, order_by=(runs.c.started_at.desc(),
-                                                    runs.c.run_id.desc()))
-        .label("rank"),
-        func.count().over(partition_by=runs.c.serial).label("runs_of_unit"),
-    ).subquery()
-    query = select(ranked).where(ranked.c.rank == 1).order_by(ranked.c.serial)
+    latest = (
+        select(runs.c.serial, func.max(runs.c.started_at).label("last"),
+               func.count().label("runs_of_unit"))
+        .group_by(runs.c.serial)
+        .subquery()
+    )
+    query = (
+        select(*_summary_columns(), latest.c.runs_of_unit)
+        .join(latest, and_(runs.c.serial == latest.c.serial,
+                           runs.c.started_at == latest.c.last))
+        .order_by(runs.c.serial, runs.c.run_id)
+    )
     with store.engine.connect() as connection:
-        return [_summary(row._mapping) for row in connection.execute(query)]
+        found = {row[2]: _summary(row, runs_of_unit=int(row[12]))
+                 for row in connection.execute(query)}
+    return list(found.values())  # two runs started in the same second: the last run id
 
 
 def history(store: Store, serial: str) -> list[RunSummary]:
@@ -151,7 +151,7 @@ def history(store: Store, serial: str) -> list[RunSummary]:
         .order_by(runs.c.started_at, runs.c.run_id)
     )
     with store.engine.connect() as connection:
-        found = [_summary(row._mapping) for row in connection.execute(query)]
+        found = [_summary(row) for row in connection.execute(query)]
     return [_with_count(s, len(found)) for s in found]
 
 
@@ -176,7 +176,7 @@ def run_summaries(
     if since is not None:
         query = query.where(runs.c.started_at >= utc(since))
     with store.engine.connect() as connection:
-        return [_summary(row._mapping) for row in connection.execute(query)]
+        return [_summary(row) for row in connection.execute(query)]
 
 
 def run_results(store: Store, run_id: str) -> dict[str, dict[str, Any]]:
@@ -226,14 +226,15 @@ def _summary_columns() -> tuple[Any, ...]:
     )
 
 
-def _summary(row: Any) -> RunSummary:
+def _summary(row: Any, *, runs_of_unit: int = 1) -> RunSummary:
+    """A row of :func:`_summary_columns`."""
+    (run_id, certificate_id, serial, unit_type, station, operator, started_at, ended_at,
+     outcome, aborted, attempt, is_reference) = row[:12]
     return RunSummary(
-        run_id=row["run_id"], certificate_id=row["certificate_id"], serial=row["serial"],
-        unit_type=row["unit_type"], station=row["station"], operator=row["operator"],
-        started_at=utc(row["started_at"]), ended_at=utc(row["ended_at"]),
-        outcome=row["outcome"], aborted=bool(row["aborted"]), attempt=int(row["attempt"]),
-        is_reference=bool(row["is_reference"]),
-        runs_of_unit=int(row.get("runs_of_unit", 1) or 1),
+        run_id=run_id, certificate_id=certificate_id, serial=serial, unit_type=unit_type,
+        station=station, operator=operator, started_at=utc(started_at),
+        ended_at=utc(ended_at), outcome=outcome, aborted=bool(aborted), attempt=int(attempt),
+        is_reference=bool(is_reference), runs_of_unit=runs_of_unit,
     )
 
 
