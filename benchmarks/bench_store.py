@@ -140,8 +140,18 @@ def bench(url: str, text: str, args: argparse.Namespace) -> list[tuple[str, str]
     for name, query in queries:
         seconds, size = timed(query, args.repeat)
         rows.append((name, f"{seconds * 1000:.0f} ms ({size} rows)"))
+    rows.append(("database size", f"{database_bytes(store) / 1e9:.2f} GB"))
     store.close()
     return rows
+
+
+def database_bytes(store: Store) -> int:
+    with store.engine.connect() as connection:
+        if store.dialect == "postgresql":
+            return int(connection.exec_driver_sql(
+                "SELECT pg_database_size(current_database())").scalar_one())
+        database = connection.engine.url.database or ""
+    return sum(p.stat().st_size for p in Path(database).parent.glob("results.sqlite*"))
 
 
 @contextmanager
