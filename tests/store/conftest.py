@@ -39,13 +39,14 @@ def store_url(request: pytest.FixtureRequest, tmp_path: Path) -> str:
 @pytest.fixture(scope="session")
 def calibrated(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """``--out`` of two real simulated calibrations of one unit (the J/B/T_c protocol only,
-    seeds 0 and 1): ``SERIAL/certificate.json`` and ``SERIAL/history/*/certificate.json``."""
+    seeds 0 and 1): ``SERIAL/certificate.json`` and ``SERIAL/history/*/certificate.json``.
+    The first went to the default store (``results.sqlite`` there), the second to none."""
     out = tmp_path_factory.mktemp("calibrated")
     script = (
         "import sys; from hil.cli import main\n"
-        "for seed in ('0', '1'):\n"
+        "for seed, store in (('0', []), ('1', ['--store', 'off'])):\n"
         f"    code = main(['calibrate', '--drive', 'sim', '--unit-serial', '{SERIAL}',\n"
-        f"                 '--out', r'{out}', '--seed', seed, '--store', 'off',\n"
+        f"                 '--out', r'{out}', '--seed', seed, *store,\n"
         "                 '--operator', 'tester', '--', '-k', 'inertia_friction'])\n"
         "    assert code == 0, code\n"
     )

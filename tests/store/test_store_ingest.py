@@ -75,6 +75,19 @@ def test_a_certificate_becomes_one_run_with_every_field(store_url: str,
     store.close()
 
 
+def test_calibrate_stores_in_out_by_default_and_nowhere_with_store_off(
+    calibrated: Path,
+) -> None:
+    (first,) = (json.loads(p.read_text(encoding="utf-8"))
+                for p in (calibrated / SERIAL / "history").glob("*/certificate.json"))
+    store = open_store(f"sqlite:///{calibrated / 'results.sqlite'}")
+    (stored,) = history(store, SERIAL)
+    store.close()
+    assert stored.certificate_id == first["certificate_id"]
+    assert stored.run_id == first["run"]["id"]
+    assert stored.attempt == 1
+
+
 def test_the_same_certificate_twice_is_one_run(store_url: str, calibrated: Path) -> None:
     path = calibrated / SERIAL / "certificate.json"
     store = open_store(store_url)

@@ -33,11 +33,11 @@ class StopServerAtFirstProtocol:
             self.stopped = True
 
 
-def _calibrate(pytester: pytest.Pytester, out: Path, station: Path,
-               *plugins: object) -> pytest.RunResult:
+def _calibrate(pytester: pytest.Pytester, out: Path, station: Path, *args: str,
+               plugins: tuple[object, ...] = ()) -> pytest.RunResult:
     return pytester.runpytest_inprocess(
         "--pyargs", "gimbal_hil_protocols.test_inertia_friction", "-p", "no:cacheprovider",
-        "--out", str(out), "--unit-serial", "OUT-1", "--station", str(station),
+        "--out", str(out), "--unit-serial", "OUT-1", "--station", str(station), *args,
         plugins=list(plugins),
     )
 
@@ -57,7 +57,8 @@ def test_a_server_outage_during_a_run_loses_nothing(
 
     stopper = StopServerAtFirstProtocol(postgres)
     try:
-        second = _calibrate(pytester, out, station, stopper)
+        second = _calibrate(pytester, out, station, "--reference", "--operator", "alice",
+                            plugins=(stopper,))
     finally:
         if stopper.stopped:
             postgres.start()
@@ -90,3 +91,5 @@ def test_a_server_outage_during_a_run_loses_nothing(
     assert [r.certificate_id for r in runs] == [*written, certificate["certificate_id"]]
     assert [r.attempt for r in runs] == [1, 2]
     assert {r.station for r in runs} == {"ST-7"}
+    assert [(r.operator, r.is_reference) for r in runs][1] == ("alice", True)
+    assert runs[0].is_reference is False
