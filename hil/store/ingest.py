@@ -81,13 +81,16 @@ def ingest_text(store: Store, text: str, *, source: str) -> Ingested:
 
 def ingest_tree(store: Store, directory: Path) -> list[Ingested]:
     """Ingest every certificate under ``directory``: a folder of serials, one serial's
-    folder, with its ``history/`` (older runs first, so attempts count up in time order).
+    folder, with its ``history/`` (older runs first, so attempts count up in time order),
+    or one ``certificate.json``.
 
     Raises
     ------
     InputError
         ``directory`` holds no certificate, or one of them is invalid (naming it).
     """
+    if directory.is_file():  # one certificate.json named directly
+        return [ingest_certificate(store, directory)]
     if not directory.is_dir():
         raise InputError("not a directory", source=str(directory))
     paths = sorted(directory.rglob(CERTIFICATE_NAME))

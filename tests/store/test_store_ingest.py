@@ -118,8 +118,12 @@ def test_old_certificate_folders_are_ingested_with_their_history(
         del cert["run"]
         path.write_text(json.dumps(cert), encoding="utf-8")
     store = open_store(store_url)
-    done = ingest_tree(store, old / SERIAL)  # one serial's folder
-    assert [d.new for d in done] == [True, True]
+    older = min(paths, key=_started)
+    (single,) = ingest_tree(store, older)  # one file
+    assert single.new
+    done = ingest_tree(store, old / SERIAL)  # one serial's folder, oldest first
+    assert [d.new for d in done] == [False, True]
+    assert done[0].certificate_id == single.certificate_id
     again = ingest_tree(store, old)  # the folder of serials: nothing new
     assert [d.new for d in again] == [False, False]
     assert [d.run_id for d in again] == [d.run_id for d in done]
@@ -129,6 +133,10 @@ def test_old_certificate_folders_are_ingested_with_their_history(
     assert first.station == "(not recorded)"
     assert _counts(store_url)["runs"] == 2
     store.close()
+
+
+def _started(path: Path) -> str:
+    return str(json.loads(path.read_text(encoding="utf-8"))["dates"]["calibration_started"])
 
 
 def test_a_broken_certificate_is_one_clear_error_and_stores_nothing(
