@@ -76,9 +76,13 @@ def sync_outbox(store: Store, out_dir: Path) -> list[Ingested]:
         except (OSError, ValueError, KeyError, TypeError):
             bad.append(str(entry))
             continue
-        done.append(ingest_text(store, text, source=source))
+        try:
+            done.append(ingest_text(store, text, source=source))
+        except InputError:  # not a valid certificate: kept for a person to look at
+            bad.append(str(entry))
+            continue
         entry.unlink()
     if bad:
-        raise InputError(f"not an outbox entry, left in place ({len(done)} synced)",
-                         source=", ".join(bad))
+        raise InputError(f"not an outbox entry or not a valid certificate, left in place "
+                         f"({len(done)} synced)", source=", ".join(bad))
     return done

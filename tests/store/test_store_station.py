@@ -1,16 +1,20 @@
 """The station file's ``[station]`` table: id, results store, reference; checked like every
-other table (unknown key or wrong type: one error naming file, table and key)."""
+other table (unknown key or wrong type: one error naming file, table and key). The store's
+choice, and a bad outbox entry."""
 
 from __future__ import annotations
 
 from pathlib import Path
 
 import pytest
+from store_variants import SERIAL
 
 from hil.config import builtin_fixture
 from hil.drives.station import CanOpenStation, load_station, load_station_identity
-from hil.errors import ProfileError
+from hil.errors import InputError, ProfileError
+from hil.store import open_store
 from hil.store.engine import ENV_VAR, resolve_store_url
+from hil.store.outbox import outbox_dir, pending, sync_outbox, to_outbox
 
 
 def test_the_example_station_loads_with_its_station_table() -> None:
@@ -54,3 +58,17 @@ def test_the_store_is_chosen_option_then_environment_then_station_then_out(
         == "sqlite:///x.sqlite"
     assert resolve_store_url("my.sqlite", out_dir=tmp_path) == \
         f"sqlite:///{Path('my.sqlite').resolve()}"
+
+
+def test_a_bad_outbox_entry_is_named_and_the_others_still_sync(
+    tmp_path: Path, calibrated: Path
+) -> None:
+    out = tmp_path / "out"
+    to_outbox(out, calibrated / SERIAL / "certificate.json")
+    bad = outbox_dir(out) / "broken.json"
+    bad.write_text('{"certificate_path": "x", "certificate_text": "{}"}', encoding="utf-8")
+    store = open_store(f"sqlite:///{tmp_path / 'results.sqlite'}")
+    with pytest.raises(InputError, match=r"broken.json: not an outbox entry .* \(1 synced\)"):
+        sync_outbox(store, out)
+    store.close()
+    assert pending(out) == [bad]
