@@ -169,7 +169,7 @@ def calibrate(unit: Unit, out_dir: Path, *, seed: int | None = None,
     path = out_dir / serial / "certificate.json"
     if reuse and path.is_file():
         return {r["parameter"]: r for r in json.loads(path.read_text("utf-8"))["results"]}
-    extra = ["--", "--no-documents"] + ([] if method_bias is None
+    extra = ["--", "--no-documents", "--store", "off"] + ([] if method_bias is None
                                          else ["--method-bias", method_bias])
     subprocess.run(
         [sys.executable, "-m", "hil.cli", "calibrate", "--drive", "sim",

@@ -10,6 +10,7 @@ import logging
 import re
 import shutil
 import time
+import uuid
 from dataclasses import dataclass, field
 from datetime import UTC, datetime
 from pathlib import Path
@@ -74,6 +75,9 @@ class CalibrationRun:
         out_dir: Path,
         drive_kind: str,
         method_bias: MethodBiasMap | None = None,
+        station_id: str = "",
+        operator: str = "",
+        reference: bool = False,
     ) -> None:
         if not re.fullmatch(r"[A-Za-z0-9][A-Za-z0-9._-]{0,63}", unit_serial):
             raise ValueError(
@@ -85,6 +89,8 @@ class CalibrationRun:
         self.method_bias = (load_method_bias(axis=profile.axis) if method_bias is None
                             else method_bias)
         self.unit_dir = out_dir / unit_serial
+        self.run_id = str(uuid.uuid4())
+        self.station_id, self.operator, self.reference = station_id, operator, reference
         self.started = datetime.now(UTC)
         self.drive_info: DriveInfo | None = None
         self.raw_files: list[RawFile] = []
@@ -219,6 +225,10 @@ class CalibrationRun:
             if worst in outcomes:
                 return worst
         return Outcome.PASS
+
+    def attempt(self) -> int:
+        """This run's number for the unit: 1 + the calibrations kept in ``history/``."""
+        return 1 + len(list(self.unit_dir.glob("history/*/certificate.json")))
 
     @property
     def active(self) -> bool:

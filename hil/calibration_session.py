@@ -7,8 +7,11 @@ fixtures look things up, state lives in ``config.stash``.
 
 from __future__ import annotations
 
+import getpass
 import json
 import logging
+import os
+import socket
 import time
 from collections.abc import Generator, Iterator
 from dataclasses import dataclass
@@ -21,6 +24,7 @@ from hil.certificate import write_certificate
 from hil.drives.base import Drive, DriveInfo
 from hil.drives.connect import open_drive
 from hil.drives.kinds import SIMULATED_KINDS
+from hil.drives.station import StationIdentity, load_station_identity
 from hil.errors import HilError
 from hil.gum import rounded_pair
 from hil.measurement import MethodBiasMap, Outcome, load_method_bias
@@ -29,6 +33,8 @@ from hil.profile import UnitProfile, load_profile
 from hil.report import write_documents
 from hil.report.console import outcome_banner, protocol_start
 from hil.report.plan import planned_motion_s
+from hil.store.engine import parse_store_url, resolve_store_url
+from hil.store.record import record_run
 
 log = logging.getLogger(__name__)
 
@@ -36,6 +42,8 @@ RUN_KEY = pytest.StashKey[CalibrationRun]()
 PROFILE_KEY = pytest.StashKey[UnitProfile]()
 CERTIFICATE_KEY = pytest.StashKey[Path]()
 DOCUMENTS_KEY = pytest.StashKey[list[str]]()
+STORE_MESSAGE_KEY = pytest.StashKey[str]()
+STATION_KEY = pytest.StashKey[StationIdentity]()
 PROTOCOL_MARK = "protocol"
 
 
@@ -60,6 +68,13 @@ def start(config: pytest.Config) -> None:
         raise pytest.UsageError(f"--drive {kind} (a real unit) needs --unit-serial SERIAL")
     try:
         config.stash[PROFILE_KEY] = load_profile(config.getoption("--profile"))
+        station = config.getoption("--station")
+        config.stash[STATION_KEY] = (
+            load_station_identity(station) if station is not None else StationIdentity()
+        )
+        if config.getoption("--store") != "off":  # a bad URL stops here, before any motion
+            parse_store_url(resolve_store_url(config.getoption("--store"), out_dir=Path(),
+                                              station_store=config.stash[STATION_KEY].store))
     except HilError as exc:
         raise pytest.UsageError(str(exc)) from None
 
@@ -78,6 +93,7 @@ def profile(pytestconfig: pytest.Config) -> UnitProfile:
 def calibration(pytestconfig: pytest.Config, profile: UnitProfile) -> CalibrationRun:
     """The calibration run collecting recordings and judged measurements for the certificate."""
     if RUN_KEY not in pytestconfig.stash:
+        station_id, operator, reference = _run_context(pytestconfig)
         kind = drive_kind(pytestconfig)
         serial = pytestconfig.getoption("--unit-serial")
         if serial is None:  # a simulated unit (pytest_configure refused a real one)
@@ -88,8 +104,27 @@ def calibration(pytestconfig: pytest.Config, profile: UnitProfile) -> Calibratio
             out_dir=Path(pytestconfig.getoption("--out")),
             drive_kind=kind,
             method_bias=_method_bias(pytestconfig.getoption("--method-bias"), profile),
+            station_id=station_id,
+            operator=operator,
+            reference=reference,
         )
     return pytestconfig.stash[RUN_KEY]
+
+
+def _run_context(config: pytest.Config) -> tuple[str, str, bool]:
+    """Station id, operator and reference flag for the certificate's ``run`` block."""
+    station = config.stash[STATION_KEY]
+    operator = (config.getoption("--operator") or os.environ.get("GIMBAL_HIL_OPERATOR")
+                or _login_name())
+    reference = bool(config.getoption("--reference")) or station.reference
+    return station.station_id or socket.gethostname(), str(operator), reference
+
+
+def _login_name() -> str:
+    try:
+        return getpass.getuser()
+    except (KeyError, OSError):  # no passwd entry (some containers)
+        return "unknown"
 
 
 def _method_bias(option: str | None, profile: UnitProfile) -> MethodBiasMap | None:
@@ -272,6 +307,15 @@ def pytest_sessionfinish(session: pytest.Session, exitstatus: int) -> None:
     session.config.stash[CERTIFICATE_KEY] = path
     if not session.config.getoption("--no-documents"):
         session.config.stash[DOCUMENTS_KEY] = write_documents(path)
+    option = session.config.getoption("--store")
+    if option != "off":  # the certificate is written: a failing store only queues the run
+        out_dir = Path(session.config.getoption("--out"))
+        url = resolve_store_url(
+            option, out_dir=out_dir, station_store=session.config.stash[STATION_KEY].store
+        )
+        message = record_run(path, out_dir=out_dir, url=url)
+        log.info("%s", message)
+        session.config.stash[STORE_MESSAGE_KEY] = message
 
 
 def pytest_terminal_summary(terminalreporter: pytest.TerminalReporter) -> None:
@@ -297,4 +341,6 @@ def pytest_terminal_summary(terminalreporter: pytest.TerminalReporter) -> None:
     colour = {"PASS": "green", "MARGINAL": "yellow"}.get(outcome, "red")
     for line in outcome_banner(outcome, aborted=bool(cert.get("aborted"))):
         terminalreporter.write_line(line, **{colour: True, "bold": True})
+    if STORE_MESSAGE_KEY in config.stash:
+        terminalreporter.write_line(config.stash[STORE_MESSAGE_KEY])
     terminalreporter.write_line(f"unit {run.unit_serial}: {outcome}")

@@ -17,6 +17,8 @@ from hil.errors import HilError, InputError
 from hil.motion import MODE_OF_COLUMN, Excitation, Mode
 from hil.profile import load_profile
 from hil.recording import FloatArray, read_command_csv, write_recording
+from hil.store.cli import add_arguments as add_results_arguments
+from hil.store.cli import run as run_results
 
 log = logging.getLogger("gimbal-hil")
 
@@ -46,6 +48,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     cal.add_argument("--out", type=Path, default=Path("certificates"))
     cal.add_argument("--station", type=Path, default=None)
     cal.add_argument("--seed", type=int, default=0)
+    cal.add_argument("--store", default=None, help="results store URL, or 'off'")
+    cal.add_argument("--operator", default=None)
+    cal.add_argument("--reference", action="store_true", help="a reference (golden) unit")
     cal.add_argument("pytest_args", nargs="*", help="extra pytest arguments (after --)")
 
     render = commands.add_parser(
@@ -55,6 +60,7 @@ def main(argv: Sequence[str] | None = None) -> int:
 
     diag = commands.add_parser("diagnose", help="what does the model get wrong on a recording?")
     add_diagnose_arguments(diag)
+    add_results_arguments(commands.add_parser("results", help="the results store"))
 
     args = parser.parse_args(argv)
     logging.basicConfig(
@@ -68,6 +74,8 @@ def main(argv: Sequence[str] | None = None) -> int:
             return _calibrate(args)
         if args.subcommand == "render":
             return _render(args)
+        if args.subcommand == "results":
+            return run_results(args)
         return run_diagnose(args)
     except HilError as exc:
         print(f"gimbal-hil: error: {exc}", file=sys.stderr)
@@ -122,6 +130,9 @@ def _calibrate(args: argparse.Namespace) -> int:
         options += ["--unit-serial", args.unit_serial]
     if args.station:
         options += ["--station", str(args.station)]
+    options += ["--store", args.store] if args.store else []
+    options += ["--operator", args.operator] if args.operator else []
+    options += ["--reference"] if args.reference else []
     suite = ["-p", "no:cacheprovider", "--pyargs", "gimbal_hil_protocols", "-q"]
     return int(pytest.main([*suite, *options, *args.pytest_args]))
 

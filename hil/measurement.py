@@ -72,6 +72,7 @@ class Measurement:
             "nominal": self.spec.nominal,
             "lower_limit": self.spec.lower_limit,
             "upper_limit": self.spec.upper_limit,
+            "marginal_fraction": self.spec.marginal_fraction,
             "outcome": self.outcome.value,
             "budget": [
                 {

@@ -64,6 +64,16 @@ def pytest_addoption(parser: pytest.Parser) -> None:
         action="store_true",
         help="write certificate.json/.txt only, not the HTML and PDF (population benchmarks)",
     )
+    group.addoption(
+        "--store",
+        default=None,
+        help="results store URL (postgresql://…, sqlite:///FILE) or 'off' (default: "
+        "$GIMBAL_HIL_STORE, the station file's store, else OUT/results.sqlite)",
+    )
+    group.addoption("--operator", default=None, help="who runs the calibration (default: "
+                    "$GIMBAL_HIL_OPERATOR, else the login name)")
+    group.addoption("--reference", action="store_true", default=False,
+                    help="the unit is a reference (golden) unit: kept out of fleet statistics")
 
 
 def pytest_configure(config: pytest.Config) -> None:

@@ -66,6 +66,13 @@ def build_certificate(
             "type": run.profile.unit_type,
             "axis": run.profile.axis,
         },
+        "run": {
+            "id": run.run_id,
+            "attempt": run.attempt(),
+            "station": run.station_id,
+            "operator": run.operator,
+            "reference": run.reference,
+        },
         "dates": {
             "calibration_started": run.started.isoformat(timespec="seconds"),
             "issued": issued.isoformat(timespec="seconds"),

@@ -96,6 +96,42 @@ class ModbusStation:
 Station = CanOpenStation | ModbusStation
 
 
+@dataclass(frozen=True, slots=True, kw_only=True)
+class StationIdentity:
+    """The optional ``[station]`` table: which bench this is (``id``), the results store
+    its runs go to (``store``, a database URL) and whether it calibrates reference (golden)
+    units (``reference``). Any drive kind reads it, the simulator too."""
+
+    station_id: str | None = None
+    store: str | None = None
+    reference: bool = False
+
+
+def load_station_identity(path: str | Path) -> StationIdentity:
+    """Read only the ``[station]`` table of a station file (absent: all defaults).
+
+    Raises
+    ------
+    ProfileError
+        The file is missing or the table holds an unknown key or a wrong type.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise ProfileError("station file not found", source=str(path))
+    data, _ = read_toml(path)
+    return _identity(ConfigTable.root(data, source=str(path)).table_at("station", required=False))
+
+
+def _identity(table: ConfigTable) -> StationIdentity:
+    identity = StationIdentity(
+        station_id=table.string("id", "") or None,
+        store=table.string("store", "") or None,
+        reference=table.boolean("reference", False),
+    )
+    table.done()
+    return identity
+
+
 def load_station(path: str | Path) -> Station:
     """Read a station file.
 
@@ -123,6 +159,7 @@ def station_from_mapping(data: Mapping[str, Any], *, source: str, base_dir: Path
         )
     else:
         station = _modbus(document.table_at("modbus"), base_dir)
+    _identity(document.table_at("station", required=False))
     document.done()
     return station
 

@@ -1,0 +1,228 @@
+"""``gimbal-hil results``: ingest, sync, units, history SERIAL, trend PARAM.
+
+Each reading command prints a table a person reads (values as GUM asks: U to two
+significant digits, the value to the same decimal) or, with ``--json``, full precision.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import statistics
+from collections.abc import Sequence
+from datetime import UTC, datetime
+from pathlib import Path
+from typing import Any
+
+from sqlalchemy import select
+
+from hil.drives.station import load_station_identity
+from hil.errors import InputError
+from hil.gum import rounded_pair
+from hil.store.engine import Store, open_store, resolve_store_url
+from hil.store.ingest import Ingested, ingest_tree
+from hil.store.outbox import sync_outbox
+from hil.store.query import RunSummary, StoredResult, history, result_series, run_results, units
+from hil.store.schema import results
+
+TIME_FORMAT = "%Y-%m-%d %H:%M"
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """Add the ``results`` subcommands to ``parser``."""
+    common = argparse.ArgumentParser(add_help=False)
+    common.add_argument("--store", default=None,
+                        help="store URL (postgresql://…, sqlite:///FILE; default: "
+                        "$GIMBAL_HIL_STORE, the station file's store, else OUT/results.sqlite)")
+    common.add_argument("--out", type=Path, default=Path("certificates"),
+                        help="the calibrations' --out (embedded store and outbox)")
+    common.add_argument("--station-file", type=Path, default=None,
+                        help="station TOML whose [station] store to use")
+    common.add_argument("--json", action="store_true", help="print JSON (full precision)")
+    commands = parser.add_subparsers(dest="results_command", required=True)
+    ingest = commands.add_parser("ingest", parents=[common],
+                                 help="store certificates written before the store existed")
+    ingest.add_argument("directories", type=Path, nargs="+", metavar="DIR",
+                        help="a folder of serials or one serial's folder (history included)")
+    commands.add_parser("sync", parents=[common], help="upload the runs waiting in the outbox")
+    commands.add_parser("units", parents=[common], help="every unit: its last run and outcome")
+    hist = commands.add_parser("history", parents=[common],
+                               help="every run of one unit; as-found / as-left")
+    hist.add_argument("serial")
+    trend = commands.add_parser("trend", parents=[common], help="one result over the runs")
+    trend.add_argument("parameter", metavar="PARAM")
+    trend.add_argument("--station", default=None, help="only this station id")
+    trend.add_argument("--since", default=None, help="only runs from this date (YYYY-MM-DD)")
+    trend.add_argument("--include-aborted", action="store_true")
+    trend.add_argument("--include-reference", action="store_true")
+
+
+def run(args: argparse.Namespace) -> int:
+    """Run one ``results`` subcommand; its exit code."""
+    station_store = (load_station_identity(args.station_file).store
+                     if args.station_file is not None else None)
+    url = resolve_store_url(args.store, out_dir=args.out, station_store=station_store)
+    store = open_store(url)
+    try:
+        command = args.results_command
+        if command in ("ingest", "sync"):
+            done = (sync_outbox(store, args.out) if command == "sync" else
+                    [i for d in args.directories for i in ingest_tree(store, d)])
+            _emit(args, _ingested_json(done, store), _ingested_text(done, store, command))
+            return 0
+        if command == "units":
+            found = units(store)
+            _emit(args, [_summary_json(s) for s in found], _units_text(found))
+            return 0
+        if command == "history":
+            return _history(args, store)
+        return _trend(args, store)
+    finally:
+        store.close()
+
+
+def _emit(args: argparse.Namespace, data: Any, text: str) -> None:
+    print(json.dumps(data, indent=2) if args.json else text)
+
+
+def _ingested_json(done: Sequence[Ingested], store: Store) -> dict[str, Any]:
+    return {"store": store.url, "new": sum(i.new for i in done),
+            "already_stored": sum(not i.new for i in done),
+            "runs": [{"certificate_id": i.certificate_id, "run_id": i.run_id,
+                      "serial": i.serial, "new": i.new} for i in done]}
+
+
+def _ingested_text(done: Sequence[Ingested], store: Store, command: str) -> str:
+    new = sum(i.new for i in done)
+    lines = [f"{'+' if i.new else '='} {i.certificate_id}" for i in done]
+    lines.append(f"{command}: {new} run(s) stored, {len(done) - new} already stored "
+                 f"({store.url})")
+    return "\n".join(lines)
+
+
+def _summary_json(s: RunSummary) -> dict[str, Any]:
+    return {"serial": s.serial, "unit_type": s.unit_type, "run_id": s.run_id,
+            "certificate_id": s.certificate_id, "station": s.station, "operator": s.operator,
+            "started_at": s.started_at.isoformat(), "ended_at": s.ended_at.isoformat(),
+            "outcome": s.outcome, "aborted": s.aborted, "attempt": s.attempt,
+            "is_reference": s.is_reference, "runs": s.runs_of_unit}
+
+
+def _units_text(found: Sequence[RunSummary]) -> str:
+    rows = [(s.serial, s.unit_type, str(s.runs_of_unit), s.started_at.strftime(TIME_FORMAT),
+             s.station, s.outcome + (" (reference)" if s.is_reference else ""))
+            for s in found]
+    return _table(("serial", "type", "runs", "last run (UTC)", "station", "outcome"), rows,
+                  empty="no runs stored")
+
+
+def _history(args: argparse.Namespace, store: Store) -> int:
+    runs = history(store, args.serial)
+    if not runs:
+        raise InputError(f"no runs of unit '{args.serial}' in {store.url}")
+    found = run_results(store, runs[-2].run_id) if len(runs) > 1 else {}
+    left = run_results(store, runs[-1].run_id)
+    changes = [_as_found_left(name, found.get(name), row) for name, row in left.items()]
+    if args.json:
+        _emit(args, {"serial": args.serial, "runs": [_summary_json(s) for s in runs],
+                     "as_found_run": runs[-2].run_id if found else None,
+                     "as_left_run": runs[-1].run_id, "results": changes}, "")
+        return 0
+    rows = [(str(s.attempt), s.started_at.strftime(TIME_FORMAT), s.station, s.operator,
+             s.outcome + (" aborted" if s.aborted else ""), s.certificate_id) for s in runs]
+    text = [f"unit {args.serial}: {len(runs)} run(s)",
+            _table(("#", "started (UTC)", "station", "operator", "outcome", "certificate"), rows)]
+    if found:
+        text += ["", f"as found (run {runs[-2].attempt}) → as left (run {runs[-1].attempt}, "
+                 "the latest):",
+                 _table(("result", "as found", "as left", "unit", "outcome"),
+                        [_change_row(c) for c in changes])]
+    print("\n".join(text))
+    return 0
+
+
+def _as_found_left(name: str, found: dict[str, Any] | None,
+                   left: dict[str, Any]) -> dict[str, Any]:
+    keep = ("value", "standard_uncertainty", "expanded_uncertainty", "outcome")
+    return {"name": name, "unit": left["unit"],
+            "as_found": {k: found[k] for k in keep} if found else None,
+            "as_left": {k: left[k] for k in keep}}
+
+
+def _change_row(change: dict[str, Any]) -> tuple[str, ...]:
+    def shown(side: dict[str, Any] | None) -> str:
+        if side is None:
+            return "-"
+        value, u = rounded_pair(side["value"], side["expanded_uncertainty"])
+        return f"{value} ± {u}"
+
+    found, left = change["as_found"], change["as_left"]
+    outcome = f"{found['outcome']} → {left['outcome']}" if found else left["outcome"]
+    return (change["name"], shown(found), shown(left), change["unit"], outcome)
+
+
+def _trend(args: argparse.Namespace, store: Store) -> int:
+    since = _date(args.since) if args.since else None
+    series = result_series(store, args.parameter, station=args.station, since=since,
+                           include_aborted=args.include_aborted,
+                           include_reference=args.include_reference)
+    if not series:
+        _known_parameter(store, args.parameter)
+    values = [p.value for p in series]
+    summary = {"n": len(values), "mean": statistics.fmean(values) if values else None,
+               "standard_deviation": statistics.stdev(values) if len(values) > 1 else None}
+    if args.json:
+        _emit(args, {"parameter": args.parameter, "station": args.station,
+                     "since": since.isoformat() if since else None, **summary,
+                     "points": [_point_json(p) for p in series]}, "")
+        return 0
+    rows = [(p.started_at.strftime(TIME_FORMAT), p.serial, p.station,
+             " ± ".join(rounded_pair(p.value, p.expanded_uncertainty)), p.unit, p.outcome)
+            for p in series]
+    text = [f"{args.parameter}: {len(series)} run(s)"
+            + (f", station {args.station}" if args.station else "")
+            + (f", since {since:%Y-%m-%d}" if since else ""),
+            _table(("started (UTC)", "serial", "station", "value ± U", "unit", "outcome"),
+                   rows, empty="no runs match")]
+    sd = summary["standard_deviation"]
+    if sd is not None and math.isfinite(sd) and sd > 0:
+        mean, spread = rounded_pair(float(summary["mean"] or 0.0), sd)
+        text.append(f"mean {mean}, standard deviation {spread} {series[0].unit} "
+                    f"(n = {len(values)})")
+    print("\n".join(text))
+    return 0
+
+
+def _point_json(p: StoredResult) -> dict[str, Any]:
+    return {"run_id": p.run_id, "certificate_id": p.certificate_id, "serial": p.serial,
+            "station": p.station, "started_at": p.started_at.isoformat(), "value": p.value,
+            "standard_uncertainty": p.standard_uncertainty,
+            "expanded_uncertainty": p.expanded_uncertainty, "unit": p.unit,
+            "nominal": p.nominal, "lower_limit": p.lower_limit, "upper_limit": p.upper_limit,
+            "outcome": p.outcome, "is_reference": p.is_reference}
+
+
+def _known_parameter(store: Store, name: str) -> None:
+    with store.engine.connect() as connection:
+        known = sorted(connection.execute(select(results.c.name).distinct()).scalars())
+    if known and name not in known:
+        raise InputError(f"no result '{name}' in {store.url} (known: {', '.join(known)})")
+
+
+def _date(text: str) -> datetime:
+    try:
+        moment = datetime.fromisoformat(text)
+    except ValueError:
+        raise InputError(f"not a date (YYYY-MM-DD): {text!r}", source="--since") from None
+    return moment.replace(tzinfo=UTC) if moment.tzinfo is None else moment
+
+
+def _table(header: Sequence[str], rows: Sequence[Sequence[str]], *, empty: str = "") -> str:
+    if not rows:
+        return empty
+    widths = [max(len(str(r[i])) for r in (header, *rows)) for i in range(len(header))]
+    lines = ["  ".join(str(c).ljust(w) for c, w in zip(r, widths, strict=True)).rstrip()
+             for r in (header, *rows)]
+    lines.insert(1, "  ".join("-" * w for w in widths))
+    return "\n".join(lines)

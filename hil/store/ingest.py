@@ -1,0 +1,134 @@
+"""Ingest certificates into the store: atomic (one transaction per run) and idempotent (keyed
+by certificate id: the same certificate twice is one run, also when two stations race)."""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass
+from datetime import UTC, datetime
+from pathlib import Path
+
+from sqlalchemy import Connection, func, insert, select
+from sqlalchemy.exc import IntegrityError, OperationalError
+
+from hil.errors import InputError
+from hil.store.engine import Store, StoreUnavailableError
+from hil.store.rows import CertificateRows, certificate_rows
+from hil.store.schema import protocol_outcomes, recordings, results, runs
+
+log = logging.getLogger(__name__)
+CERTIFICATE_NAME = "certificate.json"
+
+
+@dataclass(frozen=True, slots=True)
+class Ingested:
+    """What one ingest did: ``new`` is False when the certificate was already stored."""
+
+    certificate_id: str
+    run_id: str
+    serial: str
+    new: bool
+
+
+def ingest_certificate(store: Store, path: Path) -> Ingested:
+    """Store the run of one ``certificate.json`` (nothing happens if it is stored already).
+
+    Parameters
+    ----------
+    store : Store
+        An open store (:func:`hil.store.open_store`).
+    path : Path
+        The certificate file.
+
+    Returns
+    -------
+    Ingested
+
+    Raises
+    ------
+    InputError
+        The file is missing or not a valid certificate.
+    StoreUnavailableError
+        The database went away.
+    """
+    try:
+        text = path.read_text(encoding="utf-8")
+    except OSError as exc:
+        raise InputError(f"cannot read: {exc.strerror}", source=str(path)) from None
+    return ingest_text(store, text, source=str(path.resolve()))
+
+
+def ingest_text(store: Store, text: str, *, source: str) -> Ingested:
+    """Store a certificate given as its JSON text (see :func:`ingest_certificate`)."""
+    rows = certificate_rows(text, source=source)
+    run = rows.run
+    done = Ingested(run["certificate_id"], run["run_id"], run["serial"], new=False)
+    try:
+        with store.engine.begin() as connection:
+            if _stored(connection, run["certificate_id"]):
+                return done
+            _insert(connection, rows)
+    except IntegrityError:  # another station stored the same certificate meanwhile
+        with store.engine.connect() as connection:
+            if _stored(connection, run["certificate_id"]):
+                return done
+        raise
+    except OperationalError as exc:
+        raise StoreUnavailableError(f"results store {store.url}: {exc.orig}") from None
+    log.info("stored run %s (%s)", run["run_id"], run["certificate_id"])
+    return Ingested(run["certificate_id"], run["run_id"], run["serial"], new=True)
+
+
+def ingest_tree(store: Store, directory: Path) -> list[Ingested]:
+    """Ingest every certificate under ``directory``: a folder of serials, one serial's
+    folder, with its ``history/`` (older runs first, so attempts count up in time order),
+    or one ``certificate.json``.
+
+    Raises
+    ------
+    InputError
+        ``directory`` holds no certificate, or one of them is invalid (naming it).
+    """
+    if directory.is_file():  # one certificate.json named directly
+        return [ingest_certificate(store, directory)]
+    if not directory.is_dir():
+        raise InputError("not a directory", source=str(directory))
+    paths = sorted(directory.rglob(CERTIFICATE_NAME))
+    if not paths:
+        raise InputError(f"no {CERTIFICATE_NAME} found under it", source=str(directory))
+    texts = []
+    for path in paths:
+        try:
+            text = path.read_text(encoding="utf-8")
+        except OSError as exc:
+            raise InputError(f"cannot read: {exc.strerror}", source=str(path)) from None
+        started = certificate_rows(text, source=str(path)).run["started_at"]
+        texts.append((started, str(path.resolve()), text))
+    texts.sort(key=lambda item: (item[0], item[1]))
+    return [ingest_text(store, text, source=source) for _, source, text in texts]
+
+
+def _stored(connection: Connection, certificate_id: str) -> bool:
+    found = connection.execute(
+        select(runs.c.run_id).where(runs.c.certificate_id == certificate_id)
+    ).first()
+    return found is not None
+
+
+def _insert(connection: Connection, rows: CertificateRows) -> None:
+    run = dict(rows.run, ingested_at=datetime.now(UTC))
+    if run["attempt"] is None:  # an old certificate: count this unit's earlier runs
+        earlier = connection.execute(
+            select(func.count())
+            .select_from(runs)
+            .where(runs.c.serial == run["serial"], runs.c.started_at < run["started_at"])
+        ).scalar_one()
+        run["attempt"] = int(earlier) + 1
+    connection.execute(insert(runs), [run])
+    for table, table_rows in (
+        (protocol_outcomes, rows.protocols),
+        (results, rows.results),
+        (recordings, rows.recordings),
+    ):
+        if table_rows:
+            connection.execute(insert(table), table_rows)

@@ -1,0 +1,244 @@
+"""Read the store: the series statistics are computed on, the fleet's units, one unit's
+history, and the frozen SPC baselines.
+
+``result_series`` and :class:`StoredResult` are the interface the fleet statistics
+(``hil.fleet``) are written against: keep their names and fields.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+from datetime import UTC, datetime
+from typing import Any
+
+from sqlalchemy import and_, delete, func, insert, select
+
+from hil.store.engine import Store
+from hil.store.schema import results, runs, spc_baselines
+
+
+@dataclass(frozen=True, slots=True)
+class StoredResult:
+    """One stored result of one run, with what statistics need to filter and judge it."""
+
+    run_id: str
+    certificate_id: str
+    serial: str
+    station: str
+    started_at: datetime
+    value: float
+    standard_uncertainty: float
+    expanded_uncertainty: float
+    unit: str
+    nominal: float | None
+    lower_limit: float | None
+    upper_limit: float | None
+    outcome: str
+    is_reference: bool
+
+
+@dataclass(frozen=True, slots=True)
+class RunSummary:
+    """A stored run, as ``units`` and ``history`` list it."""
+
+    run_id: str
+    certificate_id: str
+    serial: str
+    unit_type: str
+    station: str
+    operator: str
+    started_at: datetime
+    ended_at: datetime
+    outcome: str
+    aborted: bool
+    attempt: int
+    is_reference: bool
+    runs_of_unit: int = 1
+
+
+def utc(moment: datetime) -> datetime:
+    """``moment`` as an aware UTC time (SQLite hands back naive ones)."""
+    return moment.replace(tzinfo=UTC) if moment.tzinfo is None else moment.astimezone(UTC)
+
+
+def result_series(
+    store: Store,
+    name: str,
+    *,
+    station: str | None = None,
+    since: datetime | None = None,
+    include_aborted: bool = False,
+    include_reference: bool = False,
+) -> list[StoredResult]:
+    """Every stored value of result ``name``, oldest run first.
+
+    Parameters
+    ----------
+    store : Store
+        An open store.
+    name : str
+        The result (measurement) name, e.g. ``"inertia_kg_m2"``.
+    station : str, optional
+        Only runs of this station id.
+    since : datetime, optional
+        Only runs started at or after it (naive times are taken as UTC).
+    include_aborted : bool
+        Keep aborted runs (left out of statistics by default).
+    include_reference : bool
+        Keep runs of reference (golden) units (left out by default).
+
+    Returns
+    -------
+    list of StoredResult
+        Ordered by ``started_at`` (then run id).
+    """
+    query = (
+        select(
+            runs.c.run_id, runs.c.certificate_id, runs.c.serial, runs.c.station,
+            runs.c.started_at, results.c.value, results.c.standard_uncertainty,
+            results.c.expanded_uncertainty, results.c.unit, results.c.nominal,
+            results.c.lower_limit, results.c.upper_limit, results.c.outcome,
+            runs.c.is_reference,
+        )
+        .join(runs, runs.c.run_id == results.c.run_id)
+        .where(results.c.name == name)
+        .order_by(runs.c.started_at, runs.c.run_id)
+    )
+    if station is not None:
+        query = query.where(runs.c.station == station)
+    if since is not None:
+        query = query.where(runs.c.started_at >= utc(since))
+    if not include_aborted:
+        query = query.where(runs.c.aborted.is_(False))
+    if not include_reference:
+        query = query.where(runs.c.is_reference.is_(False))
+    with store.engine.connect() as connection:
+        rows = connection.execute(query).all()
+    # positional: the columns are selected in the dataclass's field order (fast for 10⁵ rows)
+    return [
+        StoredResult(r[0], r[1], r[2], r[3], utc(r[4]), r[5], r[6], r[7], r[8], r[9], r[10],
+                     r[11], r[12], bool(r[13]))
+        for r in rows
+    ]
+
+
+def units(store: Store) -> list[RunSummary]:
+    """Every unit's latest run (with how many runs it has), by serial."""
+    latest = (
+        select(runs.c.serial, func.max(runs.c.started_at).label("last"),
+               func.count().label("runs_of_unit"))
+        .group_by(runs.c.serial)
+        .subquery()
+    )
+    query = (
+        select(*_summary_columns(), latest.c.runs_of_unit)
+        .join(latest, and_(runs.c.serial == latest.c.serial,
+                           runs.c.started_at == latest.c.last))
+        .order_by(runs.c.serial, runs.c.run_id)
+    )
+    with store.engine.connect() as connection:
+        found = {row[2]: _summary(row, runs_of_unit=int(row[12]))
+                 for row in connection.execute(query)}
+    return list(found.values())  # two runs started in the same second: the last run id
+
+
+def history(store: Store, serial: str) -> list[RunSummary]:
+    """Every run of one unit, oldest first."""
+    query = (
+        select(*_summary_columns())
+        .where(runs.c.serial == serial)
+        .order_by(runs.c.started_at, runs.c.run_id)
+    )
+    with store.engine.connect() as connection:
+        found = [_summary(row) for row in connection.execute(query)]
+    return [_with_count(s, len(found)) for s in found]
+
+
+def run_summaries(
+    store: Store, *, station: str | None = None, since: datetime | None = None
+) -> list[RunSummary]:
+    """Every stored run (aborted and reference runs included: each carries its flags),
+    oldest first; for yields per station and day.
+
+    Parameters
+    ----------
+    store : Store
+        An open store.
+    station : str, optional
+        Only runs of this station id.
+    since : datetime, optional
+        Only runs started at or after it (naive times are taken as UTC).
+    """
+    query = select(*_summary_columns()).order_by(runs.c.started_at, runs.c.run_id)
+    if station is not None:
+        query = query.where(runs.c.station == station)
+    if since is not None:
+        query = query.where(runs.c.started_at >= utc(since))
+    with store.engine.connect() as connection:
+        return [_summary(row) for row in connection.execute(query)]
+
+
+def run_results(store: Store, run_id: str) -> dict[str, dict[str, Any]]:
+    """One run's results by name (value, u, U, unit, limits, outcome)."""
+    with store.engine.connect() as connection:
+        rows = connection.execute(select(results).where(results.c.run_id == run_id))
+        return {row.name: dict(row._mapping) for row in rows}
+
+
+def save_baseline(store: Store, name: str, body: dict[str, Any]) -> None:
+    """Freeze (or replace) the SPC baseline ``name``.
+
+    Parameters
+    ----------
+    store : Store
+        An open store.
+    name : str
+        The baseline's name (e.g. the result it belongs to).
+    body : dict
+        JSON-serialisable content (control limits, the runs it was built from, …).
+    """
+    text = json.dumps(body, sort_keys=True)
+    with store.engine.begin() as connection:
+        connection.execute(delete(spc_baselines).where(spc_baselines.c.name == name))
+        connection.execute(
+            insert(spc_baselines), [{"name": name, "body": text, "frozen_at": datetime.now(UTC)}]
+        )
+
+
+def load_baseline(store: Store, name: str) -> dict[str, Any] | None:
+    """The baseline ``name`` as saved, or ``None`` when none was frozen."""
+    with store.engine.connect() as connection:
+        row = connection.execute(
+            select(spc_baselines.c.body).where(spc_baselines.c.name == name)
+        ).first()
+    if row is None:
+        return None
+    body: dict[str, Any] = json.loads(row.body)
+    return body
+
+
+def _summary_columns() -> tuple[Any, ...]:
+    return (
+        runs.c.run_id, runs.c.certificate_id, runs.c.serial, runs.c.unit_type,
+        runs.c.station, runs.c.operator, runs.c.started_at, runs.c.ended_at, runs.c.outcome,
+        runs.c.aborted, runs.c.attempt, runs.c.is_reference,
+    )
+
+
+def _summary(row: Any, *, runs_of_unit: int = 1) -> RunSummary:
+    """A row of :func:`_summary_columns`."""
+    (run_id, certificate_id, serial, unit_type, station, operator, started_at, ended_at,
+     outcome, aborted, attempt, is_reference) = row[:12]
+    return RunSummary(
+        run_id=run_id, certificate_id=certificate_id, serial=serial, unit_type=unit_type,
+        station=station, operator=operator, started_at=utc(started_at),
+        ended_at=utc(ended_at), outcome=outcome, aborted=bool(aborted), attempt=int(attempt),
+        is_reference=bool(is_reference), runs_of_unit=runs_of_unit,
+    )
+
+
+def _with_count(summary: RunSummary, count: int) -> RunSummary:
+    from dataclasses import replace
+
+    return replace(summary, runs_of_unit=count)
