@@ -22,6 +22,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import resource
 import subprocess
 import sys
 import time
@@ -110,7 +111,8 @@ def main() -> int:
         power.append({"change": label, "factor": factor, "found": found, "reps": args.reps,
                       "flagged": dict(which)})
     report = {"pairs": args.pairs, "quiet": quiet, "false_alarms_by_result": dict(flagged_by),
-              "power": power, "wall_s": time.perf_counter() - started}
+              "power": power, "wall_s": time.perf_counter() - started,
+              "cpu_s": resource.getrusage(resource.RUSAGE_CHILDREN).ru_utime}
     (args.out / "bench_compare.json").write_text(json.dumps(report, indent=2) + "\n")
     print(markdown(report))
     return 0 if quiet >= GOAL_QUIET * args.pairs else 1
@@ -140,7 +142,8 @@ def markdown(report: dict[str, Any]) -> str:
         found = smallest.get(change)
         lines.append(f"Smallest {change} change found ≥ 95 % of the time: "
                      + (f"{100 * found:.0f} %." if found is not None else "none of those tried."))
-    lines.append(f"\nWall time {report['wall_s'] / 60:.1f} min.")
+    lines.append(f"\nWall time {report['wall_s'] / 60:.1f} min, calibrations' CPU "
+                 f"{report.get('cpu_s', float('nan')) / 60:.1f} min.")
     return "\n".join(lines)
 
 

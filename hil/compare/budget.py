@@ -60,17 +60,17 @@ def classify(line: BudgetLine, *, protocols: Sequence[str], same_unit: bool = Tr
         A short reason for the output.
     """
     if not same_unit:
-        return Sharing.INDEPENDENT, "different units: nothing shared"
+        return Sharing.INDEPENDENT, "different units"
     if line.kind == "A":
-        return Sharing.INDEPENDENT, "Type A: this run's noise"
+        return Sharing.INDEPENDENT, "Type A noise"
     reference = _PROTOCOL_REFERENCE.search(line.source)
     if reference is not None and reference.group(1) in protocols:
-        return Sharing.INDEPENDENT, f"re-measured in each run by {reference.group(1)}"
+        return Sharing.INDEPENDENT, f"re-measured by {reference.group(1)}"
     if line.source.startswith("method:"):
-        return Sharing.SHARED, "the method's error on this unit"
+        return Sharing.SHARED, "method error, same unit"
     if line.source.startswith("allowance"):
-        return Sharing.SHARED, "allowance for unmodelled physics"
-    return Sharing.SHARED, "systematic Type B input"
+        return Sharing.SHARED, "allowance"
+    return Sharing.SHARED, "systematic Type B"
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -144,7 +144,7 @@ def _pair(baseline: BudgetLine | None, candidate: BudgetLine | None, *,
     c = candidate.signed_contribution if candidate is not None else 0.0
     if baseline is None or candidate is None:
         sharing = Sharing.INDEPENDENT
-        reason = f"only in the {'candidate' if baseline is None else 'baseline'}"
+        reason = f"{'candidate' if baseline is None else 'baseline'} only"
     else:
         sharing, reason = classify(some, protocols=protocols, same_unit=same_unit)
     if sharing is Sharing.SHARED:

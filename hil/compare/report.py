@@ -111,11 +111,11 @@ def _budget_line(row: Row) -> str:
     parts = []
     for line in row.budget.lines:
         if line.sharing is Sharing.SHARED:
-            parts.append(f"{line.source} [shared: {line.reason}] "
-                         f"{abs(line.baseline_contribution):.2g} → {line.contribution:.2g}")
+            parts.append(f"{line.source}: {abs(line.baseline_contribution):.2g} → "
+                         f"{line.contribution:.2g} (shared: {line.reason})")
         else:
-            parts.append(f"{line.source} [independent: {line.reason}] "
-                         f"{line.contribution:.2g}")
+            parts.append(f"{line.source}: {line.contribution:.2g} "
+                         f"(independent: {line.reason})")
     dof = f"{row.budget.dof:.0f}" if math.isfinite(row.budget.dof) else "∞"
     return (f"{row.serial} {row.parameter}: u(Δ) {row.budget.standard_uncertainty:.2g} "
             f"{row.unit}, ν {dof}; " + "; ".join(parts))
