@@ -2,14 +2,19 @@
 
     nice -n 10 python benchmarks/bench_compare.py --pairs 30 --reps 12 --out /tmp/bench-compare
 
-1. Identical firmware, different noise seeds: ``--pairs`` independent pairs of
-   calibrations of the demo elevation unit (seeds 1000 + 2i, 1001 + 2i), each pair compared;
-   the fraction that flags nothing (goal ≥ 19/20) and which results the others flagged.
+0. With ``--write-map``: ``--map-pairs`` identical-firmware pairs (seeds 1000 + 2i,
+   1001 + 2i) measure each result's run-to-run scatter beyond its budget; where the RMS of
+   ``Δ/u(Δ)`` exceeds its χ² 95 % bound, the excess per run goes into the repeatability
+   map (``fixtures/compare_repeatability.toml``) that ``gimbal-hil compare`` applies.
+1. Identical firmware, different noise seeds, out of sample: ``--pairs`` independent pairs
+   of calibrations of the demo elevation unit (seeds 3000 + 2i, 3001 + 2i), each pair
+   compared with the map; the fraction that flags nothing (goal ≥ 19/20) and which results
+   the others flagged.
 2. Detection power: a candidate with the velocity loop's gain (Kp and Ki together) at
    ``--gain-factors`` of today's, ``--reps`` times each with a fresh seed, each compared
-   with one of the pairs' baselines; the fraction flagged, and the smallest change found
-   at least 95 % of the time. The same for the current loop made slower (``--tau-factors``),
-   the one firmware setting today's suite measures directly.
+   with one of the out-of-sample pairs' baselines; the fraction flagged, and the smallest
+   change found at least 95 % of the time. The same for the current loop made slower
+   (``--tau-factors``), the one firmware setting today's suite measures directly.
 
 Every firmware edit goes through ``tests/compare/firmware_variants.py`` (the settings
 move from ``[plant]`` to ``[firmware]`` with issue 11's firmware work). Prints a markdown
@@ -21,6 +26,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import os
 import resource
 import subprocess
@@ -33,7 +39,16 @@ from typing import Any
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+import numpy as np  # noqa: E402
+import tomli_w  # noqa: E402
+from scipy import stats  # noqa: E402
+
 from hil.compare.certificates import load_side  # noqa: E402
+from hil.compare.repeatability import (  # noqa: E402
+    NO_MAP,
+    RepeatabilityMap,
+    load_repeatability,
+)
 from hil.compare.verdict import Comparison, compare_sides  # noqa: E402
 from tests.compare.firmware_variants import (  # noqa: E402
     firmware_setting,
@@ -60,6 +75,8 @@ def calibrate(changes: dict[str, float], out: Path, *, seed: int, reuse: bool) -
     )
     if not path.is_file():
         raise SystemExit(f"{out}: calibration wrote no certificate")
+    if json.loads(path.read_text(encoding="utf-8"))["aborted"]:
+        raise SystemExit(f"{path}: an aborted calibration (delete it and run again)")
     return out
 
 
@@ -67,13 +84,62 @@ def scaled(keys: tuple[str, ...], factor: float) -> dict[str, float]:
     return {key: factor * float(firmware_setting(PROFILE, key)) for key in keys}
 
 
-def compared(baseline: Path, candidate: Path) -> Comparison:
-    return compare_sides(load_side(baseline), load_side(candidate))
+def compared(baseline: Path, candidate: Path, repeatability: RepeatabilityMap) -> Comparison:
+    return compare_sides(load_side(baseline), load_side(candidate),
+                         repeatability=repeatability)
+
+
+def pair_dirs(out: Path, first_seed: int, pairs: int, *, reuse: bool
+              ) -> list[tuple[Path, Path]]:
+    """Identical-firmware pairs of calibrations (seeds first + 2i, first + 2i + 1)."""
+    return [tuple(calibrate({}, out / f"same-{s}", seed=s, reuse=reuse)  # type: ignore[misc]
+                  for s in (first_seed + 2 * i, first_seed + 2 * i + 1))
+            for i in range(pairs)]
+
+
+def write_map(pairs: list[tuple[Path, Path]], path: Path) -> dict[str, Any]:
+    """Each result's run-to-run scatter beyond its budget, where significant (χ² 95 %)."""
+    deltas: dict[str, list[tuple[float, float, float]]] = {}
+    for first, second in pairs:
+        for row in compared(first, second, NO_MAP).rows:
+            if row.budget is not None and row.difference is not None and row.baseline:
+                deltas.setdefault(row.parameter, []).append(
+                    (row.difference, row.budget.standard_uncertainty, row.baseline.value))
+    entries: dict[str, Any] = {}
+    for name, rows in deltas.items():
+        d, u, v = (np.array(x) for x in zip(*rows, strict=True))
+        n = len(d)
+        rms_z = math.sqrt(float(np.mean((d / u) ** 2)))
+        if rms_z <= math.sqrt(stats.chi2.ppf(0.95, n) / n):
+            continue
+        excess = math.sqrt(max(float(np.mean(d**2) - np.mean(u**2)) / 2, 0.0))
+        relative = abs(float(np.mean(v))) > 10 * float(np.std(v))
+        entries[name] = {"scale": "relative" if relative else "absolute",
+                         "scatter": excess / abs(float(np.mean(v))) if relative else excess,
+                         "pairs": n, "rms_z_without": round(rms_z, 2)}
+    document = {"population": f"{PROFILE}, {len(pairs)} identical-firmware pairs",
+                "results": {"elevation": {k: {key: e[key] for key in ("scale", "scatter",
+                                                                        "pairs")}
+                                          for k, e in entries.items()}}}
+    path.write_text(MAP_HEADER + tomli_w.dumps(document), encoding="utf-8")
+    return entries
+
+
+MAP_HEADER = """\
+# Run-to-run scatter beyond each result's stated budget, per axis, written by
+# benchmarks/bench_compare.py --write-map (see benchmarks/RESULTS.md). Only results whose
+# identical-firmware reruns scatter significantly more than their budgets (RMS of Δ/u(Δ)
+# above its χ² 95 % bound) have an entry; gimbal-hil compare adds it to each run as an
+# independent line of the difference's budget.
+"""
 
 
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--pairs", type=int, default=30)
+    parser.add_argument("--pairs", type=int, default=20, help="out-of-sample pairs")
+    parser.add_argument("--map-pairs", type=int, default=20)
+    parser.add_argument("--write-map", type=Path, default=None,
+                        help="measure the repeatability map on --map-pairs and write it")
     parser.add_argument("--reps", type=int, default=12, help="candidates per change size")
     parser.add_argument("--gain-factors", type=float, nargs="+", default=[0.8, 0.7, 0.6, 0.5])
     parser.add_argument("--tau-factors", type=float, nargs="+", default=[1.02, 1.03, 1.05])
@@ -81,15 +147,17 @@ def main() -> int:
     parser.add_argument("--reuse", action="store_true")
     args = parser.parse_args()
     started = time.perf_counter()
-    baselines: list[Path] = []
+    repeatability, map_entries = load_repeatability(), {}
+    if args.write_map is not None:
+        map_entries = write_map(pair_dirs(args.out, 1000, args.map_pairs, reuse=args.reuse),
+                                args.write_map)
+        repeatability = load_repeatability(args.write_map)
+    pairs = pair_dirs(args.out, 3000, args.pairs, reuse=args.reuse)
+    baselines = [first for first, _ in pairs]
     quiet = 0
     flagged_by: Counter[str] = Counter()
-    for i in range(args.pairs):
-        seeds = (1000 + 2 * i, 1001 + 2 * i)
-        first, second = (calibrate({}, args.out / f"same-{s}", seed=s, reuse=args.reuse)
-                         for s in seeds)
-        baselines.append(first)
-        comparison = compared(first, second)
+    for first, second in pairs:
+        comparison = compared(first, second, repeatability)
         quiet += comparison.exit_code == 0
         flagged_by.update(r.parameter for r in comparison.flagged())
     power: list[dict[str, Any]] = []
@@ -105,12 +173,13 @@ def main() -> int:
             name = f"{keys[0]}-{factor:g}-{seed}"
             candidate = calibrate(scaled(keys, factor), args.out / name, seed=seed,
                                   reuse=args.reuse)
-            comparison = compared(baselines[r % len(baselines)], candidate)
+            comparison = compared(baselines[r % len(baselines)], candidate, repeatability)
             found += comparison.exit_code == 1
             which.update(f"{row.parameter} {row.verdict.value}" for row in comparison.flagged())
         power.append({"change": label, "factor": factor, "found": found, "reps": args.reps,
                       "flagged": dict(which)})
-    report = {"pairs": args.pairs, "quiet": quiet, "false_alarms_by_result": dict(flagged_by),
+    report = {"pairs": args.pairs, "quiet": quiet, "map": map_entries,
+              "false_alarms_by_result": dict(flagged_by),
               "power": power, "wall_s": time.perf_counter() - started,
               "cpu_s": resource.getrusage(resource.RUSAGE_CHILDREN).ru_utime}
     (args.out / "bench_compare.json").write_text(json.dumps(report, indent=2) + "\n")
@@ -121,7 +190,10 @@ def main() -> int:
 def markdown(report: dict[str, Any]) -> str:
     pairs, quiet = report["pairs"], report["quiet"]
     alarms = ", ".join(f"{k} ×{v}" for k, v in report["false_alarms_by_result"].items())
-    lines = [
+    lines = [f"Repeatability map: {name} +{100 * e['scatter']:.2g} %"
+             if e["scale"] == "relative" else f"Repeatability map: {name} +{e['scatter']:.2g}"
+             for name, e in report.get("map", {}).items()]
+    lines += [
         f"Identical firmware, different seeds: **{quiet}/{pairs}** comparisons flag nothing "
         f"(goal ≥ 19/20 = {GOAL_QUIET * pairs:.1f}/{pairs})"
         + (f"; flagged: {alarms}." if alarms else "."),

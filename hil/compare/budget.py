@@ -15,6 +15,7 @@ from dataclasses import dataclass
 from enum import StrEnum
 
 from hil.compare.certificates import BudgetLine, Result
+from hil.compare.repeatability import Repeatability
 from hil.identify.estimate import combine_linear
 
 SHARING_RULE = (
@@ -27,8 +28,10 @@ SHARING_RULE = (
     "equal): every other Type B line: the method's error over the simulated population "
     "('method: …'), the allowance for physics the simulator lacks ('allowance …'), a "
     "station's calibration constant. A line found on one side only, and every line when "
-    "the serials differ (--allow-different-units), counts as independent. Degrees of "
-    "freedom: Welch–Satterthwaite over the lines that remain."
+    "the serials differ (--allow-different-units), counts as independent. Where identical-"
+    "firmware reruns scatter more than the budgets state (fixtures/compare_repeatability."
+    "toml, measured by benchmarks/bench_compare.py), that excess is one more independent "
+    "line per run. Degrees of freedom: Welch–Satterthwaite over the lines that remain."
 )
 
 # a re-measured input names the protocol that measured it: "… (gravity_cable: m·g·e, φ)"
@@ -95,7 +98,8 @@ class DifferenceBudget:
 
 
 def difference_budget(baseline: Result, candidate: Result, *, protocols: Sequence[str],
-                      same_unit: bool = True) -> DifferenceBudget:
+                      same_unit: bool = True, repeatability: Repeatability | None = None
+                      ) -> DifferenceBudget:
     """``u(Δ)`` and its Welch–Satterthwaite degrees of freedom.
 
     Parameters
@@ -106,6 +110,8 @@ def difference_budget(baseline: Result, candidate: Result, *, protocols: Sequenc
         Protocols named on either certificate.
     same_unit : bool
         Both runs are of the same unit.
+    repeatability : Repeatability or None
+        Measured run-to-run scatter beyond the budget: one more independent line per run.
 
     Returns
     -------
@@ -122,6 +128,12 @@ def difference_budget(baseline: Result, candidate: Result, *, protocols: Sequenc
             rest.remove(partner)
         lines.append(_pair(line, partner, protocols=protocols, same_unit=same_unit))
     lines += [_pair(None, c, protocols=protocols, same_unit=same_unit) for c in rest]
+    if repeatability is not None and repeatability.scatter > 0:
+        b, c = (repeatability.standard_uncertainty(r.value) for r in (baseline, candidate))
+        lines.append(DifferenceLine(
+            source=repeatability.source, sharing=Sharing.INDEPENDENT, reason="measured",
+            baseline_contribution=b, candidate_contribution=c, contribution=math.hypot(b, c),
+            baseline_dof=repeatability.pairs, candidate_dof=repeatability.pairs))
     # Welch–Satterthwaite over every input that remains, each side's independent lines apart
     weights: list[float] = []
     dofs: list[float] = []

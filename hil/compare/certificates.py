@@ -61,6 +61,7 @@ class Certificate:
     path: Path
     serial: str
     unit_type: str
+    axis: str
     profile_sha256: str
     profile_sha256_without_firmware: str | None
     protocols: tuple[str, ...]
@@ -145,6 +146,7 @@ def read_certificate(path: Path) -> Certificate:
         path=path,
         serial=at.string(unit, "serial", "unit.serial"),
         unit_type=at.string(unit, "type", "unit.type"),
+        axis=str(unit.get("axis", "")),
         profile_sha256=at.string(method, "profile_sha256", "method.profile_sha256"),
         profile_sha256_without_firmware=(
             at.string(method, "profile_sha256_without_firmware",

@@ -13,6 +13,7 @@ import sys
 from pathlib import Path
 
 from hil.compare.certificates import load_side
+from hil.compare.repeatability import NO_MAP, load_repeatability
 from hil.compare.report import as_json, render_markdown, render_text
 from hil.compare.verdict import compare_sides
 from hil.errors import InputError
@@ -25,7 +26,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     ----------
     parser : argparse.ArgumentParser
         Gets ``baseline``, ``candidate``, ``--json``, ``--markdown``,
-        ``--allow-different-units`` and ``--alpha``.
+        ``--allow-different-units``, ``--alpha`` and ``--repeatability``.
     """
     parser.add_argument("baseline", type=Path,
                         help="certificate.json, or a directory of SERIAL/certificate.json")
@@ -38,6 +39,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="compare different serials, unit types or profiles")
     parser.add_argument("--alpha", type=float, default=0.05,
                         help="family-wise error rate of the Holm procedure (default 0.05)")
+    parser.add_argument("--repeatability", metavar="MAP.toml|off", default=None,
+                        help="run-to-run scatter beyond the budgets (default: the shipped "
+                             "fixtures/compare_repeatability.toml; 'off': none)")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -54,9 +58,13 @@ def run(args: argparse.Namespace) -> int:
         0 nothing worse, 1 something WORSE, CHANGED or MISSING. Bad input raises
         :class:`~hil.errors.InputError` (the command line prints it and returns 2).
     """
+    repeatability = (NO_MAP if args.repeatability == "off"
+                     else load_repeatability(None if args.repeatability is None
+                                             else Path(args.repeatability)))
     comparison = compare_sides(load_side(args.baseline), load_side(args.candidate),
                                alpha=args.alpha,
-                               allow_different_units=args.allow_different_units)
+                               allow_different_units=args.allow_different_units,
+                               repeatability=repeatability)
     for warning in comparison.warnings:
         print(f"gimbal-hil compare: warning: {warning}", file=sys.stderr)
     print(render_text(comparison), end="")

@@ -9,6 +9,7 @@ from enum import StrEnum
 
 from hil.compare.budget import SHARING_RULE, DifferenceBudget, difference_budget
 from hil.compare.certificates import Certificate, Result
+from hil.compare.repeatability import NO_MAP, Repeatability, RepeatabilityMap
 from hil.compare.statistics import HOLM_RULE, critical_t, holm, t_p_value
 from hil.errors import InputError
 from hil.identify.estimate import coverage_factor
@@ -80,7 +81,8 @@ class Comparison:
 
 
 def compare_sides(baseline: Mapping[str, Certificate], candidate: Mapping[str, Certificate],
-                  *, alpha: float = 0.05, allow_different_units: bool = False) -> Comparison:
+                  *, alpha: float = 0.05, allow_different_units: bool = False,
+                  repeatability: RepeatabilityMap = NO_MAP) -> Comparison:
     """Compare two sides (certificates by serial) result by result.
 
     Parameters
@@ -92,6 +94,9 @@ def compare_sides(baseline: Mapping[str, Certificate], candidate: Mapping[str, C
         Family-wise error rate of the Holm procedure.
     allow_different_units : bool
         Compare different serials, unit types or profiles (else refused).
+    repeatability : RepeatabilityMap
+        Run-to-run scatter beyond the budgets, by the certificates' axis and result
+        (:func:`hil.compare.repeatability.load_repeatability`); none by default.
 
     Returns
     -------
@@ -114,11 +119,14 @@ def compare_sides(baseline: Mapping[str, Certificate], candidate: Mapping[str, C
         protocols = tuple({*b.protocols, *c.protocols})
         for name in [*b.results, *(n for n in c.results if n not in b.results)]:
             rows.append(_row(b.serial if same_unit else f"{b.serial}→{c.serial}", name,
-                             b.results.get(name), c.results.get(name), protocols, same_unit))
+                             b.results.get(name), c.results.get(name), protocols, same_unit,
+                             repeatability.entry(b.axis, name)))
     tested = [i for i, r in enumerate(rows) if r.p_value is not None]
     adjusted = holm([rows[i].p_value or 0.0 for i in tested])
     for i, p in zip(tested, adjusted, strict=True):
         rows[i] = _judged(rows[i], p, alpha)
+    notes.append(f"repeatability map: {repeatability.source}"
+                 + (f" (sha256 {repeatability.sha256[:12]}…)" if repeatability.sha256 else ""))
     return Comparison(alpha=alpha, rows=tuple(rows), warnings=tuple(warnings),
                       notes=tuple(notes), pairs=tuple((b.serial, c.serial) for b, c in pairs))
 
@@ -176,7 +184,8 @@ def _check_pair(b: Certificate, c: Certificate, allow: bool, warnings: list[str]
 
 
 def _row(serial: str, name: str, b: Result | None, c: Result | None,
-         protocols: tuple[str, ...], same_unit: bool) -> Row:
+         protocols: tuple[str, ...], same_unit: bool, repeatability: Repeatability | None
+         ) -> Row:
     some = b or c
     assert some is not None
     direction = (b.direction if b is not None else None) or (c.direction if c else None)
@@ -186,7 +195,8 @@ def _row(serial: str, name: str, b: Result | None, c: Result | None,
     if b.unit != c.unit:
         raise InputError(f"{serial}: result {name} is in {b.unit!r} in the baseline "
                          f"and {c.unit!r} in the candidate")
-    budget = difference_budget(b, c, protocols=protocols, same_unit=same_unit)
+    budget = difference_budget(b, c, protocols=protocols, same_unit=same_unit,
+                               repeatability=repeatability)
     delta, u = c.value - b.value, budget.standard_uncertainty
     expanded = coverage_factor(budget.dof) * u
     return Row(

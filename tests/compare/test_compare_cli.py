@@ -212,3 +212,30 @@ def test_json_keeps_full_precision_and_text_rounds(tmp_path: Path,
     row = json.loads((tmp_path / "o.json").read_text())["results"][0]
     assert row["baseline"]["value"] == 1.0123456789
     assert "1.0123 ± 0.0025 N·m" in out
+
+
+def test_the_shipped_repeatability_map_widens_only_its_results(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    # coulomb_nm has an entry for the elevation axis: u(Δ) grows; bandwidth_hz has none
+    b, c = sides(tmp_path, certificate(), certificate())
+    compare(capsys, b, c, "--json", tmp_path / "with.json")
+    compare(capsys, b, c, "--json", tmp_path / "without.json", "--repeatability", "off")
+    def u(name: str) -> dict[str, float]:
+        rows = json.loads((tmp_path / name).read_text())["results"]
+        return {r["parameter"]: r["budget_of_difference"]["standard_uncertainty"] for r in rows}
+    assert u("with.json")["coulomb_nm"] > u("without.json")["coulomb_nm"]
+    assert u("with.json")["bandwidth_hz"] == u("without.json")["bandwidth_hz"]
+
+
+def test_a_bad_repeatability_map_names_file_and_key(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    b, c = sides(tmp_path, certificate(), certificate())
+    bad = tmp_path / "map.toml"
+    bad.write_text('population = "x"\n[results.elevation.coulomb_nm]\nscale = "relative"\n'
+                   'scatter = -1\npairs = 20\n', encoding="utf-8")
+    code, _, err = compare(capsys, b, c, "--repeatability", bad)
+    assert code == 2
+    assert str(bad) in err
+    assert "scatter" in err

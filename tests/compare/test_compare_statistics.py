@@ -117,3 +117,17 @@ def test_the_p_value_uses_the_difference_budget(tmp_path: Path) -> None:
     assert row.budget.dof == pytest.approx(40)
     assert row.p_value == pytest.approx(2 * stats.t.sf(4.0, 40), rel=1e-3)
     assert row.verdict is Verdict.CHANGED
+
+
+def test_a_measured_repeatability_excess_adds_one_independent_line_per_run(
+    tmp_path: Path,
+) -> None:
+    from hil.compare.repeatability import Repeatability
+
+    b, c = _pair(tmp_path, result("x", 1.0, u_a=0.003), result("x", 1.0, u_a=0.004))
+    extra = Repeatability(name="x", relative=True, scatter=0.006, pairs=20)
+    budget = difference_budget(b, c, protocols=PROTOCOLS,  # type: ignore[arg-type]
+                               repeatability=extra)
+    assert budget.standard_uncertainty == pytest.approx(math.sqrt(0.005**2 + 2 * 0.006**2))
+    assert budget.lines[-1].sharing is Sharing.INDEPENDENT
+    assert "identical-firmware reruns" in budget.lines[-1].source
