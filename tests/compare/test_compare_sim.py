@@ -4,7 +4,7 @@ nothing else WORSE or CHANGED.
 
 What changes physically with today's suite (mechanics identified from the measured motion
 and torque, so the velocity loop's tuning should not move them), measured as the shift of
-each result between two runs with the same noise seed, in units of u(Δ):
+each result between two runs with the same noise seed, in units of u(Δ) (budgets only):
 
 - velocity loop gain (Kp and Ki together) −50 %: ``inertia_amplitude_spread_pct`` +5 to +6
   (a softer loop dwells longer at each reversal, and the dwell biases J at each amplitude
