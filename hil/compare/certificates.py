@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import json
 import math
+import re
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
@@ -19,6 +20,9 @@ from hil.errors import InputError
 SCHEMA = "gimbal-hil/certificate/v1"
 CERTIFICATE_FILE = "certificate.json"
 DIRECTIONS = ("higher", "lower")
+# an emulator's endpoint is new in every run (a virtual CAN channel, a loopback port)
+_EPHEMERAL = ((re.compile(r"virtual:[\w-]+"), "virtual"),
+              (re.compile(r"127\.0\.0\.1:\d+"), "127.0.0.1"))
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -139,6 +143,7 @@ def read_certificate(path: Path) -> Certificate:
         by_name[result.parameter] = result
     bias = method.get("method_bias")
     station = {key: drive.get(key) for key in ("kind", "vendor", "model", "transport")}
+    station["transport"] = _stable_transport(station["transport"])
     if "station" in document:  # a station file's identity, when the certificate states one
         station["station"] = document["station"]
     revision = software.get("git_revision")
@@ -162,6 +167,15 @@ def read_certificate(path: Path) -> Certificate:
         outcome=at.string(document, "outcome", "outcome"),
         results=by_name,
     )
+
+
+def _stable_transport(transport: object) -> object:
+    """The transport without an emulator's per-run endpoint (channel name, loopback port)."""
+    if not isinstance(transport, str):
+        return transport
+    for pattern, stable in _EPHEMERAL:
+        transport = pattern.sub(stable, transport)
+    return transport
 
 
 def _result(at: _Reader, entry: Any, where: str) -> Result:
