@@ -1,4 +1,4 @@
-"""The ``gimbal-hil`` command: simulate, calibrate, diagnose."""
+"""The ``gimbal-hil`` command: simulate, calibrate, diagnose, compare."""
 
 from __future__ import annotations
 
@@ -10,6 +10,8 @@ from pathlib import Path
 
 import numpy as np
 
+from hil.compare.cli import add_arguments as add_compare_arguments
+from hil.compare.cli import run as run_compare
 from hil.diagnose.cli import add_arguments as add_diagnose_arguments
 from hil.diagnose.cli import run as run_diagnose
 from hil.drives.kinds import DRIVE_KINDS
@@ -62,6 +64,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     add_diagnose_arguments(diag)
     add_results_arguments(commands.add_parser("results", help="the results store"))
 
+    comp = commands.add_parser("compare", help="baseline calibration against a candidate")
+    add_compare_arguments(comp)
+
     args = parser.parse_args(argv)
     logging.basicConfig(
         level=logging.INFO if args.verbose else logging.WARNING,
@@ -76,6 +81,8 @@ def main(argv: Sequence[str] | None = None) -> int:
             return _render(args)
         if args.subcommand == "results":
             return run_results(args)
+        if args.subcommand == "compare":
+            return run_compare(args)
         return run_diagnose(args)
     except HilError as exc:
         print(f"gimbal-hil: error: {exc}", file=sys.stderr)

@@ -24,7 +24,9 @@ class MeasurementSpec:
     that limit, in which a value is MARGINAL; ``accuracy_rel`` is the largest error the
     method claims on validation data (the project's tests hold it to it; not part of the
     uncertainty); ``allowance_rel`` is a hand-set allowance for physics the simulator lacks,
-    a named rectangular Type B line of the budget when given.
+    a named rectangular Type B line of the budget when given. ``direction`` (``"higher"``
+    or ``"lower"``): which way is better, for ``gimbal-hil compare``; ``None`` for a
+    result without one (mechanics: a change is CHANGED, neither better nor worse).
     """
 
     name: str
@@ -36,6 +38,7 @@ class MeasurementSpec:
     accuracy_rel: float | None = None
     allowance_rel: float | None = None
     description: str = ""
+    direction: str | None = None
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -173,6 +176,7 @@ def _measurement(name: str, table: ConfigTable) -> MeasurementSpec:
         raise table.error("upper", f"lower limit {lower} is not below upper limit {upper}")
     accuracy = table.non_negative("accuracy_pct") if "accuracy_pct" in table else None
     allowance = table.non_negative("allowance_pct") if "allowance_pct" in table else None
+    direction = table.choice("direction", ("higher", "lower")) if "direction" in table else None
     spec = MeasurementSpec(
         name=name,
         unit=table.string("unit", ""),
@@ -183,6 +187,7 @@ def _measurement(name: str, table: ConfigTable) -> MeasurementSpec:
         accuracy_rel=None if accuracy is None else accuracy / 100.0,
         allowance_rel=None if allowance is None else allowance / 100.0,
         description=table.string("description", ""),
+        direction=direction,
     )
     table.done()
     return spec

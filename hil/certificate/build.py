@@ -16,6 +16,7 @@ from typing import Any
 from hil import __version__
 from hil.calibration import CalibrationRun
 from hil.certificate.controller import controller_outputs
+from hil.certificate.procedure import profile_sha256_without_firmware
 from hil.certificate.render import render_text
 from hil.measurement import DECISION_RULE
 
@@ -80,6 +81,7 @@ def build_certificate(
         "method": {
             "profile": run.profile.source,
             "profile_sha256": run.profile.sha256,
+            "profile_sha256_without_firmware": profile_sha256_without_firmware(run.profile.raw),
             "protocols": {
                 name: {
                     "outcome": (
@@ -128,7 +130,7 @@ def build_certificate(
             }
             for a in run.artifacts
         ],
-        "results": [m.as_dict() for m in run.measurements],
+        "results": [{**m.as_dict(), "direction": m.spec.direction} for m in run.measurements],
         "decision_rule": DECISION_RULE,
         "outcome": outcome.value,
         "aborted": aborted,

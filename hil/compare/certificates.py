@@ -1,0 +1,274 @@
+"""Reading the two sides of a comparison: certificate JSON, checked against its schema.
+
+Each side is one ``certificate.json`` or a directory holding one per serial
+(``DIR/SERIAL/certificate.json``). Anything missing or mistyped is an
+:class:`~hil.errors.InputError` naming the file and the place in it.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import re
+from collections.abc import Mapping
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Literal
+
+from hil.errors import InputError
+
+SCHEMA = "gimbal-hil/certificate/v1"
+CERTIFICATE_FILE = "certificate.json"
+DIRECTIONS = ("higher", "lower")
+# an emulator's endpoint is new in every run (a virtual CAN channel, a loopback port)
+_EPHEMERAL = ((re.compile(r"virtual:[\w-]+"), "virtual"),
+              (re.compile(r"127\.0\.0\.1:\d+"), "127.0.0.1"))
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class BudgetLine:
+    """One line of a result's uncertainty budget as the certificate states it."""
+
+    source: str
+    kind: Literal["A", "B"]
+    standard_uncertainty: float
+    sensitivity: float
+    dof: float  # inf when the certificate gives none
+
+    @property
+    def signed_contribution(self) -> float:
+        """``cᵢ·u(xᵢ)``, in the result's unit."""
+        return self.sensitivity * self.standard_uncertainty
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class Result:
+    """One certificate result: value, uncertainty, limits, direction, budget."""
+
+    parameter: str
+    value: float
+    unit: str
+    standard_uncertainty: float
+    expanded_uncertainty: float
+    dof: float
+    lower_limit: float
+    upper_limit: float
+    outcome: str
+    direction: str | None
+    budget: tuple[BudgetLine, ...]
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class Certificate:
+    """What a comparison needs from one certificate."""
+
+    path: Path
+    serial: str
+    unit_type: str
+    axis: str
+    profile_sha256: str
+    profile_sha256_without_firmware: str | None
+    protocols: tuple[str, ...]
+    station: Mapping[str, Any]
+    software_version: str
+    git_revision: str | None
+    firmware_version: str | None
+    method_bias_sha256: str | None
+    outcome: str
+    results: Mapping[str, Result]
+
+
+def load_side(path: Path) -> dict[str, Certificate]:
+    """One side of a comparison, by serial.
+
+    Parameters
+    ----------
+    path : Path
+        A ``certificate.json``, a unit directory holding one, or a directory of unit
+        directories (``DIR/SERIAL/certificate.json``; ``history/`` is not read).
+
+    Returns
+    -------
+    dict of str to Certificate
+
+    Raises
+    ------
+    InputError
+        Missing path, no certificate found, unreadable JSON, schema mismatch, the same
+        serial twice.
+    """
+    if not path.exists():
+        raise InputError("no such file or directory", source=str(path))
+    if path.is_file():
+        files = [path]
+    elif (path / CERTIFICATE_FILE).is_file():
+        files = [path / CERTIFICATE_FILE]
+    else:
+        files = sorted(p / CERTIFICATE_FILE for p in path.iterdir()
+                       if (p / CERTIFICATE_FILE).is_file())
+        if not files:
+            raise InputError(f"no {CERTIFICATE_FILE} here nor in DIR/SERIAL/{CERTIFICATE_FILE}",
+                             source=str(path))
+    side: dict[str, Certificate] = {}
+    for file in files:
+        certificate = read_certificate(file)
+        if certificate.serial in side:
+            raise InputError(f"serial {certificate.serial} also in {side[certificate.serial].path}",
+                             source=str(file))
+        side[certificate.serial] = certificate
+    return side
+
+
+def read_certificate(path: Path) -> Certificate:
+    """Read and check one ``certificate.json`` (schema ``gimbal-hil/certificate/v1``)."""
+    try:
+        document = json.loads(path.read_text(encoding="utf-8"))
+    except OSError as exc:
+        raise InputError(f"cannot read: {exc.strerror or exc}", source=str(path)) from exc
+    except (UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise InputError(f"not JSON: {exc}", source=str(path)) from exc
+    at = _Reader(path)
+    if not isinstance(document, dict):
+        raise at.error("", "a certificate is a JSON object")
+    if document.get("schema") != SCHEMA:
+        raise at.error("schema", f"is {document.get('schema')!r}, expected {SCHEMA!r}")
+    unit, method = at.obj(document, "unit"), at.obj(document, "method")
+    software, drive = at.obj(document, "software"), at.obj(document, "drive")
+    results = at.list_(document, "results")
+    parsed = [_result(at, entry, f"results[{i}]") for i, entry in enumerate(results)]
+    by_name: dict[str, Result] = {}
+    for i, result in enumerate(parsed):
+        if result.parameter in by_name:
+            raise at.error(f"results[{i}].parameter", f"{result.parameter!r} appears twice")
+        by_name[result.parameter] = result
+    bias = method.get("method_bias")
+    station = {key: drive.get(key) for key in ("kind", "vendor", "model", "transport")}
+    station["transport"] = _stable_transport(station["transport"])
+    if "station" in document:  # a station file's identity, when the certificate states one
+        station["station"] = document["station"]
+    revision = software.get("git_revision")
+    return Certificate(
+        path=path,
+        serial=at.string(unit, "serial", "unit.serial"),
+        unit_type=at.string(unit, "type", "unit.type"),
+        axis=str(unit.get("axis", "")),
+        profile_sha256=at.string(method, "profile_sha256", "method.profile_sha256"),
+        profile_sha256_without_firmware=(
+            at.string(method, "profile_sha256_without_firmware",
+                      "method.profile_sha256_without_firmware")
+            if "profile_sha256_without_firmware" in method else None),
+        protocols=tuple(at.obj(method, "protocols", "method.protocols")),
+        station=station,
+        software_version=at.string(software, "version", "software.version"),
+        git_revision=revision if isinstance(revision, str) else None,
+        firmware_version=(str(drive["firmware_version"])
+                          if drive.get("firmware_version") is not None else None),
+        method_bias_sha256=(str(bias.get("sha256")) if isinstance(bias, dict) else None),
+        outcome=at.string(document, "outcome", "outcome"),
+        results=by_name,
+    )
+
+
+def _stable_transport(transport: object) -> object:
+    """The transport without an emulator's per-run endpoint (channel name, loopback port)."""
+    if not isinstance(transport, str):
+        return transport
+    for pattern, stable in _EPHEMERAL:
+        transport = pattern.sub(stable, transport)
+    return transport
+
+
+def _result(at: _Reader, entry: Any, where: str) -> Result:
+    if not isinstance(entry, dict):
+        raise at.error(where, "must be an object")
+    direction = entry.get("direction")
+    if direction is not None and direction not in DIRECTIONS:
+        raise at.error(f"{where}.direction", f"is {direction!r}, expected 'higher' or 'lower'")
+    budget = at.list_(entry, "budget", f"{where}.budget")
+    if not budget:
+        raise at.error(f"{where}.budget", "is empty (every result has at least one line)")
+    return Result(
+        parameter=at.string(entry, "parameter", f"{where}.parameter"),
+        value=at.number(entry, "value", f"{where}.value"),
+        unit=at.string(entry, "unit", f"{where}.unit"),
+        standard_uncertainty=at.number(entry, "standard_uncertainty",
+                                       f"{where}.standard_uncertainty", non_negative=True),
+        expanded_uncertainty=at.number(entry, "expanded_uncertainty",
+                                       f"{where}.expanded_uncertainty", non_negative=True),
+        dof=at.dof(entry, "degrees_of_freedom", f"{where}.degrees_of_freedom"),
+        lower_limit=at.number(entry, "lower_limit", f"{where}.lower_limit"),
+        upper_limit=at.number(entry, "upper_limit", f"{where}.upper_limit"),
+        outcome=at.string(entry, "outcome", f"{where}.outcome"),
+        direction=direction,
+        budget=tuple(_line(at, line, f"{where}.budget[{j}]") for j, line in enumerate(budget)),
+    )
+
+
+def _line(at: _Reader, line: Any, where: str) -> BudgetLine:
+    if not isinstance(line, dict):
+        raise at.error(where, "must be an object")
+    kind = line.get("type")
+    if kind not in ("A", "B"):
+        raise at.error(f"{where}.type", f"is {kind!r}, expected 'A' or 'B'")
+    return BudgetLine(
+        source=at.string(line, "component", f"{where}.component"),
+        kind=kind,
+        standard_uncertainty=at.number(line, "standard_uncertainty",
+                                       f"{where}.standard_uncertainty", non_negative=True),
+        sensitivity=at.number(line, "sensitivity", f"{where}.sensitivity"),
+        dof=at.dof(line, "degrees_of_freedom", f"{where}.degrees_of_freedom"),
+    )
+
+
+class _Reader:
+    """Typed access to a certificate's fields; errors name the file and the JSON path."""
+
+    def __init__(self, path: Path) -> None:
+        self.path = path
+
+    def error(self, where: str, message: str) -> InputError:
+        return InputError(f"{where} {message}" if where else message, source=str(self.path))
+
+    def obj(self, parent: Mapping[str, Any], key: str, where: str | None = None
+            ) -> dict[str, Any]:
+        value = self._get(parent, key, where)
+        if not isinstance(value, dict):
+            raise self.error(where or key, "must be an object")
+        return value
+
+    def list_(self, parent: Mapping[str, Any], key: str, where: str | None = None
+              ) -> list[Any]:
+        value = self._get(parent, key, where)
+        if not isinstance(value, list):
+            raise self.error(where or key, "must be a list")
+        return value
+
+    def string(self, parent: Mapping[str, Any], key: str, where: str) -> str:
+        value = self._get(parent, key, where)
+        if not isinstance(value, str):
+            raise self.error(where, f"must be a string, not {type(value).__name__}")
+        return value
+
+    def number(self, parent: Mapping[str, Any], key: str, where: str, *,
+               non_negative: bool = False) -> float:
+        value = self._get(parent, key, where)
+        if isinstance(value, bool) or not isinstance(value, int | float):
+            raise self.error(where, f"must be a number, not {type(value).__name__}")
+        if not math.isfinite(value) or (non_negative and value < 0):
+            raise self.error(where, f"is {value}, expected a finite"
+                             + (" non-negative" if non_negative else "") + " number")
+        return float(value)
+
+    def dof(self, parent: Mapping[str, Any], key: str, where: str) -> float:
+        """Degrees of freedom: ``null`` or absent means infinitely many (Type B)."""
+        if parent.get(key) is None:
+            return math.inf
+        value = self.number(parent, key, where, non_negative=True)
+        if value <= 0:
+            raise self.error(where, f"is {value}, expected a positive number or null")
+        return value
+
+    def _get(self, parent: Mapping[str, Any], key: str, where: str | None) -> Any:
+        if key not in parent:
+            raise self.error(where or key, "is missing")
+        return parent[key]

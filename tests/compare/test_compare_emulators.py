@@ -1,0 +1,68 @@
+"""The same comparison over the protocol emulators, the firmware variant set through the
+profile: CANopen (current-loop protocol, its time constant doubled) and Modbus (the J/B/T_c
+sines, identical firmware, two seeds; the current loop cannot be measured at Modbus's
+100 Hz). One protocol each keeps the cost to a few seconds of CPU; an emulator's per-run
+endpoint (virtual CAN channel, loopback port) is not a station difference."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from hil.cli import main
+from hil.config import builtin_fixture
+from tests.compare.firmware_variants import firmware_setting, with_firmware, write_profile
+
+pytestmark = pytest.mark.slow
+
+PROFILE = "demo_gimbal_elevation"
+
+
+def calibrate(document: dict[str, Any], out: Path, *, drive: str, only: str,
+              seed: int = 0) -> Path:
+    station = builtin_fixture(f"station_{drive.removesuffix('-emulator')}_emulator.toml")
+    profile = write_profile(document, out / "profile.toml")
+    done = subprocess.run(
+        [sys.executable, "-m", "hil.cli", "calibrate", "--drive", drive, "--station",
+         str(station), "--profile", str(profile), "--unit-serial", "EMU-1", "--seed",
+         str(seed), "--out", str(out), "--", "-k", only],
+        capture_output=True, text=True, timeout=600, check=False,
+    )
+    path = out / "EMU-1" / "certificate.json"
+    assert path.is_file(), done.stdout + done.stderr
+    return path
+
+
+def compare(baseline: Path, candidate: Path, out: Path,
+            capsys: pytest.CaptureFixture[str]) -> tuple[int, dict[str, str], str]:
+    code = main(["compare", str(baseline), str(candidate), "--json", str(out)])
+    rows = json.loads(out.read_text(encoding="utf-8"))["results"]
+    return code, {r["parameter"]: r["verdict"] for r in rows}, capsys.readouterr().err
+
+
+def test_canopen_a_slower_current_loop_is_worse(tmp_path: Path,
+                                                capsys: pytest.CaptureFixture[str]) -> None:
+    tau_s = firmware_setting(PROFILE, "current_loop_time_constant_s")
+    base = calibrate(with_firmware(PROFILE), tmp_path / "base", drive="canopen-emulator",
+                     only="current_loop")
+    slow = calibrate(with_firmware(PROFILE, current_loop_time_constant_s=2 * tau_s),
+                     tmp_path / "slow", drive="canopen-emulator", only="current_loop", seed=1)
+    code, verdicts, err = compare(base, slow, tmp_path / "c.json", capsys)
+    assert (code, verdicts) == (1, {"current_loop_time_constant_ms": "WORSE"})
+    assert "warning" not in err
+
+
+def test_modbus_identical_firmware_flags_nothing(tmp_path: Path,
+                                                 capsys: pytest.CaptureFixture[str]) -> None:
+    runs = [calibrate(with_firmware(PROFILE), tmp_path / f"s{seed}", drive="modbus-emulator",
+                      only="inertia_friction", seed=seed) for seed in (1, 2)]
+    code, verdicts, err = compare(*runs, tmp_path / "c.json", capsys)
+    assert code == 0
+    assert set(verdicts) >= {"inertia_kg_m2", "viscous_nm_s_rad", "coulomb_nm"}
+    assert set(verdicts.values()) == {"SAME"}
+    assert "warning" not in err
