@@ -140,7 +140,10 @@ def _calibrate(args: argparse.Namespace) -> int:
     options += ["--store", args.store] if args.store else []
     options += ["--operator", args.operator] if args.operator else []
     options += ["--reference"] if args.reference else []
-    suite = ["-p", "no:cacheprovider", "--pyargs", "gimbal_hil_protocols", "-q"]
+    # the command has imported hil already: pytest cannot rewrite the asserts of the
+    # package its plugin comes from (the protocols' asserts carry their own messages)
+    suite = ["-p", "no:cacheprovider", "--pyargs", "gimbal_hil_protocols", "-q",
+             "-W", "ignore::pytest.PytestAssertRewriteWarning"]
     return int(pytest.main([*suite, *options, *args.pytest_args]))
 
 

@@ -143,8 +143,10 @@ def _read_text(path: Path) -> list[str]:
         raise RecordingError("file is not UTF-8 text", source=source) from exc
 
 
-def read_recording(path: str | Path) -> Recording:
-    """Read a recording, refusing bad input with file, line and column named.
+def read_recording(path: str | Path, *, log_warnings: bool = True) -> Recording:
+    """Read a recording, refusing bad input with file, line and column named; the format's
+    warnings (gaps, saturation, a still position) are logged unless ``log_warnings`` is
+    false, and kept on the recording either way.
 
     Raises
     ------
@@ -153,7 +155,7 @@ def read_recording(path: str | Path) -> Recording:
         not strictly increasing, fewer than 100 samples, unreadable file.
     """
     path = Path(path)
-    return parse_recording(_read_text(path), source=str(path))
+    return parse_recording(_read_text(path), source=str(path), log_warnings=log_warnings)
 
 
 @dataclass(frozen=True, slots=True)
@@ -217,7 +219,7 @@ def _strictly_increasing(time_s: FloatArray, table: _Table, source: str) -> None
         )
 
 
-def parse_recording(lines: list[str], *, source: str) -> Recording:
+def parse_recording(lines: list[str], *, source: str, log_warnings: bool = True) -> Recording:
     """Parse the lines of a recording file (see :func:`read_recording`)."""
     table = _parse_table(lines, source=source)
     names = set(table.header)
@@ -237,7 +239,7 @@ def parse_recording(lines: list[str], *, source: str) -> Recording:
     _strictly_increasing(columns["time_s"], table, source)
     recording = Recording(columns=columns, metadata=table.metadata, source=source)
     warnings = tuple(check_recording(recording))
-    for message in warnings:
+    for message in warnings if log_warnings else ():
         log.warning("%s: %s", source, message)
     return Recording(columns=columns, metadata=table.metadata, source=source, warnings=warnings)
 

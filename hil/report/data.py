@@ -51,12 +51,12 @@ class ProtocolData:
     def recording(self, excitation: str) -> Recording | None:
         """The raw recording of ``excitation``, read from its file."""
         path = self.recordings.get(excitation)
-        return None if path is None else read_recording(path)
+        return None if path is None else read_recording(path, log_warnings=False)
 
     def recordings_named(self, prefix: str) -> list[tuple[str, Recording]]:
         """Every raw recording whose excitation starts with ``prefix``, in run order."""
-        return [(name, read_recording(path)) for name, path in self.recordings.items()
-                if name.startswith(prefix)]
+        return [(name, read_recording(path, log_warnings=False))
+                for name, path in self.recordings.items() if name.startswith(prefix)]
 
 
 def from_certificate(cert: Mapping[str, Any], unit_dir: Path) -> list[ProtocolData]:
