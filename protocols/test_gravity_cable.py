@@ -50,6 +50,8 @@ def result(drive: Drive, calibration: CalibrationRun, spec: Spec) -> GravityCabl
         "recorded_rows": rows,
         "offset_nm": analysed.offset_nm,
         "cable_hysteresis_angle_rad": analysed.hysteresis_angle_rad,
+        "cable_hysteresis_angle_u_rad": analysed.hysteresis_angle_u_rad,
+        "cable_hysteresis_covariance": analysed.hysteresis_covariance,
         "loop_half_width_nm": analysed.loop_half_width_nm,
         "sliding_friction_at_sweep_speed_nm": analysed.friction_nm,
         "bins": analysed.bins,

@@ -108,3 +108,28 @@ def test_cable_hysteresis_biases_b_and_removing_the_measured_loop_restores_it() 
     assert line.standard_uncertainty == loop.half_width_u_nm
     # B falls as more of the loop is taken out: the sensitivity's sign is the physics'
     assert line.sensitivity < 0
+
+
+def test_the_loop_s_h_and_s0_are_propagated_together() -> None:
+    """h and s₀ come from one fit and err together: the budget's two loop lines must
+    state the scatter J, B and T_c show when (h, s₀) are drawn from that fit's joint
+    distribution (holding s₀ fixed, as a single h line would, understates T_c's 10 ×)."""
+    plant = dataclasses.replace(
+        BASE, cable_hysteresis_nm=0.002, cable_hysteresis_angle_rad=0.02
+    )
+    recordings, spec = _record(plant, centre_rad=0.0)
+    u_h, u_s, rho = 0.0003, 0.005, -0.8
+    loop = CableLoop(half_width_nm=0.002, half_width_u_nm=u_h, angle_rad=0.02,
+                     angle_u_rad=u_s, covariance=rho * u_h * u_s)
+    stated = protocol.with_earlier_inputs(recordings, spec, lag=None, loop=loop)
+    rng = np.random.default_rng(5)
+    draws = rng.multivariate_normal([0.002, 0.02], [[u_h**2, rho * u_h * u_s],
+                                                    [rho * u_h * u_s, u_s**2]], size=48)
+    found = [protocol.sine_estimates(protocol.analyse(recordings, spec, cable_loop=CableLoop(
+        half_width_nm=h, half_width_u_nm=u_h, angle_rad=s0))) for h, s0 in draws]
+    for name in ("viscous_nm_s_rad", "coulomb_nm"):
+        loop_lines = [c for c in stated[name].budget if "cable hysteresis" in c.source]
+        assert len(loop_lines) == 3  # h (with s₀'s share), s₀'s rest, s₀'s curvature
+        stated_u = math.sqrt(sum(c.contribution**2 for c in loop_lines))
+        scatter = float(np.std([f[name].value for f in found], ddof=1))
+        assert 0.75 < scatter / stated_u < 1.3, (name, scatter / stated_u)

@@ -130,6 +130,11 @@ class GravityCableResult:
         ``cable_hysteresis_nm``: h, the half width of the cable's loop (N·m).
     hysteresis_angle_rad : float
         s₀, the travel over which the hysteresis turns over (rad).
+    hysteresis_angle_u_rad : float
+        Standard uncertainty of s₀ from the same fit (rad).
+    hysteresis_covariance : float
+        Covariance of h and s₀ in that fit (N·m·rad): an h fitted high comes with an s₀
+        fitted short.
     friction_nm : float
         Sliding friction at the sweep speed, loop half width − h (N·m).
     loop_half_width_nm : float
@@ -152,6 +157,8 @@ class GravityCableResult:
     offset_nm: float
     hysteresis: Estimate  # N·m, half width of the cable's loop
     hysteresis_angle_rad: float  # s₀
+    hysteresis_angle_u_rad: float
+    hysteresis_covariance: float  # cov(h, s₀), N·m·rad
     friction_nm: float  # sliding friction at the sweep speed (loop half width − h)
     loop_half_width_nm: float  # F + h
     bins: int
@@ -173,11 +180,17 @@ class CableLoop:
         Standard uncertainty of h (N·m).
     angle_rad : float
         s₀, the travel over which the loop turns over (rad).
+    angle_u_rad : float
+        Standard uncertainty of s₀ (rad; 0: taken as exact).
+    covariance : float
+        Covariance of h and s₀ from their common fit (N·m·rad).
     """
 
     half_width_nm: float
     half_width_u_nm: float
     angle_rad: float
+    angle_u_rad: float = 0.0
+    covariance: float = 0.0
 
 
 
@@ -352,8 +365,8 @@ def identify_gravity_cable(
     grad_mge = np.array([a / mge, b / mge])
     grad_phase = np.array([b / mge**2, -a / mge**2])
     cov_ab = cov[:2, :2]
-    hysteresis, s0 = _hysteresis(p2, t2, position_rad[c0:c1], torque_nm[c0:c1],
-                                 settle_rad=settle_rad)
+    hysteresis, s0, s0_u, covariance = _hysteresis(
+        p2, t2, position_rad[c0:c1], torque_nm[c0:c1], settle_rad=settle_rad)
     loop = float(np.mean(half_diff))
     return GravityCableResult(
         mge=Estimate(name="gravity_mge_nm", value=mge,
@@ -367,6 +380,8 @@ def identify_gravity_cable(
         offset_nm=offset,
         hysteresis=hysteresis,
         hysteresis_angle_rad=s0,
+        hysteresis_angle_u_rad=s0_u,
+        hysteresis_covariance=covariance,
         friction_nm=loop - hysteresis.value,
         loop_half_width_nm=loop,
         bins=len(y),
@@ -380,10 +395,10 @@ def identify_gravity_cable(
 def _hysteresis(
     p_ref: FloatArray, t_ref: FloatArray, p_probe: FloatArray, t_probe: FloatArray, *,
     settle_rad: float,
-) -> tuple[Estimate, float]:
+) -> tuple[Estimate, float, float, float]:
     """``h`` and ``s₀`` from the probe minus the settled pass in the same direction at the
     same positions: ``2h·exp(−s/s₀)`` (friction, gravity, cable and cogging cancel; K_t
-    ripple only scales the small hysteresis term)."""
+    ripple only scales the small hysteresis term). Returns h, s₀, u(s₀) and cov(h, s₀)."""
     reversal = float(p_probe.max())  # the axis overshoots the command's reversal a little
     s = reversal - p_probe  # travel since the reversal (probe runs downwards)
     length = float(s.max())
@@ -427,4 +442,4 @@ def _hysteresis(
     cov = cost / dof * np.linalg.pinv(jac.T @ jac)
     estimate = Estimate(name="cable_hysteresis_nm", value=amplitude / 2,
                         standard_uncertainty=math.sqrt(cov[1, 1]) / 2, unit="N·m", dof=dof)
-    return estimate, s0
+    return estimate, s0, math.sqrt(cov[2, 2]), float(cov[1, 2]) / 2

@@ -206,11 +206,17 @@ def measured_cable_loop(calibration: CalibrationRun) -> CableLoop | None:
         measured.
     """
     h = calibration.result("cable_hysteresis_nm")
-    angle = calibration.details.get("gravity_cable", {}).get("cable_hysteresis_angle_rad")
+    details = calibration.details.get("gravity_cable", {})
+    angle = details.get("cable_hysteresis_angle_rad")
     if h is None or not isinstance(angle, float):
         return None
+    angle_u = details.get("cable_hysteresis_angle_u_rad", 0.0)
+    covariance = details.get("cable_hysteresis_covariance", 0.0)
     return CableLoop(
-        half_width_nm=h.value, half_width_u_nm=h.standard_uncertainty, angle_rad=angle
+        half_width_nm=h.value, half_width_u_nm=h.standard_uncertainty, angle_rad=angle,
+        angle_u_rad=angle_u if isinstance(angle_u, float) and math.isfinite(angle_u) else 0.0,
+        covariance=(covariance if isinstance(covariance, float) and math.isfinite(covariance)
+                    else 0.0),
     )
 
 
@@ -274,14 +280,51 @@ def with_earlier_inputs(
         wider = dataclasses.replace(loop, half_width_nm=loop.half_width_nm + loop.half_width_u_nm)
         inputs.append(("cable hysteresis loop h taken out (gravity_cable)",
                        loop.half_width_u_nm, "N·m", at(lag_s, wider)))
-    return {
-        name: estimate.with_components(*(
-            Component.from_change(source=source, standard_uncertainty=u, unit=unit,
-                                  change=shifted[name].value - estimate.value)
-            for source, u, unit, shifted in inputs
-        ))
+    lines = {
+        name: [Component.from_change(source=source, standard_uncertainty=u, unit=unit,
+                                     change=shifted[name].value - estimate.value)
+               for source, u, unit, shifted in inputs]
         for name, estimate in base.items()
     }
+    if (loop is not None and loop.half_width_u_nm > 0
+            and 0 < loop.angle_u_rad < loop.angle_rad):
+        _with_loop_angle(lines, base, loop, *(
+            at(lag_s, dataclasses.replace(loop, angle_rad=loop.angle_rad + sign
+                                          * loop.angle_u_rad)) for sign in (1, -1)))
+    return {name: estimate.with_components(*lines[name]) for name, estimate in base.items()}
+
+
+def _with_loop_angle(lines: dict[str, list[Component]], base: dict[str, Estimate],
+                     loop: CableLoop, longer: dict[str, Estimate],
+                     shorter: dict[str, Estimate]) -> None:
+    """h and s₀ come from one fit and err together (an h fitted high, an s₀ short): the
+    h line takes s₀'s share that moves with h (its regression on h), and s₀'s remainder,
+    independent of h, is a line of its own. The results bend with s₀ (B has a minimum
+    near the true loop): central differences for the slope, and the curvature's own line
+    (GUM 5.1.2 note, ``½·(∂²f/∂s₀²)²·u⁴``)."""
+    u = loop.angle_u_rad
+    slope = loop.covariance / loop.half_width_u_nm**2  # E[δs₀ | δh] = slope·δh
+    rest_u = math.sqrt(max(u**2 - slope * loop.covariance, 0.0))
+    for name, estimate in base.items():
+        up, down = longer[name].value - estimate.value, shorter[name].value - estimate.value
+        per_angle = (up - down) / (2 * u)
+        curvature = (up + down) / u**2
+        h_line = next(c for c in lines[name] if c.source.startswith("cable hysteresis loop h"))
+        lines[name] = [
+            dataclasses.replace(c, source="cable hysteresis loop h, with the s₀ fitted with "
+                                          "it, taken out (gravity_cable)",
+                                sensitivity=c.sensitivity + per_angle * slope)
+            if c is h_line else c
+            for c in lines[name]
+        ]
+        lines[name] += [
+            Component(source="cable hysteresis loop's angle s₀ beyond h taken out "
+                             "(gravity_cable)",
+                      kind="B", standard_uncertainty=rest_u, unit="rad", sensitivity=per_angle),
+            Component(source="cable hysteresis loop's angle s₀, second order (gravity_cable)",
+                      kind="B", standard_uncertainty=u**2, unit="rad²",
+                      sensitivity=curvature / math.sqrt(2)),
+        ]
 
 
 def measured_load_stiffness(calibration: CalibrationRun, *, position_rad: float) -> Estimate | None:
