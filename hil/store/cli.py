@@ -1,4 +1,5 @@
-"""``gimbal-hil results``: ingest, sync, units, history SERIAL, trend PARAM.
+"""``gimbal-hil results``: ingest, sync, units, history SERIAL, trend PARAM, and the fleet
+statistics (spc, export, yield, report: :mod:`hil.store.fleet_cli`).
 
 Each reading command prints a table a person reads (values as GUM asks: U to two
 significant digits, the value to the same decimal) or, with ``--json``, full precision.
@@ -20,6 +21,7 @@ from sqlalchemy import select
 from hil.drives.station import load_station_identity
 from hil.errors import InputError
 from hil.gum import rounded_pair
+from hil.store import fleet_cli
 from hil.store.engine import Store, open_store, resolve_store_url
 from hil.store.ingest import Ingested, ingest_tree
 from hil.store.outbox import sync_outbox
@@ -56,6 +58,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     trend.add_argument("--since", default=None, help="only runs from this date (YYYY-MM-DD)")
     trend.add_argument("--include-aborted", action="store_true")
     trend.add_argument("--include-reference", action="store_true")
+    fleet_cli.add_arguments(commands, common)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -77,7 +80,9 @@ def run(args: argparse.Namespace) -> int:
             return 0
         if command == "history":
             return _history(args, store)
-        return _trend(args, store)
+        if command == "trend":
+            return _trend(args, store)
+        return fleet_cli.run(args, store)
     finally:
         store.close()
 

@@ -1,0 +1,141 @@
+"""``gimbal-hil results spc / export / yield / report``: the fleet statistics of
+:mod:`hil.fleet` over the stored runs.
+
+``spc PARAM`` exits 1 when a selected Nelson rule or the EWMA fires on one of the newest
+``--gate-last`` runs (default 1: the unit just calibrated), so a line can gate on it; the
+limits are the frozen baseline's when one was frozen (``spc baseline freeze PARAM``), else
+trial limits from the runs shown.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from datetime import UTC, datetime
+from pathlib import Path
+from typing import Any
+
+from hil.errors import InputError
+from hil.fleet.baseline import freeze_baseline
+from hil.fleet.charts import EwmaSettings
+from hil.fleet.commands import export_rows, fleet_report_html, has_signal, spc_report, yield_table
+from hil.store.engine import Store
+from hil.store.query import load_baseline, result_series, run_summaries, save_baseline
+
+BASELINE_PREFIX = "spc:"
+
+
+def add_arguments(commands: argparse._SubParsersAction[argparse.ArgumentParser],
+                  common: argparse.ArgumentParser) -> None:
+    """Add ``spc``, ``export``, ``yield`` and ``report`` to the ``results`` subcommands."""
+    selection = argparse.ArgumentParser(add_help=False)
+    selection.add_argument("--station", default=None, help="only this station id")
+    selection.add_argument("--since", default=None, help="only runs from this date (YYYY-MM-DD)")
+    spc = commands.add_parser(
+        "spc", parents=[common, selection],
+        help="capability, I-MR chart, Nelson rules, EWMA of one result (exit 1 on a signal); "
+             "'spc baseline freeze PARAM' freezes the limits")
+    spc.add_argument("words", nargs="+", metavar="PARAM",
+                     help="the result's name, or: baseline freeze PARAM")
+    spc.add_argument("--rules", default="1,2,5,6", help="Nelson rules (comma list or 'all')")
+    spc.add_argument("--ewma-lambda", type=float, default=0.2)
+    spc.add_argument("--ewma-l", type=float, default=3.0)
+    spc.add_argument("--gate-last", type=int, default=1,
+                     help="exit 1 on a signal among the newest N runs (0: any run)")
+    export = commands.add_parser("export", parents=[common, selection],
+                                 help="one result's stored values as CSV or parquet")
+    export.add_argument("parameter", metavar="PARAM")
+    export.add_argument("--format", choices=("csv", "parquet"), default="csv")
+    export.add_argument("--output", type=Path, required=True, help="file to write")
+    fpy = commands.add_parser("yield", parents=[common, selection],
+                              help="first-pass yield per station and/or day")
+    fpy.add_argument("--by", choices=("station", "day", "station_day"), default="station")
+    report = commands.add_parser("report", parents=[common, selection],
+                                 help="HTML fleet report: histograms, charts, Cpk, yield")
+    report.add_argument("--html", type=Path, required=True, help="file to write")
+    report.add_argument("--parameters", default=None,
+                        help="comma list of results (default: every stored result)")
+
+
+def run(args: argparse.Namespace, store: Store) -> int:
+    """Run one of this module's subcommands; its exit code."""
+    since = _since(args.since)
+    command = args.results_command
+    if command == "spc":
+        return _spc(args, store, since)
+    if command == "export":
+        points = result_series(store, args.parameter, station=args.station, since=since,
+                               include_reference=True)
+        _require(points, args.parameter, store)
+        path = export_rows(points, format=args.format, path=args.output)
+        print(f"{len(points)} run(s) of {args.parameter} written to {path}")
+        return 0
+    if command == "yield":
+        result = yield_table(run_summaries(store, station=args.station, since=since),
+                             by=args.by)
+        print(json.dumps(result.to_json(), indent=2) if args.json else result.table())
+        return 0
+    names = (args.parameters.split(",") if args.parameters else _stored_names(store))
+    series = {name: result_series(store, name, station=args.station, since=since)
+              for name in names}
+    baselines = {name: found for name in names
+                 if (found := load_baseline(store, BASELINE_PREFIX + name)) is not None}
+    path = fleet_report_html(series, run_summaries(store, station=args.station, since=since),
+                             args.html, baselines=baselines)
+    print(f"fleet report of {len(names)} result(s) written to {path}")
+    return 0
+
+
+def _spc(args: argparse.Namespace, store: Store, since: datetime | None) -> int:
+    words: list[str] = args.words
+    if words[:2] == ["baseline", "freeze"] and len(words) == 3:
+        name = words[2]
+        points = result_series(store, name, station=args.station, since=since)
+        frozen = freeze_baseline(points, parameter=name, frozen_at=datetime.now(UTC))
+        save_baseline(store, BASELINE_PREFIX + name, frozen.to_dict())
+        print(json.dumps(frozen.to_dict(), indent=2) if args.json else
+              f"baseline for {name} frozen from {frozen.n} runs "
+              f"({frozen.first_started_at} … {frozen.last_started_at}) in {store.url}")
+        return 0
+    if len(words) != 1:
+        raise InputError("spc takes one result name, or: spc baseline freeze PARAM")
+    name = words[0]
+    points = result_series(store, name, station=args.station, since=since)
+    _require(points, name, store)
+    baseline = load_baseline(store, BASELINE_PREFIX + name)
+    rules: Any = "all" if args.rules == "all" else [int(r) for r in args.rules.split(",") if r]
+    result = spc_report(points, parameter=name, rules=rules,
+                        limits_from="data" if baseline is None else "baseline",
+                        baseline=baseline,
+                        ewma=EwmaSettings(lam=args.ewma_lambda, width=args.ewma_l))
+    signal = has_signal(result, last=args.gate_last or None)
+    print(json.dumps({**result.to_json(), "signal": signal}, indent=2) if args.json
+          else result.table())
+    if signal and not args.json:
+        scope = ("the newest run" if args.gate_last == 1 else
+                 "any run" if not args.gate_last else f"the newest {args.gate_last} runs")
+        print(f"SIGNAL: a selected rule or the EWMA fired on {scope} (exit 1)")
+    return 1 if signal else 0
+
+
+def _since(text: str | None) -> datetime | None:
+    if text is None:
+        return None
+    try:
+        return datetime.fromisoformat(text).replace(tzinfo=UTC)
+    except ValueError:
+        raise InputError(f"not a date (YYYY-MM-DD): {text!r}", source="--since") from None
+
+
+def _require(points: list[Any], name: str, store: Store) -> None:
+    if not points:
+        raise InputError(f"no stored results named '{name}' in {store.url}")
+
+
+def _stored_names(store: Store) -> list[str]:
+    from sqlalchemy import select
+
+    from hil.store.schema import results
+
+    with store.engine.connect() as connection:
+        return sorted(connection.execute(select(results.c.name).distinct()).scalars())
