@@ -1,8 +1,9 @@
 """A population of simulated units, calibrated, against the truth each result claims.
 
 Shared by ``bench_coverage.py`` (the benchmark) and ``tests/test_coverage.py`` (its small
-version). A unit is one of the demo profiles with every ``[plant]`` parameter drawn across
-its measurement's tolerance range (parameters without a declared measurement: ±20 %;
+version). A unit is one of the demo profiles with every ``[plant]`` parameter (and the
+``[firmware]`` current-loop lag, gains and filter) drawn across its measurement's tolerance
+range (parameters without a declared measurement: ±20 %;
 ``T_s`` as ``T_c·(1.1 … 1.5)``, so that every unit has the Stribeck peak ``v_s`` describes),
 every effect on, and its own noise seed. It is calibrated through the command line, as a
 test engineer would (``gimbal-hil calibrate --drive sim``), and each certificate result
@@ -16,7 +17,7 @@ the reported torque are in those units.
 =================================  ==========================================================
 result                             truth
 =================================  ==========================================================
-current_loop_time_constant_ms      ``1000·current_loop_time_constant_s``
+current_loop_time_constant_ms      ``1000·current_loop_time_constant_s`` (``[firmware]``)
 gravity_mge_nm                     ``gravity_mge_nm / g``
 gravity_phase_rad                  ``gravity_phase_rad``
 eccentricity_mm                    ``1000·gravity_mge_nm / (g·mass_kg·9.80665)`` (reported)
@@ -140,6 +141,20 @@ def draw_plant(profile_raw: Mapping[str, Any], rng: np.random.Generator) -> dict
     return drawn
 
 
+def draw_firmware(profile_raw: Mapping[str, Any], rng: np.random.Generator) -> dict[str, Any]:
+    """The ``[firmware]`` table of a new unit: the controller's numbers drawn like the
+    plant's (the current loop's lag across its measurement's tolerance, the velocity loop's
+    gains and filter ±20 %: the tuning each drive ships with), its version and switches kept."""
+    drawn: dict[str, Any] = {}
+    for key, value in dict(profile_raw.get("firmware", {})).items():
+        if isinstance(value, float):
+            spread = _relative_spread(profile_raw, MEASURED_BY.get(key, ""))
+            drawn[key] = value * rng.uniform(1 - spread, 1 + spread)
+        else:  # version, command_delay_samples, feedforward, cogging_compensation
+            drawn[key] = value
+    return drawn
+
+
 def write_population(
     directory: Path, *, units_per_profile: int, seed: int, profiles: Sequence[str] = PROFILES
 ) -> list[Unit]:
@@ -152,8 +167,8 @@ def write_population(
         for i in range(units_per_profile):
             serial = f"{name.removeprefix('demo_gimbal_')[:3].upper()}-{i:04d}"
             path = directory / f"{serial}.toml"
-            path.write_text(tomli_w.dumps({**raw, "plant": draw_plant(raw, rng)}),
-                            encoding="utf-8")
+            drawn = {**raw, "plant": draw_plant(raw, rng), "firmware": draw_firmware(raw, rng)}
+            path.write_text(tomli_w.dumps(drawn), encoding="utf-8")
             units.append(Unit(profile_path=path, serial=serial, axis=raw["unit"]["axis"],
                               seed=int(rng.integers(1, 2**31 - 1))))
     return units
@@ -189,7 +204,7 @@ def truths(unit: Unit) -> dict[str, float]:
     assert plant is not None
     g = 1.0 + plant.torque_constant_error_rel
     truth: dict[str, float] = {
-        "current_loop_time_constant_ms": 1000 * plant.current_loop_time_constant_s,
+        "current_loop_time_constant_ms": 1000 * profile.firmware.current_loop_time_constant_s,
         "gravity_mge_nm": plant.gravity_mge_nm / g,
         "gravity_phase_rad": plant.gravity_phase_rad,
         "cable_stiffness_nm_rad": plant.cable_stiffness_nm_rad / g,
@@ -217,7 +232,8 @@ def truths(unit: Unit) -> dict[str, float]:
         sys.path.insert(0, str(Path(__file__).resolve().parent))
         from crb_frf import two_mass_truth
 
-        model = two_mass_truth(plant)
+        model = two_mass_truth(
+            plant, time_constant_s=profile.firmware.current_loop_time_constant_s)
         truth["resonance_frequency_hz"] = model.resonance_hz
         truth["antiresonance_frequency_hz"] = model.antiresonance_hz
         truth["resonance_damping_ratio"] = model.resonance_damping

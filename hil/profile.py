@@ -11,9 +11,12 @@ from typing import Any
 from hil.config import ConfigTable, builtin_fixture, read_toml
 from hil.errors import ProfileError
 from hil.motion import Limits
+from plant_sim.firmware import Firmware, firmware_from_table
 from plant_sim.params import PlantParams, plant_from_table
 
 DEFAULT_PROFILE = "demo_gimbal_elevation"
+DIRECTIONS = ("higher", "lower")
+"""A measurement's optional ``direction``: which way is better."""
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -36,6 +39,7 @@ class MeasurementSpec:
     accuracy_rel: float | None = None
     allowance_rel: float | None = None
     description: str = ""
+    direction: str | None = None
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -47,6 +51,7 @@ class UnitProfile:
     limits: Limits
     sample_rate_hz: float
     plant: PlantParams | None
+    firmware: Firmware
     protocols: Mapping[str, Mapping[str, Any]]
     measurements: Mapping[str, MeasurementSpec]
     unit: Mapping[str, Any] = field(default_factory=dict)
@@ -122,6 +127,7 @@ def profile_from_mapping(data: Mapping[str, Any], *, source: str, sha256: str = 
     sample_rate_hz = drive.positive("sample_rate_hz")
     drive.done()
     plant = plant_from_table(document.table_at("plant")) if "plant" in document else None
+    firmware = firmware_from_table(document.table_at("firmware", required=False))
     protocols = {name: table.values for name, table in document.tables("protocols").items()}
     measurements = {
         name: _measurement(name, table) for name, table in document.tables("measurements").items()
@@ -135,6 +141,7 @@ def profile_from_mapping(data: Mapping[str, Any], *, source: str, sha256: str = 
         limits=limits,
         sample_rate_hz=sample_rate_hz,
         plant=plant,
+        firmware=firmware,
         protocols=protocols,
         measurements=measurements,
         unit=dict(unit.values),
@@ -183,6 +190,7 @@ def _measurement(name: str, table: ConfigTable) -> MeasurementSpec:
         accuracy_rel=None if accuracy is None else accuracy / 100.0,
         allowance_rel=None if allowance is None else allowance / 100.0,
         description=table.string("description", ""),
+        direction=table.choice("direction", DIRECTIONS) if "direction" in table else None,
     )
     table.done()
     return spec

@@ -40,6 +40,7 @@ from hil.config import builtin_fixture
 from hil.drives.cia402.emulator_recorder import DriveRecorder
 from hil.drives.emulator_faults import CanFaults
 from hil.motion import Mode
+from plant_sim.firmware import Firmware
 from plant_sim.model import Plant
 from plant_sim.params import PlantParams
 
@@ -125,6 +126,7 @@ class Cia402Emulator:
         self,
         plant: PlantParams,
         *,
+        firmware: Firmware | None = None,
         fs_hz: float,
         seed: int,
         channel: str,
@@ -143,7 +145,8 @@ class Cia402Emulator:
     ) -> None:
         if exact_torque_hold and not plant.exact_torque_hold:
             plant = plant.with_changes(exact_torque_hold=True)  # the same physics as SimDrive
-        self.plant = Plant(plant, fs_hz=fs_hz, seed=seed)
+        self.firmware = firmware or Firmware()
+        self.plant = Plant(plant, fs_hz=fs_hz, seed=seed, firmware=self.firmware)
         self.fs_hz = float(fs_hz)
         self.faults = faults or CanFaults()
         self.node_id = node_id

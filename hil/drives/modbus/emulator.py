@@ -47,6 +47,7 @@ from hil.drives.modbus.regmap import (
     load_register_map,
 )
 from hil.motion import Mode
+from plant_sim.firmware import Firmware
 from plant_sim.model import Plant
 from plant_sim.params import PlantParams
 
@@ -101,6 +102,7 @@ class ModbusEmulator:
         self,
         plant: PlantParams,
         *,
+        firmware: Firmware | None = None,
         fs_hz: float,
         seed: int,
         register_map: Path,
@@ -110,7 +112,8 @@ class ModbusEmulator:
         serial_number: int = 1,
         watchdog_s: float = 0.5,
     ) -> None:
-        self.plant = Plant(plant, fs_hz=fs_hz, seed=seed)
+        self.firmware = firmware or Firmware()
+        self.plant = Plant(plant, fs_hz=fs_hz, seed=seed, firmware=self.firmware)
         self.fs_hz = float(fs_hz)
         self.map = load_register_map(register_map)
         self.rated_torque_nm = rated_torque_nm

@@ -1,0 +1,123 @@
+"""cogging_compensation: the protocol's library (spec, excitation, analysis); the test and
+its declared measurements are in ``protocols/test_cogging_compensation.py``.
+
+How well the drive's cogging compensation works: the table the cogging protocol wrote
+(``cogging_compensation.json``) is loaded into the drive, and the same constant-velocity
+pass is run with it cleared and with it loaded (a drive applies it only when its firmware
+has ``cogging_compensation``). The residual cogging is the position ripple at the table's
+orders; the ratio without / with is the compensation's effectiveness. Numerics in
+:mod:`hil.closed_loop.ripple`.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from hil.closed_loop.ripple import position_ripple, ripple_estimate
+from hil.closed_loop.tracking import reduction
+from hil.drives.base import DriveInfo
+from hil.errors import IdentificationError
+from hil.identify.estimate import Estimate
+from hil.motion import CompensationTable, Excitation, Mode, PositionHarmonic
+from hil.profile import UnitProfile
+from hil.recording import Recording
+from hil.suite.travel import TravelSpec, on_command_grid, speed_ramp
+
+NAME = "cogging_compensation"
+MEASUREMENTS = ("cogging_ripple_uncompensated_urad", "cogging_ripple_compensated_urad",
+                "cogging_compensation_ratio")
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class Spec(TravelSpec):
+    """One constant-velocity pass (after a ramp and ``skip_s``), run twice."""
+
+    speed_rad_s: float
+    pass_s: float
+    ramp_s: float
+    skip_s: float
+
+    @classmethod
+    def from_profile(cls, profile: UnitProfile, info: DriveInfo) -> Spec:
+        """The spec from ``[protocols.cogging_compensation]`` and the drive.
+
+        Raises
+        ------
+        ProfileError
+            A missing, mistyped or unknown key; a pass past the travel limits.
+        """
+        settings = profile.settings(NAME)
+        spec = cls(
+            **TravelSpec.envelope(settings, profile, info),
+            speed_rad_s=settings.positive("speed_rad_s", 0.3),
+            pass_s=settings.positive("pass_s", 1.5),
+            ramp_s=settings.positive("ramp_s", 0.1),
+            skip_s=settings.positive("skip_s", 0.2),
+        )
+        settings.done()
+        spec.require_travel(spec.speed_rad_s * (spec.pass_s + spec.ramp_s), protocol=NAME,
+                            source=profile.source)
+        return spec
+
+    def command(self) -> np.ndarray:
+        up = speed_ramp(self.speed_rad_s, ramp_s=self.ramp_s, fs_hz=self.fs_hz, up=True)
+        down = speed_ramp(self.speed_rad_s, ramp_s=self.ramp_s, fs_hz=self.fs_hz, up=False)
+        return np.concatenate([up, np.full(round(self.pass_s * self.fs_hz), self.speed_rad_s),
+                               down])
+
+    @property
+    def analysed(self) -> slice:
+        start = round((self.ramp_s + self.skip_s) * self.fs_hz)
+        return slice(start, round((self.ramp_s + self.pass_s) * self.fs_hz))
+
+
+def table_from_json(data: Mapping[str, Any]) -> CompensationTable:
+    """The drive's table from ``cogging_compensation.json`` (format: hil/identify/cogging.py).
+
+    Raises
+    ------
+    IdentificationError
+        The file holds no cogging harmonic.
+    """
+    cogging = tuple(PositionHarmonic(order=int(h["order"]), amplitude=float(h["amplitude_nm"]),
+                                     phase_rad=float(h["phase_rad"])) for h in data["cogging"])
+    ripple = tuple(PositionHarmonic(order=int(h["order"]), amplitude=float(h["amplitude"]),
+                                    phase_rad=float(h["phase_rad"])) for h in data["kt_ripple"])
+    if not cogging and not ripple:
+        raise IdentificationError("the compensation table holds no harmonic")
+    return CompensationTable(cogging_nm=cogging, kt_ripple=ripple)
+
+
+def orders(table: CompensationTable) -> list[int]:
+    return sorted({h.order for h in (*table.cogging_nm, *table.kt_ripple)})
+
+
+def excitation(spec: Spec) -> tuple[Excitation, Excitation]:
+    """The pass with the table cleared and loaded (each from :attr:`Spec.start_rad`,
+    reached by ``spec.move_to_start`` from wherever the axis is)."""
+    command = spec.command()
+    off, on = (Excitation(name=f"pass_{label}", mode=Mode.VELOCITY, fs_hz=spec.fs_hz,
+                          command=command) for label in ("uncompensated", "compensated"))
+    return off, on
+
+
+def analyse(off: tuple[Recording, Excitation], on: tuple[Recording, Excitation],
+            spec: Spec, table: CompensationTable) -> tuple[dict[str, Estimate], list[int]]:
+    """The residual ripple without and with the table, and their ratio."""
+    found = []
+    for recording, exc in (off, on):
+        position, _, _ = on_command_grid(recording, exc)
+        window = spec.analysed
+        t = np.arange(len(position))[window] / spec.fs_hz
+        found.append(position_ripple(t, position[window], orders=orders(table)))
+    (a_off, u_off, n_off), (a_on, u_on, n_on) = found
+    without = ripple_estimate("cogging_ripple_uncompensated_urad", a_off, u_off, order=n_off)
+    with_table = ripple_estimate("cogging_ripple_compensated_urad", a_on, u_on, order=n_on)
+    ratio = reduction(without, with_table, name="cogging_compensation_ratio",
+                      labels=("table cleared", "table loaded"))
+    return ({without.name: without, with_table.name: with_table, ratio.name: ratio},
+            [n_off, n_on])
