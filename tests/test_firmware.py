@@ -74,8 +74,10 @@ def test_an_old_profile_with_firmware_keys_in_plant_is_told_where_they_moved(
     with pytest.raises(ProfileError) as caught:
         load_profile(path)
     text = str(caught.value)
-    assert f"[plant] holds '{key}'" in text and "moved to the [firmware] table" in text
-    assert str(path) in text and "\n" not in text
+    assert f"[plant] holds '{key}'" in text
+    assert "moved to the [firmware] table" in text
+    assert str(path) in text
+    assert "\n" not in text
 
 
 def test_the_old_profile_error_is_one_line_from_the_command_line(
@@ -88,7 +90,8 @@ def test_the_old_profile_error_is_one_line_from_the_command_line(
                  "--out", str(tmp_path / "r.csv")])
     err = capsys.readouterr().err.strip()
     assert code == 2
-    assert len(err.splitlines()) == 1 and "[firmware]" in err
+    assert len(err.splitlines()) == 1
+    assert "[firmware]" in err
 
 
 def _torque_run(firmware: Firmware, command: np.ndarray,
