@@ -24,6 +24,7 @@ from __future__ import annotations
 import asyncio
 import logging
 import math
+import re
 import threading
 import time
 from dataclasses import dataclass
@@ -44,6 +45,7 @@ from hil.drives.modbus.regmap import (
     TIMESTAMP,
     TORQUE_MEAN,
     TORQUE_MEAN_WINDOW,
+    TORQUE_OFFSET,
     load_register_map,
 )
 from hil.motion import Mode
@@ -95,6 +97,15 @@ class _Context(ModbusBaseDeviceContext):  # type: ignore[misc]
         return await self.emulator.serve(func_code, address, len(values), [int(v) for v in values])
 
 
+def version_code(version: str) -> int:
+    """The ``firmware_version`` register (major × 256 + minor) of a version string: its
+    first ``major.minor`` (``"GMB-2-EL 1.4.0"`` → 0x0104); 0 when it has none."""
+    found = re.search(r"(\d+)\.(\d+)", version)
+    if found is None:
+        return 0
+    return min(int(found.group(1)), 255) * 256 + min(int(found.group(2)), 255)
+
+
 class ModbusEmulator:
     """One emulated servo axis behind a Modbus server on 127.0.0.1 (an ephemeral port)."""
 
@@ -144,7 +155,7 @@ class ModbusEmulator:
         self._server: ModbusTcpServer | None = None
         self._ready = threading.Event()
         self._stopping = False
-        self._put("firmware_version", 2 * 256 + 1)
+        self._put("firmware_version", version_code(self.firmware.version))
         self._put("serial_number", serial_number)
         self._put("rated_torque", rated_torque_nm)
         self._put("mode", self.map.modes["velocity"])
@@ -329,7 +340,10 @@ class ModbusEmulator:
             self._clock += block / self.fs_hz
             steps -= block
             mode, command = self._command(block)
-            trace = self.plant.run(mode, command)
+            offset = None
+            if self.enabled and TORQUE_OFFSET in self.map.registers:
+                offset = np.full(block, self._get(TORQUE_OFFSET))  # held until written again
+            trace = self.plant.run(mode, command, offset)
             if self.enabled:
                 self.time_enabled_s += block / self.fs_hz
             self._sample(trace)
