@@ -23,7 +23,7 @@ def result(drive: Drive, calibration: CalibrationRun, profile: UnitProfile
     hold = excitation(spec, position_rad=drive.status().position_rad)
     estimates, blocks = analyse(calibration.run(drive, hold, protocol=NAME), hold, spec)
     calibration.details[NAME] = {
-        "position_rad": spec.position_rad,
+        "position_rad": float(hold.command[-1]),
         "block_torque_rms_mnm": [float(v) * 1e3 for v in blocks.torque_rms_nm],
         "block_position_rms_urad": [float(v) * 1e6 for v in blocks.position_rms_rad],
     }

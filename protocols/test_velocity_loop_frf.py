@@ -30,8 +30,9 @@ def result(drive: Drive, calibration: CalibrationRun, profile: UnitProfile) -> F
         why=f"4 × its highest line, {max(spec.frequencies_hz):g} Hz")
     if shortfall is not None:
         pytest.skip(shortfall)
-    move, lines = excitation(spec, position_rad=drive.status().position_rad)
-    calibration.run(drive, move, protocol=NAME)
+    *moves, lines = excitation(spec, position_rad=drive.status().position_rad)
+    for move in moves:
+        calibration.run(drive, move, protocol=NAME)
     analysed = analyse(calibration.run(drive, lines, protocol=NAME), spec)
 
     def db(values: np.ndarray) -> list[float]:

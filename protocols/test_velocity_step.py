@@ -24,8 +24,9 @@ pytestmark = pytest.mark.protocol(NAME)
 def result(drive: Drive, calibration: CalibrationRun, profile: UnitProfile
            ) -> dict[str, Estimate]:
     spec = Spec.from_profile(profile, drive.info)
-    move, forward, backward = excitation(spec, position_rad=drive.status().position_rad)
-    calibration.run(drive, move, protocol=NAME)
+    *moves, forward, backward = excitation(spec, position_rad=drive.status().position_rad)
+    for move in moves:
+        calibration.run(drive, move, protocol=NAME)
     runs = [(calibration.run(drive, e, protocol=NAME), e) for e in (forward, backward)]
     estimates, steps = analyse(runs, spec)
     calibration.details[NAME] = {

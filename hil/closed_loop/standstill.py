@@ -1,7 +1,8 @@
 """Standstill: torque ripple and position jitter while the drive holds a position.
 
 Over ``blocks`` equal blocks of the hold: the RMS of the reported torque about its block
-mean (N·m) and the RMS of the encoder position about its block mean (rad). The result is
+mean and trend (N·m) and the RMS of the encoder position about its block mean and trend
+(rad; a slow settling after the move is not jitter). The result is
 the RMS over all blocks; its Type A uncertainty the scatter of the block values ``s/√b``
 (``b − 1`` degrees of freedom). The encoder's resolution is a rectangular Type B line of
 the jitter (a position held inside one count reads as no jitter at all), the torque's
@@ -42,9 +43,16 @@ def standstill_blocks(position_rad: FloatArray, torque_nm: FloatArray, *, blocks
     n = len(position_rad) // blocks if blocks > 0 else 0
     if blocks < 2 or n < 10:
         raise IdentificationError(f"standstill: {len(position_rad)} samples in {blocks} blocks")
-    pos = np.asarray(position_rad[: n * blocks]).reshape(blocks, n)
-    tq = np.asarray(torque_nm[: n * blocks]).reshape(blocks, n)
+    pos = _detrended(np.asarray(position_rad[: n * blocks]).reshape(blocks, n))
+    tq = _detrended(np.asarray(torque_nm[: n * blocks]).reshape(blocks, n))
     return Standstill(torque_rms_nm=tq.std(axis=1), position_rms_rad=pos.std(axis=1))
+
+
+def _detrended(blocks: FloatArray) -> FloatArray:
+    """Each block less its straight line (a slow settling is not jitter)."""
+    ramp = np.arange(blocks.shape[1]) - (blocks.shape[1] - 1) / 2
+    slope = blocks @ ramp / (ramp @ ramp)
+    return np.asarray(blocks - slope[:, None] * ramp[None, :], dtype=np.float64)
 
 
 def block_estimate(name: str, values: FloatArray, *, scale: float, unit: str,

@@ -98,16 +98,33 @@ class Spec(TravelSpec):
         return slice(start, start + self.periods * round(self.period_s * self.fs_hz))
 
 
+def direction_from(spec: TravelSpec, position_rad: float, needed_rad: float) -> float | None:
+    """+1 or −1 when a one-way run of ``needed_rad`` fits from ``position_rad`` (up first),
+    ``None`` when it fits neither way or the axis stands inside a margin (the run then starts
+    at :attr:`TravelSpec.start_rad`)."""
+    low, high = spec.travel_min_rad + spec.margin_rad, spec.travel_max_rad - spec.margin_rad
+    if not low <= position_rad <= high:
+        return None
+    if position_rad + needed_rad <= spec.travel_max_rad - spec.margin_rad:
+        return 1.0
+    if position_rad - needed_rad >= spec.travel_min_rad + spec.margin_rad:
+        return -1.0
+    return None
+
+
 def excitation(spec: Spec, *, position_rad: float) -> list[Excitation]:
-    """Move to the start; ramp to the carrier, the multisine's periods on it, ramp down."""
+    """Ramp to the carrier, the multisine's periods on it, ramp down: from where the axis
+    is, up or down, where that fits (else a move to the start first)."""
     lines = multisine(harmonics=spec.harmonics, amplitudes_rad_s=spec.amplitudes_rad_s,
                       period_s=spec.period_s, periods=spec.settle_periods + spec.periods,
                       fs_hz=spec.fs_hz)
     up = speed_ramp(spec.speed_rad_s, ramp_s=spec.ramp_s, fs_hz=spec.fs_hz, up=True)
     down = speed_ramp(spec.speed_rad_s, ramp_s=spec.ramp_s, fs_hz=spec.fs_hz, up=False)
     command = np.concatenate([up, spec.speed_rad_s + lines, down])
-    return [spec.move_to_start(position_rad, hold_s=0.2),
-            Excitation(name="multisine", mode=Mode.VELOCITY, fs_hz=spec.fs_hz, command=command)]
+    sign = direction_from(spec, position_rad, float(np.sum(command)) / spec.fs_hz)
+    runs = [] if sign is not None else [spec.move_to_start(position_rad, hold_s=0.2)]
+    return [*runs, Excitation(name="multisine", mode=Mode.VELOCITY, fs_hz=spec.fs_hz,
+                              command=(sign or 1.0) * command)]
 
 
 def analyse(recording: Recording, spec: Spec) -> FrfResult:
@@ -121,6 +138,7 @@ def analyse(recording: Recording, spec: Spec) -> FrfResult:
     window = spec.analysed
     command = recording.velocity_cmd
     assert command is not None
-    return analyse_frf(command=command[window], velocity=recording.velocity[window],
-                       torque=recording.effort[window], harmonics=spec.harmonics,
+    sign = 1.0 if float(np.mean(command)) >= 0 else -1.0  # a run down: the same loop
+    return analyse_frf(command=sign * command[window], velocity=sign * recording.velocity[window],
+                       torque=sign * recording.effort[window], harmonics=spec.harmonics,
                        period_s=spec.period_s, fs_hz=spec.fs_hz, periods=spec.periods)

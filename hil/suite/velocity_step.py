@@ -20,6 +20,7 @@ from hil.motion import Excitation, Mode
 from hil.profile import UnitProfile
 from hil.recording import Recording
 from hil.suite.travel import TravelSpec, on_command_grid, speed_ramp
+from hil.suite.velocity_loop_frf import direction_from
 
 NAME = "velocity_step"
 SIZES = ("small", "large")
@@ -92,12 +93,16 @@ def staircase(spec: Spec, sign: float) -> np.ndarray:
 
 
 def excitation(spec: Spec, *, position_rad: float) -> list[Excitation]:
-    """Move to the start, the staircase forward, then its mirror back."""
-    return [spec.move_to_start(position_rad, hold_s=0.2),
+    """The staircase one way and its mirror back: from where the axis is, up first or down
+    first, where that fits (else a move to the start first)."""
+    sign = direction_from(spec, position_rad, spec.travel_rad)
+    runs = [] if sign is not None else [spec.move_to_start(position_rad, hold_s=0.2)]
+    first = sign or 1.0
+    return [*runs,
             Excitation(name="steps_forward", mode=Mode.VELOCITY, fs_hz=spec.fs_hz,
-                       command=staircase(spec, 1.0)),
+                       command=staircase(spec, first)),
             Excitation(name="steps_backward", mode=Mode.VELOCITY, fs_hz=spec.fs_hz,
-                       command=staircase(spec, -1.0))]
+                       command=staircase(spec, -first))]
 
 
 def step_results(recording: Recording, excitation: Excitation, spec: Spec

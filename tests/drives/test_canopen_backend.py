@@ -61,7 +61,7 @@ def test_sine_over_canopen_agrees_with_simdrive(profile: UnitProfile) -> None:
     }
     assert np.allclose(np.diff(rec.time_s), 1e-3)  # times from the SYNC count
     assert rec.metadata["drive"] == "canopen node 5"
-    assert rec.metadata["firmware"] == "1.4.0"
+    assert rec.metadata["firmware"] == profile.firmware.version  # 0x100A, from [firmware]
     assert rec.metadata["operation_mode"] == "9"  # cyclic synchronous velocity
     assert rec.metadata["lost_samples"] == "0"
 
