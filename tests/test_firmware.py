@@ -178,3 +178,30 @@ def test_the_firmware_version_is_the_drives() -> None:
     drive = SimDrive(PROFILE.plant, firmware=PROFILE.firmware, limits=PROFILE.limits,
                      fs_hz=FS, seed=0)
     assert drive.info.firmware_version == PROFILE.firmware.version
+
+
+CLOSED_LOOP = ("velocity_loop_frf", "velocity_step", "tracking", "standstill",
+               "cogging_compensation")
+
+
+def test_every_closed_loop_measurement_declares_its_direction() -> None:
+    import importlib
+
+    for name in ("demo_gimbal_elevation", "demo_gimbal_azimuth"):
+        profile = load_profile(name)
+        closed = {m for p in CLOSED_LOOP
+                  for m in importlib.import_module(f"hil.suite.{p}").MEASUREMENTS}
+        for spec in profile.measurements.values():
+            if spec.name in closed:
+                assert spec.direction in ("higher", "lower"), spec.name
+            else:  # mechanics: no better direction
+                assert spec.direction is None, spec.name
+        assert closed <= set(profile.measurements)
+
+
+def test_a_direction_other_than_higher_or_lower_is_refused(tmp_path: Path) -> None:
+    path = _write(tmp_path, {"measurements": {"inertia_kg_m2": {
+        "unit": "kg·m²", "nominal": 0.0036, "tolerance_pct": 15, "direction": "up"}}})
+    with pytest.raises(ProfileError, match=r"\[measurements.inertia_kg_m2\] 'direction': "
+                                           "must be one of higher, lower"):
+        load_profile(path)
