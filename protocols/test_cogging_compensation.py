@@ -27,6 +27,7 @@ from hil.suite.cogging_compensation import (
     orders,
     table_from_json,
 )
+from hil.suite.rate import sample_rate_shortfall
 
 pytestmark = pytest.mark.protocol(NAME)
 
@@ -55,6 +56,12 @@ def result(cleared: Drive, calibration: CalibrationRun, profile: UnitProfile
     with open(path, encoding="utf-8") as handle:
         table = table_from_json(json.load(handle))
     spec = Spec.from_profile(profile, drive.info)
+    shortfall = sample_rate_shortfall(
+        spec.needed_sample_rate_hz, drive.info, protocol=NAME,
+        why=f"≥ {spec.min_samples_per_pass} samples in the {spec.pass_s - spec.skip_s:g} s "
+            "analysed pass")
+    if shortfall is not None:
+        pytest.skip(shortfall)
     off, on = excitation(spec)
     recorded = []
     for loaded, run in ((None, off), (table, on)):

@@ -15,6 +15,7 @@ from hil.calibration import CalibrationRun
 from hil.drives.base import Drive
 from hil.identify.estimate import Estimate
 from hil.profile import UnitProfile
+from hil.suite.rate import sample_rate_shortfall
 from hil.suite.velocity_step import MEASUREMENTS, NAME, Spec, analyse, excitation
 
 pytestmark = pytest.mark.protocol(NAME)
@@ -24,6 +25,10 @@ pytestmark = pytest.mark.protocol(NAME)
 def result(drive: Drive, calibration: CalibrationRun, profile: UnitProfile
            ) -> dict[str, Estimate]:
     spec = Spec.from_profile(profile, drive.info)
+    shortfall = sample_rate_shortfall(spec.min_sample_rate_hz, drive.info, protocol=NAME,
+                                      why="≥ 10 samples in a 10 ms rise")
+    if shortfall is not None:
+        pytest.skip(shortfall)
     *moves, forward, backward = excitation(spec, position_rad=drive.status().position_rad)
     for move in moves:
         calibration.run(drive, move, protocol=NAME)

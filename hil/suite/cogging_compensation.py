@@ -25,6 +25,7 @@ from hil.identify.estimate import Estimate
 from hil.motion import CompensationTable, Excitation, Mode, PositionHarmonic
 from hil.profile import UnitProfile
 from hil.recording import Recording
+from hil.suite.cogging import MIN_SAMPLES_PER_PASS
 from hil.suite.travel import TravelSpec, on_command_grid, speed_ramp
 
 NAME = "cogging_compensation"
@@ -40,6 +41,7 @@ class Spec(TravelSpec):
     pass_s: float
     ramp_s: float
     skip_s: float
+    min_samples_per_pass: int  # as the cogging protocol: the ripple's floor falls as 1/√N
 
     @classmethod
     def from_profile(cls, profile: UnitProfile, info: DriveInfo) -> Spec:
@@ -57,11 +59,17 @@ class Spec(TravelSpec):
             pass_s=settings.positive("pass_s", 1.5),
             ramp_s=settings.positive("ramp_s", 0.1),
             skip_s=settings.positive("skip_s", 0.2),
+            min_samples_per_pass=settings.integer("min_samples_per_pass", MIN_SAMPLES_PER_PASS),
         )
         settings.done()
         spec.require_travel(spec.speed_rad_s * (spec.pass_s + spec.ramp_s), protocol=NAME,
                             source=profile.source)
         return spec
+
+    @property
+    def needed_sample_rate_hz(self) -> float:
+        """Enough samples in the analysed pass (``min_samples_per_pass``)."""
+        return self.min_samples_per_pass / (self.pass_s - self.skip_s)
 
     def command(self) -> np.ndarray:
         up = speed_ramp(self.speed_rad_s, ramp_s=self.ramp_s, fs_hz=self.fs_hz, up=True)

@@ -42,6 +42,7 @@ class Spec(TravelSpec):
     hold_s: float
     ramp_s: float
     smooth_s: float
+    min_sample_rate_hz: float  # a rise of ~10 ms needs ~10 samples: not over a polled link
 
     @classmethod
     def from_profile(cls, profile: UnitProfile, info: DriveInfo) -> Spec:
@@ -61,6 +62,7 @@ class Spec(TravelSpec):
             hold_s=settings.positive("hold_s", 0.4),
             ramp_s=settings.positive("ramp_s", 0.1),
             smooth_s=settings.positive("smooth_s", 0.005),
+            min_sample_rate_hz=settings.positive("min_sample_rate_hz", 1000.0),
         )
         settings.done()
         spec.require_travel(spec.travel_rad, protocol=NAME, source=profile.source)
