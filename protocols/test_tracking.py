@@ -13,6 +13,7 @@ from hil.calibration import CalibrationRun
 from hil.drives.base import Drive
 from hil.identify.estimate import Estimate
 from hil.profile import UnitProfile
+from hil.suite.rate import sample_rate_shortfall
 from hil.suite.tracking import (
     MEASUREMENTS,
     MICRO,
@@ -30,6 +31,12 @@ pytestmark = pytest.mark.protocol(NAME)
 def result(drive: Drive, calibration: CalibrationRun, profile: UnitProfile
            ) -> dict[str, Estimate]:
     spec = Spec.from_profile(profile, drive.info)
+    shortfall = sample_rate_shortfall(
+        spec.min_sample_rate_hz, drive.info, protocol=NAME,
+        why="the torque offset follows the command sample by sample; a polled link holds it "
+            "a whole poll and writes it with the host's jitter")
+    if shortfall is not None:
+        pytest.skip(shortfall)
     viscous, coulomb, source = feedforward_values(calibration, profile)
     off, on = excitation(spec, viscous_nm_s_rad=viscous, coulomb_nm=coulomb)
     recorded = []

@@ -50,6 +50,7 @@ class Spec(TravelSpec):
     slew_s: float
     track_s: float
     reversal_s: float
+    min_sample_rate_hz: float  # the offset follows ω* sample by sample (not a polled link)
 
     @classmethod
     def from_profile(cls, profile: UnitProfile, info: DriveInfo) -> Spec:
@@ -69,6 +70,7 @@ class Spec(TravelSpec):
             slew_s=settings.positive("slew_s", 0.3),
             track_s=settings.positive("track_s", 0.5),
             reversal_s=settings.positive("reversal_s", 0.5),
+            min_sample_rate_hz=settings.positive("min_sample_rate_hz", 1000.0),
         )
         settings.done()
         spec.require_travel(float(np.sum(spec.command())) / spec.fs_hz, protocol=NAME,
