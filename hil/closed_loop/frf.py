@@ -128,6 +128,7 @@ class LoopFigures:
     sensitivity_peak_db: float
 
     def as_tuple(self) -> tuple[float, ...]:
+        """The figures in the order of :data:`MARGIN_NAMES`."""
         return (self.bandwidth_hz, self.peak_gain_db, self.gain_margin_db,
                 self.phase_margin_deg, self.sensitivity_peak_db)
 

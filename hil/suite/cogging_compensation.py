@@ -72,6 +72,7 @@ class Spec(TravelSpec):
         return self.min_samples_per_pass / (self.pass_s - self.skip_s)
 
     def command(self) -> np.ndarray:
+        """Ramp up, the constant-velocity pass, ramp down (rad/s)."""
         up = speed_ramp(self.speed_rad_s, ramp_s=self.ramp_s, fs_hz=self.fs_hz, up=True)
         down = speed_ramp(self.speed_rad_s, ramp_s=self.ramp_s, fs_hz=self.fs_hz, up=False)
         return np.concatenate([up, np.full(round(self.pass_s * self.fs_hz), self.speed_rad_s),
@@ -79,6 +80,7 @@ class Spec(TravelSpec):
 
     @property
     def analysed(self) -> slice:
+        """The pass's samples after the ramp and ``skip_s``."""
         start = round((self.ramp_s + self.skip_s) * self.fs_hz)
         return slice(start, round((self.ramp_s + self.pass_s) * self.fs_hz))
 
@@ -101,6 +103,7 @@ def table_from_json(data: Mapping[str, Any]) -> CompensationTable:
 
 
 def orders(table: CompensationTable) -> list[int]:
+    """Every order of the table, cogging and K_t ripple, ascending."""
     return sorted({h.order for h in (*table.cogging_nm, *table.kt_ripple)})
 
 

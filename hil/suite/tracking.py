@@ -78,6 +78,7 @@ class Spec(TravelSpec):
         return spec
 
     def command(self) -> np.ndarray:
+        """The standard move's velocity command (rad/s)."""
         return gimbal_move(slew_rad_s=self.slew_rad_s, track_rad_s=self.track_rad_s,
                            ramp_s=self.ramp_s, slew_s=self.slew_s, track_s=self.track_s,
                            reversal_s=self.reversal_s, fs_hz=self.fs_hz)

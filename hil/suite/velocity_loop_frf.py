@@ -75,19 +75,23 @@ class Spec(TravelSpec):
 
     @property
     def harmonics(self) -> tuple[int, ...]:
+        """Each line in cycles per period."""
         return tuple(round(f * self.period_s) for f in self.frequencies_hz)
 
     @property
     def amplitudes_rad_s(self) -> tuple[float, ...]:
+        """Each line's velocity amplitude (rad/s)."""
         return tuple(self.amplitude_high_rad_s if f >= self.high_from_hz
                      else self.amplitude_rad_s for f in self.frequencies_hz)
 
     @property
     def duration_s(self) -> float:
+        """Ramps and periods of the multisine run (s)."""
         return 2 * self.ramp_s + (self.settle_periods + self.periods) * self.period_s
 
     @property
     def needed_sample_rate_hz(self) -> float:
+        """4 × the highest line (Hz)."""
         return needed_sample_rate_hz(max(self.frequencies_hz))
 
     @property

@@ -70,19 +70,23 @@ class Spec(TravelSpec):
 
     @property
     def levels_rad_s(self) -> tuple[float, ...]:
+        """The staircase's velocity levels (rad/s)."""
         b = self.base_rad_s
         return (b, b + self.small_rad_s, b, b + self.large_rad_s, b)
 
     @property
     def travel_rad(self) -> float:
+        """Travel of one staircase, ramps included (rad)."""
         return (sum(self.levels_rad_s) * self.hold_s + self.base_rad_s * self.ramp_s)
 
     @property
     def hold_samples(self) -> int:
+        """Samples per level."""
         return round(self.hold_s * self.fs_hz)
 
     @property
     def ramp_samples(self) -> int:
+        """Samples of the ramp to the base level."""
         return round(self.ramp_s * self.fs_hz)
 
 
