@@ -141,18 +141,32 @@ def draw_plant(profile_raw: Mapping[str, Any], rng: np.random.Generator) -> dict
     return drawn
 
 
-def draw_firmware(profile_raw: Mapping[str, Any], rng: np.random.Generator) -> dict[str, Any]:
-    """The ``[firmware]`` table of a new unit: the controller's numbers drawn like the
-    plant's (the current loop's lag across its measurement's tolerance, the velocity loop's
-    gains and filter ±20 %: the tuning each drive ships with), its version and switches kept."""
-    drawn: dict[str, Any] = {}
-    for key, value in dict(profile_raw.get("firmware", {})).items():
-        if isinstance(value, float):
-            spread = _relative_spread(profile_raw, MEASURED_BY.get(key, ""))
-            drawn[key] = value * rng.uniform(1 - spread, 1 + spread)
-        else:  # version, command_delay_samples, feedforward, cogging_compensation
-            drawn[key] = value
-    return drawn
+# The [firmware] numbers are drawn where the [plant] table held them before they moved
+# (after the key named here), so a seed draws the same population as it did then.
+DRAWN_AFTER = {"current_loop_time_constant_s": "cable_hysteresis_nm",
+               "velocity_filter_hz": "torque_noise_nm",
+               "velocity_kp_nm_s_rad": "velocity_filter_hz",
+               "velocity_ki_nm_rad": "velocity_kp_nm_s_rad"}
+
+
+def draw_unit(profile_raw: Mapping[str, Any], rng: np.random.Generator
+              ) -> tuple[dict[str, Any], dict[str, Any]]:
+    """The ``[plant]`` and ``[firmware]`` tables of a new unit: the plant as
+    :func:`draw_plant`, the firmware's current-loop lag across its measurement's tolerance
+    and its velocity gains and filter ±20 % (the tuning each drive ships with), its version
+    and switches kept."""
+    firmware = dict(profile_raw.get("firmware", {}))
+    merged: dict[str, Any] = {}
+    for key, value in profile_raw["plant"].items():
+        merged[key] = value
+        for moved, after in DRAWN_AFTER.items():
+            if after in merged and moved in firmware and moved not in merged:
+                merged[moved] = firmware[moved]
+    merged.update({k: v for k, v in firmware.items()
+                   if isinstance(v, float) and k not in merged})
+    drawn = draw_plant({**profile_raw, "plant": merged}, rng)
+    drawn_firmware = {k: drawn.pop(k) if k in drawn else v for k, v in firmware.items()}
+    return drawn, drawn_firmware
 
 
 def write_population(
@@ -167,7 +181,8 @@ def write_population(
         for i in range(units_per_profile):
             serial = f"{name.removeprefix('demo_gimbal_')[:3].upper()}-{i:04d}"
             path = directory / f"{serial}.toml"
-            drawn = {**raw, "plant": draw_plant(raw, rng), "firmware": draw_firmware(raw, rng)}
+            plant, firmware = draw_unit(raw, rng)
+            drawn = {**raw, "plant": plant, "firmware": firmware}
             path.write_text(tomli_w.dumps(drawn), encoding="utf-8")
             units.append(Unit(profile_path=path, serial=serial, axis=raw["unit"]["axis"],
                               seed=int(rng.integers(1, 2**31 - 1))))
