@@ -26,6 +26,7 @@ from hil.suite.cogging_compensation import (
     excitation,
     orders,
     table_from_json,
+    table_relative_uncertainty,
 )
 from hil.suite.rate import sample_rate_shortfall
 
@@ -54,7 +55,8 @@ def result(cleared: Drive, calibration: CalibrationRun, profile: UnitProfile
         pytest.skip("no cogging_compensation.json in this calibration (the cogging protocol "
                     "did not run before this one)")
     with open(path, encoding="utf-8") as handle:
-        table = table_from_json(json.load(handle))
+        data = json.load(handle)
+    table = table_from_json(data)
     spec = Spec.from_profile(profile, drive.info)
     shortfall = sample_rate_shortfall(
         spec.needed_sample_rate_hz, drive.info, protocol=NAME,
@@ -71,10 +73,13 @@ def result(cleared: Drive, calibration: CalibrationRun, profile: UnitProfile
         recorded.append(calibration.run(drive, run, protocol=NAME))
     drive.load_compensation(None)
     recorded_off, recorded_on = recorded
-    estimates, largest = analyse((recorded_off, off), (recorded_on, on), spec, table)
+    relative_u = table_relative_uncertainty(data)
+    estimates, largest = analyse((recorded_off, off), (recorded_on, on), spec, table,
+                                 table_relative_u=relative_u)
     calibration.details[NAME] = {
         "table": path,
         "orders": orders(table),
+        "table_relative_uncertainty": relative_u,
         "largest_order": {"cleared": largest[0], "loaded": largest[1]},
     }
     return estimates

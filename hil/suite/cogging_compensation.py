@@ -5,12 +5,14 @@ How well the drive's cogging compensation works: the table the cogging protocol 
 (``cogging_compensation.json``) is loaded into the drive, and the same constant-velocity
 pass is run with it cleared and with it loaded (a drive applies it only when its firmware
 has ``cogging_compensation``). The residual cogging is the position ripple at the table's
-orders; the ratio without / with is the compensation's effectiveness. Numerics in
+orders; the share of it the table removes is the compensation's effectiveness. Numerics in
 :mod:`hil.closed_loop.ripple`.
 """
 
 from __future__ import annotations
 
+import dataclasses
+import math
 from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
@@ -18,10 +20,9 @@ from typing import Any
 import numpy as np
 
 from hil.closed_loop.ripple import position_ripple, ripple_estimate
-from hil.closed_loop.tracking import reduction
 from hil.drives.base import DriveInfo
 from hil.errors import IdentificationError
-from hil.identify.estimate import Estimate
+from hil.identify.estimate import Component, Estimate, with_budget
 from hil.motion import CompensationTable, Excitation, Mode, PositionHarmonic
 from hil.profile import UnitProfile
 from hil.recording import Recording
@@ -30,7 +31,7 @@ from hil.suite.travel import TravelSpec, on_command_grid, speed_ramp
 
 NAME = "cogging_compensation"
 MEASUREMENTS = ("cogging_ripple_uncompensated_urad", "cogging_ripple_compensated_urad",
-                "cogging_compensation_ratio")
+                "cogging_compensation_removed_pct")
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -102,6 +103,16 @@ def table_from_json(data: Mapping[str, Any]) -> CompensationTable:
     return CompensationTable(cogging_nm=cogging, kt_ripple=ripple)
 
 
+def table_relative_uncertainty(data: Mapping[str, Any]) -> float:
+    """The largest ``amplitude_u / amplitude`` of the table's harmonics: how far, relative
+    to what it cancels, the identified table may be off (0 when none is stated)."""
+    ratios = [float(h["amplitude_u_nm"]) / float(h["amplitude_nm"]) for h in data["cogging"]
+              if float(h["amplitude_nm"]) > 0]
+    ratios += [float(h["amplitude_u"]) / float(h["amplitude"]) for h in data["kt_ripple"]
+               if float(h["amplitude"]) > 0]
+    return max(ratios, default=0.0)
+
+
 def orders(table: CompensationTable) -> list[int]:
     """Every order of the table, cogging and K_t ripple, ascending."""
     return sorted({h.order for h in (*table.cogging_nm, *table.kt_ripple)})
@@ -117,8 +128,15 @@ def excitation(spec: Spec) -> tuple[Excitation, Excitation]:
 
 
 def analyse(off: tuple[Recording, Excitation], on: tuple[Recording, Excitation],
-            spec: Spec, table: CompensationTable) -> tuple[dict[str, Estimate], list[int]]:
-    """The residual ripple without and with the table, and their ratio."""
+            spec: Spec, table: CompensationTable, *, table_relative_u: float = 0.0
+            ) -> tuple[dict[str, Estimate], list[int]]:
+    """The residual ripple without and with the table, and their ratio.
+
+    The residual with the table also carries the table's own uncertainty (identified from
+    this calibration's noisy torque): a table off by ``δ`` relative leaves about ``δ`` of
+    the uncompensated ripple, in amplitude and in phase, so ``√2·δ·ripple_cleared`` is a
+    Type A line of the compensated ripple (``table_relative_u`` = δ).
+    """
     found = []
     for recording, exc in (off, on):
         position, _, _ = on_command_grid(recording, exc)
@@ -128,7 +146,27 @@ def analyse(off: tuple[Recording, Excitation], on: tuple[Recording, Excitation],
     (a_off, u_off, n_off), (a_on, u_on, n_on) = found
     without = ripple_estimate("cogging_ripple_uncompensated_urad", a_off, u_off, order=n_off)
     with_table = ripple_estimate("cogging_ripple_compensated_urad", a_on, u_on, order=n_on)
-    ratio = reduction(without, with_table, name="cogging_compensation_ratio",
-                      labels=("table cleared", "table loaded"))
-    return ({without.name: without, with_table.name: with_table, ratio.name: ratio},
+    if table_relative_u > 0:
+        with_table = with_table.with_components(Component(
+            source="the table's own uncertainty (cogging_compensation.json amplitude_u), times "
+                   "the ripple it cancels, amplitude and phase (Type A)", kind="A",
+            standard_uncertainty=math.sqrt(2) * table_relative_u * without.value, unit="µrad"))
+    removed = removed_fraction(without, with_table)
+    return ({without.name: without, with_table.name: with_table, removed.name: removed},
             [n_off, n_on])
+
+
+def removed_fraction(without: Estimate, with_table: Estimate) -> Estimate:
+    """``100·(1 − with/without)``: the share of the ripple the table removes (%), both
+    budgets propagated to first order. Bounded where the ratio ``without/with`` is not:
+    the residual sits near its own noise, the ratio's denominator."""
+    value = 100 * (1 - with_table.value / without.value)
+    lines = [dataclasses.replace(c, source=f"{c.source} [table cleared]",
+                                 sensitivity=c.sensitivity * 100 * with_table.value
+                                 / without.value**2) for c in without.components()]
+    lines += [dataclasses.replace(c, source=f"{c.source} [table loaded]",
+                                  sensitivity=-c.sensitivity * 100 / without.value)
+              for c in with_table.components()]
+    base = Estimate(name="cogging_compensation_removed_pct", value=value,
+                    standard_uncertainty=0.0, unit="%")
+    return with_budget(base, lines, value=value)
