@@ -51,11 +51,11 @@ class UnitProfile:
     limits: Limits
     sample_rate_hz: float
     plant: PlantParams | None
-    firmware: Firmware
     protocols: Mapping[str, Mapping[str, Any]]
     measurements: Mapping[str, MeasurementSpec]
     unit: Mapping[str, Any] = field(default_factory=dict)
     raw: Mapping[str, Any] = field(default_factory=dict)
+    firmware: Firmware = field(default_factory=Firmware)  # the [firmware] table (or defaults)
 
     def protocol(self, name: str) -> Mapping[str, Any]:
         """Settings of one protocol; a clear error when the profile lacks them."""
