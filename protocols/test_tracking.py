@@ -37,7 +37,7 @@ def result(drive: Drive, calibration: CalibrationRun, profile: UnitProfile
             "a whole poll and writes it with the host's jitter")
     if shortfall is not None:
         pytest.skip(shortfall)
-    viscous, coulomb, source = feedforward_values(calibration, profile)
+    viscous, coulomb, u_rel, source = feedforward_values(calibration, profile, spec)
     off, on = excitation(spec, viscous_nm_s_rad=viscous, coulomb_nm=coulomb)
     recorded = []
     for move in (off, on):
@@ -47,9 +47,11 @@ def result(drive: Drive, calibration: CalibrationRun, profile: UnitProfile
         drive.enable()
         recorded.append(calibration.run(drive, move, protocol=NAME))
     recorded_off, recorded_on = recorded
-    estimates, f_off, f_on = analyse((recorded_off, off), (recorded_on, on), spec)
+    estimates, f_off, f_on = analyse((recorded_off, off), (recorded_on, on), spec,
+                                     feedforward_u_rel=u_rel)
     calibration.details[NAME] = {
-        "feedforward": {"viscous_nm_s_rad": viscous, "coulomb_nm": coulomb, "source": source,
+        "feedforward": {"viscous_nm_s_rad": viscous, "coulomb_nm": coulomb,
+                        "relative_uncertainty": u_rel, "source": source,
                         "sent_as": "torque offset (CiA 402 0x60B2)"},
         "noise_urad": {"no_ff": f_off.noise_rad * MICRO, "ff": f_on.noise_rad * MICRO},
         "peak_error_no_ff_urad": f_off.peak_rad * MICRO,

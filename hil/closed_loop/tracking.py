@@ -83,6 +83,7 @@ class Following:
     noise_rad: float
     u_rms_rad: float
     samples: int
+    error_rad: FloatArray  # θ − θ*, one per sample
 
 
 def following_error(position_rad: FloatArray, velocity_cmd_rad_s: FloatArray, *,
@@ -105,7 +106,17 @@ def following_error(position_rad: FloatArray, velocity_cmd_rad_s: FloatArray, *,
     rms = float(np.sqrt(np.mean(error**2)))
     u_rms = noise * float(np.sqrt(np.sum(error**2))) / (len(error) * rms) if rms > 0 else noise
     return Following(rms_rad=rms, peak_rad=float(np.max(np.abs(error))), noise_rad=noise,
-                     u_rms_rad=u_rms, samples=len(error))
+                     u_rms_rad=u_rms, samples=len(error), error_rad=error)
+
+
+def feedforward_change(off: Following, on: Following, *, relative: float
+                       ) -> tuple[float, float]:
+    """Change of (RMS, peak) of the run with feedforward when the feedforward were
+    ``1 + relative`` times as large: by superposition of the runs without and with it,
+    ``e = e_on + relative·(e_on − e_off)`` (the loop linear about the run with it)."""
+    error = on.error_rad + relative * (on.error_rad - off.error_rad)
+    return (float(np.sqrt(np.mean(error**2))) - on.rms_rad,
+            float(np.max(np.abs(error))) - on.peak_rad)
 
 
 def as_estimate(name: str, value_rad: float, u_rad: float, *, scale: float, unit: str,

@@ -13,6 +13,7 @@ Numerics in :mod:`hil.closed_loop.tracking`.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -21,13 +22,14 @@ from hil.calibration import CalibrationRun
 from hil.closed_loop.tracking import (
     Following,
     as_estimate,
+    feedforward_change,
     following_error,
     friction_feedforward,
     gimbal_move,
     reduction,
 )
 from hil.drives.base import DriveInfo
-from hil.identify.estimate import Estimate
+from hil.identify.estimate import Component, Estimate
 from hil.identify.quantisation import quantisation_step
 from hil.motion import Excitation, Mode
 from hil.profile import UnitProfile
@@ -84,14 +86,24 @@ class Spec(TravelSpec):
                            reversal_s=self.reversal_s, fs_hz=self.fs_hz)
 
 
-def feedforward_values(calibration: CalibrationRun, profile: UnitProfile
-                       ) -> tuple[float, float, str]:
-    """``(B, T_c, source)``: this calibration's results, else the declared nominals."""
+def feedforward_values(calibration: CalibrationRun, profile: UnitProfile, spec: Spec
+                       ) -> tuple[float, float, float, str]:
+    """``(B, T_c, u_rel, source)``: this calibration's results, else the declared nominals.
+
+    ``u_rel`` is the feedforward's relative standard uncertainty over the move, the two
+    terms weighted by their RMS over it: ``√((T_c·u_r(T_c))² + (B·ω*_rms·u_r(B))²) /
+    √(T_c² + (B·ω*_rms)²)`` (0 for declared nominals: no measurement, nothing propagated).
+    """
     found = calibration.results("viscous_nm_s_rad", "coulomb_nm")
-    if found is not None:
-        return found[0].value, found[1].value, "measured (inertia_friction)"
-    return (profile.measurement("viscous_nm_s_rad").nominal,
-            profile.measurement("coulomb_nm").nominal, "declared nominals")
+    if found is None:
+        return (profile.measurement("viscous_nm_s_rad").nominal,
+                profile.measurement("coulomb_nm").nominal, 0.0, "declared nominals")
+    viscous, coulomb = found
+    w_rms = float(np.sqrt(np.mean(spec.command() ** 2)))
+    b_part, c_part = viscous.value * w_rms, coulomb.value
+    u_rel = math.hypot(b_part * viscous.relative_uncertainty,
+                       c_part * coulomb.relative_uncertainty) / math.hypot(b_part, c_part)
+    return viscous.value, coulomb.value, u_rel, "measured (inertia_friction)"
 
 
 def excitation(spec: Spec, *, viscous_nm_s_rad: float, coulomb_nm: float
@@ -107,9 +119,13 @@ def excitation(spec: Spec, *, viscous_nm_s_rad: float, coulomb_nm: float
                        torque_offset_nm=offset))
 
 
-def analyse(off: tuple[Recording, Excitation], on: tuple[Recording, Excitation], spec: Spec
+def analyse(off: tuple[Recording, Excitation], on: tuple[Recording, Excitation], spec: Spec,
+            *, feedforward_u_rel: float = 0.0
             ) -> tuple[dict[str, Estimate], Following, Following]:
-    """The declared figures from the two runs."""
+    """The declared figures from the two runs; ``feedforward_u_rel`` (the feedforward's
+    relative uncertainty, see :func:`feedforward_values`) adds a Type A line to the
+    figures with feedforward, its size by superposition of the two runs
+    (:func:`~hil.closed_loop.tracking.feedforward_change`)."""
     runs = []
     for recording, exc in (off, on):
         position, _, _ = on_command_grid(recording, exc)
@@ -121,11 +137,19 @@ def analyse(off: tuple[Recording, Excitation], on: tuple[Recording, Excitation],
         return as_estimate(name, value, u, scale=MICRO, unit="µrad", resolution_rad=lsb)
 
     rms_on = est("tracking_rms_error_urad", f_on.rms_rad, f_on.u_rms_rad)
+    peak_on = est("tracking_peak_error_urad", f_on.peak_rad, f_on.noise_rad)
+    if feedforward_u_rel > 0:
+        d_rms, d_peak = feedforward_change(f_off, f_on, relative=feedforward_u_rel)
+        lines = [Component(source="the feedforward's B and T_c (this calibration's u), by "
+                                  "superposition of the runs without and with it (Type A)",
+                           kind="A", standard_uncertainty=abs(change) * MICRO, unit="µrad")
+                 for change in (d_rms, d_peak)]
+        rms_on = rms_on.with_components(lines[0])
+        peak_on = peak_on.with_components(lines[1])
     rms_off = est("tracking_rms_error_no_ff_urad", f_off.rms_rad, f_off.u_rms_rad)
     out = {
         "tracking_rms_error_urad": rms_on,
-        "tracking_peak_error_urad": est("tracking_peak_error_urad", f_on.peak_rad,
-                                        f_on.noise_rad),
+        "tracking_peak_error_urad": peak_on,
         "tracking_rms_error_no_ff_urad": rms_off,
         "tracking_ff_reduction": reduction(rms_off, rms_on, name="tracking_ff_reduction"),
     }

@@ -11,7 +11,7 @@ import pytest
 from hil.closed_loop.ripple import position_ripple
 from hil.closed_loop.standstill import block_estimate, standstill_blocks
 from hil.closed_loop.step import mean_estimate, smoothed_velocity, step_figures
-from hil.closed_loop.tracking import following_error, reference_position
+from hil.closed_loop.tracking import feedforward_change, following_error, reference_position
 from hil.drives.sim import SimDrive
 from hil.profile import load_profile
 from hil.suite import tracking
@@ -71,6 +71,17 @@ def test_following_error_of_a_known_lag() -> None:
     assert found.rms_rad == pytest.approx(float(np.sqrt(np.mean(error**2))), rel=1e-3)
     assert found.noise_rad == pytest.approx(noise, rel=0.1)
     assert found.peak_rad == pytest.approx(1e-3, abs=4 * noise)
+
+
+def test_feedforward_change_is_the_superposition_of_the_two_runs() -> None:
+    command = np.full(4000, 0.2)
+    reference = reference_position(command, start_rad=0.0, fs_hz=FS)
+    shape = 1e-3 * np.sin(np.arange(4000) / 200.0)
+    off = following_error(reference + 2 * shape, command, fs_hz=FS)
+    on = following_error(reference + shape, command, fs_hz=FS)
+    d_rms, d_peak = feedforward_change(off, on, relative=0.5)  # half again: half the error
+    assert d_rms == pytest.approx(-0.5 * on.rms_rad, rel=1e-9)
+    assert d_peak == pytest.approx(-0.5 * on.peak_rad, rel=1e-9)
 
 
 def test_ripple_amplitude_at_the_orders_and_its_uncertainty() -> None:
