@@ -74,7 +74,7 @@ from collections.abc import Callable
 import crb_frf
 import crb_locked
 import crb_slow
-from crb_common import MonteCarlo, markdown
+from crb_common import MonteCarlo, bare_firmware, markdown
 
 from hil.profile import load_profile
 
@@ -87,11 +87,12 @@ def _stribeck(runs: int) -> list[MonteCarlo]:
     profile = load_profile(ELEVATION)
     assert profile.plant is not None
     white = crb_slow.stribeck_white(profile.plant)
+    bare = bare_firmware(profile)
     return [
         crb_slow.stribeck(
-            profile, white, runs, "white, exact_torque_hold=False", exact_torque_hold=False
+            bare, white, runs, "white, exact_torque_hold=False", exact_torque_hold=False
         ),
-        crb_slow.stribeck(profile, white, runs, "white"),
+        crb_slow.stribeck(bare, white, runs, "white"),
         crb_slow.stribeck(profile, profile.plant, runs, "demo unit"),
     ]
 
@@ -100,8 +101,9 @@ def _gravity_cable(runs: int) -> list[MonteCarlo]:
     profile = load_profile(ELEVATION)
     assert profile.plant is not None
     white = crb_slow.gravity_white(profile.plant)
+    bare = bare_firmware(profile)
     return [
-        crb_slow.gravity_cable(profile, white, runs, "white"),
+        crb_slow.gravity_cable(bare, white, runs, "white"),
         crb_slow.gravity_cable(profile, profile.plant, runs, "demo unit"),
     ]
 
@@ -110,8 +112,9 @@ def _cogging(runs: int) -> list[MonteCarlo]:
     profile = load_profile(ELEVATION)
     assert profile.plant is not None
     white = crb_slow.cogging_white(profile.plant)
+    bare = bare_firmware(profile)
     return [
-        crb_slow.cogging(profile, white, runs, "white"),
+        crb_slow.cogging(bare, white, runs, "white"),
         crb_slow.cogging(profile, profile.plant, runs, "demo unit"),
     ]
 
@@ -120,8 +123,9 @@ def _torque_constant(runs: int) -> list[MonteCarlo]:
     profile = load_profile(ELEVATION)
     assert profile.plant is not None
     white = crb_locked.torque_constant_white(profile.plant)
+    bare = bare_firmware(profile)
     return [
-        crb_locked.torque_constant(profile, white, runs, "white"),
+        crb_locked.torque_constant(bare, white, runs, "white"),
         crb_locked.torque_constant(profile, profile.plant, runs, "demo unit"),
         crb_locked.torque_constant(
             profile, profile.plant, runs, "demo unit + ripple table", ripple_table=True
@@ -133,8 +137,9 @@ def _current_loop(runs: int) -> list[MonteCarlo]:
     profile = load_profile(ELEVATION)
     assert profile.plant is not None
     white = crb_frf.current_loop_white(profile.plant)
+    lagged = bare_firmware(profile, keep_lag=True)
     return [
-        crb_frf.current_loop(profile, white, runs, "white"),
+        crb_frf.current_loop(lagged, white, runs, "white"),
         crb_frf.current_loop(profile, profile.plant, runs, "demo unit"),
     ]
 
@@ -143,10 +148,11 @@ def _resonance(runs: int) -> list[MonteCarlo]:
     profile = load_profile(AZIMUTH)
     assert profile.plant is not None
     white = crb_frf.resonance_white(profile.plant, substeps=RESONANCE_SUBSTEPS)
+    lagged = bare_firmware(profile, keep_lag=True)
     return [
-        crb_frf.resonance(profile, white, runs, f"white (substeps {RESONANCE_SUBSTEPS})"),
+        crb_frf.resonance(lagged, white, runs, f"white (substeps {RESONANCE_SUBSTEPS})"),
         crb_frf.resonance(
-            profile, white, runs, "white, settle_s = 0.2 s (diagnostic)", settle_s=0.2
+            lagged, white, runs, "white, settle_s = 0.2 s (diagnostic)", settle_s=0.2
         ),
         crb_frf.resonance(profile, profile.plant, runs, "demo unit"),
     ]
@@ -156,8 +162,9 @@ def _inertia_elevation(runs: int) -> list[MonteCarlo]:
     profile = load_profile(AZIMUTH)
     assert profile.plant is not None
     white = crb_locked.inertia_elevation_white(profile.plant)
+    bare = bare_firmware(profile)
     return [
-        crb_locked.inertia_elevation(profile, white, runs, "white"),
+        crb_locked.inertia_elevation(bare, white, runs, "white"),
         crb_locked.inertia_elevation(profile, profile.plant, runs, "demo unit"),
     ]
 

@@ -80,12 +80,13 @@ def main() -> None:
             plant.shaft_stiffness_nm_rad * reduced)) + plant.viscous_nm_s_rad / (
             2 * plant.inertia_kg_m2 * wr) * j_load / j_total,
         viscous_over_inertia_1_s=plant.viscous_nm_s_rad / j_total,
-        time_constant_s=plant.current_loop_time_constant_s)
+        time_constant_s=profile.firmware.current_loop_time_constant_s)
     truth = two_mass_response(truth_model, freqs, fs_hz=fs)
 
     corr_err, welch_err = [], []
     for seed in range(args.runs):
-        with SimDrive(plant, limits=profile.limits, fs_hz=fs, seed=seed) as drive:
+        with SimDrive(plant, firmware=profile.firmware, limits=profile.limits, fs_hz=fs,
+                      seed=seed) as drive:
             drive.enable()
             move, sine = protocol.excitation(spec, position_rad=drive.status().position_rad)
             drive.run(move)

@@ -1,8 +1,9 @@
 """A population of simulated units, calibrated, against the truth each result claims.
 
 Shared by ``bench_coverage.py`` (the benchmark) and ``tests/test_coverage.py`` (its small
-version). A unit is one of the demo profiles with every ``[plant]`` parameter drawn across
-its measurement's tolerance range (parameters without a declared measurement: ±20 %;
+version). A unit is one of the demo profiles with every ``[plant]`` parameter (and the
+``[firmware]`` current-loop lag, gains and filter) drawn across its measurement's tolerance
+range (parameters without a declared measurement: ±20 %;
 ``T_s`` as ``T_c·(1.1 … 1.5)``, so that every unit has the Stribeck peak ``v_s`` describes),
 every effect on, and its own noise seed. It is calibrated through the command line, as a
 test engineer would (``gimbal-hil calibrate --drive sim``), and each certificate result
@@ -16,7 +17,7 @@ the reported torque are in those units.
 =================================  ==========================================================
 result                             truth
 =================================  ==========================================================
-current_loop_time_constant_ms      ``1000·current_loop_time_constant_s``
+current_loop_time_constant_ms      ``1000·current_loop_time_constant_s`` (``[firmware]``)
 gravity_mge_nm                     ``gravity_mge_nm / g``
 gravity_phase_rad                  ``gravity_phase_rad``
 eccentricity_mm                    ``1000·gravity_mge_nm / (g·mass_kg·9.80665)`` (reported)
@@ -140,6 +141,34 @@ def draw_plant(profile_raw: Mapping[str, Any], rng: np.random.Generator) -> dict
     return drawn
 
 
+# The [firmware] numbers are drawn where the [plant] table held them before they moved
+# (after the key named here), so a seed draws the same population as it did then.
+DRAWN_AFTER = {"current_loop_time_constant_s": "cable_hysteresis_nm",
+               "velocity_filter_hz": "torque_noise_nm",
+               "velocity_kp_nm_s_rad": "velocity_filter_hz",
+               "velocity_ki_nm_rad": "velocity_kp_nm_s_rad"}
+
+
+def draw_unit(profile_raw: Mapping[str, Any], rng: np.random.Generator
+              ) -> tuple[dict[str, Any], dict[str, Any]]:
+    """The ``[plant]`` and ``[firmware]`` tables of a new unit: the plant as
+    :func:`draw_plant`, the firmware's current-loop lag across its measurement's tolerance
+    and its velocity gains and filter ±20 % (the tuning each drive ships with), its version
+    and switches kept."""
+    firmware = dict(profile_raw.get("firmware", {}))
+    merged: dict[str, Any] = {}
+    for key, value in profile_raw["plant"].items():
+        merged[key] = value
+        for moved, after in DRAWN_AFTER.items():
+            if after in merged and moved in firmware and moved not in merged:
+                merged[moved] = firmware[moved]
+    merged.update({k: v for k, v in firmware.items()
+                   if isinstance(v, float) and k not in merged})
+    drawn = draw_plant({**profile_raw, "plant": merged}, rng)
+    drawn_firmware = {k: drawn.pop(k) if k in drawn else v for k, v in firmware.items()}
+    return drawn, drawn_firmware
+
+
 def write_population(
     directory: Path, *, units_per_profile: int, seed: int, profiles: Sequence[str] = PROFILES
 ) -> list[Unit]:
@@ -152,8 +181,9 @@ def write_population(
         for i in range(units_per_profile):
             serial = f"{name.removeprefix('demo_gimbal_')[:3].upper()}-{i:04d}"
             path = directory / f"{serial}.toml"
-            path.write_text(tomli_w.dumps({**raw, "plant": draw_plant(raw, rng)}),
-                            encoding="utf-8")
+            plant, firmware = draw_unit(raw, rng)
+            drawn = {**raw, "plant": plant, "firmware": firmware}
+            path.write_text(tomli_w.dumps(drawn), encoding="utf-8")
             units.append(Unit(profile_path=path, serial=serial, axis=raw["unit"]["axis"],
                               seed=int(rng.integers(1, 2**31 - 1))))
     return units
@@ -190,7 +220,7 @@ def truths(unit: Unit) -> dict[str, float]:
     assert plant is not None
     g = 1.0 + plant.torque_constant_error_rel
     truth: dict[str, float] = {
-        "current_loop_time_constant_ms": 1000 * plant.current_loop_time_constant_s,
+        "current_loop_time_constant_ms": 1000 * profile.firmware.current_loop_time_constant_s,
         "gravity_mge_nm": plant.gravity_mge_nm / g,
         "gravity_phase_rad": plant.gravity_phase_rad,
         "cable_stiffness_nm_rad": plant.cable_stiffness_nm_rad / g,
@@ -218,7 +248,8 @@ def truths(unit: Unit) -> dict[str, float]:
         sys.path.insert(0, str(Path(__file__).resolve().parent))
         from crb_frf import two_mass_truth
 
-        model = two_mass_truth(plant)
+        model = two_mass_truth(
+            plant, time_constant_s=profile.firmware.current_loop_time_constant_s)
         truth["resonance_frequency_hz"] = model.resonance_hz
         truth["antiresonance_frequency_hz"] = model.antiresonance_hz
         truth["resonance_damping_ratio"] = model.resonance_damping

@@ -14,6 +14,7 @@ every nuisance parameter the estimator fits as a column of ``J``; the bound on p
 
 from __future__ import annotations
 
+import dataclasses
 import itertools
 import math
 import time
@@ -26,6 +27,8 @@ from numpy.typing import NDArray
 from hil.drives.sim import SimDrive
 from hil.identify.current_loop import TREND_ORDER, block_phasors
 from hil.motion import Limits
+from hil.profile import UnitProfile
+from plant_sim.firmware import Firmware
 from plant_sim.params import PlantParams
 
 FloatArray = NDArray[np.float64]
@@ -34,7 +37,8 @@ ComplexArray = NDArray[np.complex128]
 
 def bare_plant(plant: PlantParams) -> PlantParams:
     """``plant`` with every effect beyond ``J·α + B·ω + T_c·sgn(ω)`` and the white torque
-    noise switched off (ideal encoder, no velocity filter, no lag, exact K_t, rigid)."""
+    noise switched off (ideal encoder, exact K_t, rigid; :func:`bare_firmware` takes the
+    velocity filter and the current-loop lag out of the drive)."""
     return plant.with_changes(
         static_friction_nm=0.0,
         coulomb_neg_nm=None,
@@ -48,12 +52,19 @@ def bare_plant(plant: PlantParams) -> PlantParams:
         gravity_mge_nm=0.0,
         cable_stiffness_nm_rad=0.0,
         cable_hysteresis_nm=0.0,
-        current_loop_time_constant_s=0.0,
         encoder_counts_per_rev=0,
-        velocity_filter_hz=0.0,
         torque_constant_error_rel=0.0,
         inertia_elevation_kg_m2=0.0,
     )
+
+
+def bare_firmware(profile: UnitProfile, *, keep_lag: bool = False) -> UnitProfile:
+    """``profile`` with its firmware's velocity filter (and, unless ``keep_lag``, the
+    current-loop lag) off: the drive of a "white" case."""
+    firmware = profile.firmware.with_changes(velocity_filter_hz=0.0)
+    if not keep_lag:
+        firmware = firmware.with_changes(current_loop_time_constant_s=0.0)
+    return dataclasses.replace(profile, firmware=firmware)
 
 
 def reported_scale(plant: PlantParams) -> float:
@@ -63,12 +74,14 @@ def reported_scale(plant: PlantParams) -> float:
 
 
 def sim_drive(
-    plant: PlantParams, *, limits: Limits, fs_hz: float, seed: int, exact_torque_hold: bool = True
+    plant: PlantParams, *, firmware: Firmware, limits: Limits, fs_hz: float, seed: int,
+    exact_torque_hold: bool = True,
 ) -> SimDrive:
     """An enabled :class:`SimDrive` (``exact_torque_hold``: its default, see the Stribeck case
     in ``bench_crb.py`` for why one case turns it off)."""
     drive = SimDrive(
-        plant, limits=limits, fs_hz=fs_hz, seed=seed, exact_torque_hold=exact_torque_hold
+        plant, firmware=firmware, limits=limits, fs_hz=fs_hz, seed=seed,
+        exact_torque_hold=exact_torque_hold,
     )
     drive.enable()
     return drive

@@ -97,7 +97,7 @@ def _stepped_sine(
 def current_loop(profile: UnitProfile, plant: PlantParams, runs: int, case: str) -> MonteCarlo:
     """τ against two bounds: from the complex FRF points (J, B/J, τ free) and from their
     phases only (a free magnitude per frequency: what the phase fit can use)."""
-    tau_ms = plant.current_loop_time_constant_s * 1e3
+    tau_ms = profile.firmware.current_loop_time_constant_s * 1e3
     inertia = plant.total_inertia_kg_m2 * reported_scale(plant)
     b_over_j = plant.viscous_nm_s_rad / plant.total_inertia_kg_m2
     result = MonteCarlo(
@@ -112,7 +112,8 @@ def current_loop(profile: UnitProfile, plant: PlantParams, runs: int, case: str)
     fs = profile.sample_rate_hz
 
     def one(seed: int) -> tuple[list[float], list[float]] | None:
-        drive = sim_drive(plant, limits=profile.limits, fs_hz=fs, seed=seed)
+        drive = sim_drive(plant, firmware=profile.firmware, limits=profile.limits, fs_hz=fs,
+                          seed=seed)
         spec = current_protocol.Spec.from_profile(profile, drive.info)
         ran = _stepped_sine(current_protocol, spec, drive, sigma=sigma, fs_hz=fs)
         if ran is None:
@@ -147,16 +148,15 @@ def current_loop(profile: UnitProfile, plant: PlantParams, runs: int, case: str)
 
 
 def current_loop_white(plant: PlantParams) -> PlantParams:
-    """Rigid axis, Coulomb + viscous friction, the current-loop lag, torque noise."""
-    return bare_plant(plant).with_changes(
-        current_loop_time_constant_s=plant.current_loop_time_constant_s
-    )
+    """Rigid axis, Coulomb + viscous friction, torque noise (run with
+    ``bare_firmware(profile, keep_lag=True)``: the current-loop lag kept)."""
+    return bare_plant(plant)
 
 
 # ----------------------------------------------------------------------------- resonance
 
 
-def two_mass_truth(plant: PlantParams) -> TwoMassModel:
+def two_mass_truth(plant: PlantParams, *, time_constant_s: float) -> TwoMassModel:
     """The fitted model's parameters for the simulated plant (as ``bench_frf.py`` derives
     them; torque in reported units: the K_t error scales J)."""
     j_total = plant.total_inertia_kg_m2
@@ -172,7 +172,7 @@ def two_mass_truth(plant: PlantParams) -> TwoMassModel:
         resonance_damping=c / (2 * math.sqrt(k * reduced))
         + plant.viscous_nm_s_rad / (2 * plant.motor_inertia_kg_m2 * wr) * j_load / j_total,
         viscous_over_inertia_1_s=plant.viscous_nm_s_rad / j_total,
-        time_constant_s=plant.current_loop_time_constant_s,
+        time_constant_s=time_constant_s,
     )
 
 
@@ -187,7 +187,7 @@ def resonance(
     """f_res, f_anti, ζ_res. ``settle_s``: a diagnostic that overrides the profile's
     settling time per frequency (the travel limits widened to make room: the simulator has
     no end stops); ``None`` runs the protocol as the profile sets it."""
-    truth = two_mass_truth(plant)
+    truth = two_mass_truth(plant, time_constant_s=profile.firmware.current_loop_time_constant_s)
     result = MonteCarlo(
         estimator="resonance",
         case=case,
@@ -205,7 +205,7 @@ def resonance(
         limits = profile.limits
         if settle_s is not None:
             limits = dataclasses.replace(limits, travel_min_rad=-30.0, travel_max_rad=30.0)
-        drive = sim_drive(plant, limits=limits, fs_hz=fs, seed=seed)
+        drive = sim_drive(plant, firmware=profile.firmware, limits=limits, fs_hz=fs, seed=seed)
         spec = resonance_protocol.Spec.from_profile(profile, drive.info)
         if settle_s is not None:
             spec = dataclasses.replace(spec, settle_s=settle_s)
@@ -237,6 +237,5 @@ def resonance_white(plant: PlantParams, *, substeps: int) -> PlantParams:
         shaft_stiffness_nm_rad=plant.shaft_stiffness_nm_rad,
         shaft_damping_nm_s_rad=plant.shaft_damping_nm_s_rad,
         inertia_elevation_kg_m2=plant.inertia_elevation_kg_m2,
-        current_loop_time_constant_s=plant.current_loop_time_constant_s,
         substeps=substeps,
     )

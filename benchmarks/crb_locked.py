@@ -89,7 +89,8 @@ def torque_constant(
     ripple = [(h.order, h.amplitude, h.phase_rad) for h in plant.kt_ripple] if ripple_table else []
 
     def one(seed: int) -> tuple[list[float], list[float]] | None:
-        drive = sim_drive(plant, limits=profile.limits, fs_hz=profile.sample_rate_hz, seed=seed)
+        drive = sim_drive(plant, firmware=profile.firmware, limits=profile.limits,
+                          fs_hz=profile.sample_rate_hz, seed=seed)
         spec = torque_protocol.Spec.from_profile(profile, drive.info)
         sweeps, var_k, var_g = [], [], []
         for angle in spec.angles_rad:
@@ -170,7 +171,8 @@ def inertia_elevation(profile: UnitProfile, plant: PlantParams, runs: int, case:
     sigma = plant.torque_noise_nm
 
     def one(seed: int) -> tuple[list[float], list[float]] | None:
-        drive = sim_drive(plant, limits=profile.limits, fs_hz=profile.sample_rate_hz, seed=seed)
+        drive = sim_drive(plant, firmware=profile.firmware, limits=profile.limits,
+                          fs_hz=profile.sample_rate_hz, seed=seed)
         spec = elevation_protocol.Spec.from_profile(profile, drive.info)
         inertias: list[Estimate] = []
         bounds = []

@@ -108,8 +108,7 @@ def stribeck(
     sigma = plant.torque_noise_nm
 
     def one(seed: int) -> tuple[list[float], list[float]] | None:
-        drive = sim_drive(
-            plant,
+        drive = sim_drive(plant, firmware=profile.firmware,
             limits=profile.limits,
             fs_hz=profile.sample_rate_hz,
             seed=seed,
@@ -235,7 +234,8 @@ def gravity_cable(profile: UnitProfile, plant: PlantParams, runs: int, case: str
     sigma = plant.torque_noise_nm
 
     def one(seed: int) -> tuple[list[float], list[float]] | None:
-        drive = sim_drive(plant, limits=profile.limits, fs_hz=profile.sample_rate_hz, seed=seed)
+        drive = sim_drive(plant, firmware=profile.firmware, limits=profile.limits,
+                          fs_hz=profile.sample_rate_hz, seed=seed)
         spec = gravity_protocol.Spec.from_profile(profile, drive.info)
         move, sweep = gravity_protocol.excitation(spec, position_rad=drive.status().position_rad)
         drive.run(move)
@@ -336,7 +336,8 @@ def cogging(profile: UnitProfile, plant: PlantParams, runs: int, case: str) -> M
     inertia = profile.measurement("inertia_kg_m2").nominal  # the protocol's fallback
 
     def one(seed: int) -> tuple[list[float], list[float]] | None:
-        drive = sim_drive(plant, limits=profile.limits, fs_hz=profile.sample_rate_hz, seed=seed)
+        drive = sim_drive(plant, firmware=profile.firmware, limits=profile.limits,
+                          fs_hz=profile.sample_rate_hz, seed=seed)
         spec = cogging_protocol.Spec.from_profile(profile, drive.info)
         move, passes = cogging_protocol.excitation(spec, position_rad=drive.status().position_rad)
         drive.run(move)

@@ -28,19 +28,21 @@ from hil.identify.inertia_friction import (
 )
 from hil.identify.sine_run import HOLD_SAMPLES, FloatArray, analyse_sine_run
 from hil.profile import load_profile
+from plant_sim.firmware import Firmware
 from plant_sim.model import Plant, simulate
 from plant_sim.params import PlantParams
 
 FS_HZ = 4000.0
 
 
-def simulator_speed(params: PlantParams, seconds: float = 60.0) -> float:
+def simulator_speed(params: PlantParams, firmware: Firmware, seconds: float = 60.0) -> float:
     command = 0.5 * np.sin(2 * np.pi * 2.0 * np.arange(int(seconds * FS_HZ)) / FS_HZ)
-    simulate(params, mode=protocol.Mode.VELOCITY, command=command[:100], fs_hz=FS_HZ, seed=0)
+    simulate(params, mode=protocol.Mode.VELOCITY, command=command[:100], fs_hz=FS_HZ, seed=0,
+             firmware=firmware)
     best = math.inf
     for _ in range(3):
         started = time.perf_counter()
-        Plant(params, fs_hz=FS_HZ, seed=0).run(protocol.Mode.VELOCITY, command)
+        Plant(params, firmware=firmware, fs_hz=FS_HZ, seed=0).run(protocol.Mode.VELOCITY, command)
         best = min(best, time.perf_counter() - started)
     return seconds / best
 
@@ -53,19 +55,20 @@ VARIANTS: tuple[tuple[str, Method, int], ...] = (
 )
 
 
-def efficiency(plant: PlantParams, runs: int) -> dict[str, dict[str, float]]:
+def efficiency(plant: PlantParams, firmware: Firmware, runs: int) -> dict[str, dict[str, float]]:
     """RMSE / CRB and bias of J, B, T_c for each variant on the same Monte Carlo data."""
     profile = load_profile()
     truth = np.array([plant.inertia_kg_m2, plant.viscous_nm_s_rad, plant.coulomb_nm])
     errors: dict[str, list[FloatArray]] = {label: [] for label, _, _ in VARIANTS}
     bounds: list[FloatArray] = []
     for seed in range(runs):
-        with SimDrive(plant, limits=profile.limits, fs_hz=FS_HZ, seed=seed) as drive:
+        with SimDrive(plant, firmware=firmware, limits=profile.limits, fs_hz=FS_HZ,
+                      seed=seed) as drive:
             drive.enable()
             spec = protocol.Spec.from_profile(profile, drive.info)
             recordings = [drive.run(e) for e in protocol.excitation(spec)]
         # as the protocol does after the current-loop protocol measured the lag
-        hold = HOLD_SAMPLES + plant.current_loop_time_constant_s * spec.fs_hz
+        hold = HOLD_SAMPLES + firmware.current_loop_time_constant_s * spec.fs_hz
         sine_runs = [
             analyse_sine_run(
                 r,
@@ -102,31 +105,29 @@ def main() -> None:
     parser.add_argument("--runs", type=int, default=200)
     parser.add_argument("--json", default=None)
     args = parser.parse_args()
-    demo = load_profile().plant
+    profile = load_profile()
+    demo = profile.plant
     assert demo is not None
     white = PlantParams(
         inertia_kg_m2=0.0036,
         viscous_nm_s_rad=0.005,
         coulomb_nm=0.020,
         torque_noise_nm=0.002,
-        velocity_kp_nm_s_rad=0.45,
-        velocity_ki_nm_rad=12.0,
     )
-    lagged = dataclasses.replace(
-        white,
-        current_loop_time_constant_s=3e-4,
-        encoder_counts_per_rev=1 << 19,
-        velocity_filter_hz=300.0,
+    white_firmware = Firmware(velocity_kp_nm_s_rad=0.45, velocity_ki_nm_rad=12.0)
+    lagged = dataclasses.replace(white, encoder_counts_per_rev=1 << 19)
+    lagged_firmware = white_firmware.with_changes(
+        current_loop_time_constant_s=3e-4, velocity_filter_hz=300.0
     )
     two_mass = dataclasses.replace(
         demo, load_inertia_kg_m2=0.004, shaft_stiffness_nm_rad=400.0, shaft_damping_nm_s_rad=0.02
     )
     report = {
-        "simulator_x_real_time_rigid": simulator_speed(white),
-        "simulator_x_real_time_all_effects": simulator_speed(demo),
-        "simulator_x_real_time_all_effects_two_mass": simulator_speed(two_mass),
-        "jbt_white_noise": efficiency(white, args.runs),
-        "jbt_lag_quantisation_filter": efficiency(lagged, args.runs),
+        "simulator_x_real_time_rigid": simulator_speed(white, white_firmware),
+        "simulator_x_real_time_all_effects": simulator_speed(demo, profile.firmware),
+        "simulator_x_real_time_all_effects_two_mass": simulator_speed(two_mass, profile.firmware),
+        "jbt_white_noise": efficiency(white, white_firmware, args.runs),
+        "jbt_lag_quantisation_filter": efficiency(lagged, lagged_firmware, args.runs),
         "jbt_protocol_motion_time_s": sum(
             e.duration_s
             for e in protocol.excitation(

@@ -107,7 +107,8 @@ def _simulate(args: argparse.Namespace) -> int:
             args.duration, fs_hz, travel_rad=travel, max_velocity_rad_s=limits.velocity_rad_s
         )
         mode, name = Mode.VELOCITY, f"builtin_{args.duration:g}s"
-    drive = SimDrive(profile.plant, limits=profile.limits, fs_hz=fs_hz, seed=args.seed)
+    drive = SimDrive(profile.plant, firmware=profile.firmware, limits=profile.limits,
+                     fs_hz=fs_hz, seed=args.seed)
     with drive:
         drive.enable()
         recording = drive.run(Excitation(name=name, mode=mode, command=command, fs_hz=fs_hz))

@@ -35,17 +35,48 @@ class Limits:
 
 @dataclass(frozen=True, slots=True, kw_only=True)
 class Excitation:
-    """A sampled command trajectory: one sample per control period at ``fs_hz``."""
+    """A sampled command trajectory: one sample per control period at ``fs_hz``.
+
+    ``torque_offset_nm`` (one per command sample, optional): the torque feedforward the
+    master sends beside the command (CiA 402 0x60B2); a drive whose firmware has
+    ``feedforward`` adds it to its torque command, any other ignores it.
+    """
 
     name: str
     mode: Mode
     command: FloatArray
     fs_hz: float
     metadata: dict[str, str] = field(default_factory=dict)
+    torque_offset_nm: FloatArray | None = None
+
+    def __post_init__(self) -> None:
+        offset = self.torque_offset_nm
+        if offset is not None and len(offset) != len(self.command):
+            raise ValueError(f"excitation '{self.name}': torque_offset_nm has {len(offset)} "
+                             f"samples, the command {len(self.command)}")
 
     @property
     def duration_s(self) -> float:
         return len(self.command) / self.fs_hz
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class PositionHarmonic:
+    """``amplitude·sin(order·θ + phase_rad)`` over the motor position θ (rad)."""
+
+    order: int
+    amplitude: float
+    phase_rad: float
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class CompensationTable:
+    """A cogging compensation table as a drive takes it (``cogging_compensation.json``):
+    the drive adds ``Σ cogging`` (N·m) to its torque command and divides it by
+    ``1 + Σ kt_ripple`` (relative)."""
+
+    cogging_nm: tuple[PositionHarmonic, ...]
+    kt_ripple: tuple[PositionHarmonic, ...] = ()
 
 
 COMMAND_COLUMN: dict[Mode, str] = {

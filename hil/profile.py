@@ -11,9 +11,12 @@ from typing import Any
 from hil.config import ConfigTable, builtin_fixture, read_toml
 from hil.errors import ProfileError
 from hil.motion import Limits
+from plant_sim.firmware import Firmware, firmware_from_table
 from plant_sim.params import PlantParams, plant_from_table
 
 DEFAULT_PROFILE = "demo_gimbal_elevation"
+DIRECTIONS = ("higher", "lower")
+"""A measurement's optional ``direction``: which way is better."""
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -54,6 +57,7 @@ class UnitProfile:
     measurements: Mapping[str, MeasurementSpec]
     unit: Mapping[str, Any] = field(default_factory=dict)
     raw: Mapping[str, Any] = field(default_factory=dict)
+    firmware: Firmware = field(default_factory=Firmware)  # the [firmware] table (or defaults)
 
     def protocol(self, name: str) -> Mapping[str, Any]:
         """Settings of one protocol; a clear error when the profile lacks them."""
@@ -125,6 +129,7 @@ def profile_from_mapping(data: Mapping[str, Any], *, source: str, sha256: str = 
     sample_rate_hz = drive.positive("sample_rate_hz")
     drive.done()
     plant = plant_from_table(document.table_at("plant")) if "plant" in document else None
+    firmware = firmware_from_table(document.table_at("firmware", required=False))
     protocols = {name: table.values for name, table in document.tables("protocols").items()}
     measurements = {
         name: _measurement(name, table) for name, table in document.tables("measurements").items()
@@ -138,6 +143,7 @@ def profile_from_mapping(data: Mapping[str, Any], *, source: str, sha256: str = 
         limits=limits,
         sample_rate_hz=sample_rate_hz,
         plant=plant,
+        firmware=firmware,
         protocols=protocols,
         measurements=measurements,
         unit=dict(unit.values),
@@ -176,7 +182,6 @@ def _measurement(name: str, table: ConfigTable) -> MeasurementSpec:
         raise table.error("upper", f"lower limit {lower} is not below upper limit {upper}")
     accuracy = table.non_negative("accuracy_pct") if "accuracy_pct" in table else None
     allowance = table.non_negative("allowance_pct") if "allowance_pct" in table else None
-    direction = table.choice("direction", ("higher", "lower")) if "direction" in table else None
     spec = MeasurementSpec(
         name=name,
         unit=table.string("unit", ""),
@@ -187,7 +192,7 @@ def _measurement(name: str, table: ConfigTable) -> MeasurementSpec:
         accuracy_rel=None if accuracy is None else accuracy / 100.0,
         allowance_rel=None if allowance is None else allowance / 100.0,
         description=table.string("description", ""),
-        direction=direction,
+        direction=table.choice("direction", DIRECTIONS) if "direction" in table else None,
     )
     table.done()
     return spec

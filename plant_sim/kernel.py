@@ -41,8 +41,11 @@ from numba import njit
     P_EXACT_HOLD,
     P_KT_SCALE,
     P_LOCKED,
+    P_DELAY,  # firmware: extra control periods between the torque command and the current loop
+    P_FEEDFORWARD,  # firmware: 1 adds the torque offset input to the command
+    P_COMPENSATION,  # firmware: 1 applies the loaded cogging / K_t ripple table
     N_PARAMS,
-) = range(29)
+) = range(32)
 
 # state vector layout
 (
@@ -55,8 +58,9 @@ from numba import njit
     S_INTEGRATOR,
     S_POS_MEAS_PREV,
     S_HYST,
+    S_DELAY_INDEX,  # next slot of the command delay line
     N_STATE,
-) = range(10)
+) = range(11)
 
 MODE_TORQUE, MODE_VELOCITY, MODE_POSITION = 0, 1, 2
 
@@ -92,6 +96,10 @@ def run_kernel(
     state: np.ndarray,
     mode: int,
     command: np.ndarray,
+    torque_offset: np.ndarray,
+    comp_cogging: np.ndarray,
+    comp_ripple: np.ndarray,
+    delay_line: np.ndarray,
     torque_noise: np.ndarray,
     dt_s: float,
     substeps: int,
@@ -105,6 +113,11 @@ def run_kernel(
     """Advance ``len(command)`` control periods. Outputs are sampled at each period start.
 
     ``out_load_torque`` is the shaft torque sensor of a locked rotor (0 when not locked).
+    Firmware: ``torque_offset`` (one per command sample, or empty) is added to the torque
+    command when ``P_FEEDFORWARD`` is set; with ``P_COMPENSATION`` set the command gets
+    ``comp_cogging(θ̂)`` added and is divided by ``1 + comp_ripple(θ̂)`` (θ̂ the encoder);
+    the reported torque is that command; ``delay_line`` (``P_DELAY`` slots, state across
+    calls) holds it back that many control periods before the current loop.
     """
     j_m = params[P_J_MOTOR]
     j_l = params[P_J_LOAD]
@@ -137,6 +150,9 @@ def run_kernel(
     inv_j_m = 1.0 / j_m
     mge = params[P_MGE]
     grav_phase = params[P_GRAV_PHASE]
+    delay = int(params[P_DELAY])
+    feedforward = params[P_FEEDFORWARD] != 0.0 and torque_offset.shape[0] > 0
+    compensate = params[P_COMPENSATION] != 0.0
 
     theta_m = state[S_THETA_M]
     omega_m = state[S_OMEGA_M]
@@ -147,6 +163,7 @@ def run_kernel(
     integrator = state[S_INTEGRATOR]
     pos_prev = state[S_POS_MEAS_PREV]
     hyst = state[S_HYST]
+    slot = int(state[S_DELAY_INDEX])
 
     for k in range(command.shape[0]):
         # --- sensing and the drive's loops, once per control period ---
@@ -164,12 +181,22 @@ def run_kernel(
             integrator += params[P_KI_VEL] * error * dt_s
             integrator = min(max(integrator, -t_max), t_max)  # anti-windup clamp
             torque_cmd = params[P_KP_VEL] * error + integrator
+        if feedforward:
+            torque_cmd += torque_offset[k]
+        if compensate:
+            torque_cmd += _periodic(pos_meas, comp_cogging)
+            torque_cmd /= 1.0 + _periodic(pos_meas, comp_ripple)
         torque_cmd = min(max(torque_cmd, -t_max), t_max)
         out_position[k] = pos_meas
         out_velocity[k] = vel_est
         out_torque[k] = torque_cmd + torque_noise[k]
         out_current[k] = torque_act / kt
         out_torque_actual[k] = torque_act
+        if delay > 0:  # the current loop gets the command of `delay` periods ago
+            held_cmd = delay_line[slot]
+            delay_line[slot] = torque_cmd
+            slot = slot + 1 if slot + 1 < delay else 0
+            torque_cmd = held_cmd
         if locked:
             # the clamp's torque sensor holds everything acting on the (still) rotor
             held = kt_scale * torque_act * (1.0 + _periodic(theta_m, kt_ripple))
@@ -246,3 +273,4 @@ def run_kernel(
     state[S_INTEGRATOR] = integrator
     state[S_POS_MEAS_PREV] = pos_prev
     state[S_HYST] = hyst
+    state[S_DELAY_INDEX] = slot

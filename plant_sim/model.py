@@ -12,6 +12,7 @@ from numpy.typing import NDArray
 from hil.motion import COMMAND_COLUMN, Mode
 from hil.recording import Recording
 from plant_sim import kernel
+from plant_sim.firmware import Firmware
 from plant_sim.params import Harmonic, PlantParams
 
 FloatArray = NDArray[np.float64]
@@ -52,8 +53,8 @@ def periodic_table(harmonics: tuple[Harmonic, ...]) -> FloatArray:
     return table
 
 
-def pack_params(params: PlantParams) -> FloatArray:
-    """The kernel's parameter vector."""
+def pack_params(params: PlantParams, firmware: Firmware) -> FloatArray:
+    """The kernel's parameter vector (the plant's physics and the drive's firmware)."""
     vector = np.zeros(kernel.N_PARAMS)
     vector[kernel.P_J_MOTOR] = params.motor_inertia_kg_m2
     vector[kernel.P_J_LOAD] = params.load_at_elevation_kg_m2
@@ -78,19 +79,22 @@ def pack_params(params: PlantParams) -> FloatArray:
     vector[kernel.P_CABLE_ZERO] = params.cable_zero_rad
     vector[kernel.P_HYST_NM] = params.cable_hysteresis_nm
     vector[kernel.P_HYST_ANGLE] = params.cable_hysteresis_angle_rad
-    vector[kernel.P_TAU_I] = params.current_loop_time_constant_s
+    vector[kernel.P_TAU_I] = firmware.current_loop_time_constant_s
     vector[kernel.P_T_MAX] = (
         params.torque_limit_nm if math.isfinite(params.torque_limit_nm) else 1e12
     )
     vector[kernel.P_COUNTS] = params.encoder_counts_per_rev
-    vector[kernel.P_VEL_FILTER_HZ] = params.velocity_filter_hz
-    vector[kernel.P_KP_VEL] = params.velocity_kp_nm_s_rad
-    vector[kernel.P_KI_VEL] = params.velocity_ki_nm_rad
+    vector[kernel.P_VEL_FILTER_HZ] = firmware.velocity_filter_hz
+    vector[kernel.P_KP_VEL] = firmware.velocity_kp_nm_s_rad
+    vector[kernel.P_KI_VEL] = firmware.velocity_ki_nm_rad
     vector[kernel.P_KP_POS] = params.position_kp_1_s
     vector[kernel.P_KT] = params.torque_constant_nm_a
     vector[kernel.P_EXACT_HOLD] = float(params.exact_torque_hold)
     vector[kernel.P_KT_SCALE] = 1.0 + params.torque_constant_error_rel
     vector[kernel.P_LOCKED] = float(params.locked_rotor)
+    vector[kernel.P_DELAY] = firmware.command_delay_samples
+    vector[kernel.P_FEEDFORWARD] = float(firmware.feedforward)
+    vector[kernel.P_COMPENSATION] = float(firmware.cogging_compensation)
     return vector
 
 
@@ -107,7 +111,8 @@ class Plant:
     """One simulated axis with its drive loops. Deterministic given ``seed``.
 
     ``run`` may be called repeatedly; state (position, integrators, filters) carries over,
-    so an emulator can advance the plant one SYNC period at a time.
+    so an emulator can advance the plant one SYNC period at a time. ``firmware`` is the
+    drive's controller (default: :class:`~plant_sim.firmware.Firmware`'s defaults).
     """
 
     def __init__(
@@ -116,13 +121,18 @@ class Plant:
         *,
         fs_hz: float,
         seed: int,
+        firmware: Firmware | None = None,
         initial_position_rad: float = 0.0,
     ) -> None:
         if not fs_hz > 0:
             raise ValueError(f"fs_hz must be > 0, got {fs_hz}")
         self.params = params
+        self.firmware = firmware or Firmware()
         self.fs_hz = float(fs_hz)
-        self._packed = pack_params(params)
+        self._packed = pack_params(params, self.firmware)
+        self._delay_line = np.zeros(max(1, self.firmware.command_delay_samples))
+        self._comp_cogging = np.zeros(0)
+        self._comp_ripple = np.zeros(0)
         self._cogging = periodic_table(params.cogging)
         self._kt_ripple = periodic_table(params.kt_ripple)
         self._substeps = substeps_for(params, self.fs_hz)
@@ -160,17 +170,33 @@ class Plant:
         """Move the other axis (elevation) of the station: the inertia about this axis
         follows ``inertia_elevation_kg_m2``."""
         self.params = self.params.with_changes(elevation_rad=elevation_rad)
-        self._packed = pack_params(self.params)
+        self._packed = pack_params(self.params, self.firmware)
         self._substeps = substeps_for(self.params, self.fs_hz)
+
+    def load_compensation(
+        self, cogging: tuple[Harmonic, ...], kt_ripple: tuple[Harmonic, ...] = ()
+    ) -> None:
+        """Load a cogging compensation table into the drive (empty: none). The drive applies
+        it only when its firmware has ``cogging_compensation``."""
+        self._comp_cogging = periodic_table(cogging)
+        self._comp_ripple = periodic_table(kt_ripple)
 
     def hold(self) -> None:
         """Reset the velocity integrator (what a drive does on disable/enable)."""
         self._state[kernel.S_INTEGRATOR] = 0.0
 
-    def run(self, mode: Mode, command: FloatArray) -> PlantTrace:
-        """Advance one control period per command sample."""
+    def run(
+        self, mode: Mode, command: FloatArray, torque_offset: FloatArray | None = None
+    ) -> PlantTrace:
+        """Advance one control period per command sample; ``torque_offset`` (N·m, one per
+        sample) is the master's torque offset, which the firmware adds when it has
+        ``feedforward``."""
         command = np.ascontiguousarray(command, dtype=np.float64)
         n = command.shape[0]
+        offset = (np.zeros(0) if torque_offset is None
+                  else np.ascontiguousarray(torque_offset, dtype=np.float64))
+        if offset.shape[0] not in (0, n):
+            raise ValueError(f"torque_offset has {offset.shape[0]} samples, command {n}")
         noise = self._rng.normal(0.0, 1.0, n) * self.params.torque_noise_nm
         outputs = [np.empty(n) for _ in range(6)]
         run_kernel: Callable[..., None] = kernel.run_kernel
@@ -181,6 +207,10 @@ class Plant:
             self._state,
             _KERNEL_MODE[mode],
             command,
+            offset,
+            self._comp_cogging,
+            self._comp_ripple,
+            self._delay_line,
             noise,
             1.0 / self.fs_hz,
             self._substeps,
@@ -232,10 +262,12 @@ def simulate(
     command: FloatArray,
     fs_hz: float,
     seed: int,
+    firmware: Firmware | None = None,
     initial_position_rad: float = 0.0,
 ) -> Recording:
     """Simulate ``command`` (one sample per control period) from rest and return a Recording."""
-    plant = Plant(params, fs_hz=fs_hz, seed=seed, initial_position_rad=initial_position_rad)
+    plant = Plant(params, fs_hz=fs_hz, seed=seed, firmware=firmware,
+                  initial_position_rad=initial_position_rad)
     trace = plant.run(mode, command)
     metadata = {"drive": "plant_sim", "control_mode": mode.value, "seed": str(seed)}
     return trace_to_recording(trace, mode=mode, command=command, metadata=metadata)

@@ -9,6 +9,7 @@ from typing import Any, get_type_hints
 
 from hil.config import ConfigTable
 from hil.errors import ProfileError
+from plant_sim.firmware import refuse_moved_keys
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -22,7 +23,7 @@ class Harmonic:
 
 @dataclass(frozen=True, slots=True, kw_only=True)
 class PlantParams:
-    """A gimbal axis and its drive.
+    """A gimbal axis (its drive's controller settings are :class:`plant_sim.firmware.Firmware`).
 
     Mechanics: ``J·α = T_motor·(1 + K_t ripple(θ)) − cogging(θ) − friction(ω) − gravity(θ)
     − cable(θ) − offset``; with ``load_inertia_kg_m2 > 0`` a two-mass system whose load is
@@ -50,14 +51,10 @@ class PlantParams:
     cable_zero_rad: float = 0.0
     cable_hysteresis_nm: float = 0.0  # half width of the Dahl hysteresis loop
     cable_hysteresis_angle_rad: float = 0.02  # travel over which hysteresis saturates
-    current_loop_time_constant_s: float = 0.0
     torque_constant_nm_a: float = 0.1
     torque_limit_nm: float = math.inf
     encoder_counts_per_rev: int = 0  # 0: ideal encoder
     torque_noise_nm: float = 0.0  # std of white noise on the reported torque
-    velocity_filter_hz: float = 0.0  # 0: raw position difference
-    velocity_kp_nm_s_rad: float = 0.05
-    velocity_ki_nm_rad: float = 1.0
     position_kp_1_s: float = 30.0
     substeps: int = 0  # physics steps per control period; 0: chosen from the dynamics
     # True: the held (zero-order hold) motor torque moves the position by its exact double
@@ -86,9 +83,7 @@ class PlantParams:
             "shaft_damping_nm_s_rad",
             "cable_stiffness_nm_rad",
             "cable_hysteresis_nm",
-            "current_loop_time_constant_s",
             "torque_noise_nm",
-            "velocity_filter_hz",
             "load_torque_noise_nm",
         ):
             value = getattr(self, name)
@@ -168,6 +163,7 @@ def plant_from_table(table: ConfigTable) -> PlantParams:
     ProfileError
         An unknown key, a wrong type or a value out of range, naming file, table and key.
     """
+    refuse_moved_keys(table)
     hints = get_type_hints(PlantParams)
     kwargs: dict[str, Any] = {}
     for f in fields(PlantParams):

@@ -92,7 +92,8 @@ def _load_profile_and_protocols(path: Path) -> None:
     """Load a profile and let every protocol read its own settings table."""
     profile: UnitProfile = load_profile(path)
     assert profile.plant is not None
-    drive = SimDrive(profile.plant, limits=profile.limits, fs_hz=profile.sample_rate_hz, seed=0)
+    drive = SimDrive(profile.plant, firmware=profile.firmware, limits=profile.limits,
+                     fs_hz=profile.sample_rate_hz, seed=0)
     info = drive.info
     for name in profile.protocols:
         module = importlib.import_module(f"hil.suite.{name}")

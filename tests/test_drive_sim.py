@@ -9,6 +9,7 @@ from hil.drives.base import DriveState
 from hil.drives.sim import SimDrive
 from hil.errors import DriveStateError, LimitViolationError
 from hil.motion import Excitation, Limits, Mode
+from plant_sim.firmware import Firmware
 from plant_sim.params import PlantParams
 
 LIMITS = Limits(velocity_rad_s=2.0, torque_nm=0.3, travel_min_rad=-1.0, travel_max_rad=1.0)
@@ -16,9 +17,9 @@ FS = 1000.0
 
 
 def _drive() -> SimDrive:
-    plant = PlantParams(inertia_kg_m2=0.003, coulomb_nm=0.01, velocity_kp_nm_s_rad=0.3,
-                        velocity_ki_nm_rad=10.0)
-    return SimDrive(plant, limits=LIMITS, fs_hz=FS, seed=0)
+    plant = PlantParams(inertia_kg_m2=0.003, coulomb_nm=0.01)
+    firmware = Firmware(velocity_kp_nm_s_rad=0.3, velocity_ki_nm_rad=10.0)
+    return SimDrive(plant, firmware=firmware, limits=LIMITS, fs_hz=FS, seed=0)
 
 
 @pytest.mark.parametrize(

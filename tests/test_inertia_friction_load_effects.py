@@ -26,13 +26,12 @@ BASE = PlantParams(
     coulomb_nm=0.020,
     torque_noise_nm=0.0015,
     encoder_counts_per_rev=1 << 19,
-    velocity_kp_nm_s_rad=0.45,
-    velocity_ki_nm_rad=12.0,
 )
+FIRMWARE = PROFILE.firmware.with_changes(velocity_filter_hz=0.0, current_loop_time_constant_s=0.0)
 
 
 def _record(plant: PlantParams, *, centre_rad: float) -> tuple[list[Recording], protocol.Spec]:
-    with SimDrive(plant, limits=PROFILE.limits, fs_hz=4000.0, seed=3) as drive:
+    with SimDrive(plant, firmware=FIRMWARE, limits=PROFILE.limits, fs_hz=4000.0, seed=3) as drive:
         drive.enable()
         spec = dataclasses.replace(
             protocol.Spec.from_profile(PROFILE, drive.info), centre_rad=centre_rad

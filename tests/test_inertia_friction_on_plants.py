@@ -21,48 +21,57 @@ from hil.identify.inertia_friction import (
 )
 from hil.measurement import Outcome
 from hil.profile import UnitProfile, load_profile
+from plant_sim.firmware import Firmware
 from plant_sim.params import Harmonic, PlantParams
 
 PROFILE = load_profile()
 
 
-def _identify(plant: PlantParams, profile: UnitProfile, seed: int) -> InertiaFrictionResult:
-    with SimDrive(plant, limits=profile.limits, fs_hz=profile.sample_rate_hz, seed=seed) as drive:
+def _identify(plant: PlantParams, profile: UnitProfile, seed: int,
+              firmware: Firmware | None = None) -> InertiaFrictionResult:
+    with SimDrive(plant, firmware=firmware or profile.firmware, limits=profile.limits,
+                  fs_hz=profile.sample_rate_hz, seed=seed) as drive:
         drive.enable()
         spec = protocol.Spec.from_profile(profile, drive.info)
         return protocol.analyse([drive.run(e) for e in protocol.excitation(spec)], spec)
 
 
 @st.composite
-def plausible_plants(draw: st.DrawFn) -> PlantParams:
+def plausible_plants(draw: st.DrawFn) -> tuple[PlantParams, Firmware]:
     inertia = draw(st.floats(0.0015, 0.008))
     bandwidth_rad_s = 2 * math.pi * draw(st.floats(15.0, 40.0))
     smallest_inertial_torque = inertia * 0.5 * 2 * math.pi * 2.0
-    return PlantParams(
+    viscous = draw(st.floats(0.002, 0.012))
+    coulomb = draw(st.floats(0.008, 0.035))
+    order = draw(st.integers(24, 120))
+    amplitude = draw(st.floats(0.0, 0.02)) * smallest_inertial_torque
+    phase = draw(st.floats(0.0, 2 * math.pi))
+    lag_s = draw(st.floats(5e-5, 6e-4))  # the draws keep their order of old
+    plant = PlantParams(
         inertia_kg_m2=inertia,
-        viscous_nm_s_rad=draw(st.floats(0.002, 0.012)),
-        coulomb_nm=draw(st.floats(0.008, 0.035)),
-        cogging=(
-            Harmonic(
-                order=draw(st.integers(24, 120)),
-                amplitude=draw(st.floats(0.0, 0.02)) * smallest_inertial_torque,
-                phase_rad=draw(st.floats(0.0, 2 * math.pi)),
-            ),
-        ),
-        current_loop_time_constant_s=draw(st.floats(5e-5, 6e-4)),
+        viscous_nm_s_rad=viscous,
+        coulomb_nm=coulomb,
+        cogging=(Harmonic(order=order, amplitude=amplitude, phase_rad=phase),),
         encoder_counts_per_rev=draw(st.sampled_from([1 << 17, 1 << 18, 1 << 19])),
         torque_noise_nm=draw(st.floats(2e-4, 3e-3)),
+        torque_limit_nm=0.5,
+    )
+    firmware = Firmware(
+        current_loop_time_constant_s=lag_s,
         velocity_filter_hz=draw(st.floats(150.0, 600.0)),
         velocity_kp_nm_s_rad=inertia * bandwidth_rad_s,
         velocity_ki_nm_rad=inertia * bandwidth_rad_s * bandwidth_rad_s / 5,
-        torque_limit_nm=0.5,
     )
+    return plant, firmware
 
 
 @settings(max_examples=12)
-@given(plant=plausible_plants(), seed=st.integers(0, 2**16))
-def test_recovers_j_b_tc_within_the_profiles_accuracy_claim(plant: PlantParams, seed: int) -> None:
-    result = _identify(plant, PROFILE, seed)
+@given(unit=plausible_plants(), seed=st.integers(0, 2**16))
+def test_recovers_j_b_tc_within_the_profiles_accuracy_claim(
+    unit: tuple[PlantParams, Firmware], seed: int
+) -> None:
+    plant, firmware = unit
+    result = _identify(plant, PROFILE, seed, firmware)
     for estimate, truth in (
         (result.inertia, plant.inertia_kg_m2),
         (result.viscous, plant.viscous_nm_s_rad),

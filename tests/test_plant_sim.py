@@ -10,6 +10,7 @@ import pytest
 
 from hil.motion import Mode
 from hil.profile import load_profile
+from plant_sim.firmware import Firmware
 from plant_sim.model import Plant, simulate
 from plant_sim.params import Harmonic, PlantParams
 
@@ -31,12 +32,12 @@ def test_runs_are_deterministic_given_the_seed() -> None:
         coulomb_nm=0.02,
         torque_noise_nm=0.002,
         encoder_counts_per_rev=4096,
-        velocity_filter_hz=200.0,
     )
+    firmware = Firmware(velocity_filter_hz=200.0)
     command = 0.5 * np.sin(np.linspace(0, 20, 8000))
-    a = simulate(params, mode=Mode.VELOCITY, command=command, fs_hz=FS, seed=7)
-    b = simulate(params, mode=Mode.VELOCITY, command=command, fs_hz=FS, seed=7)
-    c = simulate(params, mode=Mode.VELOCITY, command=command, fs_hz=FS, seed=8)
+    a = simulate(params, mode=Mode.VELOCITY, command=command, fs_hz=FS, seed=7, firmware=firmware)
+    b = simulate(params, mode=Mode.VELOCITY, command=command, fs_hz=FS, seed=7, firmware=firmware)
+    c = simulate(params, mode=Mode.VELOCITY, command=command, fs_hz=FS, seed=8, firmware=firmware)
     np.testing.assert_array_equal(a.effort, b.effort)
     assert not np.array_equal(a.effort, c.effort)
 
@@ -59,18 +60,19 @@ def test_breakaway_above_static_friction_and_stribeck_curve() -> None:
     # at constant speed the drive's torque equals the Stribeck friction at that speed
     for speed in (0.005, 0.05, 0.3):
         held = Plant(
-            params.with_changes(velocity_kp_nm_s_rad=0.5, velocity_ki_nm_rad=20.0), fs_hz=FS, seed=0
+            params, firmware=Firmware(velocity_kp_nm_s_rad=0.5, velocity_ki_nm_rad=20.0),
+            fs_hz=FS, seed=0,
         ).run(Mode.VELOCITY, np.full(16000, speed))
         expected = 0.02 + 0.01 * math.exp(-((speed / 0.02) ** 2))
         assert np.mean(held.torque_nm[-4000:]) == pytest.approx(expected, rel=0.02)
 
 
 def test_reversal_sticks_then_moves_the_other_way() -> None:
-    params = PlantParams(
-        inertia_kg_m2=0.003, coulomb_nm=0.02, velocity_kp_nm_s_rad=0.3, velocity_ki_nm_rad=10.0
-    )
+    params = PlantParams(inertia_kg_m2=0.003, coulomb_nm=0.02)
+    firmware = Firmware(velocity_kp_nm_s_rad=0.3, velocity_ki_nm_rad=10.0)
     t = np.arange(8000) / FS
-    trace = Plant(params, fs_hz=FS, seed=0).run(Mode.VELOCITY, 0.5 * np.sin(2 * np.pi * t[:3600]))
+    trace = Plant(params, firmware=firmware, fs_hz=FS, seed=0).run(Mode.VELOCITY,
+                  0.5 * np.sin(2 * np.pi * t[:3600]))
     steps = np.diff(trace.position_rad)
     sign_changes = np.count_nonzero(np.diff(np.sign(steps[steps != 0])))
     assert sign_changes == 1  # exactly one reversal: no chattering at zero speed
@@ -100,11 +102,11 @@ def test_encoder_quantisation_saturation_and_gravity() -> None:
         gravity_mge_nm=0.04,
         gravity_phase_rad=0.0,
         position_kp_1_s=20.0,
-        velocity_kp_nm_s_rad=0.3,
-        velocity_ki_nm_rad=10.0,
-        velocity_filter_hz=100.0,
     )
-    trace = Plant(params, fs_hz=FS, seed=0).run(Mode.POSITION, np.full(20000, 0.5))
+    firmware = Firmware(velocity_kp_nm_s_rad=0.3, velocity_ki_nm_rad=10.0,
+                        velocity_filter_hz=100.0)
+    trace = Plant(params, firmware=firmware, fs_hz=FS, seed=0).run(Mode.POSITION, np.full(20000,
+                  0.5))
     counts = trace.position_rad / (2 * math.pi / 65536)
     np.testing.assert_allclose(counts, np.round(counts), atol=1e-9)
     assert np.max(np.abs(trace.torque_nm)) <= 0.05
@@ -116,11 +118,11 @@ def test_cogging_is_periodic_in_position() -> None:
     params = PlantParams(
         inertia_kg_m2=0.003,
         cogging=(Harmonic(order=12, amplitude=0.01),),
-        velocity_kp_nm_s_rad=0.5,
-        velocity_ki_nm_rad=20.0,
     )
+    firmware = Firmware(velocity_kp_nm_s_rad=0.5, velocity_ki_nm_rad=20.0)
     speed = 0.5
-    trace = Plant(params, fs_hz=FS, seed=0).run(Mode.VELOCITY, np.full(int(FS * 8), speed))
+    trace = Plant(params, firmware=firmware, fs_hz=FS, seed=0).run(Mode.VELOCITY,
+                  np.full(int(FS * 8), speed))
     keep = slice(int(FS), None)
     theta, torque = trace.position_rad[keep], trace.torque_nm[keep]
     design = np.column_stack([np.sin(12 * theta), np.cos(12 * theta), np.ones_like(theta)])
@@ -158,12 +160,14 @@ def test_at_constant_speed_the_encoder_moves_at_the_speed_friction_sees(
     """The exact-hold position correction must not act on torque that friction balances:
     it once let the encoder lag the internal velocity by h/2·T/J (0.0008 rad/s, 16 % of
     the slowest Stribeck step), which biased T_s and v_s."""
-    demo = load_profile().plant
+    profile = load_profile()
+    demo = profile.plant
     assert demo is not None
     plant = dataclasses.replace(
         demo, torque_noise_nm=0.0, cogging=(), kt_ripple=(),
         cable_hysteresis_nm=0.0, gravity_mge_nm=0.0, cable_stiffness_nm_rad=0.0,
     )
-    trace = Plant(plant, fs_hz=4000.0, seed=0).run(Mode.VELOCITY, np.full(40000, speed_rad_s))
+    trace = Plant(plant, firmware=profile.firmware, fs_hz=4000.0, seed=0).run(
+        Mode.VELOCITY, np.full(40000, speed_rad_s))
     rate = (trace.position_rad[-1] - trace.position_rad[20000]) / (19999 / 4000.0)
     assert rate == pytest.approx(speed_rad_s, rel=1e-3)

@@ -20,6 +20,7 @@ from hil.diagnose import interpret
 from hil.diagnose.model import Fit
 from hil.errors import ProfileError
 from hil.profile import profile_from_mapping
+from plant_sim.firmware import FIRMWARE_KEYS, firmware_from_mapping, firmware_to_mapping
 from plant_sim.params import plant_from_mapping, plant_to_mapping
 
 if TYPE_CHECKING:
@@ -181,10 +182,45 @@ def extended_plant(diagnosis: Diagnosis) -> dict[str, Any]:
     """
     fields = model_fields(diagnosis.final)
     fields.update(data_fields(diagnosis))
+    plant, _ = split_firmware(fields)
     try:
-        return plant_to_mapping(plant_from_mapping(fields, source="extended model"))
+        return plant_to_mapping(plant_from_mapping(plant, source="extended model"))
     except ProfileError as exc:
         raise ProfileError(f"extended model is not a valid plant: {exc}") from exc
+
+
+def split_firmware(fields: dict[str, Any]) -> tuple[dict[str, Any], dict[str, Any]]:
+    """Simulator fields split into the ``[plant]`` table's and the ``[firmware]`` table's
+    (the drive's velocity loop, filter and current-loop lag).
+
+    Parameters
+    ----------
+    fields : dict of str to Any
+        From :func:`model_fields` and :func:`data_fields`.
+
+    Returns
+    -------
+    plant, firmware : dict of str to Any
+    """
+    firmware = {k: v for k, v in fields.items() if k in FIRMWARE_KEYS}
+    plant = {k: v for k, v in fields.items() if k not in FIRMWARE_KEYS}
+    return plant, firmware
+
+
+def extended_firmware(diagnosis: Diagnosis) -> dict[str, Any]:
+    """The ``[firmware]`` table of the extended model: what the recording shows of the
+    drive's controller (velocity PI, filter, current-loop lag), the rest at its defaults.
+
+    Raises
+    ------
+    ProfileError
+        The values do not make a valid firmware.
+    """
+    fields = model_fields(diagnosis.final)
+    fields.update(data_fields(diagnosis))
+    _, firmware = split_firmware(fields)
+    firmware.setdefault("version", "diagnosed")
+    return firmware_to_mapping(firmware_from_mapping(firmware, source="extended model"))
 
 
 def extended_profile(diagnosis: Diagnosis) -> dict[str, Any]:
@@ -199,7 +235,7 @@ def extended_profile(diagnosis: Diagnosis) -> dict[str, Any]:
     dict of str to Any
         ``unit``, ``limits`` (1.5 × the largest recorded speed, the plant's torque limit
         or 1.5 × the largest effort, the recorded travel widened by 5 % of its span on
-        each side), ``drive``, ``plant`` and an empty ``measurements``.
+        each side), ``drive``, ``firmware``, ``plant`` and an empty ``measurements``.
 
     Raises
     ------
@@ -227,6 +263,7 @@ def extended_profile(diagnosis: Diagnosis) -> dict[str, Any]:
             "travel_max_rad": float(np.max(position)) + margin,
         },
         "drive": {"sample_rate_hz": diagnosis.signals.fs_hz},
+        "firmware": extended_firmware(diagnosis),
         "plant": plant,
         "measurements": {},
     }

@@ -9,7 +9,7 @@ from typing import TYPE_CHECKING, Any
 
 from hil.diagnose import interpret
 from hil.diagnose.model import Fit
-from hil.diagnose.profile_out import extended_plant
+from hil.diagnose.profile_out import extended_firmware, extended_plant
 from hil.diagnose.select import DECISION_RULE, Candidate
 
 if TYPE_CHECKING:
@@ -139,6 +139,7 @@ def report(diagnosis: Diagnosis) -> dict[str, Any]:
             "metrics": final_metrics,
             "parameters": model_parameters(diagnosis.final),
             "plant": extended_plant(diagnosis),
+            "firmware": extended_firmware(diagnosis),
         },
     }
     result = _clean(data)

@@ -15,8 +15,8 @@ from types import TracebackType
 import numpy as np
 from numpy.typing import NDArray
 
-from hil.errors import LimitViolationError
-from hil.motion import Excitation, Limits, Mode
+from hil.errors import DriveStateError, LimitViolationError
+from hil.motion import CompensationTable, Excitation, Limits, Mode
 from hil.recording import Recording
 
 log = logging.getLogger(__name__)
@@ -236,6 +236,18 @@ class Drive(abc.ABC):
             A fault or communication loss; the drive is already safe. The partial
             recording, if any, is attached as ``exc.partial_recording``.
         """
+
+    def load_compensation(self, table: CompensationTable | None) -> None:
+        """Load a cogging compensation table into the drive (``None``: clear it).
+
+        The drive applies it only when its firmware has cogging compensation.
+
+        Raises
+        ------
+        DriveStateError
+            This drive takes no compensation table.
+        """
+        raise DriveStateError(f"{self.info.transport} drive takes no compensation table")
 
     def close(self) -> None:
         """Disable the drive, then release the transport."""

@@ -32,6 +32,7 @@ def open_drive(
             raise ProfileError("--drive sim needs a [plant] table", source=profile.source)
         with SimDrive(
             profile.plant,
+            firmware=profile.firmware,
             limits=profile.limits,
             fs_hz=profile.sample_rate_hz,
             seed=seed,

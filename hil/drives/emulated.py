@@ -53,6 +53,7 @@ def canopen_emulator(
     station = dataclasses.replace(station, channel=channel, **(station_changes or {}))
     emulator = Cia402Emulator(
         _plant(profile, "canopen-emulator"),
+        firmware=profile.firmware,
         fs_hz=profile.sample_rate_hz,
         seed=seed,
         channel=channel,
@@ -85,6 +86,7 @@ def modbus_emulator(
     assert isinstance(station, ModbusStation)
     emulator = ModbusEmulator(
         _plant(profile, "modbus-emulator"),
+        firmware=profile.firmware,
         fs_hz=profile.sample_rate_hz,
         seed=seed,
         register_map=station.register_map_path,

@@ -6,24 +6,25 @@ import contextlib
 import logging
 from collections.abc import Iterator
 
-from hil import __version__
 from hil.drives.base import Drive, DriveInfo, DriveState, DriveStatus, check_limits
 from hil.errors import DriveStateError
-from hil.motion import Excitation, Limits, Mode
+from hil.motion import CompensationTable, Excitation, Limits, Mode, PositionHarmonic
 from hil.recording import Recording
+from plant_sim.firmware import Firmware
 from plant_sim.model import Plant, trace_to_recording
-from plant_sim.params import PlantParams
+from plant_sim.params import Harmonic, PlantParams
 
 log = logging.getLogger(__name__)
 
 
 class SimDrive(Drive):
-    """A simulated drive with its plant. Deterministic given ``seed``."""
+    """A simulated drive with its plant and firmware. Deterministic given ``seed``."""
 
     def __init__(
         self,
         plant: PlantParams,
         *,
+        firmware: Firmware | None = None,
         limits: Limits,
         fs_hz: float,
         seed: int,
@@ -34,12 +35,13 @@ class SimDrive(Drive):
         if exact_torque_hold and not plant.exact_torque_hold:
             plant = plant.with_changes(exact_torque_hold=True)
         self._plant_params = plant
-        self._plant = Plant(plant, fs_hz=fs_hz, seed=seed)
+        firmware = firmware or Firmware()
+        self._plant = Plant(plant, fs_hz=fs_hz, seed=seed, firmware=firmware)
         self._state = DriveState.DISABLED
         self._info = DriveInfo(
             vendor="gimbal-hil",
             model="plant_sim",
-            firmware_version=__version__,
+            firmware_version=firmware.version,
             serial=serial,
             rated_torque_nm=min(plant.torque_limit_nm, limits.torque_nm),
             limits=limits,
@@ -73,6 +75,13 @@ class SimDrive(Drive):
         """Put the station's other (elevation) axis at ``elevation_rad`` (simulated)."""
         self._plant.set_elevation(elevation_rad)
 
+    def load_compensation(self, table: CompensationTable | None) -> None:
+        """Load (or clear) the drive's cogging compensation table."""
+        if table is None:
+            self._plant.load_compensation(())
+            return
+        self._plant.load_compensation(_harmonics(table.cogging_nm), _harmonics(table.kt_ripple))
+
     def enable(self) -> None:
         self._plant.hold()
         self._state = DriveState.ENABLED
@@ -101,7 +110,7 @@ class SimDrive(Drive):
             )
         check_limits(excitation, self._info.limits, start_position_rad=self._plant.position_rad)
         log.info("sim: running %s (%.2f s)", excitation.name, excitation.duration_s)
-        trace = self._plant.run(excitation.mode, excitation.command)
+        trace = self._plant.run(excitation.mode, excitation.command, excitation.torque_offset_nm)
         metadata = {
             "drive": "plant_sim",
             "excitation": excitation.name,
@@ -112,3 +121,8 @@ class SimDrive(Drive):
         return trace_to_recording(
             trace, mode=excitation.mode, command=excitation.command, metadata=metadata
         )
+
+
+def _harmonics(table: tuple[PositionHarmonic, ...]) -> tuple[Harmonic, ...]:
+    return tuple(Harmonic(order=h.order, amplitude=h.amplitude, phase_rad=h.phase_rad)
+                 for h in table)

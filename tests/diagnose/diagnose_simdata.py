@@ -11,6 +11,7 @@ from numpy.typing import NDArray
 
 from hil.motion import Mode
 from hil.recording import Recording
+from plant_sim.firmware import Firmware
 from plant_sim.model import simulate
 from plant_sim.params import Harmonic, PlantParams
 
@@ -38,10 +39,16 @@ def excitation(fs_hz: float = FS_HZ, *, scale: float = 1.0) -> FloatArray:
 BASE: dict[str, Any] = {
     "encoder_counts_per_rev": 2**20,
     "torque_noise_nm": 0.002,
-    "velocity_filter_hz": 300.0,
-    "velocity_kp_nm_s_rad": 0.45,
-    "velocity_ki_nm_rad": 12.0,
 }
+FIRMWARE = Firmware(velocity_filter_hz=300.0, velocity_kp_nm_s_rad=0.45, velocity_ki_nm_rad=12.0)
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class SimUnit:
+    """A simulated axis and its drive's firmware."""
+
+    plant: PlantParams
+    firmware: Firmware
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -51,7 +58,7 @@ class Hidden:
     effect: str | None
     key: str | None
     truth: float
-    params: PlantParams
+    params: SimUnit
 
 
 def plant(inertia: float, viscous: float, coulomb: float, effect: str | None,
@@ -60,6 +67,7 @@ def plant(inertia: float, viscous: float, coulomb: float, effect: str | None,
     base = dict(BASE, inertia_kg_m2=inertia, viscous_nm_s_rad=viscous, coulomb_nm=coulomb)
     key: str | None = None
     truth = math.nan
+    firmware = FIRMWARE
     if effect == "offset":
         truth = math.copysign(0.006 + 0.024 * size, detail - 0.5)
         base["torque_offset_nm"], key = truth, "offset_nm"
@@ -90,7 +98,7 @@ def plant(inertia: float, viscous: float, coulomb: float, effect: str | None,
         key = "stiffness_nm_per_rad"
     elif effect == "current_lag":
         truth = 0.0015 + 0.0025 * size
-        base["current_loop_time_constant_s"], key = truth, "time_constant_s"
+        firmware, key = FIRMWARE.with_changes(current_loop_time_constant_s=truth), "time_constant_s"
     elif effect == "two_mass":
         ratio = 2.0 + 4.0 * detail
         truth = 30.0 + 50.0 * size
@@ -102,9 +110,10 @@ def plant(inertia: float, viscous: float, coulomb: float, effect: str | None,
         base.update(inertia_kg_m2=motor, load_inertia_kg_m2=load,
                     shaft_stiffness_nm_rad=stiffness, shaft_damping_nm_s_rad=damping)
         key = "resonance_hz"
-    return Hidden(effect=effect, key=key, truth=truth, params=PlantParams(**base))
+    return Hidden(effect=effect, key=key, truth=truth,
+                  params=SimUnit(plant=PlantParams(**base), firmware=firmware))
 
 
-def record(params: PlantParams, *, seed: int, scale: float = 1.0) -> Recording:
-    return simulate(params, mode=Mode.VELOCITY, command=excitation(scale=scale), fs_hz=FS_HZ,
-                    seed=seed)
+def record(params: SimUnit, *, seed: int, scale: float = 1.0) -> Recording:
+    return simulate(params.plant, mode=Mode.VELOCITY, command=excitation(scale=scale),
+                    fs_hz=FS_HZ, seed=seed, firmware=params.firmware)

@@ -11,10 +11,11 @@ from diagnose_simdata import FS_HZ, plant, record
 
 from hil.diagnose import cli
 from hil.diagnose.core import diagnose
-from hil.diagnose.profile_out import data_fields, model_fields, write_profile
+from hil.diagnose.profile_out import data_fields, model_fields, split_firmware, write_profile
 from hil.diagnose.signals import zero_phase_lowpass
 from hil.motion import Mode
 from hil.profile import load_profile
+from plant_sim.firmware import Firmware
 from plant_sim.model import simulate
 from plant_sim.params import plant_from_mapping
 
@@ -31,15 +32,18 @@ def test_extended_profile_simulates_the_heldout_run_better(tmp_path: Path) -> No
     profile = load_profile(path)  # what `gimbal-hil simulate --profile` reads
     assert profile.plant is not None
     assert profile.plant.gravity_mge_nm > 0
-    base_fields = model_fields(diagnosis.base) | data_fields(diagnosis)
+    base_fields, base_firmware = split_firmware(model_fields(diagnosis.base)
+                                                | data_fields(diagnosis))
     base_plant = plant_from_mapping(base_fields)
+    firmware = {"base": Firmware(**base_firmware), "extended": profile.firmware}
     heldout = record(hidden.params, seed=12, scale=0.8)  # another run, never diagnosed
     command = heldout.velocity_cmd
     assert command is not None
     measured = _lowpass(heldout.effort)
     errors = {}
     for name, params in (("base", base_plant), ("extended", profile.plant)):
-        simulated = simulate(params, mode=Mode.VELOCITY, command=command, fs_hz=FS_HZ, seed=3)
+        simulated = simulate(params, mode=Mode.VELOCITY, command=command, fs_hz=FS_HZ, seed=3,
+                             firmware=firmware[name])
         errors[name] = float(np.sqrt(np.mean((measured - _lowpass(simulated.effort)) ** 2)))
     assert errors["extended"] < 0.5 * errors["base"], errors
 

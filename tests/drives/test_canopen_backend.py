@@ -37,7 +37,8 @@ def test_sine_over_canopen_agrees_with_simdrive(profile: UnitProfile) -> None:
         drive.enable()
         over_can, recordings = _identify(drive, drive.info.max_sample_rate_hz)
     assert profile.plant is not None
-    sim = SimDrive(profile.plant, limits=profile.limits, fs_hz=profile.sample_rate_hz, seed=7)
+    sim = SimDrive(profile.plant, firmware=profile.firmware, limits=profile.limits,
+                   fs_hz=profile.sample_rate_hz, seed=7)
     sim.enable()
     in_process, _ = _identify(sim, profile.sample_rate_hz)
     for name in ("inertia", "viscous", "coulomb"):
@@ -60,7 +61,7 @@ def test_sine_over_canopen_agrees_with_simdrive(profile: UnitProfile) -> None:
     }
     assert np.allclose(np.diff(rec.time_s), 1e-3)  # times from the SYNC count
     assert rec.metadata["drive"] == "canopen node 5"
-    assert rec.metadata["firmware"] == "1.4.0"
+    assert rec.metadata["firmware"] == profile.firmware.version  # 0x100A, from [firmware]
     assert rec.metadata["operation_mode"] == "9"  # cyclic synchronous velocity
     assert rec.metadata["lost_samples"] == "0"
 

@@ -126,7 +126,7 @@ def test_all_pdos_lost_is_a_communication_error(profile: UnitProfile) -> None:
 def test_slow_sdo_within_timeout_works_beyond_it_fails_cleanly(profile: UnitProfile) -> None:
     with canopen_emulator(profile, seed=1, faults=CanFaults(sdo_delay_s=0.02)) as (_, station):  # noqa: SIM117
         with CanOpenDrive(station, limits=profile.limits) as drive:
-            assert drive.info.firmware_version == "1.4.0"
+            assert drive.info.firmware_version == profile.firmware.version
     slow = CanFaults(sdo_delay_s=0.5)
     with canopen_emulator(profile, seed=1, faults=slow, station_changes={"sdo_timeout_s": 0.1}) as (
         emulator,

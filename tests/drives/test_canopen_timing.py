@@ -25,6 +25,7 @@ from hil.identify.current_loop import CurrentLoopResult, torque_hold_s
 from hil.motion import Excitation, Mode
 from hil.profile import UnitProfile
 from hil.suite import current_loop as protocol
+from plant_sim.firmware import Firmware
 from plant_sim.params import PlantParams
 
 J = 0.004
@@ -35,7 +36,7 @@ LSB_RAD = 2 * math.pi / (1 << 20)  # the emulator's encoder
 
 def _frictionless(profile: UnitProfile) -> UnitProfile:
     plant = PlantParams(inertia_kg_m2=J, torque_limit_nm=0.5, exact_torque_hold=True)
-    return dataclasses.replace(profile, plant=plant)
+    return dataclasses.replace(profile, plant=plant, firmware=Firmware())
 
 
 @pytest.mark.parametrize("sampling", ["instantaneous", "mean"])
@@ -143,7 +144,7 @@ def test_late_answer_stays_on_its_sync(profile: UnitProfile) -> None:
 def _lagged(profile: UnitProfile, tau_s: float) -> UnitProfile:
     assert profile.plant is not None
     return dataclasses.replace(
-        profile, plant=profile.plant.with_changes(current_loop_time_constant_s=tau_s)
+        profile, firmware=profile.firmware.with_changes(current_loop_time_constant_s=tau_s)
     )
 
 

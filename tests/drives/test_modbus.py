@@ -35,7 +35,7 @@ def test_sine_over_modbus_tcp(profile: UnitProfile) -> None:
     assert np.all(np.diff(recording.time_s) > 0)  # host timestamps, irregular
     velocity = recording.columns["velocity_rad_s"]
     assert np.corrcoef(velocity, recording.columns["velocity_cmd_rad_s"])[0, 1] > 0.9
-    assert recording.metadata["firmware"] == "2.1"
+    assert recording.metadata["firmware"] == "1.4"  # major.minor of [firmware] version
 
 
 def test_rtu_over_socket_url(profile: UnitProfile) -> None:

@@ -131,6 +131,7 @@ def test_wrapping_drive_clock_is_unwrapped(tmp_path: Path, profile: UnitProfile)
     assert profile.plant is not None
     emulator = ModbusEmulator(
         profile.plant,
+        firmware=profile.firmware,
         fs_hz=profile.sample_rate_hz,
         seed=1,
         register_map=regmap,
@@ -237,6 +238,7 @@ def test_torque_mean_is_the_mean_since_the_previous_row(profile: UnitProfile) ->
     assert profile.plant is not None
     emulator = _TorqueLoggingEmulator(
         profile.plant,
+        firmware=profile.firmware,
         fs_hz=profile.sample_rate_hz,
         seed=2,
         register_map=REGMAP,

@@ -91,7 +91,8 @@ def run_demo_plant(seed: int, cogging: tuple[Harmonic, ...],
     speed = SETTINGS["speed_rad_s"]
     n = round(2.6 / speed * FS)
     command = np.concatenate([np.full(n, speed), np.full(n, -speed)])
-    trace = Plant(params, fs_hz=FS, seed=seed, initial_position_rad=-1.3).run(Mode.VELOCITY,
+    trace = Plant(params, firmware=PROFILE.firmware, fs_hz=FS, seed=seed,
+                  initial_position_rad=-1.3).run(Mode.VELOCITY,
                                                                                command)
     skip = math.ceil(SETTINGS["skip_rad"] / speed * FS)
     passes = [(trace.time_s[a:b], trace.position_rad[a:b], trace.torque_nm[a:b])

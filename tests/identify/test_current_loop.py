@@ -26,6 +26,7 @@ from hil.identify.current_loop import (
 from hil.motion import Mode
 from hil.profile import load_profile
 from hil.suite import current_loop as protocol
+from plant_sim.firmware import Firmware
 from plant_sim.model import Plant
 from plant_sim.params import PlantParams
 
@@ -198,8 +199,8 @@ def test_simulator_holds_the_torque_over_the_period() -> None:
     """Torque mode, no effects but the lag, exact hold (as SimDrive runs it): the sim's
     sampled response is the model's (a constant-torque kick first: no reversal)."""
     for tau_s in (0.0, 3e-4):
-        plant = Plant(PlantParams(inertia_kg_m2=0.0036, current_loop_time_constant_s=tau_s,
-                                  exact_torque_hold=True), fs_hz=FS, seed=0)
+        plant = Plant(PlantParams(inertia_kg_m2=0.0036, exact_torque_hold=True),
+                      firmware=Firmware(current_loop_time_constant_s=tau_s), fs_hz=FS, seed=0)
         f = 110.0
         t = np.arange(round(FS / f * 44)) / FS
         plant.run(Mode.TORQUE, np.full(40, 0.1))
@@ -228,10 +229,10 @@ def test_hidden_lag_is_recovered_within_the_claimed_accuracy(
 ) -> None:
     assert PROFILE.plant is not None
     assert ACCURACY is not None
-    plant = PROFILE.plant.with_changes(current_loop_time_constant_s=tau_ms * 1e-3,
-                                       inertia_kg_m2=inertia, coulomb_nm=coulomb,
+    firmware = PROFILE.firmware.with_changes(current_loop_time_constant_s=tau_ms * 1e-3)
+    plant = PROFILE.plant.with_changes(inertia_kg_m2=inertia, coulomb_nm=coulomb,
                                        static_friction_nm=1.3 * coulomb)
-    with SimDrive(plant, limits=PROFILE.limits, fs_hz=FS, seed=seed) as drive:
+    with SimDrive(plant, firmware=firmware, limits=PROFILE.limits, fs_hz=FS, seed=seed) as drive:
         drive.enable()
         move, sines = protocol.excitation(SPEC, position_rad=drive.status().position_rad)
         drive.run(move)

@@ -115,7 +115,8 @@ def test_eccentricity_in_mm() -> None:
 def run_demo_plant(seed: int, **changes: float) -> GravityCableResult:
     assert PROFILE.plant is not None
     plan = demo_plan()
-    plant = Plant(PROFILE.plant.with_changes(**changes), fs_hz=FS, seed=seed,
+    plant = Plant(PROFILE.plant.with_changes(**changes), firmware=PROFILE.firmware, fs_hz=FS,
+                  seed=seed,
                   initial_position_rad=-1.3)
     trace = plant.run(Mode.VELOCITY, plan.command_rad_s)
     return analyse(trace.position_rad, trace.torque_nm, plan)

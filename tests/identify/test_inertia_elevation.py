@@ -123,7 +123,7 @@ def test_hidden_payload_inertia_is_recovered_within_the_claimed_accuracy(
     plant = PROFILE.plant.with_changes(load_inertia_kg_m2=zenith_load,
                                        inertia_elevation_kg_m2=delta,
                                        torque_constant_error_rel=kt_error)
-    drive = SimDrive(plant, limits=PROFILE.limits, fs_hz=FS, seed=seed)
+    drive = SimDrive(plant, firmware=PROFILE.firmware, limits=PROFILE.limits, fs_hz=FS, seed=seed)
     with drive:
         drive.enable()
         sweeps = []

@@ -141,7 +141,8 @@ def test_hidden_shaft_is_recovered_within_the_claimed_accuracy(
     plant = PROFILE.plant.with_changes(inertia_kg_m2=j_m, load_inertia_kg_m2=j_l,
                                        shaft_stiffness_nm_rad=k, shaft_damping_nm_s_rad=c,
                                        inertia_elevation_kg_m2=0.0)
-    with SimDrive(plant, limits=PROFILE.limits, fs_hz=FS, seed=seed) as drive:
+    with SimDrive(plant, firmware=PROFILE.firmware, limits=PROFILE.limits, fs_hz=FS,
+                  seed=seed) as drive:
         drive.enable()
         move, sine = protocol.excitation(SPEC, position_rad=drive.status().position_rad)
         drive.run(move)

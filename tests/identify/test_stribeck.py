@@ -129,11 +129,14 @@ def test_fit_refuses_when_stick_slip_leaves_too_few_points() -> None:
         fit_stribeck(broken)
 
 
-def run_demo_plant(seed: int, **changes: float) -> StribeckResult:
+def run_demo_plant(seed: int, kp: float | None = None, **changes: float) -> StribeckResult:
     assert PROFILE.plant is not None
     params = PROFILE.plant.with_changes(**changes)
+    firmware = PROFILE.firmware
+    if kp is not None:
+        firmware = firmware.with_changes(velocity_kp_nm_s_rad=kp)
     stairs = demo_stairs()
-    plant = Plant(params, fs_hz=4000.0, seed=seed, initial_position_rad=-0.5)
+    plant = Plant(params, firmware=firmware, fs_hz=4000.0, seed=seed, initial_position_rad=-0.5)
     trace = plant.run(Mode.VELOCITY, stairs.command_rad_s)
     return identify_stribeck(time_s=trace.time_s, position_rad=trace.position_rad,
                              torque_nm=trace.torque_nm, stairs=stairs,
@@ -185,7 +188,7 @@ def test_unresolvable_rise_is_refused_naming_stick_slip() -> None:
 def test_stick_slip_speeds_are_flagged_and_left_out_of_the_fit() -> None:
     """A softer velocity loop (K_p 0.2 < the friction's steepest fall ≈ 0.26 N·m·s/rad) limit-
     cycles around v_s/√2: those speeds are flagged, the rest still give T_s and v_s."""
-    result = run_demo_plant(3, velocity_kp_nm_s_rad=0.2)
+    result = run_demo_plant(3, kp=0.2)
     flagged = [p for p in result.points if p.stick_slip]
     assert flagged
     assert all(0.005 < p.speed_rad_s < 0.03 for p in flagged)

@@ -105,7 +105,7 @@ def test_locked_rotor_holds_still_and_reads_the_true_torque() -> None:
     plant = PROFILE.plant.with_changes(torque_constant_error_rel=0.05, kt_ripple=(),
                                        cogging=(), gravity_mge_nm=0.0, cable_stiffness_nm_rad=0.0,
                                        cable_hysteresis_nm=0.0)
-    drive = SimDrive(plant, limits=PROFILE.limits, fs_hz=FS, seed=0)
+    drive = SimDrive(plant, firmware=PROFILE.firmware, limits=PROFILE.limits, fs_hz=FS, seed=0)
     with drive:
         drive.enable()
         before = drive.status().position_rad
@@ -142,7 +142,7 @@ def test_hidden_torque_constant_is_recovered_within_the_claimed_accuracy(
     plant = PROFILE.plant.with_changes(
         torque_constant_error_rel=error, load_torque_noise_nm=noise,
         kt_ripple=(Harmonic(order=order, amplitude=ripple, phase_rad=phase),))
-    drive = SimDrive(plant, limits=PROFILE.limits, fs_hz=FS, seed=seed)
+    drive = SimDrive(plant, firmware=PROFILE.firmware, limits=PROFILE.limits, fs_hz=FS, seed=seed)
     with drive:
         drive.enable()
         table = _measured_ripple(drive)

@@ -19,6 +19,7 @@ import numpy as np
 from hil.drives.cia402.link import CanLink
 from hil.drives.cia402.protocol import (
     CW_ENABLE_OPERATION,
+    RPDO_FORMAT,
     SW_FAULT,
     TARGET_OBJECT,
     TORQUE_MEAN_PER_RATED,
@@ -106,6 +107,26 @@ def _raw_command(setup: RunSetup, excitation: Excitation) -> np.ndarray:
     return np.clip(np.round(np.asarray(excitation.command) * factor), low, high).astype(np.int64)
 
 
+def _raw_offset(setup: RunSetup, excitation: Excitation) -> np.ndarray | None:
+    """The torque offset (0x60B2, per-mille of the rated torque) of a velocity-mode run:
+    zeros when the excitation sends none; ``None`` in the other modes' RPDOs.
+
+    Raises
+    ------
+    DriveStateError
+        A torque offset in a mode whose RPDO does not carry one.
+    """
+    if excitation.mode is not Mode.VELOCITY:
+        if excitation.torque_offset_nm is not None:
+            raise DriveStateError(f"excitation '{excitation.name}': a torque offset (0x60B2) "
+                                  "is streamed in velocity mode only")
+        return None
+    if excitation.torque_offset_nm is None:
+        return np.zeros(len(excitation.command), dtype=np.int64)
+    per_mille = np.asarray(excitation.torque_offset_nm) * 1e3 / setup.scaling.rated_torque_nm
+    return np.clip(np.round(per_mille), *_LIMITS["h"]).astype(np.int64)
+
+
 def _metadata(setup: RunSetup, excitation: Excitation, **extra: str) -> dict[str, str]:
     return {
         **setup.identity,
@@ -144,7 +165,8 @@ def run_stream(link: CanLink, setup: RunSetup, excitation: Excitation) -> Acquir
     sc, mode = setup.scaling, excitation.mode
     raw = _raw_command(setup, excitation)
     cob, _ = link.rpdo_payload(mode, CW_ENABLE_OPERATION, 0)
-    packer = struct.Struct("<H" + TARGET_OBJECT[mode][1])
+    packer = struct.Struct(RPDO_FORMAT[mode])
+    offset = _raw_offset(setup, excitation)
     counts_margin = 0.05 * sc.counts_per_rad  # the drive's own 0x607D acts first
     travel = (
         setup.travel_rad[0] * sc.counts_per_rad - counts_margin,
@@ -162,7 +184,7 @@ def run_stream(link: CanLink, setup: RunSetup, excitation: Excitation) -> Acquir
     )
     try:
         with link.direct_receive():
-            done = _stream_loop(link, setup, excitation, raw, cob, packer, travel)
+            done = _stream_loop(link, setup, excitation, raw, offset, cob, packer, travel)
     except _FaultedError as fault:
         # 0x603F by SDO: only now that the Notifier receives again
         code = link.emcy[-1][0] if link.emcy else link.fault_code()
@@ -196,6 +218,7 @@ def _stream_loop(
     setup: RunSetup,
     excitation: Excitation,
     raw: np.ndarray,
+    offset: np.ndarray | None,
     cob: int,
     packer: struct.Struct,
     travel: tuple[float, float],
@@ -206,7 +229,9 @@ def _stream_loop(
     lost_in_a_row = 0
     done = 0
     for k in range(len(raw)):
-        answered = link.tick(cob, packer.pack(CW_ENABLE_OPERATION, int(raw[k])))
+        fields = (CW_ENABLE_OPERATION, int(raw[k])) if offset is None else (
+            CW_ENABLE_OPERATION, int(raw[k]), int(offset[k]))
+        answered = link.tick(cob, packer.pack(*fields))
         done = k + 1
         if not answered:
             lost_in_a_row += 1
@@ -312,6 +337,9 @@ def run_recorder(link: CanLink, setup: RunSetup, excitation: Excitation) -> Acqu
     """
     st_period_s = setup.sync_period_s
     sc = setup.scaling
+    if excitation.torque_offset_nm is not None:
+        raise DriveStateError(f"'{excitation.name}' sends a torque offset (0x60B2): the drive "
+                              "recorder plays no offset; stream it (at the SYNC rate)")
     divider = round(setup.recorder_rate_hz / excitation.fs_hz)
     wave = np.repeat(_raw_command(setup, excitation), divider).astype("<i4")
     capacity = int(link.read(0x2200, 5))

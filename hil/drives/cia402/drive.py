@@ -17,6 +17,7 @@ from hil.drives.base import Drive, DriveInfo, DriveState, DriveStatus, check_lim
 from hil.drives.cia402.acquire import RunSetup, run_recorder, run_stream
 from hil.drives.cia402.link import CanLink
 from hil.drives.cia402.protocol import (
+    COMPENSATION_TABLE,
     INTERPOLATION_CODES,
     INTERPOLATION_UNKNOWN,
     TORQUE_MEAN_NAME,
@@ -26,12 +27,13 @@ from hil.drives.cia402.protocol import (
     TPDO_LAYOUT_MEAN,
     Scaling,
     max_stream_rate_hz,
+    pack_harmonics,
     state_of,
 )
 from hil.drives.cia402.state_machine import Cia402StateMachine
 from hil.drives.station import CanOpenStation
 from hil.errors import DriveError, DriveStateError
-from hil.motion import Excitation, Limits, Mode
+from hil.motion import CompensationTable, Excitation, Limits, Mode
 from hil.recording import Recording
 
 log = logging.getLogger(__name__)
@@ -280,6 +282,23 @@ class CanOpenDrive(Drive):
     def quick_stop(self) -> None:
         """Quick stop by the drive's ramp (0x605A, 0x6085), confirmed at rest."""
         self.states.quick_stop()
+
+    def load_compensation(self, table: CompensationTable | None) -> None:
+        """Download a cogging compensation table into 0x2300 (``None``: an empty one).
+
+        Raises
+        ------
+        DriveStateError
+            The drive's object dictionary has no 0x2300.
+        """
+        od = self.node_od
+        if od is None or COMPENSATION_TABLE not in od:
+            raise DriveStateError(f"node {self.station.node_id} has no compensation table "
+                                  f"object 0x{COMPENSATION_TABLE:04X}")
+        cogging = () if table is None else table.cogging_nm
+        ripple = () if table is None else table.kt_ripple
+        self.link.write(COMPENSATION_TABLE, 1, pack_harmonics(cogging))
+        self.link.write(COMPENSATION_TABLE, 2, pack_harmonics(ripple))
 
     def close(self) -> None:
         """Disable, return the node to PRE-OPERATIONAL, release the bus."""

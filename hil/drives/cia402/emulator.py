@@ -38,10 +38,12 @@ from canopen.sdo.exceptions import SdoAbortedError
 
 from hil.config import builtin_fixture
 from hil.drives.cia402.emulator_recorder import DriveRecorder
+from hil.drives.cia402.protocol import COMPENSATION_TABLE, TORQUE_OFFSET, unpack_harmonics
 from hil.drives.emulator_faults import CanFaults
-from hil.motion import Mode
+from hil.motion import Mode, PositionHarmonic
+from plant_sim.firmware import Firmware
 from plant_sim.model import Plant
-from plant_sim.params import PlantParams
+from plant_sim.params import Harmonic, PlantParams
 
 log = logging.getLogger(__name__)
 
@@ -125,6 +127,7 @@ class Cia402Emulator:
         self,
         plant: PlantParams,
         *,
+        firmware: Firmware | None = None,
         fs_hz: float,
         seed: int,
         channel: str,
@@ -143,7 +146,8 @@ class Cia402Emulator:
     ) -> None:
         if exact_torque_hold and not plant.exact_torque_hold:
             plant = plant.with_changes(exact_torque_hold=True)  # the same physics as SimDrive
-        self.plant = Plant(plant, fs_hz=fs_hz, seed=seed)
+        self.firmware = firmware or Firmware()
+        self.plant = Plant(plant, fs_hz=fs_hz, seed=seed, firmware=self.firmware)
         self.fs_hz = float(fs_hz)
         self.faults = faults or CanFaults()
         self.node_id = node_id
@@ -166,7 +170,7 @@ class Cia402Emulator:
         self.mode_display = 0
         self.error_code = 0
         self.controlword = 0
-        self.targets: dict[int, int] = {0x60FF: 0, 0x6071: 0, 0x607A: 0}
+        self.targets: dict[int, int] = {0x60FF: 0, 0x6071: 0, 0x607A: 0, TORQUE_OFFSET: 0}
         self.sync_count = 0
         self.time_enabled_s = 0.0
         self.emcy_sent: list[int] = []
@@ -187,6 +191,7 @@ class Cia402Emulator:
         self._previous_target: dict[int, float] = {}
         self._raw_cache: dict[tuple[int, int], int] = {}
         self._steps = 0
+        self._compensation: dict[int, tuple[PositionHarmonic, ...]] = {1: (), 2: ()}
         self.recorder = DriveRecorder(
             capacity=16384,
             loop_period_us=round(1e6 / fs_hz),
@@ -208,6 +213,7 @@ class Cia402Emulator:
         self._network, self.node = network, node
         store = node.data_store
         store.setdefault(0x1018, {})[4] = struct.pack("<I", self._serial)
+        store.setdefault(0x100A, {})[0] = self.firmware.version.encode("utf-8")
         store.setdefault(0x6076, {})[0] = struct.pack("<I", round(self.rated_torque_nm * 1e3))
         store.setdefault(0x6075, {})[0] = struct.pack("<I", round(self.rated_current_a * 1e3))
         store.setdefault(0x608F, {})[1] = struct.pack("<I", self.counts_per_rev)
@@ -302,6 +308,12 @@ class Cia402Emulator:
             raise SdoAbortedError(ABORT_VALUE_RANGE)
         elif index in (0x2100, 0x2200):
             self.recorder.write(index, subindex, value, running=self.state == ENABLED)
+        elif index == COMPENSATION_TABLE and subindex in (1, 2):
+            try:
+                self._compensation[subindex] = unpack_harmonics(bytes(value))
+            except (ValueError, struct.error):
+                raise SdoAbortedError(ABORT_VALUE_RANGE) from None
+            self.plant.load_compensation(*(_harmonics(self._compensation[s]) for s in (1, 2)))
 
     def _check_period(self, index: int, subindex: int, value: int) -> None:
         """0x1006 (µs) must be a whole number of control periods; 0x60C2 is taken as is."""
@@ -550,7 +562,10 @@ class Cia402Emulator:
         steps = self.steps_per_sync()
         period_s = steps / self.fs_hz
         mode, command = self._command(steps, period_s)
-        trace = self.plant.run(mode, command)
+        offset = None
+        if self.state == ENABLED and mode is Mode.VELOCITY:  # 0x60B2, held over the period
+            offset = np.full(steps, self.targets[TORQUE_OFFSET] * self.rated_torque_nm / 1e3)
+        trace = self.plant.run(mode, command, offset)
         self.recorder.capture(trace, enabled=self.state == ENABLED)
         # what the drive latches at the *next* SYNC: its most recent control-loop values
         cpr = self.counts_per_rev
@@ -650,6 +665,11 @@ class Cia402Emulator:
         )
         timer.daemon = True
         timer.start()
+
+
+def _harmonics(table: tuple[PositionHarmonic, ...]) -> tuple[Harmonic, ...]:
+    return tuple(Harmonic(order=h.order, amplitude=h.amplitude, phase_rad=h.phase_rad)
+                 for h in table)
 
 
 def _clip16(value: float) -> int:

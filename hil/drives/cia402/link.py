@@ -30,9 +30,9 @@ import canopen
 from canopen.sdo.exceptions import SdoAbortedError, SdoCommunicationError
 
 from hil.drives.cia402.protocol import (
+    RPDO_FORMAT,
     RPDO_LAYOUT,
     SW_FAULT,
-    TARGET_OBJECT,
     TPDO1_FORMAT,
     TPDO2_FORMAT,
     TPDO_LAYOUT,
@@ -261,11 +261,14 @@ class CanLink:
         self.write(comm, 1, cob)
 
     # -- the cyclic exchange ------------------------------------------------------------
-    def rpdo_payload(self, mode: Mode, controlword: int, target: int) -> tuple[int, bytes]:
-        """COB-ID and data of the RPDO carrying ``controlword`` and the target of ``mode``."""
+    def rpdo_payload(self, mode: Mode, controlword: int, target: int,
+                     torque_offset: int = 0) -> tuple[int, bytes]:
+        """COB-ID and data of the RPDO carrying ``controlword`` and the target of ``mode``
+        (and, in velocity mode, the torque offset in per-mille of the rated torque)."""
         n = RPDO_LAYOUT[mode][0]
-        fmt = "<H" + TARGET_OBJECT[mode][1]
-        return 0x200 + 0x100 * (n - 1) + self.node_id, struct.pack(fmt, controlword, target)
+        values = (controlword, target, torque_offset) if mode is Mode.VELOCITY else (
+            controlword, target)
+        return 0x200 + 0x100 * (n - 1) + self.node_id, struct.pack(RPDO_FORMAT[mode], *values)
 
     def tick(self, cob: int | None = None, payload: bytes | None = None) -> bool:
         """One cycle: RPDO, SYNC, feedback. Returns whether both TPDOs of it arrived.

@@ -3,9 +3,10 @@
 from __future__ import annotations
 
 import math
+import struct
 from dataclasses import dataclass
 
-from hil.motion import Mode
+from hil.motion import Mode, PositionHarmonic
 
 # statusword masks (CiA 402 table 30) -> state name
 _STATES = (
@@ -46,12 +47,42 @@ TARGET_OBJECT = {
 }
 
 # The PDO layout the backend writes into the drive (all synchronous, type 1):
-# RPDO n+1 = controlword + the target of one mode; TPDO1/TPDO2 = the feedback.
+# RPDO n+1 = controlword + the target of one mode (velocity: + the torque offset 0x60B2, the
+# feedforward a drive adds when its firmware has it); TPDO1/TPDO2 = the feedback.
+TORQUE_OFFSET = 0x60B2  # INTEGER16, per-mille of 0x6076 like the target torque
 RPDO_LAYOUT: dict[Mode, tuple[int, tuple[tuple[int, int], ...]]] = {
-    Mode.VELOCITY: (1, ((0x6040, 16), (0x60FF, 32))),
+    Mode.VELOCITY: (1, ((0x6040, 16), (0x60FF, 32), (TORQUE_OFFSET, 16))),
     Mode.TORQUE: (2, ((0x6040, 16), (0x6071, 16))),
     Mode.POSITION: (3, ((0x6040, 16), (0x607A, 32))),
 }
+COMPENSATION_TABLE = 0x2300  # manufacturer: sub 1 cogging, sub 2 K_t ripple harmonics
+_HARMONIC = struct.Struct("<Hff")
+
+
+def pack_harmonics(harmonics: tuple[PositionHarmonic, ...]) -> bytes:
+    """A 0x2300 DOMAIN: UNSIGNED16 count, then per harmonic UNSIGNED16 order, REAL32
+    amplitude (N·m, or relative for K_t ripple), REAL32 phase (rad)."""
+    return struct.pack("<H", len(harmonics)) + b"".join(
+        _HARMONIC.pack(h.order, h.amplitude, h.phase_rad) for h in harmonics)
+
+
+def unpack_harmonics(data: bytes) -> tuple[PositionHarmonic, ...]:
+    """Inverse of :func:`pack_harmonics`.
+
+    Raises
+    ------
+    ValueError
+        The length does not match the count.
+    """
+    (count,) = struct.unpack_from("<H", data)
+    if len(data) != 2 + count * _HARMONIC.size:
+        raise ValueError(f"0x2300 data of {len(data)} bytes for {count} harmonics")
+    return tuple(PositionHarmonic(order=o, amplitude=a, phase_rad=p)
+                 for o, a, p in _HARMONIC.iter_unpack(data[2:]))
+
+
+RPDO_FORMAT: dict[Mode, str] = {Mode.VELOCITY: "<Hih", Mode.TORQUE: "<Hh", Mode.POSITION: "<Hi"}
+"""struct format of each mode's RPDO (controlword, target[, torque offset])."""
 TpdoLayout = tuple[tuple[int, tuple[tuple[int, int], ...]], ...]
 TPDO_LAYOUT: TpdoLayout = (
     (1, ((0x6041, 16), (0x6064, 32), (0x6061, 8))),  # "<HIb" -> statusword, position, mode

@@ -23,6 +23,7 @@ from hil.drives.modbus.regmap import (
     TIMESTAMP,
     TORQUE_MEAN,
     TORQUE_MEAN_WINDOW,
+    TORQUE_OFFSET,
     RegisterMap,
 )
 from hil.errors import (
@@ -113,6 +114,7 @@ def poll(excitation: Excitation, run: PolledRun, feedback: Feedback) -> None:
         A request failed.
     """
     command = np.asarray(excitation.command, dtype=np.float64)
+    offset = excitation.torque_offset_nm
     name = f"{excitation.mode.value}_cmd"
     fs, n = excitation.fs_hz, len(command)
     last_index = -1
@@ -122,9 +124,13 @@ def poll(excitation: Excitation, run: PolledRun, feedback: Feedback) -> None:
     while True:
         index = int((time.monotonic() - t0) * fs)
         if index >= n:
+            if offset is not None:
+                feedback.link.write_value(TORQUE_OFFSET, 0.0)
             return
         if index != last_index:
             feedback.link.write_value(name, float(command[index]))
+            if offset is not None:
+                feedback.link.write_value(TORQUE_OFFSET, float(offset[index]))
             last_index = index
         # read half a period after the setpoint changed: a drive that steps to it
         # answers with a torque transient whose start would be sampled every time

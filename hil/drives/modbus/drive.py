@@ -35,7 +35,7 @@ from hil.drives.modbus.acquire import (
     to_recording,
 )
 from hil.drives.modbus.link import ModbusLink
-from hil.drives.modbus.regmap import TORQUE_MEAN, RegisterMap, load_register_map
+from hil.drives.modbus.regmap import TORQUE_MEAN, TORQUE_OFFSET, RegisterMap, load_register_map
 from hil.drives.modbus.state_machine import ModbusStateMachine
 from hil.drives.station import ModbusStation
 from hil.errors import DriveError, DriveStateError, ProfileError
@@ -213,6 +213,9 @@ class ModbusDrive(Drive):
             )
         start = self.status()
         check_limits(excitation, self.limits, start_position_rad=start.position_rad)
+        if excitation.torque_offset_nm is not None and TORQUE_OFFSET not in self.map.registers:
+            raise DriveStateError(f"excitation '{excitation.name}' sends a torque offset; the "
+                                  f"register map has no '{TORQUE_OFFSET}' register")
         if excitation.mode is not states.mode:
             states.select(excitation.mode)
         set_interpolation(self.link, 1.0 / excitation.fs_hz)

@@ -24,6 +24,7 @@ from __future__ import annotations
 import asyncio
 import logging
 import math
+import re
 import threading
 import time
 from dataclasses import dataclass
@@ -44,9 +45,11 @@ from hil.drives.modbus.regmap import (
     TIMESTAMP,
     TORQUE_MEAN,
     TORQUE_MEAN_WINDOW,
+    TORQUE_OFFSET,
     load_register_map,
 )
 from hil.motion import Mode
+from plant_sim.firmware import Firmware
 from plant_sim.model import Plant
 from plant_sim.params import PlantParams
 
@@ -94,6 +97,15 @@ class _Context(ModbusBaseDeviceContext):  # type: ignore[misc]
         return await self.emulator.serve(func_code, address, len(values), [int(v) for v in values])
 
 
+def version_code(version: str) -> int:
+    """The ``firmware_version`` register (major × 256 + minor) of a version string: its
+    first ``major.minor`` (``"GMB-2-EL 1.4.0"`` → 0x0104); 0 when it has none."""
+    found = re.search(r"(\d+)\.(\d+)", version)
+    if found is None:
+        return 0
+    return min(int(found.group(1)), 255) * 256 + min(int(found.group(2)), 255)
+
+
 class ModbusEmulator:
     """One emulated servo axis behind a Modbus server on 127.0.0.1 (an ephemeral port)."""
 
@@ -101,6 +113,7 @@ class ModbusEmulator:
         self,
         plant: PlantParams,
         *,
+        firmware: Firmware | None = None,
         fs_hz: float,
         seed: int,
         register_map: Path,
@@ -110,7 +123,8 @@ class ModbusEmulator:
         serial_number: int = 1,
         watchdog_s: float = 0.5,
     ) -> None:
-        self.plant = Plant(plant, fs_hz=fs_hz, seed=seed)
+        self.firmware = firmware or Firmware()
+        self.plant = Plant(plant, fs_hz=fs_hz, seed=seed, firmware=self.firmware)
         self.fs_hz = float(fs_hz)
         self.map = load_register_map(register_map)
         self.rated_torque_nm = rated_torque_nm
@@ -141,7 +155,7 @@ class ModbusEmulator:
         self._server: ModbusTcpServer | None = None
         self._ready = threading.Event()
         self._stopping = False
-        self._put("firmware_version", 2 * 256 + 1)
+        self._put("firmware_version", version_code(self.firmware.version))
         self._put("serial_number", serial_number)
         self._put("rated_torque", rated_torque_nm)
         self._put("mode", self.map.modes["velocity"])
@@ -326,7 +340,10 @@ class ModbusEmulator:
             self._clock += block / self.fs_hz
             steps -= block
             mode, command = self._command(block)
-            trace = self.plant.run(mode, command)
+            offset = None
+            if self.enabled and TORQUE_OFFSET in self.map.registers:
+                offset = np.full(block, self._get(TORQUE_OFFSET))  # held until written again
+            trace = self.plant.run(mode, command, offset)
             if self.enabled:
                 self.time_enabled_s += block / self.fs_hz
             self._sample(trace)

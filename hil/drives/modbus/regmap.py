@@ -45,6 +45,9 @@ SETPOINT_INTERPOLATION = "setpoint_interpolation_time"
 # since the previous read of this register, up to the latched sample (signed, N·m); reading
 # it restarts the average. With it, optionally, the length of that average (unsigned,
 # seconds per count), latched with it.
+# optional: the torque offset (feedforward, signed, N·m, writable) a drive whose firmware has
+# feedforward adds to its torque command
+TORQUE_OFFSET = "torque_offset"
 TORQUE_MEAN = "torque_mean"
 TORQUE_MEAN_WINDOW = "torque_mean_window"
 

@@ -1,0 +1,294 @@
+"""The velocity loop's frequency response from a periodic multisine on a constant carrier.
+
+The command is ``r(t) = v₀ + Σ aₖ·cos(2π fₖ t + φₖ)`` with every ``fₖ`` a harmonic of the
+period ``T₀`` (Schroeder phases, low crest factor), so each period holds whole cycles of
+every line and its Fourier coefficients are exact (no leakage). The carrier keeps the axis
+moving one way: friction is a constant, not a reversal. Per period ``p`` and line ``k``
+the phasors of the command ``R``, the drive's velocity estimate ``V`` (its feedback) and
+its torque command ``U`` give, with ``E = R − V`` (the error the drive's PI sees)::
+
+    T = V/R   closed loop (complementary sensitivity)    S = E/R = 1 − T   sensitivity
+    L = V/E   loop gain = C·P with C = U/E (firmware), P = V/U (plant as the loop sees it)
+
+Margins are python-control's (:func:`control.stability_margins` on :func:`control.frd`
+of the measured ``L``): gain margin at the phase crossover, phase margin at the gain
+crossover, and the stability margin ``s_m`` (least distance of ``L`` to −1), whose inverse
+is the peak of ``|S|`` (the modulus margin). The −3 dB bandwidth and the peak of ``|T|``
+are read from the measured ``T`` (log-frequency interpolation between lines).
+
+Type A uncertainty: delete-one-period jackknife of every figure (``P − 1`` degrees of
+freedom): the data's scatter as these estimators evaluate it.
+"""
+
+from __future__ import annotations
+
+import math
+import warnings
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+
+import control
+import numpy as np
+from numpy.typing import NDArray
+
+from hil.errors import IdentificationError
+from hil.identify.estimate import Estimate
+
+FloatArray = NDArray[np.float64]
+ComplexArray = NDArray[np.complex128]
+
+MARGIN_NAMES = ("bandwidth_hz", "peak_gain_db", "gain_margin_db", "phase_margin_deg",
+                "sensitivity_peak_db")
+
+
+def schroeder_phases(count: int) -> FloatArray:
+    """Schroeder's phases ``−π·k(k−1)/K`` for ``K`` equal lines: a low crest factor."""
+    k = np.arange(1, count + 1)
+    return np.asarray(-math.pi * k * (k - 1) / count, dtype=np.float64)
+
+
+def multisine(
+    *, harmonics: Sequence[int], amplitudes_rad_s: Sequence[float], period_s: float,
+    periods: int, fs_hz: float,
+) -> FloatArray:
+    """``Σ aₖ·cos(2π·hₖ·t/T₀ + φₖ)`` over ``periods`` periods (zero mean), sampled at ``fs_hz``.
+
+    Raises
+    ------
+    ValueError
+        A period that is not a whole number of samples, or lines and amplitudes that differ
+        in number.
+    """
+    samples = period_s * fs_hz
+    if abs(samples - round(samples)) > 1e-9 or round(samples) < 4:
+        raise ValueError(f"period {period_s} s is not a whole number of samples at {fs_hz} Hz")
+    if len(harmonics) != len(amplitudes_rad_s):
+        raise ValueError("one amplitude per harmonic")
+    t = np.arange(round(samples) * periods) / fs_hz
+    phases = schroeder_phases(len(harmonics))
+    out = np.zeros_like(t)
+    for h, a, phi in zip(harmonics, amplitudes_rad_s, phases, strict=True):
+        out += a * np.cos(2 * math.pi * h * t / period_s + phi)
+    return out
+
+
+def period_phasors(signal: FloatArray, *, period_samples: int, periods: int,
+                   harmonics: Sequence[int]) -> ComplexArray:
+    """Fourier coefficients ``X[p, k]`` of each period at each harmonic, fitted jointly with
+    a constant and a straight line (a slow drift would leak into the low lines; the line is
+    not orthogonal to them, so it is fitted with them, not taken out first).
+
+    Parameters
+    ----------
+    signal : ndarray
+        ``periods·period_samples`` samples, the analysed periods back to back.
+    period_samples : int
+    periods : int
+    harmonics : sequence of int
+        Line numbers (cycles per period).
+
+    Returns
+    -------
+    ndarray, shape (periods, len(harmonics)), complex
+        ``X`` with ``x = Re(X·e^{iωt}) = |X|·cos(ωt + ∠X)``.
+    """
+    n = period_samples
+    blocks = np.asarray(signal[: n * periods], dtype=np.float64).reshape(periods, n)
+    phase = 2 * math.pi * np.outer(np.arange(n) / n, np.asarray(harmonics, dtype=np.float64))
+    ramp = (np.arange(n) - (n - 1) / 2) / n
+    design = np.column_stack([np.ones(n), ramp, np.cos(phase), np.sin(phase)])
+    coef = np.linalg.lstsq(design, blocks.T, rcond=None)[0]  # (2 + 2K, periods)
+    k = len(harmonics)
+    cosine, sine = coef[2: 2 + k].T, coef[2 + k:].T
+    return np.asarray(cosine - 1j * sine, dtype=np.complex128)
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class LoopFigures:
+    """What the measured FRFs say about the loop (one set of periods).
+
+    Attributes
+    ----------
+    bandwidth_hz : float
+        First frequency where ``|T|`` falls below −3 dB.
+    peak_gain_db : float
+        Largest ``|T|`` over the lines (dB).
+    gain_margin_db : float
+        ``−|L|`` in dB at the phase crossover.
+    phase_margin_deg : float
+        ``180° + ∠L`` at the gain crossover.
+    sensitivity_peak_db : float
+        ``1/s_m`` in dB: the peak of ``|S|`` (the modulus margin's inverse).
+    """
+
+    bandwidth_hz: float
+    peak_gain_db: float
+    gain_margin_db: float
+    phase_margin_deg: float
+    sensitivity_peak_db: float
+
+    def as_tuple(self) -> tuple[float, ...]:
+        """The figures in the order of :data:`MARGIN_NAMES`."""
+        return (self.bandwidth_hz, self.peak_gain_db, self.gain_margin_db,
+                self.phase_margin_deg, self.sensitivity_peak_db)
+
+
+def minus_3db_bandwidth_hz(frequencies_hz: FloatArray, closed_loop: ComplexArray) -> float:
+    """First crossing of ``|T|`` below ``1/√2``, interpolated in dB over log frequency.
+
+    Raises
+    ------
+    IdentificationError
+        ``|T|`` starts below −3 dB or never falls below it in the measured band.
+    """
+    gain_db = 20 * np.log10(np.abs(closed_loop))
+    below = np.flatnonzero(gain_db < -10 * math.log10(2))
+    if below.size == 0 or below[0] == 0:
+        raise IdentificationError(
+            "the closed loop's −3 dB point is outside the measured lines "
+            f"({frequencies_hz[0]:.3g}–{frequencies_hz[-1]:.3g} Hz)")
+    i = int(below[0])
+    x0, x1 = math.log(frequencies_hz[i - 1]), math.log(frequencies_hz[i])
+    y0, y1 = gain_db[i - 1], gain_db[i]
+    target = -10 * math.log10(2)
+    return math.exp(x0 + (target - y0) * (x1 - x0) / (y1 - y0))
+
+
+def loop_figures(frequencies_hz: FloatArray, command: ComplexArray, velocity: ComplexArray
+                 ) -> LoopFigures:
+    """Bandwidth, peak gain and margins from averaged phasors of one set of periods.
+
+    Parameters
+    ----------
+    frequencies_hz : ndarray
+        The lines.
+    command, velocity : ndarray, complex
+        Phasors of the velocity command ``R`` and the drive's velocity estimate ``V``.
+
+    Returns
+    -------
+    LoopFigures
+    """
+    closed = velocity / command
+    loop = velocity / (command - velocity)
+    omega = 2 * math.pi * frequencies_hz
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # no crossover in band: python-control warns, returns inf
+        gm, pm, sm, _, _, _ = control.stability_margins(control.frd(loop, omega))
+    if not (math.isfinite(gm) and math.isfinite(pm)):
+        raise IdentificationError(
+            "the loop gain has no phase crossover (or no gain crossover) between "
+            f"{frequencies_hz[0]:.3g} and {frequencies_hz[-1]:.3g} Hz: extend the lines")
+    return LoopFigures(
+        bandwidth_hz=minus_3db_bandwidth_hz(frequencies_hz, closed),
+        peak_gain_db=float(20 * np.log10(np.max(np.abs(closed)))),
+        gain_margin_db=float(20 * math.log10(gm)),
+        phase_margin_deg=float(pm),
+        sensitivity_peak_db=float(-20 * math.log10(sm)),
+    )
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class FrfResult:
+    """The velocity loop's measured FRFs and figures with their jackknife uncertainty.
+
+    Attributes
+    ----------
+    frequencies_hz : ndarray
+    closed_loop, sensitivity, loop_gain, controller, plant : ndarray, complex
+        ``T``, ``S``, ``L``, ``C = U/E`` and ``P = V/U``, averaged over the periods.
+    estimates : dict of str to Estimate
+        One per :data:`MARGIN_NAMES`, named ``velocity_<name>``.
+    periods : int
+    """
+
+    frequencies_hz: FloatArray
+    closed_loop: ComplexArray
+    sensitivity: ComplexArray
+    loop_gain: ComplexArray
+    controller: ComplexArray
+    plant: ComplexArray
+    estimates: dict[str, Estimate]
+    periods: int
+
+
+UNITS = {"bandwidth_hz": "Hz", "peak_gain_db": "dB", "gain_margin_db": "dB",
+         "phase_margin_deg": "°", "sensitivity_peak_db": "dB"}
+
+
+def jackknife(values: FloatArray, full: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """Delete-one jackknife: bias-corrected values and standard errors of each column.
+
+    Parameters
+    ----------
+    values : ndarray, shape (P, m)
+        The figures with each of the ``P`` groups left out in turn.
+    full : ndarray, shape (m,)
+        The figures from every group.
+
+    Returns
+    -------
+    estimate, standard_error : ndarray, shape (m,)
+        ``full`` (not bias-corrected: the correction's noise is larger than the bias) and
+        ``√((P−1)/P·Σ(θ₋ᵢ − θ̄)²)``.
+    """
+    p = values.shape[0]
+    mean = values.mean(axis=0)
+    se = np.sqrt((p - 1) / p * np.sum((values - mean) ** 2, axis=0))
+    return full, se
+
+
+def analyse_frf(
+    *, command: FloatArray, velocity: FloatArray, torque: FloatArray, harmonics: Sequence[int],
+    period_s: float, fs_hz: float, periods: int,
+    figures: Callable[[FloatArray, ComplexArray, ComplexArray], LoopFigures] = loop_figures,
+) -> FrfResult:
+    """Velocity-loop FRFs and figures from the analysed periods of a multisine run.
+
+    Parameters
+    ----------
+    command, velocity, torque : ndarray
+        Velocity command, the drive's velocity estimate and its torque command over the
+        analysed periods (settling periods already dropped), one sample per control period.
+    harmonics : sequence of int
+        The multisine's lines (cycles per period).
+    period_s, fs_hz : float
+    periods : int
+        Analysed periods (at least 3 for the jackknife).
+    figures : callable
+        The figures from phasors (default :func:`loop_figures`).
+
+    Returns
+    -------
+    FrfResult
+
+    Raises
+    ------
+    IdentificationError
+        Fewer than 3 periods, or a figure the data cannot give (no −3 dB point in band).
+    """
+    if periods < 3:
+        raise IdentificationError(f"need at least 3 analysed periods, got {periods}")
+    n = round(period_s * fs_hz)
+    r = period_phasors(command, period_samples=n, periods=periods, harmonics=harmonics)
+    v = period_phasors(velocity, period_samples=n, periods=periods, harmonics=harmonics)
+    u = period_phasors(torque, period_samples=n, periods=periods, harmonics=harmonics)
+    f = np.asarray(harmonics, dtype=np.float64) / period_s
+    rm, vm, um = r.mean(axis=0), v.mean(axis=0), u.mean(axis=0)
+    full = np.array(figures(f, rm, vm).as_tuple())
+    left_out = np.array([
+        figures(f, (rm * periods - r[i]) / (periods - 1),
+                (vm * periods - v[i]) / (periods - 1)).as_tuple()
+        for i in range(periods)
+    ])
+    value, se = jackknife(left_out, full)
+    estimates = {
+        name: Estimate(name=f"velocity_{name}", value=float(value[j]),
+                       standard_uncertainty=float(se[j]), unit=UNITS[name], dof=periods - 1)
+        for j, name in enumerate(MARGIN_NAMES)
+    }
+    error = rm - vm
+    return FrfResult(
+        frequencies_hz=f, closed_loop=vm / rm, sensitivity=error / rm, loop_gain=vm / error,
+        controller=um / error, plant=vm / um, estimates=estimates, periods=periods,
+    )

@@ -1,0 +1,156 @@
+"""tracking: the protocol's library (spec, excitation, analysis); the test and its declared
+measurements are in ``protocols/test_tracking.py``.
+
+The standard gimbal move (slew, constant-rate track, reversal) twice: without and with
+the certificate's friction feedforward ``B·ω* + T_c·sgn(ω*)`` sent as the drive's torque
+offset (CiA 402 0x60B2; a drive adds it only when its firmware has ``feedforward``).
+RMS and peak following error, and the reduction (RMS without / with). Each run starts at
+rest at the same place with the drive just re-enabled (its velocity integrator empty): in
+velocity mode the position error is the integrator's change over ``Ki``, so a run that
+inherited a holding torque from the move before it would carry that offset all along.
+Numerics in :mod:`hil.closed_loop.tracking`.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from hil.calibration import CalibrationRun
+from hil.closed_loop.tracking import (
+    Following,
+    as_estimate,
+    feedforward_change,
+    following_error,
+    friction_feedforward,
+    gimbal_move,
+    reduction,
+)
+from hil.drives.base import DriveInfo
+from hil.identify.estimate import Component, Estimate
+from hil.identify.quantisation import quantisation_step
+from hil.motion import Excitation, Mode
+from hil.profile import UnitProfile
+from hil.recording import Recording
+from hil.suite.travel import TravelSpec, on_command_grid
+
+NAME = "tracking"
+MEASUREMENTS = ("tracking_rms_error_urad", "tracking_peak_error_urad",
+                "tracking_rms_error_no_ff_urad", "tracking_ff_reduction")
+MICRO = 1e6
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class Spec(TravelSpec):
+    """The move's rates and durations."""
+
+    slew_rad_s: float
+    track_rad_s: float
+    ramp_s: float
+    slew_s: float
+    track_s: float
+    reversal_s: float
+    min_sample_rate_hz: float  # the offset follows ω* sample by sample (not a polled link)
+
+    @classmethod
+    def from_profile(cls, profile: UnitProfile, info: DriveInfo) -> Spec:
+        """The spec from ``[protocols.tracking]`` and the drive.
+
+        Raises
+        ------
+        ProfileError
+            A missing, mistyped or unknown key; a move past the travel limits.
+        """
+        settings = profile.settings(NAME)
+        spec = cls(
+            **TravelSpec.envelope(settings, profile, info),
+            slew_rad_s=settings.positive("slew_rad_s", 1.5),
+            track_rad_s=settings.positive("track_rad_s", 0.2),
+            ramp_s=settings.positive("ramp_s", 0.15),
+            slew_s=settings.positive("slew_s", 0.3),
+            track_s=settings.positive("track_s", 0.5),
+            reversal_s=settings.positive("reversal_s", 0.5),
+            min_sample_rate_hz=settings.positive("min_sample_rate_hz", 1000.0),
+        )
+        settings.done()
+        spec.require_travel(float(np.sum(spec.command())) / spec.fs_hz, protocol=NAME,
+                            source=profile.source)
+        return spec
+
+    def command(self) -> np.ndarray:
+        """The standard move's velocity command (rad/s)."""
+        return gimbal_move(slew_rad_s=self.slew_rad_s, track_rad_s=self.track_rad_s,
+                           ramp_s=self.ramp_s, slew_s=self.slew_s, track_s=self.track_s,
+                           reversal_s=self.reversal_s, fs_hz=self.fs_hz)
+
+
+def feedforward_values(calibration: CalibrationRun, profile: UnitProfile, spec: Spec
+                       ) -> tuple[float, float, float, str]:
+    """``(B, T_c, u_rel, source)``: this calibration's results, else the declared nominals.
+
+    ``u_rel`` is the feedforward's relative standard uncertainty over the move, the two
+    terms weighted by their RMS over it: ``√((T_c·u_r(T_c))² + (B·ω*_rms·u_r(B))²) /
+    √(T_c² + (B·ω*_rms)²)`` (0 for declared nominals: no measurement, nothing propagated).
+    """
+    found = calibration.results("viscous_nm_s_rad", "coulomb_nm")
+    if found is None:
+        return (profile.measurement("viscous_nm_s_rad").nominal,
+                profile.measurement("coulomb_nm").nominal, 0.0, "declared nominals")
+    viscous, coulomb = found
+    w_rms = float(np.sqrt(np.mean(spec.command() ** 2)))
+    b_part, c_part = viscous.value * w_rms, coulomb.value
+    u_rel = math.hypot(b_part * viscous.relative_uncertainty,
+                       c_part * coulomb.relative_uncertainty) / math.hypot(b_part, c_part)
+    return viscous.value, coulomb.value, u_rel, "measured (inertia_friction)"
+
+
+def excitation(spec: Spec, *, viscous_nm_s_rad: float, coulomb_nm: float
+               ) -> tuple[Excitation, Excitation]:
+    """The move without and with the feedforward (each run from :attr:`Spec.start_rad`,
+    reached by ``spec.move_to_start`` from wherever the axis is)."""
+    command = spec.command()
+    offset = friction_feedforward(command, viscous_nm_s_rad=viscous_nm_s_rad,
+                                  coulomb_nm=coulomb_nm)
+    return (Excitation(name="move_no_ff", mode=Mode.VELOCITY, fs_hz=spec.fs_hz,
+                       command=command),
+            Excitation(name="move_ff", mode=Mode.VELOCITY, fs_hz=spec.fs_hz, command=command,
+                       torque_offset_nm=offset))
+
+
+def analyse(off: tuple[Recording, Excitation], on: tuple[Recording, Excitation], spec: Spec,
+            *, feedforward_u_rel: float = 0.0
+            ) -> tuple[dict[str, Estimate], Following, Following]:
+    """The declared figures from the two runs; ``feedforward_u_rel`` (the feedforward's
+    relative uncertainty, see :func:`feedforward_values`) adds a Type A line to the
+    figures with feedforward, its size by superposition of the two runs
+    (:func:`~hil.closed_loop.tracking.feedforward_change`)."""
+    runs = []
+    for recording, exc in (off, on):
+        position, _, _ = on_command_grid(recording, exc)
+        runs.append(following_error(position, exc.command, fs_hz=spec.fs_hz))
+    f_off, f_on = runs
+    lsb = quantisation_step(on[0].position)  # the encoder's resolution, as recorded
+
+    def est(name: str, value: float, u: float) -> Estimate:
+        return as_estimate(name, value, u, scale=MICRO, unit="µrad", resolution_rad=lsb)
+
+    rms_on = est("tracking_rms_error_urad", f_on.rms_rad, f_on.u_rms_rad)
+    peak_on = est("tracking_peak_error_urad", f_on.peak_rad, f_on.noise_rad)
+    if feedforward_u_rel > 0:
+        d_rms, d_peak = feedforward_change(f_off, f_on, relative=feedforward_u_rel)
+        lines = [Component(source="the feedforward's B and T_c (this calibration's u), by "
+                                  "superposition of the runs without and with it (Type A)",
+                           kind="A", standard_uncertainty=abs(change) * MICRO, unit="µrad")
+                 for change in (d_rms, d_peak)]
+        rms_on = rms_on.with_components(lines[0])
+        peak_on = peak_on.with_components(lines[1])
+    rms_off = est("tracking_rms_error_no_ff_urad", f_off.rms_rad, f_off.u_rms_rad)
+    out = {
+        "tracking_rms_error_urad": rms_on,
+        "tracking_peak_error_urad": peak_on,
+        "tracking_rms_error_no_ff_urad": rms_off,
+        "tracking_ff_reduction": reduction(rms_off, rms_on, name="tracking_ff_reduction"),
+    }
+    return out, f_off, f_on

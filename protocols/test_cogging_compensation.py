@@ -1,0 +1,92 @@
+"""Cogging compensation effectiveness: the residual cogging (position ripple at the table's
+orders) of one constant-velocity pass with the drive's table cleared and loaded.
+
+Uses the ``cogging_compensation.json`` the cogging protocol wrote in this calibration.
+
+Library: :mod:`hil.suite.cogging_compensation`.
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Iterator
+
+import pytest
+
+from hil.calibration import CalibrationRun
+from hil.drives.base import Drive
+from hil.errors import DriveStateError
+from hil.identify.estimate import Estimate
+from hil.profile import UnitProfile
+from hil.suite.cogging_compensation import (
+    MEASUREMENTS,
+    NAME,
+    Spec,
+    analyse,
+    excitation,
+    orders,
+    table_from_json,
+    table_relative_uncertainty,
+)
+from hil.suite.rate import sample_rate_shortfall
+
+pytestmark = pytest.mark.protocol(NAME)
+
+
+@pytest.fixture(scope="module")
+def cleared(drive: Drive) -> Iterator[Drive]:
+    """The drive, its compensation table cleared again afterwards whatever happened."""
+    try:
+        drive.load_compensation(None)
+    except DriveStateError as exc:
+        pytest.skip(f"the drive takes no compensation table: {exc}")
+    try:
+        yield drive
+    finally:
+        drive.load_compensation(None)
+
+
+@pytest.fixture(scope="module")
+def result(cleared: Drive, calibration: CalibrationRun, profile: UnitProfile
+           ) -> dict[str, Estimate]:
+    drive = cleared
+    path = calibration.details.get("cogging", {}).get("compensation_table")
+    if not isinstance(path, str):
+        pytest.skip("no cogging_compensation.json in this calibration (the cogging protocol "
+                    "did not run before this one)")
+    with open(path, encoding="utf-8") as handle:
+        data = json.load(handle)
+    table = table_from_json(data)
+    spec = Spec.from_profile(profile, drive.info)
+    shortfall = sample_rate_shortfall(
+        spec.needed_sample_rate_hz, drive.info, protocol=NAME,
+        why=f"≥ {spec.min_samples_per_pass} samples in the {spec.pass_s - spec.skip_s:g} s "
+            "analysed pass")
+    if shortfall is not None:
+        pytest.skip(shortfall)
+    off, on = excitation(spec)
+    recorded = []
+    for loaded, run in ((None, off), (table, on)):
+        calibration.run(drive, spec.move_to_start(drive.status().position_rad, hold_s=0.2),
+                        protocol=NAME)
+        drive.load_compensation(loaded)
+        recorded.append(calibration.run(drive, run, protocol=NAME))
+    drive.load_compensation(None)
+    recorded_off, recorded_on = recorded
+    relative_u = table_relative_uncertainty(data)
+    estimates, largest = analyse((recorded_off, off), (recorded_on, on), spec, table,
+                                 table_relative_u=relative_u)
+    calibration.details[NAME] = {
+        "table": path,
+        "orders": orders(table),
+        "table_relative_uncertainty": relative_u,
+        "largest_order": {"cleared": largest[0], "loaded": largest[1]},
+    }
+    return estimates
+
+
+@pytest.mark.parametrize("parameter", MEASUREMENTS)
+def test_cogging_compensation(parameter: str, result: dict[str, Estimate],
+                              calibration: CalibrationRun) -> None:
+    measurement = calibration.record(NAME, result[parameter])
+    assert measurement.conforms, measurement.verdict()

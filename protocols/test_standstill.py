@@ -1,0 +1,37 @@
+"""Standstill: torque ripple and position jitter while the drive holds a position.
+
+Library: :mod:`hil.suite.standstill`.
+"""
+
+from __future__ import annotations
+
+import pytest
+
+from hil.calibration import CalibrationRun
+from hil.drives.base import Drive
+from hil.identify.estimate import Estimate
+from hil.profile import UnitProfile
+from hil.suite.standstill import MEASUREMENTS, NAME, Spec, analyse, excitation
+
+pytestmark = pytest.mark.protocol(NAME)
+
+
+@pytest.fixture(scope="module")
+def result(drive: Drive, calibration: CalibrationRun, profile: UnitProfile
+           ) -> dict[str, Estimate]:
+    spec = Spec.from_profile(profile, drive.info)
+    hold = excitation(spec, position_rad=drive.status().position_rad)
+    estimates, blocks = analyse(calibration.run(drive, hold, protocol=NAME), hold, spec)
+    calibration.details[NAME] = {
+        "position_rad": float(hold.command[-1]),
+        "block_torque_rms_mnm": [float(v) * 1e3 for v in blocks.torque_rms_nm],
+        "block_position_rms_urad": [float(v) * 1e6 for v in blocks.position_rms_rad],
+    }
+    return estimates
+
+
+@pytest.mark.parametrize("parameter", MEASUREMENTS)
+def test_standstill(parameter: str, result: dict[str, Estimate],
+                    calibration: CalibrationRun) -> None:
+    measurement = calibration.record(NAME, result[parameter])
+    assert measurement.conforms, measurement.verdict()

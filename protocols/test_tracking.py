@@ -1,0 +1,67 @@
+"""Tracking: the standard gimbal move without and with the certificate's friction
+feedforward ``B·ω* + T_c·sgn(ω*)`` (the drive's torque offset); following error and the
+feedforward's reduction of it.
+
+Library: :mod:`hil.suite.tracking`.
+"""
+
+from __future__ import annotations
+
+import pytest
+
+from hil.calibration import CalibrationRun
+from hil.drives.base import Drive
+from hil.identify.estimate import Estimate
+from hil.profile import UnitProfile
+from hil.suite.rate import sample_rate_shortfall
+from hil.suite.tracking import (
+    MEASUREMENTS,
+    MICRO,
+    NAME,
+    Spec,
+    analyse,
+    excitation,
+    feedforward_values,
+)
+
+pytestmark = pytest.mark.protocol(NAME)
+
+
+@pytest.fixture(scope="module")
+def result(drive: Drive, calibration: CalibrationRun, profile: UnitProfile
+           ) -> dict[str, Estimate]:
+    spec = Spec.from_profile(profile, drive.info)
+    shortfall = sample_rate_shortfall(
+        spec.min_sample_rate_hz, drive.info, protocol=NAME,
+        why="the torque offset follows the command sample by sample; a polled link holds it "
+            "a whole poll and writes it with the host's jitter")
+    if shortfall is not None:
+        pytest.skip(shortfall)
+    viscous, coulomb, u_rel, source = feedforward_values(calibration, profile, spec)
+    off, on = excitation(spec, viscous_nm_s_rad=viscous, coulomb_nm=coulomb)
+    recorded = []
+    for move in (off, on):
+        calibration.run(drive, spec.move_to_start(drive.status().position_rad, hold_s=0.2),
+                        protocol=NAME)
+        drive.disable()  # re-enabled: the velocity integrator starts empty for either run
+        drive.enable()
+        recorded.append(calibration.run(drive, move, protocol=NAME))
+    recorded_off, recorded_on = recorded
+    estimates, f_off, f_on = analyse((recorded_off, off), (recorded_on, on), spec,
+                                     feedforward_u_rel=u_rel)
+    calibration.details[NAME] = {
+        "feedforward": {"viscous_nm_s_rad": viscous, "coulomb_nm": coulomb,
+                        "relative_uncertainty": u_rel, "source": source,
+                        "sent_as": "torque offset (CiA 402 0x60B2)"},
+        "noise_urad": {"no_ff": f_off.noise_rad * MICRO, "ff": f_on.noise_rad * MICRO},
+        "peak_error_no_ff_urad": f_off.peak_rad * MICRO,
+        "move_s": len(on.command) / on.fs_hz,
+    }
+    return estimates
+
+
+@pytest.mark.parametrize("parameter", MEASUREMENTS)
+def test_tracking(parameter: str, result: dict[str, Estimate],
+                  calibration: CalibrationRun) -> None:
+    measurement = calibration.record(NAME, result[parameter])
+    assert measurement.conforms, measurement.verdict()

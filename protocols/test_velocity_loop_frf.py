@@ -1,0 +1,61 @@
+"""Velocity-loop frequency response: closed loop, sensitivity, bandwidth and margins.
+
+A periodic multisine on a constant-speed carrier (the axis never reverses); the closed
+loop ``T = V/R``, the sensitivity ``S = E/R`` and the loop gain ``L = V/E = C·P`` (the
+torque command splits it: ``C = U/E``, ``P = V/U``); margins by python-control.
+
+Library: :mod:`hil.suite.velocity_loop_frf`.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from hil.calibration import CalibrationRun
+from hil.closed_loop.frf import FrfResult
+from hil.drives.base import Drive
+from hil.profile import UnitProfile
+from hil.suite.rate import sample_rate_shortfall
+from hil.suite.velocity_loop_frf import MEASUREMENTS, NAME, Spec, analyse, excitation
+
+pytestmark = pytest.mark.protocol(NAME)
+
+
+@pytest.fixture(scope="module")
+def result(drive: Drive, calibration: CalibrationRun, profile: UnitProfile) -> FrfResult:
+    spec = Spec.from_profile(profile, drive.info)
+    shortfall = sample_rate_shortfall(
+        spec.needed_sample_rate_hz, drive.info, protocol=NAME,
+        why=f"4 × its highest line, {max(spec.frequencies_hz):g} Hz")
+    if shortfall is not None:
+        pytest.skip(shortfall)
+    *moves, lines = excitation(spec, position_rad=drive.status().position_rad)
+    for move in moves:
+        calibration.run(drive, move, protocol=NAME)
+    analysed = analyse(calibration.run(drive, lines, protocol=NAME), spec)
+
+    def db(values: np.ndarray) -> list[float]:
+        return [float(v) for v in 20 * np.log10(np.abs(values))]
+
+    def deg(values: np.ndarray) -> list[float]:
+        return [float(v) for v in np.degrees(np.angle(values))]
+
+    calibration.details[NAME] = {
+        "frequencies_hz": [float(f) for f in analysed.frequencies_hz],
+        "closed_loop_db": db(analysed.closed_loop), "closed_loop_deg": deg(analysed.closed_loop),
+        "sensitivity_db": db(analysed.sensitivity),
+        "loop_gain_db": db(analysed.loop_gain), "loop_gain_deg": deg(analysed.loop_gain),
+        "controller_db": db(analysed.controller), "plant_db": db(analysed.plant),
+        "periods": analysed.periods,
+        "margins": "python-control stability_margins on frd(L = V/E)",
+    }
+    return analysed
+
+
+@pytest.mark.parametrize("parameter", MEASUREMENTS)
+def test_velocity_loop_frf(parameter: str, result: FrfResult,
+                           calibration: CalibrationRun) -> None:
+    estimate = result.estimates[parameter.removeprefix("velocity_")]
+    measurement = calibration.record(NAME, estimate)
+    assert measurement.conforms, measurement.verdict()

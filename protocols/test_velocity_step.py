@@ -1,0 +1,49 @@
+"""Velocity step response: rise time, overshoot, settling time, steady-state error.
+
+Small and large steps, up and down, both directions of rotation, on a moving axis.
+
+Library: :mod:`hil.suite.velocity_step`.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import pytest
+
+from hil.calibration import CalibrationRun
+from hil.drives.base import Drive
+from hil.identify.estimate import Estimate
+from hil.profile import UnitProfile
+from hil.suite.rate import sample_rate_shortfall
+from hil.suite.velocity_step import MEASUREMENTS, NAME, Spec, analyse, excitation
+
+pytestmark = pytest.mark.protocol(NAME)
+
+
+@pytest.fixture(scope="module")
+def result(drive: Drive, calibration: CalibrationRun, profile: UnitProfile
+           ) -> dict[str, Estimate]:
+    spec = Spec.from_profile(profile, drive.info)
+    shortfall = sample_rate_shortfall(spec.min_sample_rate_hz, drive.info, protocol=NAME,
+                                      why="≥ 10 samples in a 10 ms rise")
+    if shortfall is not None:
+        pytest.skip(shortfall)
+    *moves, forward, backward = excitation(spec, position_rad=drive.status().position_rad)
+    for move in moves:
+        calibration.run(drive, move, protocol=NAME)
+    runs = [(calibration.run(drive, e, protocol=NAME), e) for e in (forward, backward)]
+    estimates, steps = analyse(runs, spec)
+    calibration.details[NAME] = {
+        "velocity": f"encoder position, central difference, {spec.smooth_s * 1e3:g} ms "
+                    "zero-phase moving average",
+        "steps": [{"size": size, **dataclasses.asdict(f)} for size, f in steps],
+    }
+    return estimates
+
+
+@pytest.mark.parametrize("parameter", MEASUREMENTS)
+def test_velocity_step(parameter: str, result: dict[str, Estimate],
+                       calibration: CalibrationRun) -> None:
+    measurement = calibration.record(NAME, result[parameter])
+    assert measurement.conforms, measurement.verdict()
