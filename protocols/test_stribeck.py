@@ -14,6 +14,7 @@ from hil.identify.estimate import Estimate
 from hil.identify.stribeck import StribeckResult
 from hil.profile import UnitProfile
 from hil.suite.stribeck import NAME, Spec, analyse, cross_check, excitation, finite_or_none
+from hil.suite.torque_constant import kt_ripple_from_cogging
 from hil.suite.travel import on_command_grid
 
 MEASUREMENTS = ("static_friction_nm", "stribeck_velocity_rad_s")
@@ -28,12 +29,14 @@ def result(drive: Drive, calibration: CalibrationRun, profile: UnitProfile) -> S
     recording = calibration.run(drive, stairs, protocol=NAME)
     position, torque, rows = on_command_grid(recording, stairs)
     time_s = np.arange(len(position)) / stairs.fs_hz
-    analysed = analyse(time_s, position, torque, spec)
+    ripple = kt_ripple_from_cogging(calibration)
+    analysed = analyse(time_s, position, torque, spec, ripple=ripple)
     calibration.details[NAME] = {
         "recorded_rows": rows,
         "coulomb_nm": analysed.coulomb.value,
         "viscous_nm_s_rad": analysed.viscous.value,
         "residual_rms_nm": analysed.residual_rms_nm,
+        "kt_ripple_correction": "cogging protocol's table" if ripple else "none",
         "lowest_clean_speed_rad_s": analysed.lowest_clean_speed_rad_s,
         "stick_slip_speeds_rad_s": [p.speed_rad_s for p in analysed.points if p.stick_slip],
         "points": [

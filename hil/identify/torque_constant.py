@@ -230,6 +230,16 @@ def ripple_factor(angle_rad: float, ripple: Sequence[tuple[int, float, float]]) 
     return 1.0 + sum(a * math.sin(n * angle_rad + psi) for n, a, psi in ripple)
 
 
+def ripple_factors(angles_rad: FloatArray, ripple: Sequence[tuple[int, float, float]]
+                   ) -> FloatArray:
+    """:func:`ripple_factor` at every angle of ``angles_rad``: the reported torque (nominal
+    K_t times the current) times this is the torque the motor makes there."""
+    factors = np.ones_like(angles_rad, dtype=np.float64)
+    for n, a, psi in ripple:
+        factors += a * np.sin(n * angles_rad + psi)
+    return factors
+
+
 def identify_torque_constant(
     sweeps: Sequence[LockedSweep], *, ripple: Sequence[tuple[int, float, float]] = ()
 ) -> TorqueConstantResult:
