@@ -1,10 +1,6 @@
 """Firmware variants of a unit profile: the ONE place that knows where the drive's
-controller settings live.
-
-Today the simulated drive's controller settings sit in the profile's ``[plant]`` table;
-issue 11 moves them into a ``[firmware]`` table. :func:`with_firmware` writes a setting
-into ``[firmware]`` when the profile has that table and into ``[plant]`` otherwise, so
-every compare test and the benchmark survive the move unchanged.
+controller settings live: the profile's ``[firmware]`` table (``[plant]`` in profiles
+written before it existed, which a calibration now refuses with a pointer to the move).
 """
 
 from __future__ import annotations
@@ -19,13 +15,16 @@ import tomli_w
 
 from hil.profile import builtin_profile_path
 
-# the controller settings a firmware release changes (issue 11, section 1); TODO after the
-# firmware work merges: command_delay_samples, feedforward, cogging_compensation
+# the controller settings a firmware release changes (issue 11, section 1)
 FIRMWARE_KEYS = (
+    "version",
     "velocity_kp_nm_s_rad",
     "velocity_ki_nm_rad",
     "velocity_filter_hz",
     "current_loop_time_constant_s",
+    "command_delay_samples",
+    "feedforward",
+    "cogging_compensation",
 )
 
 

@@ -62,7 +62,7 @@ def test_modbus_identical_firmware_flags_nothing(tmp_path: Path,
     runs = [calibrate(with_firmware(PROFILE), tmp_path / f"s{seed}", drive="modbus-emulator",
                       only="inertia_friction", seed=seed) for seed in (1, 2)]
     code, verdicts, err = compare(*runs, tmp_path / "c.json", capsys)
-    assert code == 0
+    assert code == 0, (verdicts, err)
     assert set(verdicts) >= {"inertia_kg_m2", "viscous_nm_s_rad", "coulomb_nm"}
     assert set(verdicts.values()) == {"SAME"}
     assert "warning" not in err

@@ -44,12 +44,14 @@ def test_the_hash_without_firmware_ignores_only_firmware_settings() -> None:
 
 def test_with_firmware_writes_where_the_settings_live() -> None:
     today = with_firmware("demo_gimbal_elevation", velocity_filter_hz=100.0)
-    assert today["plant"]["velocity_filter_hz"] == 100.0
+    assert today["firmware"]["velocity_filter_hz"] == 100.0
+    assert "velocity_filter_hz" not in today["plant"]
     assert firmware_setting("demo_gimbal_elevation", "velocity_filter_hz") == 300.0
+    old = profile_document("demo_gimbal_elevation")
+    old["plant"].update(old.pop("firmware"))  # a profile from before [firmware]
+    variant = with_firmware(old, velocity_filter_hz=100.0)
+    assert variant["plant"]["velocity_filter_hz"] == 100.0
+    assert old["plant"]["velocity_filter_hz"] == 300.0  # the input is left alone
     moved = profile_document("demo_gimbal_elevation")
-    moved["firmware"] = {"version": "1.0", "velocity_filter_hz": 300.0}
-    variant = with_firmware(moved, velocity_filter_hz=100.0)
-    assert variant["firmware"]["velocity_filter_hz"] == 100.0
-    assert moved["firmware"]["velocity_filter_hz"] == 300.0  # the input is left alone
     with pytest.raises(KeyError, match="not a firmware setting"):
         with_firmware(moved, inertia_kg_m2=1.0)
