@@ -79,7 +79,7 @@ def result(cleared: Drive, calibration: CalibrationRun, profile: UnitProfile
     calibration.details[NAME] = {
         "table": path,
         "orders": orders(table),
-        "table_relative_uncertainty": relative_u,
+        "table_relative_uncertainty": {str(n): u for n, u in relative_u.items()},
         "largest_order": {"cleared": largest[0], "loaded": largest[1]},
     }
     return estimates

@@ -27,6 +27,7 @@ SHARING_RULE = (
     "(fully correlated, enters as the difference of its two contributions, zero when "
     "equal): every other Type B line: the method's error over the simulated population "
     "('method: …'), the allowance for physics the simulator lacks ('allowance …'), a "
+    "resolution (a sample grid's or an LSB's rounding, '… resolution …'), a "
     "station's calibration constant. A line found on one side only, and every line when "
     "the serials differ (--allow-different-units), counts as independent. Where identical-"
     "firmware reruns scatter more than the budgets state (fixtures/compare_repeatability."
@@ -73,6 +74,8 @@ def classify(line: BudgetLine, *, protocols: Sequence[str], same_unit: bool = Tr
         return Sharing.SHARED, "method error, same unit"
     if line.source.startswith("allowance"):
         return Sharing.SHARED, "allowance"
+    if "resolution" in line.source:
+        return Sharing.SHARED, "resolution, the same grid on both runs"
     return Sharing.SHARED, "systematic Type B"
 
 

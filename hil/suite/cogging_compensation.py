@@ -103,14 +103,18 @@ def table_from_json(data: Mapping[str, Any]) -> CompensationTable:
     return CompensationTable(cogging_nm=cogging, kt_ripple=ripple)
 
 
-def table_relative_uncertainty(data: Mapping[str, Any]) -> float:
-    """The largest ``amplitude_u / amplitude`` of the table's harmonics: how far, relative
-    to what it cancels, the identified table may be off (0 when none is stated)."""
-    ratios = [float(h["amplitude_u_nm"]) / float(h["amplitude_nm"]) for h in data["cogging"]
-              if float(h["amplitude_nm"]) > 0]
-    ratios += [float(h["amplitude_u"]) / float(h["amplitude"]) for h in data["kt_ripple"]
-               if float(h["amplitude"]) > 0]
-    return max(ratios, default=0.0)
+def table_relative_uncertainty(data: Mapping[str, Any]) -> dict[int, float]:
+    """Per order, the table's ``amplitude_u / amplitude`` (the larger of its cogging and K_t
+    ripple entries there): how far, relative to what it cancels at that order, the
+    identified table may be off."""
+    ratios: dict[int, float] = {}
+    rows = [(h, "amplitude_u_nm", "amplitude_nm") for h in data["cogging"]]
+    rows += [(h, "amplitude_u", "amplitude") for h in data["kt_ripple"]]
+    for h, u_key, a_key in rows:
+        if float(h[a_key]) > 0:
+            order = int(h["order"])
+            ratios[order] = max(ratios.get(order, 0.0), float(h[u_key]) / float(h[a_key]))
+    return ratios
 
 
 def orders(table: CompensationTable) -> list[int]:
@@ -128,14 +132,17 @@ def excitation(spec: Spec) -> tuple[Excitation, Excitation]:
 
 
 def analyse(off: tuple[Recording, Excitation], on: tuple[Recording, Excitation],
-            spec: Spec, table: CompensationTable, *, table_relative_u: float = 0.0
+            spec: Spec, table: CompensationTable, *,
+            table_relative_u: Mapping[int, float] | None = None,
             ) -> tuple[dict[str, Estimate], list[int]]:
     """The residual ripple without and with the table, and their ratio.
 
     The residual with the table also carries the table's own uncertainty (identified from
-    this calibration's noisy torque): a table off by ``δ`` relative leaves about ``δ`` of
-    the uncompensated ripple, in amplitude and in phase, so ``√2·δ·ripple_cleared`` is a
-    Type A line of the compensated ripple (``table_relative_u`` = δ).
+    this calibration's noisy torque): a table off by ``δ`` relative at the order of the
+    largest uncompensated ripple leaves about ``δ`` of that ripple, in amplitude and in
+    phase, so ``√2·δ·ripple_cleared`` is a Type A line of the compensated ripple
+    (``table_relative_u``: δ per order, :func:`table_relative_uncertainty`; a weak
+    harmonic's large relative u does not apply to the strong one's ripple).
     """
     found = []
     for recording, exc in (off, on):
@@ -146,11 +153,13 @@ def analyse(off: tuple[Recording, Excitation], on: tuple[Recording, Excitation],
     (a_off, u_off, n_off), (a_on, u_on, n_on) = found
     without = ripple_estimate("cogging_ripple_uncompensated_urad", a_off, u_off, order=n_off)
     with_table = ripple_estimate("cogging_ripple_compensated_urad", a_on, u_on, order=n_on)
-    if table_relative_u > 0:
+    by_order = table_relative_u or {}
+    delta = by_order.get(n_off, max(by_order.values(), default=0.0))
+    if delta > 0:
         with_table = with_table.with_components(Component(
             source="the table's own uncertainty (cogging_compensation.json amplitude_u), times "
                    "the ripple it cancels, amplitude and phase (Type A)", kind="A",
-            standard_uncertainty=math.sqrt(2) * table_relative_u * without.value, unit="µrad"))
+            standard_uncertainty=math.sqrt(2) * delta * without.value, unit="µrad"))
     removed = removed_fraction(without, with_table)
     return ({without.name: without, with_table.name: with_table, removed.name: removed},
             [n_off, n_on])

@@ -131,7 +131,8 @@ def test_every_budget_line_of_a_real_certificate_falls_under_a_stated_rule(
         for line in result.budget:
             sharing, reason = classify(line, protocols=certificate.protocols)
             if line.kind == "B" and sharing is Sharing.SHARED:  # not the catch-all
-                assert line.source.startswith(("method:", "allowance")), line.source
+                assert line.source.startswith(("method:", "allowance")) or (
+                    "resolution" in line.source), line.source
             assert reason
 
 
@@ -143,7 +144,10 @@ def test_identical_firmware_other_seed_flags_nothing(
     code, verdicts = compare(baseline, candidate, out / "compare.json")
     assert code == 0, capsys.readouterr().out
     assert len(verdicts) >= 18
-    assert set(verdicts.values()) == {"SAME"}
+    # INCONCLUSIVE is not a flag: a result at its noise floor (the compensated cogging
+    # ripple) cannot rule out a change of a quarter of its tolerance
+    assert set(verdicts.values()) <= {"SAME", "INCONCLUSIVE"}
+    assert sum(v == "SAME" for v in verdicts.values()) >= len(verdicts) - 2
 
 
 @settings(max_examples=1, derandomize=True, deadline=None)

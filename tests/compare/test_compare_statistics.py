@@ -53,6 +53,17 @@ SOURCES = [  # every budget source the code writes (grep hil/ for Component( and
     ("allowance for physics the simulator lacks (profile allowance_pct, rectangular)", "B",
      Sharing.SHARED),
     ("torque sensor calibration constant (station)", "B", Sharing.SHARED),
+    ("cable hysteresis loop h, with the s₀ fitted with it, taken out (gravity_cable)", "B",
+     Sharing.INDEPENDENT),
+    ("cable hysteresis loop's angle s₀ beyond h taken out (gravity_cable)", "B",
+     Sharing.INDEPENDENT),
+    ("cable hysteresis loop's angle s₀, second order (gravity_cable)", "B",
+     Sharing.INDEPENDENT),
+    ("no K_t ripple above the detection limit 0.33 % (rectangular between 0 and it)", "B",
+     Sharing.SHARED),
+    ("resolution of the sample grid (rectangular)", "B", Sharing.SHARED),
+    ("encoder resolution (rectangular, LSB/√12)", "B", Sharing.SHARED),
+    ("scatter of 5 repeated steps (Type A)", "A", Sharing.INDEPENDENT),
 ]
 
 
