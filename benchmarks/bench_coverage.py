@@ -42,6 +42,9 @@ BIAS_MAP_HEADER = """\
 # benchmarks/bench_coverage.py --write-bias-map (see benchmarks/RESULTS.md). A calibration
 # corrects the mean error (bias) and states the unit-to-unit scatter beyond Type A as a
 # named Type B line of its budget. `--method-bias off` calibrates without it.
+# validated_coverage / validated_units: how often the certificate's ±U held the truth on a
+# second population not used for these figures (--write-validation); note: what keeps a
+# result's coverage from 95 %, where that was traced. Both are printed on the certificate.
 """
 GOAL_COVERAGE = (0.93, 0.98)
 GOAL_RMS = (0.7, 1.3)
