@@ -120,7 +120,7 @@ def main() -> int:
         first = calibrate(unit, args.out / "certificates", method_bias=args.method_bias,
                           reuse=True)
         second = calibrate(unit, args.out / "pairs", seed=unit.seed + 1,
-                           method_bias=args.method_bias)
+                           method_bias=args.method_bias, reuse=args.reuse)
         for name, value in repeatability(first, second).items():
             z.setdefault(name, []).append(value)
     print("\n| result (repeatability, two seeds) | pairs | RMS (x₁−x₂)/√(u₁²+u₂²) |")

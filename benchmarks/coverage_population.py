@@ -65,6 +65,8 @@ import tomli_w
 from numpy.typing import NDArray
 from scipy.optimize import brentq
 
+from hil.compare.budget import Sharing, classify
+from hil.compare.certificates import BudgetLine
 from hil.profile import builtin_profile_path, load_profile
 from plant_sim.params import PlantParams
 
@@ -189,6 +191,9 @@ def write_population(
     return units
 
 
+#: The protocols an earlier result's budget line may name (``… (gravity_cable)``).
+PROTOCOLS = ("current_loop", "gravity_cable", "inertia_friction", "cogging", "stribeck",
+             "torque_constant", "resonance", "inertia_elevation")
 #: The closed-loop protocols measure behaviour with no truth in the plant's parameters;
 #: their run-to-run check is ``bench_compare.py`` (same firmware, other seeds). Left out
 #: here, they would only add machine time.
@@ -383,14 +388,31 @@ def summarise(rows: Iterable[Row]) -> list[Summary]:
 
 def repeatability(first: Mapping[str, Mapping[str, Any]],
                   second: Mapping[str, Mapping[str, Any]]) -> dict[str, float]:
-    """``(x₁ − x₂)/√(u₁² + u₂²)`` per result of the same unit under two noise seeds."""
+    """``(x₁ − x₂)/√(u₁² + u₂²)`` per result of the same unit under two noise seeds, each
+    ``u`` the part of its budget that differs between two runs of one unit
+    (:func:`seed_part`)."""
     return {
         name: (float(a["value"]) - float(second[name]["value"]))
-        / math.hypot(float(a["standard_uncertainty"]),
-                     float(second[name]["standard_uncertainty"]))
+        / math.hypot(seed_part(a), seed_part(second[name]))
         for name, a in first.items()
-        if name in second and a["standard_uncertainty"]
+        if name in second and seed_part(a) > 0
     }
+
+
+def seed_part(result: Mapping[str, Any]) -> float:
+    """The part of a result's ``u`` that a second run of the same unit draws anew: its Type A
+    lines and the earlier protocols' results measured again (``gimbal-hil compare``'s
+    rule); the method's scatter over units, a model's misfit to the unit and resolutions
+    repeat, so a rerun cannot check them."""
+    lines = result.get("budget") or []
+    if not lines:
+        return float(result["standard_uncertainty"])
+    kept = [line for line in lines if classify(BudgetLine(
+        source=line["component"], kind=line["type"],
+        standard_uncertainty=float(line["standard_uncertainty"]),
+        sensitivity=float(line["sensitivity"]), dof=math.inf,
+    ), protocols=PROTOCOLS)[0] is Sharing.INDEPENDENT]
+    return math.sqrt(sum(float(line["contribution"]) ** 2 for line in kept))
 
 
 def bias_map(rows: Iterable[Row], *, population: str) -> dict[str, Any]:

@@ -31,7 +31,7 @@ from scipy.optimize import least_squares
 
 from hil.errors import IdentificationError
 from hil.identify.current_loop import IMAGES, block_phasors
-from hil.identify.estimate import Estimate
+from hil.identify.estimate import TYPE_A_SOURCE, Component, Estimate, with_budget
 
 FloatArray = NDArray[np.float64]
 ComplexArray = NDArray[np.complex128]
@@ -342,21 +342,27 @@ def identify_resonance(points: Sequence[FrfPoint], *, fs_hz: float,
     chi2_per_dof = float(np.sum(fit.fun**2)) / dof
     jacobian = np.asarray(fit.jac, dtype=np.float64)
     # pseudo-inverse: a nuisance parameter (B/J, τ) driven to zero leaves a flat direction
-    covariance = np.linalg.pinv(jacobian.T @ jacobian) * max(1.0, chi2_per_dof)
-    log_u = np.sqrt(np.diag(covariance))  # relative uncertainties (log parameters)
+    log_u = np.sqrt(np.diag(np.linalg.pinv(jacobian.T @ jacobian)))  # relative, at the noise
     bandwidth = velocity_loop_bandwidth_hz(points)
     ratio = model.resonance_hz / bandwidth
+
+    def estimate(name: str, value: float, index: int, unit: str) -> Estimate:
+        # the scatter about the two-mass model beyond the FRF's noise is the model's misfit
+        # to this unit, the same on every run: a Type B line of its own, not more noise
+        u = value * float(log_u[index])
+        lines = [Component(source=TYPE_A_SOURCE, kind="A", standard_uncertainty=u, unit=unit,
+                           dof=float(dof))]
+        if chi2_per_dof > 1.0:
+            lines.append(Component(
+                source=f"two-mass model's misfit to this unit (χ²/ν = {chi2_per_dof:.3g})",
+                kind="B", standard_uncertainty=u * math.sqrt(chi2_per_dof - 1.0), unit=unit))
+        return with_budget(Estimate(name=name, value=value, standard_uncertainty=u, unit=unit),
+                           lines, value=value)
+
     return ResonanceResult(
         points=tuple(points), model=model, chi2_per_dof=chi2_per_dof, bandwidth_hz=bandwidth,
-        resonance=Estimate(name="resonance_frequency_hz", value=model.resonance_hz,
-                           standard_uncertainty=model.resonance_hz * float(log_u[3]),
-                           unit="Hz", dof=float(dof)),
-        antiresonance=Estimate(name="antiresonance_frequency_hz", value=model.antiresonance_hz,
-                               standard_uncertainty=model.antiresonance_hz * float(log_u[1]),
-                               unit="Hz", dof=float(dof)),
-        damping=Estimate(name="resonance_damping_ratio", value=model.resonance_damping,
-                         standard_uncertainty=model.resonance_damping * float(log_u[4]),
-                         unit="1", dof=float(dof)),
-        ratio=Estimate(name="resonance_to_bandwidth_ratio", value=ratio,
-                       standard_uncertainty=ratio * float(log_u[3]), unit="1", dof=float(dof)),
+        resonance=estimate("resonance_frequency_hz", model.resonance_hz, 3, "Hz"),
+        antiresonance=estimate("antiresonance_frequency_hz", model.antiresonance_hz, 1, "Hz"),
+        damping=estimate("resonance_damping_ratio", model.resonance_damping, 4, "1"),
+        ratio=estimate("resonance_to_bandwidth_ratio", ratio, 3, "1"),
     )

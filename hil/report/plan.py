@@ -13,13 +13,18 @@ from hil.motion import Excitation
 from hil.profile import UnitProfile
 from hil.suite import (
     cogging,
+    cogging_compensation,
     current_loop,
     gravity_cable,
     inertia_elevation,
     inertia_friction,
     resonance,
+    standstill,
     stribeck,
     torque_constant,
+    tracking,
+    velocity_loop_frf,
+    velocity_step,
 )
 
 log = logging.getLogger(__name__)
@@ -47,6 +52,24 @@ def _elevation(profile: UnitProfile, info: DriveInfo, at_rad: float) -> list[Exc
     return [e for _ in spec.elevations_rad for e in inertia_friction.excitation(spec.sine)]
 
 
+def _tracking(profile: UnitProfile, info: DriveInfo, at_rad: float) -> list[Excitation]:
+    spec = tracking.Spec.from_profile(profile, info)
+    runs = tracking.excitation(spec, viscous_nm_s_rad=0.0, coulomb_nm=0.0)
+    moves = [spec.move_to_start(at_rad, hold_s=0.2),
+             spec.move_to_start(float(spec.start_rad + runs[0].command.sum() / spec.fs_hz),
+                                hold_s=0.2)]
+    return [*moves, *runs]
+
+
+def _compensation(profile: UnitProfile, info: DriveInfo, at_rad: float) -> list[Excitation]:
+    spec = cogging_compensation.Spec.from_profile(profile, info)
+    runs = cogging_compensation.excitation(spec)
+    moves = [spec.move_to_start(at_rad, hold_s=0.2),
+             spec.move_to_start(float(spec.start_rad + runs[0].command.sum() / spec.fs_hz),
+                                hold_s=0.2)]
+    return [*moves, *runs]
+
+
 PLANNERS: dict[str, Callable[[UnitProfile, DriveInfo, float], list[Excitation]]] = {
     "current_loop": lambda p, i, at: current_loop.excitation(
         current_loop.Spec.from_profile(p, i), position_rad=at),
@@ -61,6 +84,14 @@ PLANNERS: dict[str, Callable[[UnitProfile, DriveInfo, float], list[Excitation]]]
     "resonance": lambda p, i, at: resonance.excitation(
         resonance.Spec.from_profile(p, i), position_rad=at),
     "inertia_elevation": _elevation,
+    "velocity_loop_frf": lambda p, i, at: velocity_loop_frf.excitation(
+        velocity_loop_frf.Spec.from_profile(p, i), position_rad=at),
+    "velocity_step": lambda p, i, at: velocity_step.excitation(
+        velocity_step.Spec.from_profile(p, i), position_rad=at),
+    "tracking": _tracking,
+    "standstill": lambda p, i, at: [standstill.excitation(
+        standstill.Spec.from_profile(p, i), position_rad=at)],
+    "cogging_compensation": _compensation,
 }
 
 
