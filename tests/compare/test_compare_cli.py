@@ -214,12 +214,15 @@ def test_json_keeps_full_precision_and_text_rounds(tmp_path: Path,
     assert "1.0123 ± 0.0025 N·m" in out
 
 
-def test_the_shipped_repeatability_map_widens_only_its_results(
+def test_a_repeatability_map_widens_only_its_results(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
     # coulomb_nm has an entry for the elevation axis: u(Δ) grows; bandwidth_hz has none
     b, c = sides(tmp_path, certificate(), certificate())
-    compare(capsys, b, c, "--json", tmp_path / "with.json")
+    entries = tmp_path / "map.toml"
+    entries.write_text('population = "x"\n[results.elevation.coulomb_nm]\nscale = "relative"\n'
+                       'scatter = 0.003\npairs = 20\n', encoding="utf-8")
+    compare(capsys, b, c, "--json", tmp_path / "with.json", "--repeatability", entries)
     compare(capsys, b, c, "--json", tmp_path / "without.json", "--repeatability", "off")
     def u(name: str) -> dict[str, float]:
         rows = json.loads((tmp_path / name).read_text())["results"]
