@@ -233,9 +233,8 @@ def ripple_scan(segments: list[Segment], *, taken: list[int], orders: tuple[int,
         free &= np.abs(ks - k) > 1
     if np.count_nonzero(free) < 10:
         return RippleScan(orders=(), detection_limit_nm=math.inf)
-    mean = np.array([np.median(q[free & (np.abs(ks - k) <= RIPPLE_FLOOR_WINDOW)])
-                     if np.count_nonzero(free & (np.abs(ks - k) <= RIPPLE_FLOOR_WINDOW)) >= 10
-                     else np.median(q[free]) for k in ks]) / math.log(2)
+    mean = np.array([_local_median(q, free & (np.abs(ks - k) <= RIPPLE_FLOOR_WINDOW), free)
+                     for k in ks]) / math.log(2)
     threshold = math.log(np.count_nonzero(free) / false_alarm)
     # |Δz| found 95 % of the time: the threshold's amplitude plus 1.645 noise SDs of |Δz|;
     # a ripple may sit at any order, so the bound is the worst order's (the lowest orders,
@@ -249,6 +248,11 @@ def ripple_scan(segments: list[Segment], *, taken: list[int], orders: tuple[int,
         chosen.append(int(ks[best]))
         candidate &= np.abs(ks - ks[best]) > reach
     return RippleScan(orders=tuple(chosen), detection_limit_nm=limit)
+
+
+def _local_median(q: FloatArray, near: NDArray[np.bool_], free: NDArray[np.bool_]) -> float:
+    """Median of ``q`` over the nearby free orders, or over every free one when too few."""
+    return float(np.median(q[near] if np.count_nonzero(near) >= 10 else q[free]))
 
 
 def _ripple_peak(ripple: tuple[HarmonicEstimate, ...], *, detection_limit: float) -> Estimate:

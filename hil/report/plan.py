@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import logging
 from collections.abc import Callable
+from typing import Any
 
 from hil.drives.base import DriveInfo
 from hil.errors import HilError
@@ -52,22 +53,24 @@ def _elevation(profile: UnitProfile, info: DriveInfo, at_rad: float) -> list[Exc
     return [e for _ in spec.elevations_rad for e in inertia_friction.excitation(spec.sine)]
 
 
+def _two_runs_from_start(spec: Any, runs: tuple[Excitation, Excitation],
+                         at_rad: float) -> list[Excitation]:
+    """A protocol that runs one excitation twice (without and with something), each from
+    its start: two moves, the first from ``at_rad``, the second from the first run's end."""
+    end_rad = float(spec.start_rad + runs[0].command.sum() / spec.fs_hz)
+    return [spec.move_to_start(at_rad, hold_s=0.2), spec.move_to_start(end_rad, hold_s=0.2),
+            *runs]
+
+
 def _tracking(profile: UnitProfile, info: DriveInfo, at_rad: float) -> list[Excitation]:
     spec = tracking.Spec.from_profile(profile, info)
-    runs = tracking.excitation(spec, viscous_nm_s_rad=0.0, coulomb_nm=0.0)
-    moves = [spec.move_to_start(at_rad, hold_s=0.2),
-             spec.move_to_start(float(spec.start_rad + runs[0].command.sum() / spec.fs_hz),
-                                hold_s=0.2)]
-    return [*moves, *runs]
+    return _two_runs_from_start(
+        spec, tracking.excitation(spec, viscous_nm_s_rad=0.0, coulomb_nm=0.0), at_rad)
 
 
 def _compensation(profile: UnitProfile, info: DriveInfo, at_rad: float) -> list[Excitation]:
     spec = cogging_compensation.Spec.from_profile(profile, info)
-    runs = cogging_compensation.excitation(spec)
-    moves = [spec.move_to_start(at_rad, hold_s=0.2),
-             spec.move_to_start(float(spec.start_rad + runs[0].command.sum() / spec.fs_hz),
-                                hold_s=0.2)]
-    return [*moves, *runs]
+    return _two_runs_from_start(spec, cogging_compensation.excitation(spec), at_rad)
 
 
 PLANNERS: dict[str, Callable[[UnitProfile, DriveInfo, float], list[Excitation]]] = {
