@@ -2,7 +2,8 @@
 
 The two directions are the two torque levels (``L̄ + F`` and ``L̄ − F``): cogging is the
 same in both, K_t ripple scales with the torque. A compensation table (JSON, format in
-:mod:`hil.identify.cogging`) is written next to the certificate.
+:mod:`hil.identify.cogging`) is written next to the certificate. With ``passes =
+"gravity_cable"`` the passes are the gravity sweep's (no motion of its own).
 
 Library: :mod:`hil.suite.cogging`.
 """
@@ -22,10 +23,12 @@ from hil.profile import UnitProfile
 from hil.suite.cogging import (
     COMPENSATION_FILE,
     NAME,
+    SWEEP_PASSES,
     Spec,
     analyse,
     excitation,
     inertia_for_correction,
+    sweep_passes,
 )
 from hil.suite.rate import sample_rate_shortfall
 from hil.suite.travel import on_command_grid
@@ -49,12 +52,17 @@ def result(drive: Drive, calibration: CalibrationRun, profile: UnitProfile) -> C
     )
     if shortfall is not None:
         pytest.skip(shortfall)
-    move, passes = excitation(spec, position_rad=drive.status().position_rad)
-    calibration.run(drive, move, protocol=NAME)
-    recording = calibration.run(drive, passes, protocol=NAME)
+    if spec.passes == SWEEP_PASSES:
+        position, torque, passes_from = sweep_passes(calibration, profile, drive.info)
+        rows = len(position)
+    else:
+        move, passes = excitation(spec, position_rad=drive.status().position_rad)
+        calibration.run(drive, move, protocol=NAME)
+        recording = calibration.run(drive, passes, protocol=NAME)
+        position, torque, rows = on_command_grid(recording, passes)
+        passes_from = "passes (this protocol's)"
     inertia, source = inertia_for_correction(calibration, profile)
-    position, torque, rows = on_command_grid(recording, passes)
-    time_s = np.arange(len(position)) / passes.fs_hz
+    time_s = np.arange(len(position)) / spec.fs_hz
     analysed = analyse(time_s, position, torque, spec, inertia_kg_m2=inertia)
     table = compensation_table(analysed)
     path = calibration.write_artifact(
@@ -65,6 +73,8 @@ def result(drive: Drive, calibration: CalibrationRun, profile: UnitProfile) -> C
     )
     calibration.details[NAME] = {
         "compensation_table": str(path),
+        "passes": passes_from,
+        "speed_rad_s": spec.speed_rad_s,
         "orders": [h.order for h in analysed.cogging],
         "cogging": table["cogging"],
         "kt_ripple": table["kt_ripple"],

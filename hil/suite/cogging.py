@@ -6,6 +6,12 @@ Cogging torque and K_t(θ) ripple from constant-velocity passes up and down the 
 The two directions are the two torque levels (``L̄ + F`` and ``L̄ − F``): cogging is the
 same in both, K_t ripple scales with the torque. A compensation table (JSON, format in
 :mod:`hil.identify.cogging`) is written next to the certificate.
+
+With ``passes = "gravity_cable"`` the protocol moves nothing: its two passes are the
+gravity sweep's up and down passes (constant velocity over the same travel, read back from
+that protocol's raw recording), so one motion serves both identifications. The sweep's
+slower speed gives each pass more samples, and the ripple's orders reach the velocity loop
+at lower frequencies, where it rejects them less (the acceleration correction is smaller).
 """
 
 from __future__ import annotations
@@ -17,11 +23,14 @@ import numpy as np
 
 from hil.calibration import CalibrationRun
 from hil.drives.base import DriveInfo
+from hil.errors import IdentificationError
 from hil.identify.cogging import CoggingResult, identify_cogging
 from hil.motion import Excitation, Mode
 from hil.profile import UnitProfile
+from hil.recording import read_recording
+from hil.suite import gravity_cable
 from hil.suite.rate import needed_sample_rate_hz
-from hil.suite.travel import TravelSpec
+from hil.suite.travel import TravelSpec, on_command_grid
 
 NAME = "cogging"
 
@@ -35,6 +44,9 @@ COMPENSATION_FILE = "cogging_compensation.json"
 # the floor in power (the ratio grows with the samples N).
 MIN_SAMPLES_PER_PASS = 4000
 
+OWN_PASSES = "own"
+SWEEP_PASSES = gravity_cable.NAME  # the gravity sweep's up and down passes
+
 
 @dataclass(frozen=True, slots=True, kw_only=True)
 class Spec(TravelSpec):
@@ -45,6 +57,8 @@ class Spec(TravelSpec):
     min_order: int
     max_order: int
     min_samples_per_pass: int
+    passes: str  # OWN_PASSES or SWEEP_PASSES
+    pass_range_rad: tuple[float, float]  # the travel a pass covers (start, stop)
 
     @classmethod
     def from_profile(cls, profile: UnitProfile, info: DriveInfo) -> Spec:
@@ -67,13 +81,28 @@ class Spec(TravelSpec):
             A missing, mistyped or unknown key.
         """
         settings = profile.settings(NAME)
+        passes = settings.choice("passes", (OWN_PASSES, SWEEP_PASSES), OWN_PASSES)
+        envelope = TravelSpec.envelope(settings, profile, info)
+        if passes == SWEEP_PASSES:
+            if "speed_rad_s" in settings:
+                raise settings.error("speed_rad_s", "is the sweep's with passes = "
+                                     f"'{SWEEP_PASSES}' (set it in [protocols.{SWEEP_PASSES}])")
+            sweep = gravity_cable.Spec.from_profile(profile, info)
+            speed = sweep.speed_rad_s
+            pass_range = (sweep.start_rad, sweep.stop_rad)
+        else:
+            speed = settings.number("speed_rad_s", 0.4)
+            margin = envelope["margin_rad"]
+            pass_range = (envelope["travel_min_rad"] + margin, envelope["travel_max_rad"] - margin)
         spec = cls(
-            **TravelSpec.envelope(settings, profile, info),
-            speed_rad_s=settings.number("speed_rad_s", 0.4),
+            **envelope,
+            speed_rad_s=speed,
             skip_rad=settings.number("skip_rad", 0.1),
             min_order=settings.integer("min_order", 10),
             max_order=settings.integer("max_order", 200),
             min_samples_per_pass=settings.integer("min_samples_per_pass", MIN_SAMPLES_PER_PASS),
+            passes=passes,
+            pass_range_rad=pass_range,
         )
         settings.done()
         return spec
@@ -85,9 +114,8 @@ class Spec(TravelSpec):
 
     @property
     def pass_s(self) -> float:
-        """Duration of one pass over the travel less both margins."""
-        travel = self.travel_max_rad - self.travel_min_rad - 2 * self.margin_rad
-        return travel / self.speed_rad_s
+        """Duration of one pass over :attr:`pass_range_rad`."""
+        return (self.pass_range_rad[1] - self.pass_range_rad[0]) / self.speed_rad_s
 
     @property
     def needed_sample_rate_hz(self) -> float:
@@ -117,8 +145,11 @@ def excitation(spec: Spec, *, position_rad: float) -> list[Excitation]:
     Returns
     -------
     list of Excitation
-        The move to :attr:`Spec.start_rad`, then the passes (velocity mode).
+        The move to :attr:`Spec.start_rad`, then the passes (velocity mode); none when the
+        passes are the gravity sweep's.
     """
+    if spec.passes == SWEEP_PASSES:
+        return []
     n = spec.pass_samples
     return [
         spec.move_to_start(position_rad, hold_s=0.2),
@@ -163,6 +194,9 @@ def analyse(
     """
     n = spec.pass_samples
     skip = math.ceil(spec.skip_rad / spec.speed_rad_s * spec.fs_hz)
+    if len(position_rad) < 2 * n:
+        raise IdentificationError(
+            f"the cogging passes need {2 * n} samples, the recording has {len(position_rad)}")
     passes = [
         (time_s[a:b], position_rad[a:b], torque_nm[a:b]) for a, b in ((skip, n), (n + skip, 2 * n))
     ]
@@ -197,3 +231,43 @@ def inertia_for_correction(calibration: CalibrationRun, profile: UnitProfile) ->
     if inertia is not None:
         return inertia.value, "measured (inertia_friction)"
     return profile.measurement("inertia_kg_m2").nominal, "declared nominal"
+
+
+def sweep_passes(
+    calibration: CalibrationRun, profile: UnitProfile, info: DriveInfo
+) -> tuple[np.ndarray, np.ndarray, str]:
+    """Position and torque of the gravity sweep (command grid), read back from its raw
+    recording: the cogging passes when ``passes = "gravity_cable"``.
+
+    Parameters
+    ----------
+    calibration : CalibrationRun
+        The calibration in progress: the sweep's raw file.
+    profile : UnitProfile
+        The unit's profile (rebuilds the sweep's excitation for its command grid).
+    info : DriveInfo
+        The drive.
+
+    Returns
+    -------
+    position_rad, torque_nm : ndarray
+        The sweep from its start (the up pass, then the down pass, then the rest).
+    path : str
+        The raw recording read, for the certificate's details.
+
+    Raises
+    ------
+    IdentificationError
+        The gravity protocol has not recorded a complete sweep in this calibration.
+    """
+    raw = [r for r in calibration.raw_files
+           if r.protocol == SWEEP_PASSES and r.excitation == "sweep" and r.complete]
+    if not raw:
+        raise IdentificationError(
+            f"[protocols.{NAME}] passes = '{SWEEP_PASSES}' needs the {SWEEP_PASSES} protocol's "
+            "complete sweep earlier in this calibration (its table before this one)")
+    spec = gravity_cable.Spec.from_profile(profile, info)
+    sweep = gravity_cable.excitation(spec, position_rad=spec.start_rad)[-1]
+    recording = read_recording(raw[-1].path, log_warnings=False)
+    position, torque, _ = on_command_grid(recording, sweep)
+    return position, torque, str(raw[-1].path)

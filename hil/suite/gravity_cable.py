@@ -84,11 +84,16 @@ class Spec(TravelSpec):
         return spec
 
     @property
+    def stop_rad(self) -> float:
+        """Where the sweep's up pass ends: the upper travel limit less the margin."""
+        return self.travel_max_rad - self.margin_rad
+
+    @property
     def plan(self) -> SweepPlan:
         """The sweep's command and its phases (:func:`hil.identify.gravity_cable.sweep_plan`)."""
         return sweep_plan(
             start_rad=self.start_rad,
-            stop_rad=self.travel_max_rad - self.margin_rad,
+            stop_rad=self.stop_rad,
             speed_rad_s=self.speed_rad_s,
             rewind_speed_rad_s=self.rewind_speed_rad_s,
             probe_rad=self.probe_rad,

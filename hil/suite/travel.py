@@ -123,7 +123,7 @@ def speed_ramp(speed_rad_s: float, *, ramp_s: float, fs_hz: float, up: bool) -> 
     return speed_rad_s * 0.5 * (1 - np.cos(math.pi * x))
 
 
-MOVE_SPEED_FRACTION = 0.5  # of the unit's velocity limit, for repositioning moves
+MOVE_SPEED_FRACTION = 0.8  # of the unit's velocity limit, for repositioning moves
 
 
 def move_speed_rad_s(settings: ConfigTable, info: DriveInfo) -> float:
