@@ -1,0 +1,184 @@
+"""Stop when the uncertainty is reached: run a protocol's excitation again until every
+result's expanded uncertainty is at most a stated fraction of its tolerance, or a maximum
+number of runs.
+
+A protocol table opts in with ``stop_at_u_fraction`` (e.g. 0.25: ``U ≤ ¼`` of the
+tolerance half-width ``(upper − lower)/2``), ``max_runs`` (default 3) and optionally
+``stop_results`` (the results judged, comma-separated; default every result of the
+protocol). The judged U is
+the certificate's: the method's line from the bias map and the profile's allowance are
+added first (:func:`hil.measurement.with_method_terms`), so a result whose U is mostly the
+method's does not ask for runs that cannot shrink it. A clean unit stops after one run; a
+noisy one runs again and its certificate says why (:attr:`StopDecision.reason`).
+
+Repeated runs are pooled as independent repeats of one measurement: the mean value, each
+Type A line divided by √n with its degrees of freedom summed, the Type B lines (inputs
+that every run shares: earlier protocols' results) kept as the first run states them.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass
+
+from hil.config import ConfigTable
+from hil.identify.estimate import Component, Estimate, with_budget
+from hil.measurement import MethodBiasMap, with_method_terms
+from hil.profile import MeasurementSpec
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class StopRule:
+    """Run again while a result's U exceeds ``fraction`` of its tolerance half-width."""
+
+    fraction: float
+    max_runs: int
+    results: tuple[str, ...] | None  # judged results; None: all of the protocol's
+
+    @classmethod
+    def from_settings(cls, settings: ConfigTable) -> StopRule | None:
+        """The rule from a protocol's table (``stop_at_u_fraction``, ``max_runs``); ``None``
+        when the table does not ask for one (one run, as always).
+
+        Raises
+        ------
+        ProfileError
+            ``stop_at_u_fraction`` not positive, or ``max_runs`` below 1.
+        """
+        if "stop_at_u_fraction" not in settings:
+            return None
+        fraction = settings.positive("stop_at_u_fraction")
+        runs = settings.integer("max_runs", 3)
+        if runs < 1:
+            raise settings.error("max_runs", f"must be at least 1, not {runs}")
+        results = (tuple(n.strip() for n in settings.string("stop_results").split(",")
+                         if n.strip()) if "stop_results" in settings else None)
+        return cls(fraction=fraction, max_runs=runs, results=results)
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class StopDecision:
+    """Whether to run again, and the sentence the certificate carries."""
+
+    again: bool
+    reason: str
+    runs: int
+
+
+def target_expanded_u(spec: MeasurementSpec, fraction: float) -> float:
+    """``fraction`` of the tolerance half-width ``(upper − lower)/2`` of ``spec``."""
+    return fraction * (spec.upper_limit - spec.lower_limit) / 2
+
+
+def pooled(runs: Sequence[Estimate]) -> Estimate:
+    """Independent repeats of one measurement as one estimate.
+
+    Parameters
+    ----------
+    runs : sequence of Estimate
+        The same result from each run (same name, unit and budget lines).
+
+    Returns
+    -------
+    Estimate
+        The mean value; Type A lines ``u/√n`` with ``n·ν`` degrees of freedom; Type B lines
+        of the first run (shared inputs do not average out). One run is returned as is.
+    """
+    if len(runs) == 1:
+        return runs[0]
+    n = len(runs)
+    first = runs[0]
+    by_source = [{c.source: c for c in r.components()} for r in runs]
+    lines: list[Component] = []
+    for line in first.components():
+        if line.kind == "A":
+            same = [found[line.source] for found in by_source if line.source in found]
+            u = math.sqrt(sum(c.contribution ** 2 for c in same)) / n
+            lines.append(dataclasses.replace(
+                line, standard_uncertainty=u, sensitivity=1.0, unit=first.unit,
+                dof=sum(c.dof for c in same), source=f"{line.source}, mean of {n} runs"))
+        else:
+            lines.append(line)
+    value = math.fsum(r.value for r in runs) / n
+    return with_budget(dataclasses.replace(first, cramer_rao_std=None), lines, value=value)
+
+
+def decide(estimates: Mapping[str, Estimate], specs: Mapping[str, MeasurementSpec],
+           method_bias: MethodBiasMap, rule: StopRule, *, runs: int) -> StopDecision:
+    """Run again? Only while some result's certificate U exceeds its target and runs remain.
+
+    Parameters
+    ----------
+    estimates : mapping of str to Estimate
+        The protocol's results so far (pooled over ``runs``), as its analysis gives them.
+    specs : mapping of str to MeasurementSpec
+        Their declarations (limits); results without one are not judged here.
+    method_bias : MethodBiasMap
+        The calibration's map (its lines are part of the U judged).
+    rule : StopRule
+        The profile's rule.
+    runs : int
+        Runs made so far.
+
+    Returns
+    -------
+    StopDecision
+        ``again`` and the reason: which result's U was above its target, or that every U
+        was below, or that the maximum number of runs was reached first.
+    """
+    above = []
+    for name, estimate in estimates.items():
+        spec = specs.get(name)
+        if spec is None or (rule.results is not None and name not in rule.results):
+            continue
+        final = with_method_terms(estimate, spec, method_bias.entries.get(name))
+        target = target_expanded_u(spec, rule.fraction)
+        if final.expanded_uncertainty > target:
+            above.append(f"{name} U = {final.expanded_uncertainty:.2g} > {target:.2g} "
+                         f"{spec.unit}".rstrip())
+    if not above:
+        return StopDecision(again=False, runs=runs, reason=(
+            f"every U ≤ {rule.fraction:g} × the tolerance half-width after {runs} run"
+            f"{'s' if runs > 1 else ''}"))
+    if runs >= rule.max_runs:
+        return StopDecision(again=False, runs=runs, reason=(
+            f"max_runs = {rule.max_runs} reached with {'; '.join(above)}"))
+    return StopDecision(again=True, runs=runs, reason=(
+        f"run {runs + 1} of at most {rule.max_runs}: after {runs} "
+        f"{'runs' if runs > 1 else 'run'}, {'; '.join(above)}"))
+
+
+def repeat_until(run_once: Callable[[], Mapping[str, Estimate]], *,
+                 specs: Mapping[str, MeasurementSpec], method_bias: MethodBiasMap,
+                 rule: StopRule | None) -> tuple[dict[str, Estimate], StopDecision]:
+    """Run a protocol's measurement once, then again while :func:`decide` asks for it.
+
+    Parameters
+    ----------
+    run_once : callable
+        Runs the excitation once and returns its results by name.
+    specs : mapping of str to MeasurementSpec
+        The results' declarations.
+    method_bias : MethodBiasMap
+        The calibration's map.
+    rule : StopRule or None
+        The profile's rule; ``None``: one run.
+
+    Returns
+    -------
+    results : dict of str to Estimate
+        Pooled over the runs made (:func:`pooled`).
+    decision : StopDecision
+        The last decision: why the protocol stopped, after how many runs.
+    """
+    runs = [dict(run_once())]
+    while True:
+        now = {name: pooled([r[name] for r in runs]) for name in runs[0]}
+        if rule is None:
+            return now, StopDecision(again=False, runs=1, reason="one run (no stop rule)")
+        decision = decide(now, specs, method_bias, rule, runs=len(runs))
+        if not decision.again:
+            return now, decision
+        runs.append(dict(run_once()))
