@@ -3,6 +3,8 @@ position (the drive keeps its position between protocols)."""
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 
@@ -14,6 +16,11 @@ from hil.suite import gravity_cable as gravity_cable_suite
 from hil.suite import stribeck as stribeck_suite
 
 PROFILE = load_profile()
+# the demo's cogging protocol analyses the gravity sweep's passes (no motion of its own):
+# its own passes are checked with a table that asks for them
+OWN_PASSES = dataclasses.replace(PROFILE, protocols={
+    **PROFILE.protocols, "cogging": {**PROFILE.protocols["cogging"], "passes": "own",
+                                     "speed_rad_s": 0.6}})
 INFO = DriveInfo(vendor="test", model="test", firmware_version="0", serial="0",
                  rated_torque_nm=0.5, limits=PROFILE.limits, modes=tuple(Mode),
                  max_sample_rate_hz=PROFILE.sample_rate_hz)
@@ -23,10 +30,17 @@ MODULES = (stribeck_suite, gravity_cable_suite, cogging_suite)
 @pytest.mark.parametrize("module", MODULES, ids=lambda m: m.NAME)
 @pytest.mark.parametrize("start", [-1.4, -0.7, 0.0, 0.9, 1.4])
 def test_every_excitation_is_inside_the_limits(module: object, start: float) -> None:
-    spec = module.Spec.from_profile(PROFILE, INFO)  # type: ignore[attr-defined]
+    spec = module.Spec.from_profile(OWN_PASSES, INFO)  # type: ignore[attr-defined]
     move, main = module.excitation(spec, position_rad=start)  # type: ignore[attr-defined]
     check_limits(move, PROFILE.limits, start_position_rad=start)
     assert move.command[-1] == pytest.approx(spec.start_rad)
     check_limits(main, PROFILE.limits, start_position_rad=spec.start_rad)
     assert main.mode is Mode.VELOCITY
     assert np.all(np.isfinite(main.command))
+
+
+@pytest.mark.parametrize("start", [-1.4, 0.0, 1.4])
+def test_cogging_from_the_sweep_moves_nothing(start: float) -> None:
+    spec = cogging_suite.Spec.from_profile(PROFILE, INFO)
+    assert spec.passes == cogging_suite.SWEEP_PASSES
+    assert cogging_suite.excitation(spec, position_rad=start) == []

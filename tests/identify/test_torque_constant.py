@@ -3,6 +3,7 @@ correction, the simulator's locked rotor, and recovery of a hidden K_t error (ef
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 
@@ -121,7 +122,9 @@ def test_locked_rotor_holds_still_and_reads_the_true_torque() -> None:
 
 def _measured_ripple(drive: SimDrive) -> list[tuple[int, float, float]]:
     """What the cogging protocol (which runs first) hands over."""
-    spec = cogging_suite.Spec.from_profile(PROFILE, drive.info)
+    own = {**PROFILE.protocols["cogging"], "passes": "own", "speed_rad_s": 0.6}
+    profile = dataclasses.replace(PROFILE, protocols={**PROFILE.protocols, "cogging": own})
+    spec = cogging_suite.Spec.from_profile(profile, drive.info)
     move, passes = cogging_suite.excitation(spec, position_rad=drive.status().position_rad)
     drive.run(move)
     rec = drive.run(passes)
