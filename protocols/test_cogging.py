@@ -11,6 +11,7 @@ Library: :mod:`hil.suite.cogging`.
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -52,15 +53,18 @@ def result(drive: Drive, calibration: CalibrationRun, profile: UnitProfile) -> C
     )
     if shortfall is not None:
         pytest.skip(shortfall)
+    analysed_elsewhere: dict[str, str] = {}
     if spec.passes == SWEEP_PASSES:
         position, torque, passes_from = sweep_passes(calibration, profile, drive.info)
         rows = len(position)
+        analysed_elsewhere["passes"] = Path(passes_from).relative_to(calibration.unit_dir
+                                                                      ).as_posix()
     else:
         move, passes = excitation(spec, position_rad=drive.status().position_rad)
         calibration.run(drive, move, protocol=NAME)
         recording = calibration.run(drive, passes, protocol=NAME)
         position, torque, rows = on_command_grid(recording, passes)
-        passes_from = "passes (this protocol's)"
+        passes_from = "passes (this protocol's own)"
     inertia, source = inertia_for_correction(calibration, profile)
     time_s = np.arange(len(position)) / spec.fs_hz
     analysed = analyse(time_s, position, torque, spec, inertia_kg_m2=inertia)
@@ -74,6 +78,8 @@ def result(drive: Drive, calibration: CalibrationRun, profile: UnitProfile) -> C
     calibration.details[NAME] = {
         "compensation_table": str(path),
         "passes": passes_from,
+        "recordings_analysed": analysed_elsewhere,
+        "pass_samples": spec.pass_samples,
         "speed_rad_s": spec.speed_rad_s,
         "orders": [h.order for h in analysed.cogging],
         "cogging": table["cogging"],

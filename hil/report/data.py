@@ -81,8 +81,10 @@ def from_certificate(cert: Mapping[str, Any], unit_dir: Path) -> list[ProtocolDa
             name=name,
             details=cert["method"]["details"].get(name, {}),
             results={r["parameter"]: r for r in cert["results"] if r["protocol"] == name},
-            recordings={f["excitation"]: unit_dir / f["file"] for f in cert["raw_data"]
-                        if f["protocol"] == name and f["complete"]},
+            recordings={**{f["excitation"]: unit_dir / f["file"] for f in cert["raw_data"]
+                           if f["protocol"] == name and f["complete"]},
+                        **_analysed_elsewhere(cert["method"]["details"].get(name, {}),
+                                              unit_dir)},
         ))
     return out
 
@@ -105,9 +107,20 @@ def from_run(run: CalibrationRun, name: str) -> ProtocolData:
         name=name,
         details=run.details.get(name, {}),
         results={m.spec.name: m.as_dict() for m in run.measurements if m.protocol == name},
-        recordings={f.excitation: f.path for f in run.raw_files
-                    if f.protocol == name and f.complete},
+        recordings={**{f.excitation: f.path for f in run.raw_files
+                       if f.protocol == name and f.complete},
+                    **_analysed_elsewhere(run.details.get(name, {}), run.unit_dir)},
     )
+
+
+def _analysed_elsewhere(details: Mapping[str, Any], unit_dir: Path) -> dict[str, Path]:
+    """Recordings another protocol made that this one analysed (its details'
+    ``recordings_analysed``: excitation name → file relative to the unit's directory), e.g.
+    the cogging protocol's passes when they are the gravity sweep's."""
+    found = details.get("recordings_analysed")
+    if not isinstance(found, Mapping):
+        return {}
+    return {str(k): unit_dir / str(v) for k, v in found.items()}
 
 
 def sample_rate_hz(recording: Recording) -> float:

@@ -148,7 +148,8 @@ def cogging(data: ProtocolData) -> Figure | None:
     if passes is None or not orders:
         return None
     position, torque = passes.position, passes.effort
-    half = len(position) // 2  # the command: one pass up, one down, of equal length
+    # one pass up, one down, of equal length (the gravity sweep's go on: rewind and probe)
+    half = int(data.number("pass_samples") or len(position) // 2)
     segments, levels = [], []
     for start in (0, half):
         index = np.arange(start + int(PASS_SETTLE * half), start + half)
