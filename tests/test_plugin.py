@@ -156,7 +156,7 @@ def test_a_typo_in_protocol_settings_is_an_error_not_a_default(
     pytester: pytest.Pytester, tmp_path: Path
 ) -> None:
     profile = _profile_with(
-        tmp_path, "settle_periods = 2\nperiods = 8", "settle_period = 2\nperiods = 8"
+        tmp_path, "settle_periods = 1\nperiods = 5", "settle_period = 1\nperiods = 5"
     )
     out = tmp_path / "certs"
     result = _run(pytester, out, "--profile", str(profile))
@@ -189,3 +189,30 @@ def test_a_real_drive_without_a_serial_is_a_usage_error(pytester: pytest.Pyteste
     )
     assert result.ret == pytest.ExitCode.USAGE_ERROR
     result.stderr.fnmatch_lines(["*--drive canopen (a real unit) needs --unit-serial SERIAL*"])
+
+
+def test_the_sines_run_again_while_a_result_misses_its_share_of_the_tolerance(
+    pytester: pytest.Pytester, tmp_path: Path
+) -> None:
+    """stop_at_u_fraction: T_c's U (about 0.0003 N·m) never reaches 0.01 × its ±0.006 N·m
+    half-width: the sines run max_runs times, pooled, and the certificate says why (one run
+    when U is reached: tests/test_stop_rule.py)."""
+    fraction, runs = 0.01, 2
+    profile = _profile_with(
+        tmp_path, "settle_periods = 1\nperiods = 5",
+        f"settle_periods = 1\nperiods = 5\nstop_at_u_fraction = {fraction}\nmax_runs = 2\n"
+        'stop_results = "coulomb_nm"')
+    out = tmp_path / "certs"
+    # in a subprocess: a second in-process calibration re-imports the numba kernel's
+    # typing registrations ("cannot augment Function(eq)"), whatever ran before
+    pytester.runpytest_subprocess(
+        "--pyargs", "gimbal_hil_protocols.test_inertia_friction", "-p", "no:cacheprovider",
+        "--out", str(out), "--profile", str(profile), "--store", "off", "--no-documents")
+    cert = json.loads((out / "SIM-0001" / "certificate.json").read_text())
+    details = cert["method"]["details"]["inertia_friction"]
+    sines = [f for f in cert["raw_data"] if f["excitation"].startswith("sine_")]
+    assert details["runs"] == runs
+    assert len(sines) == 2 * runs
+    coulomb = next(r for r in cert["results"] if r["parameter"] == "coulomb_nm")
+    assert details["stop_rule"].startswith("max_runs = 2 reached with coulomb_nm U = ")
+    assert coulomb["budget"][0]["component"].endswith("mean of 2 runs")

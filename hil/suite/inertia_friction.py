@@ -28,6 +28,7 @@ from hil.identify.sine_run import analyse_sine_run, torque_hold_samples, without
 from hil.motion import Excitation, Mode
 from hil.profile import UnitProfile
 from hil.recording import Recording
+from hil.suite.stop_rule import StopRule
 from hil.suite.travel import move_excitation, move_speed_rad_s
 
 NAME = "inertia_friction"
@@ -46,6 +47,7 @@ class Spec:
     harmonics: int = HARMONICS
     centre_rad: float | None = None  # where the sines start (None: where the axis is)
     move_speed_rad_s: float = 1.0
+    stop: StopRule | None = None  # run the sines again until U is reached (stop_rule)
 
     @classmethod
     def from_profile(cls, profile: UnitProfile, info: DriveInfo) -> Spec:
@@ -85,6 +87,7 @@ class Spec:
             move_speed_rad_s=move_speed_rad_s(settings, info),
             method=method,
             harmonics=settings.integer("harmonics", HARMONICS),
+            stop=StopRule.from_settings(settings),
         )
         settings.done()
         return spec
