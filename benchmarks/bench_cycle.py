@@ -160,7 +160,7 @@ def main() -> int:
     parser.add_argument("--workers", type=int, default=2)
     parser.add_argument("--out", type=Path, default=Path("cycle-run"))
     parser.add_argument("--reuse", action="store_true",
-                        help="read the certificates already under --out")
+                        help="only read the certificates under --out, calibrate nothing")
     parser.add_argument("--markdown", type=Path, default=None)
     args = parser.parse_args()
     for tree in (args.before, args.after):
@@ -169,12 +169,14 @@ def main() -> int:
                   file=sys.stderr)
             return 2
     runs = plan_runs(args.out, args.seeds, args.canopen_seeds)
-    if not args.reuse:
+    # a certificate already under --out is read, not made again (delete --out to start over)
+    pending = [] if args.reuse else [r for r in runs if not r.certificate.exists()]
+    if pending:
         trees = {"before": args.before, "after": args.after}
         links = {name: import_path(tree, args.out / name) for name, tree in trees.items()}
         with ThreadPoolExecutor(args.workers) as pool:
             list(pool.map(lambda r: calibrate(r, tree=trees[r.tree], links=links[r.tree]),
-                          runs))
+                          pending))
     lines: list[str] = []
     for drive in ("sim", "canopen-emulator"):
         for axis in PROFILES:
