@@ -79,8 +79,8 @@ def test_protocol_needs_follow_their_settings(elevation: UnitProfile, azimuth: U
     assert current.needed_sample_rate_hz == pytest.approx(4 * 150.0)  # frequencies up to 150
     cogging = cogging_suite.Spec.from_profile(elevation, fast)
     # the gravity sweep's passes: order 200 at 0.4 rad/s passes at 200 · 0.4 / 2π = 12.7 Hz;
-    # but 4000 samples over a 2.4 rad pass at 0.4 rad/s need more
-    assert cogging.needed_sample_rate_hz == pytest.approx(4000 / (2.4 / 0.4))
+    # but 4000 samples over a 2.6 rad pass at 0.4 rad/s need more
+    assert cogging.needed_sample_rate_hz == pytest.approx(4000 / (2.6 / 0.4))
     assert cogging.needed_sample_rate_hz > 4 * 200 * 0.4 / (2 * math.pi)
     resonance = resonance_suite.Spec.from_profile(azimuth, _info(azimuth, 4000.0))
     assert resonance.needed_sample_rate_hz == pytest.approx(4 * 300.0)  # band up to 300 Hz

@@ -25,6 +25,8 @@ from plant_sim.params import Harmonic
 
 PROFILE = load_profile()
 SETTINGS = PROFILE.protocol("cogging")
+# the demo's passes are the gravity sweep's (passes = "gravity_cable"): its speed
+SPEED_RAD_S = PROFILE.protocol("gravity_cable")["speed_rad_s"]
 FS = 4000.0
 J = 0.0036
 
@@ -88,7 +90,7 @@ def run_demo_plant(seed: int, cogging: tuple[Harmonic, ...],
                    ripple: tuple[Harmonic, ...]) -> CoggingResult:
     assert PROFILE.plant is not None
     params = PROFILE.plant.with_changes(cogging=cogging, kt_ripple=ripple)
-    speed = SETTINGS["speed_rad_s"]
+    speed = SPEED_RAD_S
     n = round(2.6 / speed * FS)
     command = np.concatenate([np.full(n, speed), np.full(n, -speed)])
     trace = Plant(params, firmware=PROFILE.firmware, fs_hz=FS, seed=seed,
