@@ -1,7 +1,11 @@
 """Acquisition over Modbus: the feedback block, the polled run and its recording.
 
-Sample ``k`` of a run: the command sample ``k`` is written at ``k/fs`` and the feedback
-block read half a period later (away from the loop's response to the new setpoint). Timing:
+Sample ``k`` of a run: a setpoint is written at ``k/fs`` and the feedback block read half a
+period later (away from the loop's response to the new setpoint). A drive that interpolates
+its setpoint (``setpoint_interpolation_time``) is sent the command ``lead`` periods ahead
+(``setpoint_lead_periods``) and ramps to it over them, so its setpoint passes through the
+command on time and a host that is late by less than the lead leaves no hold in it; a drive
+that steps is sent command sample ``k``. Timing:
 with a ``timestamp`` register (the drive's free-running clock, latched with the feedback
 and read in the same request) ``time_s`` is that clock, unwrapped; otherwise the host's
 monotonic clock at the middle of the read, which carries the link's jitter. It uses the
@@ -101,8 +105,9 @@ class PolledRun:
 
 
 def poll(excitation: Excitation, run: PolledRun, feedback: Feedback) -> None:
-    """Write each command sample at its time and read the feedback half a period later,
-    appending ``(host time, command, values)`` rows to ``run`` (kept when this raises).
+    """Write the setpoint each sample period (see the module's docstring) and read the
+    feedback half a period later, appending ``(host time, command sample due, values)`` rows
+    to ``run`` (kept when this raises).
 
     Raises
     ------
@@ -117,6 +122,9 @@ def poll(excitation: Excitation, run: PolledRun, feedback: Feedback) -> None:
     offset = excitation.torque_offset_nm
     name = f"{excitation.mode.value}_cmd"
     fs, n = excitation.fs_hz, len(command)
+    lead = feedback.link.station.setpoint_lead_periods
+    ahead = SETPOINT_INTERPOLATION in feedback.link.map.registers
+    samples = np.arange(n, dtype=np.float64)
     last_index = -1
     t0 = time.monotonic()
     run.longest_pause_s = 0.0
@@ -127,8 +135,12 @@ def poll(excitation: Excitation, run: PolledRun, feedback: Feedback) -> None:
             if offset is not None:
                 feedback.link.write_value(TORQUE_OFFSET, 0.0)
             return
-        if index != last_index:
+        if ahead:
+            due = (time.monotonic() - t0) * fs + lead
+            feedback.link.write_value(name, float(np.interp(due, samples, command)))
+        elif index != last_index:
             feedback.link.write_value(name, float(command[index]))
+        if index != last_index:
             if offset is not None:
                 feedback.link.write_value(TORQUE_OFFSET, float(offset[index]))
             last_index = index
@@ -217,7 +229,11 @@ def to_recording(
         time_s = host_s
         acquisition = "polled; time_s = host clock at mid-read (irregular, link jitter)"
     if SETPOINT_INTERPOLATION in feedback.link.map.registers:
-        acquisition += f"; setpoint interpolated over {1.0 / excitation.fs_hz:g} s"
+        lead = feedback.link.station.setpoint_lead_periods
+        acquisition += (
+            f"; setpoint interpolated by the drive over {lead / excitation.fs_hz:g} s to the "
+            f"command {lead} sample period{'s' if lead > 1 else ''} ahead"
+        )
     else:
         acquisition += "; setpoint stepped at each write"
     mean = feedback.torque_sample == "mean"

@@ -218,7 +218,7 @@ class ModbusDrive(Drive):
                                   f"register map has no '{TORQUE_OFFSET}' register")
         if excitation.mode is not states.mode:
             states.select(excitation.mode)
-        set_interpolation(self.link, 1.0 / excitation.fs_hz)
+        set_interpolation(self.link, self.link.station.setpoint_lead_periods / excitation.fs_hz)
         run = PolledRun()
         error: DriveError | None = None
         try:
