@@ -30,6 +30,7 @@ from hil.drives.modbus.regmap import (
     TORQUE_OFFSET,
     RegisterMap,
 )
+from hil.drives.station import ModbusStation
 from hil.errors import (
     DriveCommunicationError,
     DriveError,
@@ -41,6 +42,7 @@ from hil.motion import COMMAND_COLUMN, Excitation
 from hil.recording import Recording
 
 MIN_RATE_FRACTION = 0.7  # of the requested sample rate a run must achieve
+MAX_HELD_FRACTION = 0.01  # of a run the drive's setpoint may hold (a late master)
 WATCHDOG_FAULT = 0x8130  # CiA-style life guard / heartbeat error: the drive lost its master
 
 
@@ -97,11 +99,13 @@ class Feedback:
 
 @dataclass(slots=True)
 class PolledRun:
-    """What one run collected so far: ``(host time, command, feedback values)`` rows and the
-    longest pause between two feedback reads."""
+    """What one run collected so far: ``(host time, command, feedback values)`` rows, the
+    longest pause between two feedback reads, and how long the setpoint held because a
+    write came later than the drive's ramp lasted."""
 
     rows: list[tuple[float, float, dict[str, float]]] = field(default_factory=list)
     longest_pause_s: float = 0.0
+    setpoint_held_s: float = 0.0  # time the drive's ramp had ended before the next write
 
 
 def poll(excitation: Excitation, run: PolledRun, feedback: Feedback) -> None:
@@ -127,7 +131,8 @@ def poll(excitation: Excitation, run: PolledRun, feedback: Feedback) -> None:
     samples = np.arange(n, dtype=np.float64)
     last_index = -1
     t0 = time.monotonic()
-    run.longest_pause_s = 0.0
+    written = t0
+    run.longest_pause_s = run.setpoint_held_s = 0.0
     previous = t0
     while True:
         index = int((time.monotonic() - t0) * fs)
@@ -136,7 +141,10 @@ def poll(excitation: Excitation, run: PolledRun, feedback: Feedback) -> None:
                 feedback.link.write_value(TORQUE_OFFSET, 0.0)
             return
         if ahead:
-            due = (time.monotonic() - t0) * fs + lead
+            now = time.monotonic()
+            run.setpoint_held_s += max(0.0, now - written - lead / fs)
+            written = now
+            due = (now - t0) * fs + lead
             feedback.link.write_value(name, float(np.interp(due, samples, command)))
         elif index != last_index:
             feedback.link.write_value(name, float(command[index]))
@@ -190,6 +198,24 @@ def rate_shortfall(excitation: Excitation, run: PolledRun, link: ModbusLink) -> 
         f"{run.longest_pause_s:.3f} s): the host could not keep up, the recording is "
         f"not the planned excitation; lower max_poll_rate_hz in {link.station.source} "
         f"or unload the machine"
+    )
+
+
+def setpoint_holds(
+    excitation: Excitation, run: PolledRun, station: ModbusStation, where: str
+) -> DriveError | None:
+    """The master fell behind the setpoint lead so often that the drive's setpoint held
+    for more than ``MAX_HELD_FRACTION`` of the run: a jerk within rows the polled samples
+    cannot resolve (J read up to 5 % low), so the recording is not the planned excitation."""
+    if run.setpoint_held_s <= MAX_HELD_FRACTION * excitation.duration_s:
+        return None
+    lead = station.setpoint_lead_periods
+    return DriveCommunicationError(
+        f"{where}: '{excitation.name}': the host fell behind the setpoint lead "
+        f"({lead} period{'s' if lead > 1 else ''}) and the drive's setpoint held for "
+        f"{1000 * run.setpoint_held_s:.0f} ms of {excitation.duration_s:g} s (longest pause "
+        f"{run.longest_pause_s:.3f} s): the recording is not the planned excitation; raise "
+        f"setpoint_lead_periods in {station.source} or unload the machine"
     )
 
 
@@ -281,6 +307,7 @@ def to_recording(
         "requested_rate_hz": f"{excitation.fs_hz:g}",
         "longest_gap_s": f"{float(np.max(np.diff(time_s), initial=0.0)):.4f}",
         "duplicate_reads_dropped": str(duplicates),
+        "setpoint_held_s": f"{run.setpoint_held_s:.4f}",
         # row k: the drive's state latched at one control period (position measured at
         # its start, torque commanded over it, or with "mean" the mean of the torque
         # commanded per control period over the row's window ending with that period),
