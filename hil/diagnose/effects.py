@@ -501,7 +501,53 @@ def _harmonic(ctx: Context, effect: str) -> Model | None:
     if not found:
         return None
     key = f"{id(prediction_fit)}" if effect == "kt_ripple" else "1"
-    return _extend(ctx.current.model, harmonic_term(effect, tuple(found), weight, key))
+    orders = _refine_orders(ctx, effect, tuple(found), weight, key)
+    if not orders:
+        return None
+    return _extend(ctx.current.model, harmonic_term(effect, orders, weight, key))
+
+
+#: How far (in orders) the joint fit looks from each order the pursuit took.
+ORDER_REFINE_SPAN = 2
+
+
+def _refine_orders(ctx: Context, effect: str, found: tuple[int, ...],
+                   weight: Callable[[Signals], FloatArray] | None, key: str) -> tuple[int, ...]:
+    """The pursuit's orders checked in the joint fit: each moved to the neighbour (±2)
+    with the least training RSS, and those whose sine and cosine are not jointly
+    significant (Wald, χ²(2) above the pursuit's threshold) dropped.
+
+    The pursuit scores an order on the residual of the current model with the current
+    model's coefficients held; over a travel shorter than a revolution neighbouring
+    orders differ little, and once the base coefficients re-adjust (the K_t-ripple column
+    is a product with the base prediction) the best order can move by one. Orders are
+    taken strongest first, so a later, leaked order is tested with the true one present.
+    """
+    orders = list(found)
+    model = ctx.current.model
+    for index in range(len(orders)):
+        best_rss, best = math.inf, orders[index]
+        for k in range(orders[index] - ORDER_REFINE_SPAN, orders[index] + ORDER_REFINE_SPAN + 1):
+            if k < 1 or (k != orders[index] and k in orders):
+                continue
+            trial = tuple(orders[:index] + [k] + orders[index + 1 :])
+            rss = _train_rss(ctx, _extend(model, harmonic_term(effect, trial, weight, key)))
+            if rss < best_rss:
+                best_rss, best = rss, k
+        orders[index] = best
+    fit = ctx.designer.fit(_extend(model, harmonic_term(effect, tuple(orders), weight, key)),
+                           ctx.signals, ctx.rows)
+    prefix = "cog" if effect == "cogging" else "kt"
+    kept = []
+    for k in orders:
+        values, covariance = fit.block((f"{prefix}_sin{k}", f"{prefix}_cos{k}"))
+        try:
+            statistic = float(values @ np.linalg.solve(covariance, values))
+        except np.linalg.LinAlgError:
+            continue
+        if np.isfinite(statistic) and statistic >= ORDER_LIMITS.min_chi2:
+            kept.append(k)
+    return tuple(kept)
 
 
 _PROPOSERS: dict[str, Callable[[Context], Model | None]] = {

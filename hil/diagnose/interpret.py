@@ -162,8 +162,8 @@ def effect_parameters(effect: str, fit: Fit, *, lag_std_s: float = math.nan) -> 
     Raises
     ------
     ValueError
-        ``fit`` lacks the effect's coefficients (``IndexError`` for ``cogging`` and
-        ``kt_ripple``).
+        ``fit`` lacks the effect's coefficients (a ``cogging`` or ``kt_ripple`` term
+        without orders gives amplitude 0 and order 0).
     """
     estimates: dict[str, FittedParameter] = {}
     extra: dict[str, Any] = {}
@@ -188,7 +188,8 @@ def effect_parameters(effect: str, fit: Fit, *, lag_std_s: float = math.nan) -> 
         rows = _harmonics(fit, effect)
         name = "amplitude_nm" if effect == "cogging" else "relative_amplitude"
         extra["periods_per_rev"] = rows[0]["order"] if rows else 0
-        estimates[name] = FittedParameter(value=rows[0]["amplitude"], std=rows[0]["amplitude_std"])
+        estimates[name] = (FittedParameter(value=rows[0]["amplitude"], std=rows[0]["amplitude_std"])
+                           if rows else FittedParameter(value=0.0, std=math.nan))
         extra["orders"] = [
             {"periods_per_rev": r["order"], name: r["amplitude"], "phase_rad": r["phase_rad"]}
             for r in rows

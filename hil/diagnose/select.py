@@ -478,24 +478,22 @@ def prune(evaluator: Evaluator, base: Fit,
         measured again.
     """
     kept = list(accepted)
+    final = accepted[-1].fit.model if accepted else base.model
     changed = True
     while changed and len(kept) > 1:
         changed = False
-        final = kept[-1].fit.model
         for cause in kept:
             reduced = evaluator.fit(_without(final, cause.effect))
             gain = evaluator.candidate(cause.effect, final, reduced).gain
             if not (gain.plausible and gain.delta_bic <= DELTA_BIC_MAX and gain.confident):
                 log.info("dropping %s: explained by the other causes", cause.effect)
                 kept.remove(cause)
+                # the survivors are judged against the model without it from now on
+                final = _without(final, cause.effect)
                 changed = True
                 break
     if len(kept) == len(accepted):
         return accepted
-    final = accepted[-1].fit.model
-    for dropped in accepted:
-        if dropped not in kept:
-            final = _without(final, dropped.effect)
     effects = [c.effect for c in kept]
     rebuilt: list[Candidate] = []
     current = base
