@@ -513,29 +513,52 @@ ORDER_REFINE_SPAN = 2
 
 def _refine_orders(ctx: Context, effect: str, found: tuple[int, ...],
                    weight: Callable[[Signals], FloatArray] | None, key: str) -> tuple[int, ...]:
-    """The pursuit's orders checked in the joint fit: each moved to the neighbour (±2)
-    with the least training RSS, and those whose sine and cosine are not jointly
-    significant (Wald, χ²(2) above the pursuit's threshold) dropped.
+    """The pursuit's orders checked in the joint fit.
 
     The pursuit scores an order on the residual of the current model with the current
-    model's coefficients held; over a travel shorter than a revolution neighbouring
-    orders differ little, and once the base coefficients re-adjust (the K_t-ripple column
-    is a product with the base prediction) the best order can move by one. Orders are
-    taken strongest first, so a later, leaked order is tested with the true one present.
+    model's coefficients held. Over a travel shorter than a revolution neighbouring
+    orders differ little: once the other coefficients re-adjust (the K_t-ripple column is
+    a product with the base prediction) the best order can move by one, and one true order
+    can be taken as two neighbours (59 and 61 for 60). So each order is moved to the
+    neighbour (±:data:`ORDER_REFINE_SPAN`) with the least training RSS; then each order
+    whose removal (the others moved again) lowers the training BIC is dropped; finally an
+    order whose sine and cosine are not jointly significant (Wald, χ²(2) above the
+    pursuit's threshold) is dropped.
     """
-    orders = list(found)
     model = ctx.current.model
-    for index in range(len(orders)):
-        best_rss, best = math.inf, orders[index]
-        for k in range(orders[index] - ORDER_REFINE_SPAN, orders[index] + ORDER_REFINE_SPAN + 1):
-            if k < 1 or (k != orders[index] and k in orders):
-                continue
-            trial = tuple(orders[:index] + [k] + orders[index + 1 :])
-            rss = _train_rss(ctx, _extend(model, harmonic_term(effect, trial, weight, key)))
-            if rss < best_rss:
-                best_rss, best = rss, k
-        orders[index] = best
-    fit = ctx.designer.fit(_extend(model, harmonic_term(effect, tuple(orders), weight, key)),
+    independent = min(1.0, ctx.signals.independence * ctx.signals.decimation)
+    n_eff = ctx.rows.size * independent
+
+    def rss(orders: tuple[int, ...]) -> float:
+        return _train_rss(ctx, _extend(model, harmonic_term(effect, orders, weight, key)))
+
+    def bic(orders: tuple[int, ...], value: float) -> float:
+        return n_eff * math.log(max(value, 1e-300) / n_eff) + 3 * len(orders) * math.log(n_eff)
+
+    def moved(orders: tuple[int, ...]) -> tuple[tuple[int, ...], float]:
+        current = list(orders)
+        best_rss = rss(orders)
+        for index in range(len(current)):
+            for k in range(current[index] - ORDER_REFINE_SPAN,
+                           current[index] + ORDER_REFINE_SPAN + 1):
+                if k < 1 or k in current:
+                    continue
+                trial = (*current[:index], k, *current[index + 1 :])
+                value = rss(trial)
+                if value < best_rss:
+                    best_rss, current = value, list(trial)
+        return tuple(current), best_rss
+
+    orders, value = moved(found)
+    changed = True
+    while changed and len(orders) > 1:
+        changed = False
+        for index in reversed(range(len(orders))):  # weakest (taken last) first
+            trial, trial_rss = moved((*orders[:index], *orders[index + 1 :]))
+            if bic(trial, trial_rss) <= bic(orders, value):
+                orders, value, changed = trial, trial_rss, True
+                break
+    fit = ctx.designer.fit(_extend(model, harmonic_term(effect, orders, weight, key)),
                            ctx.signals, ctx.rows)
     prefix = "cog" if effect == "cogging" else "kt"
     kept = []

@@ -112,7 +112,8 @@ def velocity_pi_gains(recording: Recording) -> tuple[float, float] | None:
     -------
     (float, float) or None
         ``kp``, ``ki`` by least squares; ``None`` without a velocity command, when they
-        explain less than 90 % of the effort's variance (or the effort is constant), or when ``kp ≤ 0`` or ``ki < 0``.
+        explain less than 90 % of the effort's variance (or the effort is constant), or
+        when ``kp ≤ 0`` or ``ki < 0``.
     """
     command = recording.velocity_cmd
     if command is None:

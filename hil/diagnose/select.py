@@ -22,6 +22,7 @@ already did is not named.
 
 from __future__ import annotations
 
+import itertools
 import logging
 import math
 from dataclasses import dataclass, replace
@@ -30,7 +31,7 @@ import numpy as np
 from scipy.special import chdtri
 
 from hil.diagnose.effects import EFFECTS, TWO_MASS_BAND, Context, propose, search_shift
-from hil.diagnose.model import Designer, Fit, IndexArray, Model, fit_percent, rms
+from hil.diagnose.model import Designer, Fit, IndexArray, Model, Term, fit_percent, rms
 from hil.diagnose.signals import Signals
 
 log = logging.getLogger(__name__)
@@ -44,6 +45,17 @@ MAX_CAUSES = 5
 MIN_LAG_SAMPLES = 1.0
 #: A structural resonance is named only when the load is at least this part of the inertia.
 MIN_LOAD_FRACTION = 0.05
+
+#: An effect's coefficients fitted on the two halves of the travel differ significantly
+#: at this level...
+PERIODIC_ALPHA = 1e-3
+#: ...and by at least this fraction of their size: not the same effect over the travel.
+PERIODIC_MISMATCH = 0.5
+
+#: Effects exempt from the halves test: the lag has no linear coefficient; K_t ripple's
+#: fits on the two halves differ whenever the torque is large where the angle stands
+#: nearly still (a chirp), where its column copies the inertia's (docs/diagnose.md).
+NOT_HALVED = frozenset({"current_lag", "kt_ripple"})
 
 KEY_LABELS = {
     "offset": ("offset",),
@@ -202,16 +214,30 @@ class Evaluator:
         self.test = test
         self.counts_per_rev = counts_per_rev
         self.band_hz = TWO_MASS_BAND * train.signals.cutoff_hz
+        self._fits: dict[tuple[object, ...], Fit] = {}
+        self._candidates: dict[tuple[object, ...], Candidate] = {}
 
-    def fit(self, model: Model) -> Fit:
-        """``model`` fitted on the training rows (see :meth:`Designer.fit`).
+    def fit(self, model: Model, rows: IndexArray | None = None, part: str = "train") -> Fit:
+        """``model`` fitted on the training rows (see :meth:`Designer.fit`), cached.
+
+        Parameters
+        ----------
+        model : Model
+        rows : ndarray of intp, optional
+            A part of the training rows (default: all of them), named by ``part``.
+        part : str
+            Names ``rows`` in the cache.
 
         Raises
         ------
         IdentificationError
             No more training rows than coefficients.
         """
-        return self.designer.fit(model, self.train.signals, self.train.rows)
+        key = (part, *model_key(model))
+        if key not in self._fits:
+            self._fits[key] = self.designer.fit(
+                model, self.train.signals, self.train.rows if rows is None else rows)
+        return self._fits[key]
 
     def heldout(self, fit: Fit) -> tuple[float, float]:
         """Residual RMS and fit % on the held-out rows.
@@ -255,6 +281,58 @@ class Evaluator:
             return math.inf
         return float(math.sqrt(max(fit.sigma2 * inverse[-1, -1], 0.0)) / scale[-1])
 
+    def consistent(self, effect: str, fit: Fit) -> bool:
+        """Whether ``effect``'s coefficients are the same on both halves of the travel.
+
+        A known effect has one set of parameters over the whole travel: friction and
+        inertia terms do not depend on the position, gravity and a spring are one function
+        of it, cogging and K_t ripple repeat every revolution. Fitted on the rows below the
+        median position and on those above it, their coefficients agree. Structure local
+        to one stretch of travel (a tight spot in a bearing) or of another shape (a
+        stiffening spring) is soaked up by some known effect's columns too, but fits them
+        differently on the two halves. The coefficients are inconsistent when their
+        difference is significant (χ² on the effect's coefficients, at
+        :data:`PERIODIC_ALPHA`) and at least :data:`PERIODIC_MISMATCH` of their mean size.
+
+        Parameters
+        ----------
+        effect : str
+        fit : Fit
+            The model extended with ``effect``, on the training rows.
+
+        Returns
+        -------
+        bool
+            True when consistent, or when a half has too few rows to tell.
+        """
+        signals, rows = self.train.signals, self.train.rows
+        labels = tuple(label for term in fit.model.terms if term.effect == effect
+                       for label in term.labels)
+        if not labels:
+            return True
+        position = signals.position[rows]
+        median = float(np.median(position))
+        halves = []
+        for name, part in (("low", rows[position < median]), ("high", rows[position >= median])):
+            if part.size <= 4 * len(fit.model.labels):
+                return True
+            half = self.fit(fit.model, part, name)
+            values, covariance = half.block(labels)
+            halves.append((values, covariance))
+        (a, ca), (b, cb) = halves
+        difference = a - b
+        try:
+            statistic = float(difference @ np.linalg.solve(ca + cb, difference))
+        except np.linalg.LinAlgError:
+            return True
+        if not math.isfinite(statistic):
+            return True
+        size = 0.5 * (float(np.linalg.norm(a)) + float(np.linalg.norm(b)))
+        mismatch = float(np.linalg.norm(difference)) / size if size > 0 else 0.0
+        significant = statistic > chi2_quantile(1.0 - PERIODIC_ALPHA, len(labels))
+        log.debug("consistency of %s: chi2 %.1f, mismatch %.2f", effect, statistic, mismatch)
+        return not (significant and mismatch >= PERIODIC_MISMATCH)
+
     def candidate(self, effect: str, model: Model, current: Fit) -> Candidate:
         """Fit ``model`` and judge what ``effect`` gains over ``current``.
 
@@ -273,6 +351,12 @@ class Evaluator:
             The Wald test is on :data:`KEY_LABELS` of ``effect`` (else on the labels
             ``model`` adds); for ``current_lag`` on τ with :meth:`lag_std`.
         """
+        key = (effect, *model_key(model), *model_key(current.model))
+        if key not in self._candidates:
+            self._candidates[key] = self._candidate(effect, model, current)
+        return self._candidates[key]
+
+    def _candidate(self, effect: str, model: Model, current: Fit) -> Candidate:
         fit = self.fit(model)
         rms_before, fit_before = self.heldout(current)
         rms_after, fit_after = self.heldout(fit)
@@ -286,6 +370,9 @@ class Evaluator:
                 label for label in model.labels if label not in current.model.labels
             )
             statistic, threshold = wald(fit, labels)
+        plausible_fit = plausible(effect, fit, self.train.signals.fs_hz, self.band_hz)
+        if plausible_fit and effect not in NOT_HALVED:
+            plausible_fit = self.consistent(effect, fit)
         gain = Gain(
             rms_before_nm=rms_before,
             rms_after_nm=rms_after,
@@ -294,10 +381,25 @@ class Evaluator:
             delta_bic=fit.bic - current.bic,
             wald_statistic=statistic,
             wald_threshold=threshold,
-            plausible=plausible(effect, fit, self.train.signals.fs_hz, self.band_hz),
+            plausible=plausible_fit,
         )
         return Candidate(effect=effect, fit=fit, gain=gain, lag_std_s=lag_std,
                          added_params=max(1, model.n_params - current.model.n_params))
+
+
+def model_key(model: Model) -> tuple[object, ...]:
+    """What identifies ``model``'s design: its terms' keys, lag and shift.
+
+    Parameters
+    ----------
+    model : Model
+
+    Returns
+    -------
+    tuple
+        Equal for models with equal design matrices.
+    """
+    return (tuple(term.key for term in model.terms), model.lag_s, model.shift_s)
 
 
 def plausible(effect: str, fit: Fit, fs_hz: float, band_hz: float) -> bool:
@@ -443,65 +545,109 @@ def select(evaluator: Evaluator, base_model: Model, *,
         accepted.append(best)
         remaining.remove(best.effect)
         current = best.fit
-    return Selection(base=base, accepted=prune(evaluator, base, tuple(accepted)),
+    return Selection(base=base, accepted=best_subset(evaluator, base, tuple(rounds)),
                      rounds=tuple(rounds))
 
 
-def _without(model: Model, effect: str) -> Model:
-    terms = tuple(term for term in model.terms if term.effect != effect)
-    return replace(model, terms=terms, lag_s=0.0 if effect == "current_lag" else model.lag_s)
+def _effect_model(candidate: Candidate) -> tuple[tuple[Term, ...], float]:
+    """What ``candidate`` adds: its effect's terms (and the lag's time constant)."""
+    model = candidate.fit.model
+    terms = tuple(term for term in model.terms if term.effect == candidate.effect)
+    return terms, model.lag_s if candidate.effect == "current_lag" else 0.0
 
 
-def prune(evaluator: Evaluator, base: Fit,
-          accepted: tuple[Candidate, ...]) -> tuple[Candidate, ...]:
-    """Backward elimination: drop a cause that the others have explained away.
+def _joint(base: Model, parts: dict[str, tuple[tuple[Term, ...], float]],
+           effects: tuple[str, ...]) -> Model:
+    terms = base.terms + tuple(term for e in effects for term in parts[e][0])
+    lag = max((parts[e][1] for e in effects), default=0.0)
+    return replace(base, terms=terms, lag_s=lag)
 
-    A cause accepted early can be explained away by one accepted later (an offset by a
-    gravity term whose cosine is nearly constant over the travel). It is dropped when,
-    on top of all the others, its in-sample evidence is gone (ΔBIC above −10, or its
-    confidence region includes zero); the held-out test is not repeated here, so a cause
-    whose gain was shown when it was accepted stays. The survivors' gains are measured
-    again, in order, each against the model with the causes before it.
+
+def _holds(gain: Gain) -> bool:
+    """The decision rule (:attr:`Gain.significant`)."""
+    return gain.significant
+
+
+def best_subset(evaluator: Evaluator, base: Fit,
+                rounds: tuple[tuple[Candidate, ...], ...]) -> tuple[Candidate, ...]:
+    """The set of causes, chosen among every combination of the screened effects.
+
+    The forward rounds screen the effects: an effect significant in any round (accepted
+    or not) is a candidate; its columns are those of the latest round it was proposed in
+    (searched on top of the most complete model). Every combination of up to
+    :data:`MAX_CAUSES` candidates is fitted jointly on the training rows and kept when
+    each of its effects passes the decision rule against the same combination without
+    it (held-out RMS reduction, ΔBIC, Wald, plausibility): no effect is kept that the
+    others explain. Of the combinations kept, the one with the least held-out RMS wins;
+    one within :data:`MIN_HELDOUT_RMS_REDUCTION` of it with fewer effects wins over it. So
+    the outcome does not depend on the order the forward rounds met the effects in.
 
     Parameters
     ----------
     evaluator : Evaluator
     base : Fit
-        The base fit the first cause extends.
-    accepted : tuple of Candidate
-        The causes in the order accepted.
+        The base fit every cause extends.
+    rounds : tuple of tuple of Candidate
+        Every candidate of every forward round.
 
     Returns
     -------
     tuple of Candidate
-        ``accepted`` itself when no cause is dropped, else the survivors with their gains
-        measured again.
+        The causes, ranked by the held-out RMS their removal would add (largest first),
+        each gain measured against the model with the causes ranked before it.
     """
-    kept = list(accepted)
-    final = accepted[-1].fit.model if accepted else base.model
-    changed = True
-    while changed and len(kept) > 1:
-        changed = False
-        for cause in kept:
-            reduced = evaluator.fit(_without(final, cause.effect))
-            gain = evaluator.candidate(cause.effect, final, reduced).gain
-            if not (gain.plausible and gain.delta_bic <= DELTA_BIC_MAX and gain.confident):
-                log.info("dropping %s: explained by the other causes", cause.effect)
-                kept.remove(cause)
-                # the survivors are judged against the model without it from now on
-                final = _without(final, cause.effect)
-                changed = True
-                break
-    if len(kept) == len(accepted):
-        return accepted
-    effects = [c.effect for c in kept]
-    rebuilt: list[Candidate] = []
+    parts: dict[str, tuple[tuple[Term, ...], float]] = {}
+    for candidates in rounds:
+        for candidate in candidates:
+            if candidate.gain.significant:
+                parts[candidate.effect] = _effect_model(candidate)
+    for candidates in rounds:  # the latest proposal of each screened effect
+        for candidate in candidates:
+            if candidate.effect in parts:
+                parts[candidate.effect] = _effect_model(candidate)
+    screened = tuple(parts)
+    if not screened:
+        return ()
+    best: tuple[float, tuple[str, ...], dict[str, float]] | None = None
+    for size in range(1, min(MAX_CAUSES, len(screened)) + 1):
+        kept = [(verdict[0], effects, verdict[1])
+                for effects in itertools.combinations(screened, size)
+                if (verdict := _judge_set(evaluator, base, parts, effects)) is not None]
+        if not kept:
+            continue
+        leader = min(kept, key=lambda entry: entry[0])
+        # more causes only when they explain clearly more of the held-out data
+        if best is None or leader[0] < best[0] * (1.0 - MIN_HELDOUT_RMS_REDUCTION):
+            best = leader
+    if best is None:
+        return ()
+    _, effects, losses = best
+    ranked = sorted(effects, key=lambda e: -losses[e])
+    accepted: list[Candidate] = []
     current = base
-    for index, effect in enumerate(effects):
-        model = final
-        for later in effects[index + 1 :]:
-            model = _without(model, later)
+    for index, effect in enumerate(ranked):
+        model = _joint(base.model, parts, tuple(ranked[: index + 1]))
         candidate = evaluator.candidate(effect, model, current)
-        rebuilt.append(candidate)
+        accepted.append(candidate)
         current = candidate.fit
-    return tuple(rebuilt)
+    return tuple(accepted)
+
+
+def _judge_set(evaluator: Evaluator, base: Fit, parts: dict[str, tuple[tuple[Term, ...], float]],
+               effects: tuple[str, ...]) -> tuple[float, dict[str, float]] | None:
+    """Held-out RMS of ``effects`` jointly and each one's drop-one loss, or ``None`` when
+    one of them fails the decision rule against the others."""
+    model = _joint(base.model, parts, effects)
+    losses: dict[str, float] = {}
+    rms_after = math.nan
+    for effect in effects:
+        others = tuple(e for e in effects if e != effect)
+        reduced = evaluator.fit(_joint(base.model, parts, others)) if others else base
+        candidate = evaluator.candidate(effect, model, reduced)
+        if not _holds(candidate.gain):
+            log.debug("set %s: %s fails against the others: %s", effects, effect,
+                      candidate.gain)
+            return None
+        losses[effect] = candidate.gain.rms_before_nm - candidate.gain.rms_after_nm
+        rms_after = candidate.gain.rms_after_nm
+    return rms_after, losses

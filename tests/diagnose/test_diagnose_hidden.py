@@ -17,16 +17,17 @@ from hypothesis import strategies as st
 from hil.diagnose.core import diagnose
 from hil.diagnose.report import report
 
-EFFECTS = ("offset", "asymmetric_friction", "stribeck", "cogging", "kt_ripple", "gravity",
-           "cable_spring", "current_lag", "two_mass")
+#: Effects whose recovery this test requires. K_t ripple and the current-loop lag are
+#: tested on their own (strict xfails below, issue 12): their known biases are not mended.
+EFFECTS = ("offset", "asymmetric_friction", "stribeck", "cogging", "gravity", "cable_spring",
+           "two_mass")
+#: The outcome must not depend on the run: derandomized draws (fixed by the test's code,
+#: not by the module's import name or the test order) and no example database.
+DETERMINISTIC = settings(derandomize=True, database=None, deadline=None,
+                         phases=[Phase.explicit, Phase.generate])
 
 
-@pytest.mark.skip(reason=(
-    "quarantined, issue 12: passing depended on hypothesis's draw, which changes with the "
-    "module's import name (full suite vs alone); draws expose known recovery failures: a "
-    "current lag 9-21 % low (test_current_lag_is_recovered_within_15_pct), a K_t ripple's "
-    "order off by one (49 for 50). Issue 12 rebuilds this test with one or two hidden effects"))
-@settings(max_examples=12, deadline=None, phases=[Phase.explicit, Phase.generate])
+@settings(DETERMINISTIC, max_examples=10)
 @given(
     effect=st.sampled_from(EFFECTS),
     inertia=st.floats(0.002, 0.006),
@@ -34,7 +35,7 @@ EFFECTS = ("offset", "asymmetric_friction", "stribeck", "cogging", "kt_ripple", 
     coulomb=st.floats(0.015, 0.03),
     size=st.floats(0.0, 1.0),
     detail=st.floats(0.0, 1.0),
-    order=st.integers(24, 120),  # K_t ripple uses order // 2: at least 2 periods of travel
+    order=st.integers(24, 120),
     seed=st.integers(0, 2**16),
 )
 def test_hidden_effect_is_named_and_recovered(effect: str, inertia: float, viscous: float,
@@ -51,11 +52,9 @@ def test_hidden_effect_is_named_and_recovered(effect: str, inertia: float, visco
         hidden.key, parameters[hidden.key], hidden.truth)
     if effect == "cogging":
         assert parameters["periods_per_rev"] == order
-    if effect == "kt_ripple":
-        assert parameters["periods_per_rev"] == order // 2
 
 
-@settings(max_examples=3, deadline=None, phases=[Phase.explicit, Phase.generate])
+@settings(DETERMINISTIC, max_examples=3)
 @given(
     inertia=st.floats(0.002, 0.006),
     viscous=st.floats(0.003, 0.008),
@@ -82,3 +81,19 @@ def test_current_lag_is_recovered_within_15_pct() -> None:
     assert data["causes"][0]["name"] == "current_lag"
     lag = data["causes"][0]["parameters"]["time_constant_s"]
     assert math.isclose(lag, hidden.truth, rel_tol=0.15), (lag, hidden.truth)
+
+
+@pytest.mark.xfail(strict=True, reason=(
+    "known bias, issue 12: K_t ripple's amplitude comes out low (0.095 for 0.12 here, "
+    "-21 %; example_07 -23 %). Cause found: the column T_hat*sin(k*theta) takes most of its "
+    "weight from the chirp, where the torque is large but the angle hardly moves, so there "
+    "it is a copy of the inertia column and absorbs the chirp's misfit (without the chirp "
+    "rows example_07 gives 0.0423 for 0.042); not yet removed"))
+def test_kt_ripple_is_recovered_within_15_pct() -> None:
+    hidden = plant(0.005, 0.005, 0.02, "kt_ripple", 0.2, 0.9, 50)
+    data = report(diagnose(record(hidden.params, seed=4)))
+    assert data["causes"][0]["name"] == "kt_ripple"
+    parameters = data["causes"][0]["parameters"]
+    assert parameters["periods_per_rev"] == 25
+    assert math.isclose(parameters["relative_amplitude"], hidden.truth, rel_tol=0.15), (
+        parameters["relative_amplitude"], hidden.truth)
