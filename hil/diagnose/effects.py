@@ -528,9 +528,35 @@ def _refine_orders(ctx: Context, effect: str, found: tuple[int, ...],
     model = ctx.current.model
     independent = min(1.0, ctx.signals.independence * ctx.signals.decimation)
     n_eff = ctx.rows.size * independent
+    q, residual = ctx.basis()
+    projected: dict[int, FloatArray] = {}
+
+    def block(k: int) -> FloatArray:
+        """Order ``k``'s two columns on the training rows, the current design projected out."""
+        if k not in projected:
+            single = replace(model, terms=(harmonic_term(effect, (k,), weight, key),))
+            columns = ctx.designer.design(single, ctx.signals, ctx.rows)
+            projected[k] = columns - q @ (q.T @ columns)
+        return projected[k]
+
+    gram: dict[tuple[int, int], FloatArray] = {}
+    total = float(residual @ residual)
+
+    def cross(a: int, b: int) -> FloatArray:
+        if (a, b) not in gram:
+            gram[(a, b)] = block(a).T @ block(b)
+            gram[(b, a)] = gram[(a, b)].T
+        return gram[(a, b)]
 
     def rss(orders: tuple[int, ...]) -> float:
-        return _train_rss(ctx, _extend(model, harmonic_term(effect, orders, weight, key)))
+        """Training RSS with ``orders`` added (normal equations on the projected blocks)."""
+        normal = np.block([[cross(a, b) for b in orders] for a in orders])
+        right = np.concatenate([block(k).T @ residual for k in orders])
+        try:
+            coef = np.linalg.solve(normal, right)
+        except np.linalg.LinAlgError:
+            return total
+        return max(total - float(right @ coef), 0.0)
 
     def bic(orders: tuple[int, ...], value: float) -> float:
         return n_eff * math.log(max(value, 1e-300) / n_eff) + 3 * len(orders) * math.log(n_eff)

@@ -549,17 +549,29 @@ def select(evaluator: Evaluator, base_model: Model, *,
                      rounds=tuple(rounds))
 
 
-def _effect_model(candidate: Candidate) -> tuple[tuple[Term, ...], float]:
-    """What ``candidate`` adds: its effect's terms (and the lag's time constant)."""
+Part = tuple[frozenset[str], tuple[Term, ...], float]
+
+
+def _effect_model(candidate: Candidate) -> Part:
+    """What ``candidate`` adds (its terms and the lag's time constant), and the effects of
+    the model it was proposed on (its columns can depend on them: a Coulomb asymmetry is
+    only added without a constant, the K_t-ripple weight is that model's prediction)."""
     model = candidate.fit.model
     terms = tuple(term for term in model.terms if term.effect == candidate.effect)
-    return terms, model.lag_s if candidate.effect == "current_lag" else 0.0
+    context = frozenset(model.effects) - {"base", candidate.effect}
+    return context, terms, model.lag_s if candidate.effect == "current_lag" else 0.0
 
 
-def _joint(base: Model, parts: dict[str, tuple[tuple[Term, ...], float]],
-           effects: tuple[str, ...]) -> Model:
-    terms = base.terms + tuple(term for e in effects for term in parts[e][0])
-    lag = max((parts[e][1] for e in effects), default=0.0)
+def _variant(parts: list[Part], effects: tuple[str, ...]) -> Part:
+    """The latest proposal whose model held only effects of ``effects``, else the latest."""
+    inside = [part for part in parts if part[0] <= frozenset(effects)]
+    return (inside or parts)[-1]
+
+
+def _joint(base: Model, parts: dict[str, list[Part]], effects: tuple[str, ...]) -> Model:
+    chosen = [_variant(parts[e], effects) for e in effects]
+    terms = base.terms + tuple(term for part in chosen for term in part[1])
+    lag = max((part[2] for part in chosen), default=0.0)
     return replace(base, terms=terms, lag_s=lag)
 
 
@@ -573,8 +585,8 @@ def best_subset(evaluator: Evaluator, base: Fit,
     """The set of causes, chosen among every combination of the screened effects.
 
     The forward rounds screen the effects: an effect significant in any round (accepted
-    or not) is a candidate; its columns are those of the latest round it was proposed in
-    (searched on top of the most complete model). Every combination of up to
+    or not) is a candidate; in a combination its columns are those of its latest proposal
+    made on a model holding only effects of that combination. Every combination of up to
     :data:`MAX_CAUSES` candidates is fitted jointly on the training rows and kept when
     each of its effects passes the decision rule against the same combination without
     it (held-out RMS reduction, ΔBIC, Wald, plausibility): no effect is kept that the
@@ -596,16 +608,13 @@ def best_subset(evaluator: Evaluator, base: Fit,
         The causes, ranked by the held-out RMS their removal would add (largest first),
         each gain measured against the model with the causes ranked before it.
     """
-    parts: dict[str, tuple[tuple[Term, ...], float]] = {}
-    for candidates in rounds:
-        for candidate in candidates:
-            if candidate.gain.significant:
-                parts[candidate.effect] = _effect_model(candidate)
-    for candidates in rounds:  # the latest proposal of each screened effect
+    screened = tuple(dict.fromkeys(c.effect for candidates in rounds for c in candidates
+                                   if c.gain.significant))
+    parts: dict[str, list[Part]] = {effect: [] for effect in screened}
+    for candidates in rounds:  # every proposal of each screened effect, in round order
         for candidate in candidates:
             if candidate.effect in parts:
-                parts[candidate.effect] = _effect_model(candidate)
-    screened = tuple(parts)
+                parts[candidate.effect].append(_effect_model(candidate))
     if not screened:
         return ()
     best: tuple[float, tuple[str, ...], dict[str, float]] | None = None
@@ -633,7 +642,7 @@ def best_subset(evaluator: Evaluator, base: Fit,
     return tuple(accepted)
 
 
-def _judge_set(evaluator: Evaluator, base: Fit, parts: dict[str, tuple[tuple[Term, ...], float]],
+def _judge_set(evaluator: Evaluator, base: Fit, parts: dict[str, list[Part]],
                effects: tuple[str, ...]) -> tuple[float, dict[str, float]] | None:
     """Held-out RMS of ``effects`` jointly and each one's drop-one loss, or ``None`` when
     one of them fails the decision rule against the others."""

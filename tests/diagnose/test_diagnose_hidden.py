@@ -2,12 +2,15 @@
 
 Identification data carry encoder quantisation (2^20 counts), torque noise, a filtered
 velocity estimate and a closed velocity loop. The sizes are drawn from ranges this test
-excitation can reveal; the diagnoser never sees the effect, its size or the truth.
+excitation can reveal; the diagnoser never sees the effect, its size or the truth. Draws
+are derandomized and no example database is kept: the outcome depends on this file's
+code only, not on the module's import name or on the tests run before it.
 """
 
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import pytest
 from diagnose_simdata import plant, record
@@ -21,13 +24,22 @@ from hil.diagnose.report import report
 #: tested on their own (strict xfails below, issue 12): their known biases are not mended.
 EFFECTS = ("offset", "asymmetric_friction", "stribeck", "cogging", "gravity", "cable_spring",
            "two_mass")
-#: The outcome must not depend on the run: derandomized draws (fixed by the test's code,
-#: not by the module's import name or the test order) and no example database.
 DETERMINISTIC = settings(derandomize=True, database=None, deadline=None,
                          phases=[Phase.explicit, Phase.generate])
 
 
-@settings(DETERMINISTIC, max_examples=10)
+def recovered(cause: dict[str, Any], key: str, truth: float) -> bool:
+    """The key parameter within 15 % of the truth, or, where the report says the excitation
+    cannot separate it from another parameter, the truth inside its 95 % interval."""
+    value = cause["parameters"][key]
+    if math.isclose(value, truth, rel_tol=0.15):
+        return True
+    interval = cause["uncertainty"].get(key, {}).get("ci95")
+    return (cause.get("separable") is False and interval is not None
+            and interval[0] <= truth <= interval[1] and "note" in cause)
+
+
+@settings(DETERMINISTIC, max_examples=8)
 @given(
     effect=st.sampled_from(EFFECTS),
     inertia=st.floats(0.002, 0.006),
@@ -44,14 +56,13 @@ def test_hidden_effect_is_named_and_recovered(effect: str, inertia: float, visco
     hidden = plant(inertia, viscous, coulomb, effect, size, detail, order)
     data = report(diagnose(record(hidden.params, seed=seed)))
     names = [cause["name"] for cause in data["causes"]]
-    assert names, "nothing named"
-    assert names[0] == effect, names
-    parameters = data["causes"][0]["parameters"]
+    assert names == [effect], names
+    cause = data["causes"][0]
     assert hidden.key is not None
-    assert math.isclose(parameters[hidden.key], hidden.truth, rel_tol=0.15), (
-        hidden.key, parameters[hidden.key], hidden.truth)
+    assert recovered(cause, hidden.key, hidden.truth), (
+        hidden.key, cause["parameters"][hidden.key], hidden.truth, cause["uncertainty"])
     if effect == "cogging":
-        assert parameters["periods_per_rev"] == order
+        assert cause["parameters"]["periods_per_rev"] == order
 
 
 @settings(DETERMINISTIC, max_examples=3)
@@ -66,6 +77,7 @@ def test_no_hidden_effect_names_none(inertia: float, viscous: float, coulomb: fl
     hidden = plant(inertia, viscous, coulomb, None, 0.0, 0.0, 0)
     data = report(diagnose(record(hidden.params, seed=seed)))
     assert data["causes"] == [], [c["name"] for c in data["causes"]]
+    assert data["unexplained"] is False, data["unexplained_structure"]["where"]
     base = data["base"]["parameters"]
     assert math.isclose(base["inertia_kg_m2"], inertia, rel_tol=0.1)
     assert math.isclose(base["coulomb_nm"], coulomb, rel_tol=0.1)
