@@ -59,6 +59,10 @@ HYSTERESIS_ANGLES_RAD = (0.005, 0.02, 0.08)
 TWO_MASS_DAMPING = (0.02, 0.05, 0.1)
 #: A resonance is resolved when it lies below this fraction of the analysis bandwidth.
 TWO_MASS_BAND = 0.6
+#: Lowest antiresonance searched, as a fraction of the analysis bandwidth (10 Hz at the
+#: default 250 Hz): below it a shaft filter sits on the slow test signals (a 2 Hz sine),
+#: where a filter at the sine's frequency fits any misfit in phase or quadrature with it.
+TWO_MASS_LOW = 0.04
 
 
 class Context:
@@ -431,9 +435,10 @@ def two_mass_term(antiresonance_hz: float, damping: float) -> Term:
 
 def _two_mass(ctx: Context) -> Model | None:
     top = TWO_MASS_BAND * ctx.signals.cutoff_hz
-    if top <= 2.0:
+    low = max(1.0, TWO_MASS_LOW * ctx.signals.cutoff_hz)
+    if top <= 2.0 * low:
         return None
-    grid = np.geomspace(1.0, top, 24)
+    grid = np.geomspace(low, top, 24)
     model = ctx.current.model
     costs = [
         (_train_rss(ctx, _extend(model, two_mass_term(float(f), d))), d)
@@ -501,10 +506,10 @@ def _harmonic(ctx: Context, effect: str) -> Model | None:
     if not found:
         return None
     key = f"{id(prediction_fit)}" if effect == "kt_ripple" else "1"
-    orders = _refine_orders(ctx, effect, tuple(found), weight, key)
-    if not orders:
+    refined = _refine_orders(ctx, effect, tuple(found), weight, key)
+    if not refined:
         return None
-    return _extend(ctx.current.model, harmonic_term(effect, orders, weight, key))
+    return _extend(ctx.current.model, harmonic_term(effect, refined, weight, key))
 
 
 #: How far (in orders) the joint fit looks from each order the pursuit took.

@@ -590,9 +590,11 @@ def best_subset(evaluator: Evaluator, base: Fit,
     :data:`MAX_CAUSES` candidates is fitted jointly on the training rows and kept when
     each of its effects passes the decision rule against the same combination without
     it (held-out RMS reduction, ΔBIC, Wald, plausibility): no effect is kept that the
-    others explain. Of the combinations kept, the one with the least held-out RMS wins;
-    one within :data:`MIN_HELDOUT_RMS_REDUCTION` of it with fewer effects wins over it. So
-    the outcome does not depend on the order the forward rounds met the effects in.
+    others explain. Of the combinations kept, those within
+    :data:`MIN_HELDOUT_RMS_REDUCTION` of the least held-out RMS are indistinguishable on
+    the held-out data; of them the one with the fewest added parameters wins (then the
+    least RMS). So the outcome does not depend on the order the forward rounds met the
+    effects in.
 
     Parameters
     ----------
@@ -617,19 +619,19 @@ def best_subset(evaluator: Evaluator, base: Fit,
                 parts[candidate.effect].append(_effect_model(candidate))
     if not screened:
         return ()
-    best: tuple[float, tuple[str, ...], dict[str, float]] | None = None
-    for size in range(1, min(MAX_CAUSES, len(screened)) + 1):
-        kept = [(verdict[0], effects, verdict[1])
-                for effects in itertools.combinations(screened, size)
-                if (verdict := _judge_set(evaluator, base, parts, effects)) is not None]
-        if not kept:
-            continue
-        leader = min(kept, key=lambda entry: entry[0])
-        # more causes only when they explain clearly more of the held-out data
-        if best is None or leader[0] < best[0] * (1.0 - MIN_HELDOUT_RMS_REDUCTION):
-            best = leader
-    if best is None:
+    kept = [(verdict[0], effects, verdict[1])
+            for size in range(1, min(MAX_CAUSES, len(screened)) + 1)
+            for effects in itertools.combinations(screened, size)
+            if (verdict := _judge_set(evaluator, base, parts, effects)) is not None]
+    if not kept:
         return ()
+    # parsimony among the combinations the held-out data cannot tell apart (within 1 %
+    # of the least held-out RMS): fewest added parameters, then least RMS
+    least = min(entry[0] for entry in kept)
+    close = [entry for entry in kept if entry[0] <= least * (1.0 + MIN_HELDOUT_RMS_REDUCTION)]
+    added = {entry[1]: _joint(base.model, parts, entry[1]).n_params - base.model.n_params
+             for entry in close}
+    best = min(close, key=lambda entry: (added[entry[1]], entry[0]))
     _, effects, losses = best
     ranked = sorted(effects, key=lambda e: -losses[e])
     accepted: list[Candidate] = []

@@ -30,7 +30,7 @@ BINS = 40
 #: Significance of the structure tests (F-test; Bonferroni over the three).
 ALPHA = 0.001
 #: Least share of the residual variance the bin means must carry to count as structure.
-MIN_SHARE = 0.05
+MIN_SHARE = 0.10
 #: Bins with fewer held-out rows than this are left out of the test.
 MIN_BIN_ROWS = 10
 

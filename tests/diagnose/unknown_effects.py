@@ -29,10 +29,11 @@ def friction_bump(position: FloatArray, velocity: FloatArray, *, size: float,
     ``ΔT·sgn(ω)·exp(−½((θ − θ₀)/w)²)``, ``ΔT`` 10–30 mN·m, ``w`` = 30 mrad, ``θ₀`` between
     the 25th and 75th percentile of the positions.
     """
-    low, high = np.percentile(position, [25, 75])
+    low, high = (float(v) for v in np.percentile(position, [25, 75]))
     centre = low + (high - low) * detail
     height = 0.01 + 0.02 * size
-    return height * _direction(velocity) * np.exp(-0.5 * ((position - centre) / 0.03) ** 2)
+    bump: FloatArray = np.exp(-0.5 * ((position - centre) / 0.03) ** 2)
+    return height * _direction(velocity) * bump
 
 
 def backlash(position: FloatArray, velocity: FloatArray, *, size: float,
