@@ -258,18 +258,15 @@ def _asymmetric(ctx: Context) -> Model | None:
     """
     if not both_directions(ctx):
         return None
+    # the velocity is already low-passed (like the base viscous column): not filtered again
+    viscous = Term(effect="asymmetric_friction", labels=("viscous_neg_delta",),
+                   key="asymmetric:viscous", filtered=True,
+                   build=lambda s: s.velocity * _negative(s))
     if _has_constant(ctx.current.model):
-        term = Term(effect="asymmetric_friction", labels=("viscous_neg_delta",),
-                    key="asymmetric:viscous", filtered=True,
-                    build=lambda s: s.velocity * _negative(s))
-    else:
-        term = Term(
-            effect="asymmetric_friction",
-            labels=("viscous_neg_delta", "coulomb_neg_delta"),
-            key="asymmetric",
-            build=lambda s: np.column_stack((s.velocity * _negative(s), -_negative(s))),
-        )
-    return _extend(ctx.current.model, term)
+        return _extend(ctx.current.model, viscous)
+    coulomb = Term(effect="asymmetric_friction", labels=("coulomb_neg_delta",),
+                   key="asymmetric:coulomb", build=lambda s: -_negative(s))
+    return _extend(ctx.current.model, viscous, coulomb)
 
 
 def _gravity(ctx: Context) -> Model | None:
@@ -381,20 +378,34 @@ def search_shift(ctx: Context, model: Model) -> Model:
     Returns
     -------
     Model
-        ``model`` with the ``shift_s`` in ``[−1/fs, 1/fs]`` that minimises the training
-        RSS (a 9-point grid, refined by a bounded search).
+        ``model`` with the ``shift_s`` in ``[0, 1/fs]`` that minimises the training RSS
+        (a 9-point grid, refined by a bounded search): the drive samples the position
+        somewhere within the period over which it holds the effort.
     """
     period = 1.0 / ctx.signals.fs_hz
-    grid = np.linspace(-period, period, 9)
+    grid = np.linspace(0.0, period, 9)
     _, best = _search(ctx, lambda d: replace(model, shift_s=d), grid, log_scale=False)
     return best
 
 
+#: Effort/motion alignments (in sample periods) tried with a current-loop lag.
+LAG_SHIFTS = (0.0, 0.25, 0.5, 0.75, 1.0)
+
+
 def _current_lag(ctx: Context) -> Model | None:
+    """τ searched jointly with the effort's lead: at low frequency a first-order lag and a
+    delay look alike (a lag shifts the base model's best alignment by up to a sample),
+    at high frequency the lag's gain ``√(1 + (ωτ)²)`` tells them apart."""
     fs = ctx.signals.fs_hz
     grid = np.geomspace(0.5 / fs, min(0.05, 100.0 / fs), 20)
     model = ctx.current.model
-    _, best = _search(ctx, lambda t: replace(model, lag_s=t), grid)
+    best_rss, best = math.inf, model
+    for shift in LAG_SHIFTS:
+        shifted = replace(model, shift_s=shift / fs)
+        _, proposal = _search(ctx, lambda t, m=shifted: replace(m, lag_s=t), grid)
+        rss = _train_rss(ctx, proposal)
+        if rss < best_rss:
+            best_rss, best = rss, proposal
     return best
 
 
@@ -500,7 +511,13 @@ def _harmonic(ctx: Context, effect: str) -> Model | None:
         weight_rows = weight_fn(signals)[rows]
     residual = signals.effort_filtered[rows] - designer.predict(ctx.current, signals)[rows]
     orders = order_range(signals.position[rows], ctx.counts_per_rev)
-    segment = Segment(residual=residual, position_rad=signals.position[rows], weight=weight_rows)
+    # weighted least squares for the order search: where the model misses most (a chirp,
+    # large torque at one angle) every order's column is a constant that soaks up the
+    # misfit and lifts the whole periodogram; each row counts by its block's misfit
+    scale = _local_scale(residual, rows, signals.fs_hz)
+    segment = Segment(residual=residual / scale, position_rad=signals.position[rows],
+                      weight=(np.ones_like(residual) if weight_rows is None else weight_rows)
+                      / scale)
     found = matching_pursuit([segment], orders=orders, limits=ORDER_LIMITS,
                              independence=min(1.0, signals.independence * signals.decimation))
     if not found:
@@ -602,6 +619,21 @@ def _refine_orders(ctx: Context, effect: str, found: tuple[int, ...],
         if np.isfinite(statistic) and statistic >= ORDER_LIMITS.min_chi2:
             kept.append(k)
     return tuple(kept)
+
+
+#: Length of the blocks whose residual RMS weights the rows of the order search, s.
+SCALE_BLOCK_S = 0.25
+
+
+def _local_scale(residual: FloatArray, rows: IndexArray, fs_hz: float) -> FloatArray:
+    """RMS of ``residual`` in the :data:`SCALE_BLOCK_S` block of each row (floored at a
+    tenth of the overall RMS)."""
+    block = rows // max(1, round(SCALE_BLOCK_S * fs_hz))
+    _, index = np.unique(block, return_inverse=True)
+    count = np.bincount(index).astype(np.float64)
+    local = np.sqrt(np.bincount(index, weights=residual**2) / count)[index]
+    overall = float(np.sqrt(np.mean(residual**2)))
+    return np.asarray(np.maximum(local, 0.1 * overall if overall > 0 else 1.0), dtype=np.float64)
 
 
 _PROPOSERS: dict[str, Callable[[Context], Model | None]] = {

@@ -485,12 +485,13 @@ def wald(fit: Fit, labels: tuple[str, ...]) -> tuple[float, float]:
 
 
 def select(evaluator: Evaluator, base_model: Model, *,
-           effects: tuple[str, ...] = EFFECTS, hold_samples: float | None = 0.5) -> Selection:
+           effects: tuple[str, ...] = EFFECTS, hold_samples: float | None = None) -> Selection:
     """Greedy forward selection (see the module docstring for the rule).
 
     ``hold_samples`` is the time, in sample periods, by which the effort leads the motion
     it causes (0.5 for a drive that holds each torque sample over the following period);
-    ``None`` estimates it within ±1 sample (it is then confounded with a current lag).
+    ``None`` estimates it in [0, 1] sample on the base model; a current-loop lag is
+    searched jointly with its own alignment (a lag shifts the base model's best one).
 
     Parameters
     ----------
@@ -549,17 +550,20 @@ def select(evaluator: Evaluator, base_model: Model, *,
                      rounds=tuple(rounds))
 
 
-Part = tuple[frozenset[str], tuple[Term, ...], float]
+Part = tuple[frozenset[str], tuple[Term, ...], float, float]
 
 
 def _effect_model(candidate: Candidate) -> Part:
-    """What ``candidate`` adds (its terms and the lag's time constant), and the effects of
+    """What ``candidate`` adds (its terms, the lag's time constant and the alignment searched
+    with it, NaN for other effects), and the effects of
     the model it was proposed on (its columns can depend on them: a Coulomb asymmetry is
     only added without a constant, the K_t-ripple weight is that model's prediction)."""
     model = candidate.fit.model
     terms = tuple(term for term in model.terms if term.effect == candidate.effect)
     context = frozenset(model.effects) - {"base", candidate.effect}
-    return context, terms, model.lag_s if candidate.effect == "current_lag" else 0.0
+    if candidate.effect == "current_lag":
+        return context, terms, model.lag_s, model.shift_s
+    return context, terms, 0.0, math.nan
 
 
 def _variant(parts: list[Part], effects: tuple[str, ...]) -> Part:
@@ -572,7 +576,9 @@ def _joint(base: Model, parts: dict[str, list[Part]], effects: tuple[str, ...]) 
     chosen = [_variant(parts[e], effects) for e in effects]
     terms = base.terms + tuple(term for part in chosen for term in part[1])
     lag = max((part[2] for part in chosen), default=0.0)
-    return replace(base, terms=terms, lag_s=lag)
+    # a lag comes with the effort/motion alignment searched with it
+    shift = next((part[3] for part in chosen if not math.isnan(part[3])), base.shift_s)
+    return replace(base, terms=terms, lag_s=lag, shift_s=shift)
 
 
 def _holds(gain: Gain) -> bool:
