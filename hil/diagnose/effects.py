@@ -158,8 +158,11 @@ def _extend(model: Model, *terms: Term) -> Model:
     return replace(model, terms=model.terms + terms)
 
 
+CONSTANT_LABELS = frozenset({"offset", "cable_constant", "coulomb_neg_delta"})
+
+
 def _has_constant(model: Model) -> bool:
-    return any("offset" in term.labels or "cable_constant" in term.labels for term in model.terms)
+    return any(CONSTANT_LABELS & set(term.labels) for term in model.terms)
 
 
 def _train_rss(ctx: Context, model: Model) -> float:
@@ -253,8 +256,9 @@ def _asymmetric(ctx: Context) -> Model | None:
     """Direction-dependent viscous and Coulomb friction.
 
     While the axis moves, a Coulomb difference between the directions is a constant
-    (``ΔT_c·1(ω<0) = ΔT_c/2 − ΔT_c/2·sgn ω``): with a constant already in the model only
-    the viscous difference is separable, and only it is added.
+    (``ΔT_c·1(ω<0) = ΔT_c/2 − ΔT_c/2·sgn ω``): it is modelled as the constant ``−ΔT_c/2``
+    (with ``T_c`` the mean of the two directions), and with a constant already in the
+    model only the viscous difference is added.
     """
     if not both_directions(ctx):
         return None
@@ -264,8 +268,12 @@ def _asymmetric(ctx: Context) -> Model | None:
                    build=lambda s: s.velocity * _negative(s))
     if _has_constant(ctx.current.model):
         return _extend(ctx.current.model, viscous)
+    # the Coulomb difference as a constant −ΔT_c/2 (= an offset): the same as −ΔT_c·1(ω<0)
+    # while moving, and a constant, like any torque, at standstill too; the offset is then
+    # the same model without the viscous difference (one parameter fewer)
     coulomb = Term(effect="asymmetric_friction", labels=("coulomb_neg_delta",),
-                   key="asymmetric:coulomb", build=lambda s: -_negative(s))
+                   key="asymmetric:constant", filtered=True,
+                   build=lambda s: np.full(len(s), -0.5))
     return _extend(ctx.current.model, viscous, coulomb)
 
 

@@ -180,10 +180,12 @@ def effect_parameters(effect: str, fit: Fit, *, lag_std_s: float = math.nan,
     if effect == "offset":
         estimates["offset_nm"] = _linear(fit, {"offset": 1.0})
     elif effect == "asymmetric_friction":
-        estimates["coulomb_pos_nm"] = _linear(fit, {"coulomb": 1.0})
-        if "coulomb_neg_delta" in values:
-            estimates["coulomb_neg_nm"] = _linear(fit, {"coulomb": 1.0, "coulomb_neg_delta": 1.0})
+        if "coulomb_neg_delta" in values:  # T_c·sgn ω − ΔT_c/2: |T_c±| = T_c ∓ ΔT_c/2
+            estimates["coulomb_pos_nm"] = _linear(fit, {"coulomb": 1.0,
+                                                        "coulomb_neg_delta": -0.5})
+            estimates["coulomb_neg_nm"] = _linear(fit, {"coulomb": 1.0, "coulomb_neg_delta": 0.5})
         else:  # not separable from the offset already in the model
+            estimates["coulomb_pos_nm"] = _linear(fit, {"coulomb": 1.0})
             estimates["coulomb_neg_nm"] = estimates["coulomb_pos_nm"]
             extra["note"] = "Coulomb asymmetry is not separable from the offset while moving"
         estimates["viscous_pos"] = _linear(fit, {"viscous": 1.0})

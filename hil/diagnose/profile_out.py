@@ -60,8 +60,9 @@ def model_fields(fit: Fit) -> dict[str, Any]:
     if "asymmetric_friction" in effects:
         fields["viscous_neg_nm_s_rad"] = _positive(values["viscous"]
                                                    + values["viscous_neg_delta"])
-        fields["coulomb_neg_nm"] = _positive(values["coulomb"]
-                                             + values.get("coulomb_neg_delta", 0.0))
+        half = 0.5 * values.get("coulomb_neg_delta", 0.0)  # the model: T_c·sgn ω − 2·half
+        fields["coulomb_nm"] = _positive(values["coulomb"] - half)
+        fields["coulomb_neg_nm"] = _positive(values["coulomb"] + half)
     if "stribeck" in effects:
         term = fit.model.term("stribeck")
         fields["static_friction_nm"] = _positive(values["coulomb"] + values["stribeck_delta"])

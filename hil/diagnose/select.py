@@ -50,7 +50,7 @@ MIN_LOAD_FRACTION = 0.05
 #: at this level...
 PERIODIC_ALPHA = 1e-3
 #: ...and by at least this fraction of their size: not the same effect over the travel.
-PERIODIC_MISMATCH = 0.5
+PERIODIC_MISMATCH = 0.3
 
 #: Effects exempt from the halves test: the lag has no linear coefficient; K_t ripple's
 #: fits on the two halves differ whenever the torque is large where the angle stands
