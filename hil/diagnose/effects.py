@@ -522,7 +522,7 @@ def _harmonic(ctx: Context, effect: str) -> Model | None:
     # weighted least squares for the order search: where the model misses most (a chirp,
     # large torque at one angle) every order's column is a constant that soaks up the
     # misfit and lifts the whole periodogram; each row counts by its block's misfit
-    scale = _local_scale(residual, rows, signals.fs_hz)
+    scale = local_scale(residual, rows, signals.fs_hz)
     segment = Segment(residual=residual / scale, position_rad=signals.position[rows],
                       weight=(np.ones_like(residual) if weight_rows is None else weight_rows)
                       / scale)
@@ -633,9 +633,22 @@ def _refine_orders(ctx: Context, effect: str, found: tuple[int, ...],
 SCALE_BLOCK_S = 0.25
 
 
-def _local_scale(residual: FloatArray, rows: IndexArray, fs_hz: float) -> FloatArray:
-    """RMS of ``residual`` in the :data:`SCALE_BLOCK_S` block of each row (floored at a
-    tenth of the overall RMS)."""
+def local_scale(residual: FloatArray, rows: IndexArray, fs_hz: float) -> FloatArray:
+    """RMS of ``residual`` in the :data:`SCALE_BLOCK_S` block of each row.
+
+    Parameters
+    ----------
+    residual : ndarray
+        On ``rows``.
+    rows : ndarray of intp
+        Sample indices (their blocks are ``rows // (SCALE_BLOCK_S·fs_hz)``).
+    fs_hz : float
+
+    Returns
+    -------
+    ndarray
+        Per row, floored at a tenth of the overall RMS (1 when that is 0).
+    """
     block = rows // max(1, round(SCALE_BLOCK_S * fs_hz))
     _, index = np.unique(block, return_inverse=True)
     count = np.bincount(index).astype(np.float64)
