@@ -410,7 +410,11 @@ def _current_lag(ctx: Context) -> Model | None:
     best_rss, best = math.inf, model
     for shift in LAG_SHIFTS:
         shifted = replace(model, shift_s=shift / fs)
-        _, proposal = _search(ctx, lambda t, m=shifted: replace(m, lag_s=t), grid)
+
+        def with_lag(lag_s: float, base: Model = shifted) -> Model:
+            return replace(base, lag_s=lag_s)
+
+        _, proposal = _search(ctx, with_lag, grid)
         rss = _train_rss(ctx, proposal)
         if rss < best_rss:
             best_rss, best = rss, proposal

