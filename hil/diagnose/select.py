@@ -10,14 +10,19 @@ when all three hold
    of the key coefficients, ``cᵀC⁻¹c > χ²₀.₉₉(dim)``; for the current-loop lag the
    Gauss–Newton standard deviation of τ).
 
-Each round every remaining effect is proposed on top of the current model; of the
-significant ones, the one with the most evidence per added parameter (the most negative
-``ΔBIC / Δk``) is accepted, and the round repeats: when two effects explain the same
-thing, the simpler one is named (a constant offset rather than direction-dependent
-Coulomb friction, which look alike while the axis moves). So
-the causes come out ranked, each gain is incremental (measured against the model with
-the causes ranked before it), and an effect that only explains what an accepted one
-already did is not named.
+Forward rounds screen the effects: each round every remaining effect is proposed on top
+of the current model (its nonlinear parameters searched there) and the significant one
+with the most evidence per added parameter (the most negative ``ΔBIC / Δk``) is added for
+the next round. Then :func:`best_subset` chooses the causes among every combination of
+the effects significant in any round: a combination is kept when each of its effects is
+significant against the others (so no effect is named that the others explain), and of
+the kept ones, those within 1 % of the least held-out RMS count as equal and the one with
+the fewest added parameters wins. The outcome does not depend on the order in which the
+rounds met the effects; the causes come out ranked by the held-out RMS their removal adds,
+each gain measured against the model with the causes ranked before it.
+
+A fourth condition guards against effects outside the library: a known effect has one set
+of parameters over the whole travel (:meth:`Evaluator.consistent`).
 """
 
 from __future__ import annotations
@@ -78,11 +83,13 @@ DECISION_RULE = {
     "min_heldout_rms_reduction": MIN_HELDOUT_RMS_REDUCTION,
     "confidence": CONFIDENCE,
     "text": (
-        "an effect is named when delta_bic = BIC(extended) - BIC(current) <= -10 on the "
-        "training data, the held-out residual RMS drops by >= 1 %, and the 99 % confidence "
-        "region of its new parameters excludes zero; effects are added greedily, most "
-        "evidence per added parameter (most negative delta_bic / added parameters) first, "
-        "each gain measured against the model with the causes ranked before it"
+        "an effect is significant against a model when delta_bic = BIC(extended) - "
+        "BIC(model) <= -10 on the training data, the held-out residual RMS drops by >= 1 %, "
+        "the 99 % confidence region of its new parameters excludes zero, it is physically "
+        "plausible and its coefficients agree on both halves of the travel; the causes are "
+        "the combination of screened effects in which each is significant against the "
+        "others, with the least held-out RMS (within 1 %: the fewest parameters); ranked by "
+        "the held-out RMS their removal adds, each gain against the causes ranked before it"
     ),
 }
 
