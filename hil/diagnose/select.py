@@ -1,7 +1,7 @@
-"""Forward selection of effects, judged on held-out data.
+"""Selection of effects: forward screening, then the best subset, judged on held-out data.
 
 Decision rule (also written into the JSON report): a candidate effect is *significant*
-when all three hold
+when all of these hold (plus physical plausibility)
 
 1. ``ΔBIC = BIC(extended) − BIC(current) ≤ −10`` on the training rows ("very strong"
    evidence on the Kass–Raftery scale; searched nonlinear parameters count in ``k``);
