@@ -220,7 +220,7 @@ def setpoint_holds(
 
 
 def set_interpolation(link: ModbusLink, period_s: float) -> None:
-    """Let the drive ramp over one sample period to each new setpoint (if it can)."""
+    """Let the drive ramp to each new setpoint over ``period_s`` (if it can)."""
     if SETPOINT_INTERPOLATION not in link.map.registers:
         return
     register = link.map[SETPOINT_INTERPOLATION]
