@@ -77,10 +77,10 @@ class ModbusStation:
     ``"instantaneous"`` always ``torque``.
 
     ``setpoint_lead_periods``: with the map's ``setpoint_interpolation_time``, each setpoint
-    is the command that many sample periods ahead, reached by the drive's ramp over them:
-    the setpoint follows the command on time, and a host late by less than the lead leaves
-    no hold in it (a hold is a jerk the 100 Hz rows cannot resolve: J −2 … −6 % at load
-    average 7 with a one-period ramp). A step is spread over the lead.
+    is the command that many sample periods ahead, approached by the drive's ramp over them
+    (no delay at low frequency), and a host late by less than the lead leaves no hold in it
+    (a hold is a jerk the 100 Hz rows cannot resolve: J up to −5.5 % at load average 7–10
+    with a one-period ramp). A step is spread over the lead.
     """
 
     source: str

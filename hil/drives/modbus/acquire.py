@@ -3,9 +3,9 @@
 Sample ``k`` of a run: a setpoint is written at ``k/fs`` and the feedback block read half a
 period later (away from the loop's response to the new setpoint). A drive that interpolates
 its setpoint (``setpoint_interpolation_time``) is sent the command ``lead`` periods ahead
-(``setpoint_lead_periods``) and ramps to it over them, so its setpoint passes through the
-command on time and a host that is late by less than the lead leaves no hold in it; a drive
-that steps is sent command sample ``k``. Timing:
+(``setpoint_lead_periods``) and ramps to it over them (each write restarting the ramp: a
+first-order approach to the command, no delay at low frequency), so a host that is late by
+less than the lead leaves no hold in it; a drive that steps is sent command sample ``k``. Timing:
 with a ``timestamp`` register (the drive's free-running clock, latched with the feedback
 and read in the same request) ``time_s`` is that clock, unwrapped; otherwise the host's
 monotonic clock at the middle of the read, which carries the link's jitter. It uses the
