@@ -61,7 +61,7 @@ def test_modbus_identical_firmware_flags_nothing(tmp_path: Path,
                                                  capsys: pytest.CaptureFixture[str]) -> None:
     """Regression (issue 11): on a loaded host the polls fall behind at random; with a
     one-period setpoint ramp each late poll held the setpoint, a jerk the 100 Hz rows cannot
-    resolve, and J read 0.5–5.5 % low (CHANGED in 2 of 4 full-suite runs). The setpoint is
+    resolve, and J read up to 5.5 % low (CHANGED in 2 of 4 full-suite runs). The setpoint is
     now sent ahead (station ``setpoint_lead_periods``), and a run whose host fell behind
     even that is refused (``setpoint_holds``), not measured."""
     runs = [calibrate(with_firmware(PROFILE), tmp_path / f"s{seed}", drive="modbus-emulator",
