@@ -33,7 +33,7 @@ from hil.profile import UnitProfile, load_profile
 from hil.report import write_documents
 from hil.report.console import outcome_banner, protocol_start
 from hil.report.plan import planned_motion_s
-from hil.store.engine import parse_store_url, resolve_store_url
+from hil.store.engine import resolve_store_url
 from hil.store.record import record_run
 
 log = logging.getLogger(__name__)
@@ -73,8 +73,8 @@ def start(config: pytest.Config) -> None:
             load_station_identity(station) if station is not None else StationIdentity()
         )
         if config.getoption("--store") != "off":  # a bad URL stops here, before any motion
-            parse_store_url(resolve_store_url(config.getoption("--store"), out_dir=Path(),
-                                              station_store=config.stash[STATION_KEY].store))
+            resolve_store_url(config.getoption("--store"), out_dir=Path(),
+                              station_store=config.stash[STATION_KEY].store)
     except HilError as exc:
         raise pytest.UsageError(str(exc)) from None
 

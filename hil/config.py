@@ -9,12 +9,13 @@ the table and the key, never a silent default.
 from __future__ import annotations
 
 import difflib
+import hashlib
 import math
 import tomllib
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from importlib import resources
 from pathlib import Path
-from typing import Any, Final
+from typing import Any, Final, TypeVar
 
 from hil.errors import ProfileError
 
@@ -50,6 +51,32 @@ def read_toml(path: Path) -> tuple[dict[str, Any], bytes]:
         return tomllib.loads(payload.decode("utf-8")), payload
     except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
         raise ProfileError(f"not valid TOML: {exc}", source=str(path)) from None
+
+
+Entry = TypeVar("Entry")
+
+
+def read_results_by_axis(
+    path: Path, entry: Callable[[str, ConfigTable], Entry]
+) -> tuple[str, dict[str, dict[str, Entry]]]:
+    """A map file of ``[results.AXIS.NAME]`` tables under a ``population`` string (the
+    method-bias and repeatability maps): the SHA-256 of its bytes and ``entry(name, table)``
+    by axis and name.
+
+    Raises
+    ------
+    ProfileError
+        A missing, mistyped or unknown key in any table, naming file, table and key.
+    """
+    document, payload = read_toml(path)
+    root = ConfigTable.root(document, source=str(path))
+    root.string("population")
+    by_axis = {
+        axis: {name: entry(name, table) for name, table in results.tables_here().items()}
+        for axis, results in root.tables("results").items()
+    }
+    root.done()
+    return hashlib.sha256(payload).hexdigest(), by_axis
 
 
 class ConfigTable:

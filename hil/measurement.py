@@ -5,14 +5,13 @@ A tolerance miss is an outcome, not an exception.
 
 from __future__ import annotations
 
-import hashlib
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass
 from enum import StrEnum
 from pathlib import Path
 
-from hil.config import ConfigTable, builtin_fixture, read_toml
+from hil.config import ConfigTable, builtin_fixture, read_results_by_axis
 from hil.gum import format_result
 from hil.identify.estimate import Component, Estimate
 from hil.profile import MeasurementSpec
@@ -178,16 +177,8 @@ def load_method_bias(path: Path | None = None, *, axis: str = "") -> MethodBiasM
         A missing, mistyped or unknown key in any table, naming file, table and key.
     """
     path = path or builtin_fixture(METHOD_BIAS_FILE)
-    document, payload = read_toml(path)
-    root = ConfigTable.root(document, source=str(path))
-    root.string("population")
-    by_axis = {
-        kind: {name: _method_bias(name, table) for name, table in results.tables_here().items()}
-        for kind, results in root.tables("results").items()
-    }
-    root.done()
-    return MethodBiasMap(source=str(path), sha256=hashlib.sha256(payload).hexdigest(),
-                         entries=by_axis.get(axis, {}))
+    sha256, by_axis = read_results_by_axis(path, _method_bias)
+    return MethodBiasMap(source=str(path), sha256=sha256, entries=by_axis.get(axis, {}))
 
 
 def _method_bias(name: str, table: ConfigTable) -> MethodBias:

@@ -181,3 +181,14 @@ def test_a_bad_profile_stops_calibrate_in_one_line_before_any_motion(tmp_path: P
     assert str(bad) in errors[0]
     assert "[limits] lacks 'travel_max_rad'" in errors[0]
     assert not out.exists() or not any(out.rglob("*")), "nothing may be written"
+
+
+def test_a_setpoint_lead_below_one_period_is_refused(tmp_path: Path) -> None:
+    text = builtin_fixture("station_modbus_emulator.toml").read_text(encoding="utf-8")
+    assert "setpoint_lead_periods = 3" in text
+    path = tmp_path / "station.toml"
+    path.write_text(text.replace("setpoint_lead_periods = 3", "setpoint_lead_periods = 0"),
+                    encoding="utf-8")
+    with pytest.raises(ProfileError, match=r"\[modbus\] 'setpoint_lead_periods': must be 1 or "
+                       r"more"):
+        load_station(path)

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import math
 import sys
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import replace
 from pathlib import Path
 
@@ -53,10 +54,13 @@ def population(tmp_path_factory: pytest.TempPathFactory) -> Population:
     units = write_population(directory / "units", units_per_profile=UNITS_PER_PROFILE,
                              seed=POPULATION_SEED)
     rows = run_population(units, directory / "certificates")
+    twice = [u for u in units if int(u.serial.split("-")[1]) < PAIRS_PER_PROFILE]
+    with ThreadPoolExecutor(max_workers=2) as pool:  # the second run of each, two at a time
+        seconds = list(pool.map(
+            lambda unit: calibrate(unit, directory / "pairs", seed=unit.seed + 1), twice))
     paired: dict[str, list[float]] = {}
-    for unit in [u for u in units if int(u.serial.split("-")[1]) < PAIRS_PER_PROFILE]:
-        first = calibrate(unit, directory / "certificates")
-        second = calibrate(unit, directory / "pairs", seed=unit.seed + 1)
+    for unit, second in zip(twice, seconds, strict=True):
+        first = calibrate(unit, directory / "certificates", reuse=True)  # the population's
         for name, z in repeatability(first, second).items():
             paired.setdefault(name, []).append(z)
     return rows, paired

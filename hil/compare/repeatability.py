@@ -9,12 +9,11 @@ and a comparison adds it to each side as an independent line of the difference's
 
 from __future__ import annotations
 
-import hashlib
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
 
-from hil.config import ConfigTable, builtin_fixture, read_toml
+from hil.config import ConfigTable, builtin_fixture, read_results_by_axis
 
 REPEATABILITY_FILE = "compare_repeatability.toml"
 
@@ -70,16 +69,8 @@ def load_repeatability(path: Path | None = None) -> RepeatabilityMap:
         A missing, mistyped or unknown key, naming file, table and key.
     """
     path = path or builtin_fixture(REPEATABILITY_FILE)
-    document, payload = read_toml(path)
-    root = ConfigTable.root(document, source=str(path))
-    root.string("population")
-    by_axis = {
-        axis: {name: _entry(name, table) for name, table in results.tables_here().items()}
-        for axis, results in root.tables("results").items()
-    }
-    root.done()
-    return RepeatabilityMap(source=str(path), sha256=hashlib.sha256(payload).hexdigest(),
-                            by_axis=by_axis)
+    sha256, by_axis = read_results_by_axis(path, _entry)
+    return RepeatabilityMap(source=str(path), sha256=sha256, by_axis=by_axis)
 
 
 def _entry(name: str, table: ConfigTable) -> Repeatability:

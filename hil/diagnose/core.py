@@ -30,7 +30,10 @@ log = logging.getLogger(__name__)
 
 BLOCK_S = 0.25
 HELDOUT_EVERY = 3
-#: Effort leads motion by half a sample: the drive holds each torque over the next period.
+#: A drive holding each torque over the next period with the position sampled mid-period
+#: has the effort lead the motion by half a sample (``diagnose(..., hold_samples=0.5)``);
+#: by default the lead is estimated in [0, 1] sample (it differs between drives and
+#: simulators: this project's simulator needs 0, the shared recordings' 0.5).
 HOLD_SAMPLES = 0.5
 
 
@@ -89,6 +92,29 @@ class Diagnosis:
         """The effects of :attr:`causes`, in rank order."""
         return [c.effect for c in self.causes]
 
+    def selection_lag_std(self, fit: Fit) -> float:
+        """Newey–West standard uncertainty of ``fit``'s current-loop time constant, s.
+
+        Parameters
+        ----------
+        fit : Fit
+            A model with a current-loop lag, fitted on the training rows.
+
+        Returns
+        -------
+        float
+            Infinite when the Gauss–Newton normal matrix is singular.
+        """
+        from hil.diagnose.intervals import hac_covariance
+
+        signals, rows = self.train.signals, self.train.rows
+        matrix = self.designer.design(fit.model, signals, rows)
+        lead = self.designer.lead(fit.model, signals, rows)
+        jacobian = np.column_stack((matrix, lead @ fit.coefficients))
+        residual = signals.effort_filtered[rows] - matrix @ fit.coefficients
+        variance = float(hac_covariance(jacobian, residual)[-1, -1])
+        return math.sqrt(variance) if math.isfinite(variance) and variance >= 0 else math.inf
+
     def heldout_prediction(self, fit: Fit) -> tuple[np.ndarray, np.ndarray]:
         """Measured (filtered) and predicted effort on the held-out rows.
 
@@ -140,7 +166,7 @@ def diagnose(
     *,
     validate: Recording | None = None,
     cutoff_hz: float | None = None,
-    hold_samples: float | None = HOLD_SAMPLES,
+    hold_samples: float | None = None,
 ) -> Diagnosis:
     """Diagnose ``recording``; with ``validate``, judge every gain on that recording.
 
@@ -154,8 +180,9 @@ def diagnose(
     cutoff_hz : float, optional
         Analysis bandwidth (default: an eighth of the sample rate).
     hold_samples : float or None
-        How many sample periods the effort leads the motion (0.5: zero-order hold);
-        ``None`` estimates it within ±1 sample.
+        How many sample periods the effort leads the motion (0.5: zero-order hold with
+        the position sampled mid-period); ``None`` (default) estimates it in [0, 1]
+        sample, jointly with τ when a current-loop lag is tried.
 
     Returns
     -------

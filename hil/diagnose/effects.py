@@ -59,6 +59,10 @@ HYSTERESIS_ANGLES_RAD = (0.005, 0.02, 0.08)
 TWO_MASS_DAMPING = (0.02, 0.05, 0.1)
 #: A resonance is resolved when it lies below this fraction of the analysis bandwidth.
 TWO_MASS_BAND = 0.6
+#: Lowest antiresonance searched, as a fraction of the analysis bandwidth (10 Hz at the
+#: default 250 Hz): below it a shaft filter sits on the slow test signals (a 2 Hz sine),
+#: where a filter at the sine's frequency fits any misfit in phase or quadrature with it.
+TWO_MASS_LOW = 0.04
 
 
 class Context:
@@ -154,8 +158,11 @@ def _extend(model: Model, *terms: Term) -> Model:
     return replace(model, terms=model.terms + terms)
 
 
+CONSTANT_LABELS = frozenset({"offset", "cable_constant", "coulomb_neg_delta"})
+
+
 def _has_constant(model: Model) -> bool:
-    return any("offset" in term.labels or "cable_constant" in term.labels for term in model.terms)
+    return any(CONSTANT_LABELS & set(term.labels) for term in model.terms)
 
 
 def _train_rss(ctx: Context, model: Model) -> float:
@@ -249,23 +256,25 @@ def _asymmetric(ctx: Context) -> Model | None:
     """Direction-dependent viscous and Coulomb friction.
 
     While the axis moves, a Coulomb difference between the directions is a constant
-    (``ΔT_c·1(ω<0) = ΔT_c/2 − ΔT_c/2·sgn ω``): with a constant already in the model only
-    the viscous difference is separable, and only it is added.
+    (``ΔT_c·1(ω<0) = ΔT_c/2 − ΔT_c/2·sgn ω``): it is modelled as the constant ``−ΔT_c/2``
+    (with ``T_c`` the mean of the two directions), and with a constant already in the
+    model only the viscous difference is added.
     """
     if not both_directions(ctx):
         return None
+    # the velocity is already low-passed (like the base viscous column): not filtered again
+    viscous = Term(effect="asymmetric_friction", labels=("viscous_neg_delta",),
+                   key="asymmetric:viscous", filtered=True,
+                   build=lambda s: s.velocity * _negative(s))
     if _has_constant(ctx.current.model):
-        term = Term(effect="asymmetric_friction", labels=("viscous_neg_delta",),
-                    key="asymmetric:viscous", filtered=True,
-                    build=lambda s: s.velocity * _negative(s))
-    else:
-        term = Term(
-            effect="asymmetric_friction",
-            labels=("viscous_neg_delta", "coulomb_neg_delta"),
-            key="asymmetric",
-            build=lambda s: np.column_stack((s.velocity * _negative(s), -_negative(s))),
-        )
-    return _extend(ctx.current.model, term)
+        return _extend(ctx.current.model, viscous)
+    # the Coulomb difference as a constant −ΔT_c/2 (= an offset): the same as −ΔT_c·1(ω<0)
+    # while moving, and a constant, like any torque, at standstill too; the offset is then
+    # the same model without the viscous difference (one parameter fewer)
+    coulomb = Term(effect="asymmetric_friction", labels=("coulomb_neg_delta",),
+                   key="asymmetric:constant", filtered=True,
+                   build=lambda s: np.full(len(s), -0.5))
+    return _extend(ctx.current.model, viscous, coulomb)
 
 
 def _gravity(ctx: Context) -> Model | None:
@@ -377,20 +386,38 @@ def search_shift(ctx: Context, model: Model) -> Model:
     Returns
     -------
     Model
-        ``model`` with the ``shift_s`` in ``[−1/fs, 1/fs]`` that minimises the training
-        RSS (a 9-point grid, refined by a bounded search).
+        ``model`` with the ``shift_s`` in ``[0, 1/fs]`` that minimises the training RSS
+        (a 9-point grid, refined by a bounded search): the drive samples the position
+        somewhere within the period over which it holds the effort.
     """
     period = 1.0 / ctx.signals.fs_hz
-    grid = np.linspace(-period, period, 9)
+    grid = np.linspace(0.0, period, 9)
     _, best = _search(ctx, lambda d: replace(model, shift_s=d), grid, log_scale=False)
     return best
 
 
+#: Effort/motion alignments (in sample periods) tried with a current-loop lag.
+LAG_SHIFTS = (0.0, 0.25, 0.5, 0.75, 1.0)
+
+
 def _current_lag(ctx: Context) -> Model | None:
+    """τ searched jointly with the effort's lead: at low frequency a first-order lag and a
+    delay look alike (a lag shifts the base model's best alignment by up to a sample),
+    at high frequency the lag's gain ``√(1 + (ωτ)²)`` tells them apart."""
     fs = ctx.signals.fs_hz
     grid = np.geomspace(0.5 / fs, min(0.05, 100.0 / fs), 20)
     model = ctx.current.model
-    _, best = _search(ctx, lambda t: replace(model, lag_s=t), grid)
+    best_rss, best = math.inf, model
+    for shift in LAG_SHIFTS:
+        shifted = replace(model, shift_s=shift / fs)
+
+        def with_lag(lag_s: float, base: Model = shifted) -> Model:
+            return replace(base, lag_s=lag_s)
+
+        _, proposal = _search(ctx, with_lag, grid)
+        rss = _train_rss(ctx, proposal)
+        if rss < best_rss:
+            best_rss, best = rss, proposal
     return best
 
 
@@ -431,9 +458,10 @@ def two_mass_term(antiresonance_hz: float, damping: float) -> Term:
 
 def _two_mass(ctx: Context) -> Model | None:
     top = TWO_MASS_BAND * ctx.signals.cutoff_hz
-    if top <= 2.0:
+    low = max(1.0, TWO_MASS_LOW * ctx.signals.cutoff_hz)
+    if top <= 2.0 * low:
         return None
-    grid = np.geomspace(1.0, top, 24)
+    grid = np.geomspace(low, top, 24)
     model = ctx.current.model
     costs = [
         (_train_rss(ctx, _extend(model, two_mass_term(float(f), d))), d)
@@ -495,13 +523,142 @@ def _harmonic(ctx: Context, effect: str) -> Model | None:
         weight_rows = weight_fn(signals)[rows]
     residual = signals.effort_filtered[rows] - designer.predict(ctx.current, signals)[rows]
     orders = order_range(signals.position[rows], ctx.counts_per_rev)
-    segment = Segment(residual=residual, position_rad=signals.position[rows], weight=weight_rows)
+    # weighted least squares for the order search: where the model misses most (a chirp,
+    # large torque at one angle) every order's column is a constant that soaks up the
+    # misfit and lifts the whole periodogram; each row counts by its block's misfit
+    scale = local_scale(residual, rows, signals.fs_hz)
+    segment = Segment(residual=residual / scale, position_rad=signals.position[rows],
+                      weight=(np.ones_like(residual) if weight_rows is None else weight_rows)
+                      / scale)
     found = matching_pursuit([segment], orders=orders, limits=ORDER_LIMITS,
                              independence=min(1.0, signals.independence * signals.decimation))
     if not found:
         return None
     key = f"{id(prediction_fit)}" if effect == "kt_ripple" else "1"
-    return _extend(ctx.current.model, harmonic_term(effect, tuple(found), weight, key))
+    refined = _refine_orders(ctx, effect, tuple(found), weight, key)
+    if not refined:
+        return None
+    return _extend(ctx.current.model, harmonic_term(effect, refined, weight, key))
+
+
+#: How far (in orders) the joint fit looks from each order the pursuit took.
+ORDER_REFINE_SPAN = 2
+
+
+def _refine_orders(ctx: Context, effect: str, found: tuple[int, ...],
+                   weight: Callable[[Signals], FloatArray] | None, key: str) -> tuple[int, ...]:
+    """The pursuit's orders checked in the joint fit.
+
+    The pursuit scores an order on the residual of the current model with the current
+    model's coefficients held. Over a travel shorter than a revolution neighbouring
+    orders differ little: once the other coefficients re-adjust (the K_t-ripple column is
+    a product with the base prediction) the best order can move by one, and one true order
+    can be taken as two neighbours (59 and 61 for 60). So each order is moved to the
+    neighbour (±:data:`ORDER_REFINE_SPAN`) with the least training RSS; then each order
+    whose removal (the others moved again) lowers the training BIC is dropped; finally an
+    order whose sine and cosine are not jointly significant (Wald, χ²(2) above the
+    pursuit's threshold) is dropped.
+    """
+    model = ctx.current.model
+    independent = min(1.0, ctx.signals.independence * ctx.signals.decimation)
+    n_eff = ctx.rows.size * independent
+    q, residual = ctx.basis()
+    projected: dict[int, FloatArray] = {}
+
+    def block(k: int) -> FloatArray:
+        """Order ``k``'s two columns on the training rows, the current design projected out."""
+        if k not in projected:
+            single = replace(model, terms=(harmonic_term(effect, (k,), weight, key),))
+            columns = ctx.designer.design(single, ctx.signals, ctx.rows)
+            projected[k] = columns - q @ (q.T @ columns)
+        return projected[k]
+
+    gram: dict[tuple[int, int], FloatArray] = {}
+    total = float(residual @ residual)
+
+    def cross(a: int, b: int) -> FloatArray:
+        if (a, b) not in gram:
+            gram[(a, b)] = block(a).T @ block(b)
+            gram[(b, a)] = gram[(a, b)].T
+        return gram[(a, b)]
+
+    def rss(orders: tuple[int, ...]) -> float:
+        """Training RSS with ``orders`` added (normal equations on the projected blocks)."""
+        normal = np.block([[cross(a, b) for b in orders] for a in orders])
+        right = np.concatenate([block(k).T @ residual for k in orders])
+        try:
+            coef = np.linalg.solve(normal, right)
+        except np.linalg.LinAlgError:
+            return total
+        return max(total - float(right @ coef), 0.0)
+
+    def bic(orders: tuple[int, ...], value: float) -> float:
+        return n_eff * math.log(max(value, 1e-300) / n_eff) + 3 * len(orders) * math.log(n_eff)
+
+    def moved(orders: tuple[int, ...]) -> tuple[tuple[int, ...], float]:
+        current = list(orders)
+        best_rss = rss(orders)
+        for index in range(len(current)):
+            for k in range(current[index] - ORDER_REFINE_SPAN,
+                           current[index] + ORDER_REFINE_SPAN + 1):
+                if k < 1 or k in current:
+                    continue
+                trial = (*current[:index], k, *current[index + 1 :])
+                value = rss(trial)
+                if value < best_rss:
+                    best_rss, current = value, list(trial)
+        return tuple(current), best_rss
+
+    orders, value = moved(found)
+    changed = True
+    while changed and len(orders) > 1:
+        changed = False
+        for index in reversed(range(len(orders))):  # weakest (taken last) first
+            trial, trial_rss = moved((*orders[:index], *orders[index + 1 :]))
+            if bic(trial, trial_rss) <= bic(orders, value):
+                orders, value, changed = trial, trial_rss, True
+                break
+    fit = ctx.designer.fit(_extend(model, harmonic_term(effect, orders, weight, key)),
+                           ctx.signals, ctx.rows)
+    prefix = "cog" if effect == "cogging" else "kt"
+    kept = []
+    for k in orders:
+        values, covariance = fit.block((f"{prefix}_sin{k}", f"{prefix}_cos{k}"))
+        try:
+            statistic = float(values @ np.linalg.solve(covariance, values))
+        except np.linalg.LinAlgError:
+            continue
+        if np.isfinite(statistic) and statistic >= ORDER_LIMITS.min_chi2:
+            kept.append(k)
+    return tuple(kept)
+
+
+#: Length of the blocks whose residual RMS weights the rows of the order search, s.
+SCALE_BLOCK_S = 0.25
+
+
+def local_scale(residual: FloatArray, rows: IndexArray, fs_hz: float) -> FloatArray:
+    """RMS of ``residual`` in the :data:`SCALE_BLOCK_S` block of each row.
+
+    Parameters
+    ----------
+    residual : ndarray
+        On ``rows``.
+    rows : ndarray of intp
+        Sample indices (their blocks are ``rows // (SCALE_BLOCK_S·fs_hz)``).
+    fs_hz : float
+
+    Returns
+    -------
+    ndarray
+        Per row, floored at a tenth of the overall RMS (1 when that is 0).
+    """
+    block = rows // max(1, round(SCALE_BLOCK_S * fs_hz))
+    _, index = np.unique(block, return_inverse=True)
+    count = np.bincount(index).astype(np.float64)
+    local = np.sqrt(np.bincount(index, weights=residual**2) / count)[index]
+    overall = float(np.sqrt(np.mean(residual**2)))
+    return np.asarray(np.maximum(local, 0.1 * overall if overall > 0 else 1.0), dtype=np.float64)
 
 
 _PROPOSERS: dict[str, Callable[[Context], Model | None]] = {

@@ -3,14 +3,15 @@
 Parameter names follow the report contract (``offset_nm``, ``coulomb_pos_nm``, ...). On a
 linear axis the same names hold linear units (``offset_nm`` in N, ``inertia_kg_m2`` in
 kg, ``viscous_nm_s_rad`` in N·s/m); :func:`units` gives the map the report carries.
-Uncertainties are standard deviations from ``σ²(ΦᵀΦ)⁻¹`` (delta method for derived
-values) and 99 % intervals ``value ± 2.576·std``.
+Uncertainties are standard deviations from the fit's covariance (the report passes the
+Newey–West one, :mod:`hil.diagnose.intervals`; delta method for derived values), with
+95 % intervals ``value ± k·std`` and 99 % intervals ``value ± 2.576·std``.
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
@@ -37,16 +38,20 @@ class FittedParameter:
 
     value: float
     std: float
+    coverage: float = 2.0
 
     def as_dict(self) -> dict[str, float | list[float] | None]:
-        """``value``, ``std`` and the 99 % interval ``ci99`` (``value ± 2.576·std``).
+        """``value``, ``std``, the 95 % interval ``ci95`` (``value ± coverage·std``) and the
+        99 % interval ``ci99`` (``value ± 2.576·std``).
 
-        ``std`` and ``ci99`` are ``None`` when ``std`` is not finite.
+        ``std``, ``ci95`` and ``ci99`` are ``None`` when ``std`` is not finite.
         """
         finite = math.isfinite(self.std)
+        k = self.coverage
         return {
             "value": self.value,
             "std": self.std if finite else None,
+            "ci95": [self.value - k * self.std, self.value + k * self.std] if finite else None,
             "ci99": [self.value - Z99 * self.std, self.value + Z99 * self.std] if finite else None,
         }
 
@@ -138,7 +143,8 @@ def _harmonics(fit: Fit, effect: str) -> list[dict[str, float]]:
     return rows
 
 
-def effect_parameters(effect: str, fit: Fit, *, lag_std_s: float = math.nan) -> dict[str, Any]:
+def effect_parameters(effect: str, fit: Fit, *, lag_std_s: float = math.nan,
+                      coverage: float = 2.0) -> dict[str, Any]:
     """Named parameters of ``effect`` in ``fit``: values and :class:`FittedParameter` s.
 
     Parameters
@@ -150,6 +156,8 @@ def effect_parameters(effect: str, fit: Fit, *, lag_std_s: float = math.nan) -> 
     lag_std_s : float
         Standard deviation of the current-loop time constant, s (used for
         ``current_lag``).
+    coverage : float
+        Coverage factor of the 95 % intervals.
 
     Returns
     -------
@@ -162,19 +170,22 @@ def effect_parameters(effect: str, fit: Fit, *, lag_std_s: float = math.nan) -> 
     Raises
     ------
     ValueError
-        ``fit`` lacks the effect's coefficients (``IndexError`` for ``cogging`` and
-        ``kt_ripple``).
+        ``fit`` lacks the effect's coefficients (a ``cogging`` or ``kt_ripple`` term
+        without orders gives amplitude 0 and order 0).
     """
     estimates: dict[str, FittedParameter] = {}
     extra: dict[str, Any] = {}
+    lag = FittedParameter(value=fit.model.lag_s, std=lag_std_s)
     values = fit.as_dict()
     if effect == "offset":
         estimates["offset_nm"] = _linear(fit, {"offset": 1.0})
     elif effect == "asymmetric_friction":
-        estimates["coulomb_pos_nm"] = _linear(fit, {"coulomb": 1.0})
-        if "coulomb_neg_delta" in values:
-            estimates["coulomb_neg_nm"] = _linear(fit, {"coulomb": 1.0, "coulomb_neg_delta": 1.0})
+        if "coulomb_neg_delta" in values:  # T_c·sgn ω − ΔT_c/2: |T_c±| = T_c ∓ ΔT_c/2
+            estimates["coulomb_pos_nm"] = _linear(fit, {"coulomb": 1.0,
+                                                        "coulomb_neg_delta": -0.5})
+            estimates["coulomb_neg_nm"] = _linear(fit, {"coulomb": 1.0, "coulomb_neg_delta": 0.5})
         else:  # not separable from the offset already in the model
+            estimates["coulomb_pos_nm"] = _linear(fit, {"coulomb": 1.0})
             estimates["coulomb_neg_nm"] = estimates["coulomb_pos_nm"]
             extra["note"] = "Coulomb asymmetry is not separable from the offset while moving"
         estimates["viscous_pos"] = _linear(fit, {"viscous": 1.0})
@@ -188,7 +199,8 @@ def effect_parameters(effect: str, fit: Fit, *, lag_std_s: float = math.nan) -> 
         rows = _harmonics(fit, effect)
         name = "amplitude_nm" if effect == "cogging" else "relative_amplitude"
         extra["periods_per_rev"] = rows[0]["order"] if rows else 0
-        estimates[name] = FittedParameter(value=rows[0]["amplitude"], std=rows[0]["amplitude_std"])
+        estimates[name] = (FittedParameter(value=rows[0]["amplitude"], std=rows[0]["amplitude_std"])
+                           if rows else FittedParameter(value=0.0, std=math.nan))
         extra["orders"] = [
             {"periods_per_rev": r["order"], name: r["amplitude"], "phase_rad": r["phase_rad"]}
             for r in rows
@@ -215,10 +227,11 @@ def effect_parameters(effect: str, fit: Fit, *, lag_std_s: float = math.nan) -> 
         else:
             extra["hysteresis_nm"] = 0.0
     elif effect == "current_lag":
-        estimates["time_constant_s"] = FittedParameter(value=fit.model.lag_s, std=lag_std_s)
+        estimates["time_constant_s"] = lag
     elif effect == "two_mass":
         extra.update(two_mass_parameters(fit))
         estimates["load_inertia_kg_m2"] = _linear(fit, {"load_inertia": 1.0})
+    estimates = {name: replace(e, coverage=coverage) for name, e in estimates.items()}
     parameters: dict[str, Any] = {name: e.value for name, e in estimates.items()}
     parameters.update({k: v for k, v in extra.items() if k != "note"})
     result: dict[str, Any] = {

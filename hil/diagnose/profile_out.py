@@ -60,8 +60,9 @@ def model_fields(fit: Fit) -> dict[str, Any]:
     if "asymmetric_friction" in effects:
         fields["viscous_neg_nm_s_rad"] = _positive(values["viscous"]
                                                    + values["viscous_neg_delta"])
-        fields["coulomb_neg_nm"] = _positive(values["coulomb"]
-                                             + values.get("coulomb_neg_delta", 0.0))
+        half = 0.5 * values.get("coulomb_neg_delta", 0.0)  # the model: T_c·sgn ω − 2·half
+        fields["coulomb_nm"] = _positive(values["coulomb"] - half)
+        fields["coulomb_neg_nm"] = _positive(values["coulomb"] + half)
     if "stribeck" in effects:
         term = fit.model.term("stribeck")
         fields["static_friction_nm"] = _positive(values["coulomb"] + values["stribeck_delta"])
@@ -112,7 +113,8 @@ def velocity_pi_gains(recording: Recording) -> tuple[float, float] | None:
     -------
     (float, float) or None
         ``kp``, ``ki`` by least squares; ``None`` without a velocity command, when they
-        explain less than 90 % of the effort's variance, or when ``kp ≤ 0`` or ``ki < 0``.
+        explain less than 90 % of the effort's variance (or the effort is constant), or
+        when ``kp ≤ 0`` or ``ki < 0``.
     """
     command = recording.velocity_cmd
     if command is None:
@@ -124,7 +126,10 @@ def velocity_pi_gains(recording: Recording) -> tuple[float, float] | None:
     effort = recording.effort
     coef, *_ = np.linalg.lstsq(matrix, effort, rcond=None)
     residual = effort - matrix @ coef
-    explained = 1.0 - float(residual @ residual) / float(np.sum((effort - effort.mean()) ** 2))
+    spread = float(np.sum((effort - effort.mean()) ** 2))
+    if spread == 0.0:  # a constant effort: nothing for the gains to explain
+        return None
+    explained = 1.0 - float(residual @ residual) / spread
     if explained < 0.9 or coef[0] <= 0 or coef[1] < 0:
         return None
     return float(coef[0]), float(coef[1])

@@ -7,7 +7,7 @@ import math
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from hil.diagnose import interpret
+from hil.diagnose import interpret, intervals, unexplained
 from hil.diagnose.model import Fit
 from hil.diagnose.profile_out import extended_firmware, extended_plant
 from hil.diagnose.select import DECISION_RULE, Candidate
@@ -58,9 +58,25 @@ def _gain(candidate: Candidate) -> dict[str, Any]:
     }
 
 
-def _cause(rank: int, candidate: Candidate) -> dict[str, Any]:
-    named = interpret.effect_parameters(candidate.effect, candidate.fit,
-                                        lag_std_s=candidate.lag_std_s)
+def _cause(rank: int, candidate: Candidate, diagnosis: Diagnosis) -> dict[str, Any]:
+    train = diagnosis.train
+    fit = intervals.robust_fit(diagnosis.designer, candidate.fit, train.signals, train.rows)
+    lag_std_s = candidate.lag_std_s
+    if candidate.effect == "current_lag":
+        lag_std_s = diagnosis.selection_lag_std(candidate.fit)
+    named = interpret.effect_parameters(candidate.effect, fit, lag_std_s=lag_std_s,
+                                        coverage=intervals.coverage(fit))
+    if candidate.effect == "stribeck":
+        profile = intervals.stribeck_profile(diagnosis.designer, candidate.fit, train.signals,
+                                             train.rows)
+        if profile is not None:
+            for name in ("static_torque_nm", "stribeck_velocity_rad_s"):
+                # the profile likelihood's interval: T_s and v_s trade off against each other
+                named["uncertainty"][name]["ci95"] = profile[name]
+                named["uncertainty"][name]["ci99"] = None
+            named["separable"] = profile["separable"]
+            if "excitation" in profile:
+                named["note"] = profile["excitation"]
     out: dict[str, Any] = {
         "rank": rank,
         "name": candidate.effect,
@@ -69,6 +85,8 @@ def _cause(rank: int, candidate: Candidate) -> dict[str, Any]:
         "gain": _gain(candidate),
         "model_parameters": model_parameters(candidate.fit, candidate.lag_std_s),
     }
+    if "separable" in named:
+        out["separable"] = named["separable"]
     if "note" in named:
         out["note"] = named["note"]
     return out
@@ -132,8 +150,9 @@ def report(diagnosis: Diagnosis) -> dict[str, Any]:
         },
         "data_issues": [issue.as_dict() for issue in diagnosis.issues],
         "decision_rule": DECISION_RULE,
-        "causes": [_cause(rank, c) for rank, c in enumerate(diagnosis.causes, start=1)],
+        "causes": [_cause(rank, c, diagnosis) for rank, c in enumerate(diagnosis.causes, start=1)],
         "candidates_by_round": rounds,
+        **final_structure(diagnosis),
         "extended_model": {
             "effects": diagnosis.cause_names,
             "metrics": final_metrics,
@@ -145,6 +164,35 @@ def report(diagnosis: Diagnosis) -> dict[str, Any]:
     result = _clean(data)
     assert isinstance(result, dict)
     return result
+
+
+def final_structure(diagnosis: Diagnosis) -> dict[str, Any]:
+    """Structure the final model leaves in the held-out residual.
+
+    Parameters
+    ----------
+    diagnosis : Diagnosis
+
+    Returns
+    -------
+    dict of str to Any
+        ``unexplained`` (bool) and ``unexplained_structure``: where it lies and the tests
+        (:func:`hil.diagnose.unexplained.judge`), with the Ljung–Box test of the same
+        residual (reported, not deciding).
+    """
+    from hil.diagnose.residual import residual_tests
+
+    signals, rows = diagnosis.heldout.signals, diagnosis.heldout.rows
+    measured, predicted = diagnosis.heldout_prediction(diagnosis.final)
+    residual = measured - predicted
+    judged = unexplained.judge(
+        position=signals.position[rows], velocity=signals.velocity[rows], residual=residual,
+        independence=min(1.0, signals.independence * signals.decimation),
+        rotary=signals.axis_kind == "rotary")
+    whiteness = residual_tests(residual, signals.velocity[rows], input_name="velocity")
+    judged["ljung_box"] = whiteness["ljung_box"]
+    judged["cross_correlation_independent"] = whiteness["cross_correlation"]["independent"]
+    return {"unexplained": judged.pop("unexplained"), "unexplained_structure": judged}
 
 
 def _clean(value: Any) -> Any:

@@ -23,6 +23,7 @@ from scipy import stats
 from scipy.signal import butter, sosfiltfilt
 
 from hil.errors import IdentificationError
+from hil.identify.kinematics import uniform_position
 from hil.recording import GAP_FACTOR, AxisKind, Recording, saturated_mask
 
 log = logging.getLogger(__name__)
@@ -32,8 +33,6 @@ BoolArray = NDArray[np.bool_]
 
 #: Default derivative bandwidth as a fraction of the sample rate.
 CUTOFF_FRACTION = 0.125
-#: The friction-switching velocity is smoothed this much more than the main velocity.
-SLOW_CUTOFF_RATIO = 8.0
 #: Relative spread of sample periods above which sampling counts as irregular.
 IRREGULAR_TOLERANCE = 0.01
 MIN_VALID_SAMPLES = 200
@@ -58,9 +57,6 @@ class Signals:
         Measured position (interpolated when resampled), rad or m.
     velocity, acceleration : ndarray
         Zero-phase derivatives of position (rad/s, rad/s² or m/s, m/s²).
-    velocity_slow : ndarray
-        Velocity smoothed further: the derivative of position low-passed at
-        ``cutoff_hz / 8``.
     effort : ndarray
         Measured torque (N·m) or force (N).
     effort_filtered : ndarray
@@ -92,7 +88,6 @@ class Signals:
     position: FloatArray
     velocity: FloatArray
     acceleration: FloatArray
-    velocity_slow: FloatArray
     effort: FloatArray
     effort_filtered: FloatArray
     velocity_reported: FloatArray
@@ -245,8 +240,11 @@ def prepare(recording: Recording, *, cutoff_hz: float | None = None) -> Signals:
     sat_raw = _saturation_mask(np.asarray(recording.effort, dtype=np.float64))
 
     if resampled:
-        count = math.floor((time_raw[-1] - time_raw[0]) / period_s) + 1
-        time_s = time_raw[0] + period_s * np.arange(count)
+        # position by the identification's spline rule (linear interpolation across a
+        # missed poll cuts the path's corner and biases J low); the other columns linearly
+        time_s, position = uniform_position(recording.position, time_s=time_raw,
+                                            step_s=period_s)
+        count = len(time_s)
 
         def on_grid(values: FloatArray) -> FloatArray:
             return np.asarray(np.interp(time_s, time_raw, values), dtype=np.float64)
@@ -265,22 +263,17 @@ def prepare(recording: Recording, *, cutoff_hz: float | None = None) -> Signals:
 
         in_gap = np.zeros(len(time_s), dtype=bool)
         saturated = sat_raw
+        position = on_grid(recording.position)
 
-    position = on_grid(recording.position)
     effort = on_grid(recording.effort)
     velocity_reported = on_grid(recording.velocity)
     segments = _segments(in_gap)
     smooth = zero_phase_lowpass(position, fs_hz=fs_hz, cutoff_hz=cutoff_hz, segments=segments)
-    slow = zero_phase_lowpass(
-        position, fs_hz=fs_hz, cutoff_hz=cutoff_hz / SLOW_CUTOFF_RATIO, segments=segments
-    )
     velocity = np.zeros_like(position)
     acceleration = np.zeros_like(position)
-    velocity_slow = np.zeros_like(position)
     for start, stop in segments:
         velocity[start:stop] = _first_derivative(smooth[start:stop], period_s)
         acceleration[start:stop] = _second_derivative(smooth[start:stop], period_s)
-        velocity_slow[start:stop] = _first_derivative(slow[start:stop], period_s)
 
     margin = max(3, math.ceil(2.0 * fs_hz / cutoff_hz))
     valid = ~in_gap & ~_dilate(saturated, 2)
@@ -302,7 +295,6 @@ def prepare(recording: Recording, *, cutoff_hz: float | None = None) -> Signals:
         position=position,
         velocity=velocity,
         acceleration=acceleration,
-        velocity_slow=velocity_slow,
         effort=effort,
         effort_filtered=zero_phase_lowpass(
             effort, fs_hz=fs_hz, cutoff_hz=cutoff_hz, segments=segments

@@ -54,28 +54,33 @@ def _open_field_drive(
     kind: str, *, profile: UnitProfile, unit_serial: str, station: Path | None, seed: int
 ) -> Iterator[Drive]:
     """The CANopen and Modbus kinds: a real drive from ``station``, or an emulator of
-    ``profile.plant`` started here (and stopped on leaving)."""
+    ``profile.plant`` started here (and stopped on leaving), reached with ``station``'s
+    settings when one is given (the built-in emulator station's otherwise)."""
     from hil.drives.station import CanOpenStation, ModbusStation, load_station
 
-    if kind in ("canopen", "modbus"):
-        if station is None:
-            raise ProfileError(f"--drive {kind} needs --station FILE (a station TOML)")
+    bus = kind.removesuffix("-emulator")
+    loaded = None
+    if station is not None:  # an emulator takes the file's settings, at its own endpoint
         loaded = load_station(station)
-        wanted = CanOpenStation if kind == "canopen" else ModbusStation
-        if not isinstance(loaded, wanted):
-            raise ProfileError(f"not a {kind} station file", source=str(station))
+        if not isinstance(loaded, CanOpenStation if bus == "canopen" else ModbusStation):
+            raise ProfileError(f"not a {bus} station file", source=str(station))
+    if kind in ("canopen", "modbus"):
+        if loaded is None:
+            raise ProfileError(f"--drive {kind} needs --station FILE (a station TOML)")
         with _backend(loaded, profile) as drive:
             yield drive
         return
     from hil.drives.emulated import canopen_emulator, modbus_emulator
 
     serial = int.from_bytes(unit_serial.encode()[-4:].rjust(4, b"\0"), "big")
-    if kind == "canopen-emulator":
-        with canopen_emulator(profile, seed=seed, serial=serial) as (_, emulated):  # noqa: SIM117
+    if isinstance(loaded, CanOpenStation) or (loaded is None and bus == "canopen"):
+        with canopen_emulator(profile, seed=seed, serial=serial,  # noqa: SIM117
+                              base_station=loaded) as (_, emulated):
             with _backend(emulated, profile) as drive:
                 yield drive
         return
-    with modbus_emulator(profile, seed=seed) as (_, emulated_modbus):  # noqa: SIM117
+    assert loaded is None or isinstance(loaded, ModbusStation)
+    with modbus_emulator(profile, seed=seed, base_station=loaded) as (_, emulated_modbus):  # noqa: SIM117
         with _backend(emulated_modbus, profile) as drive:
             yield drive
 

@@ -42,12 +42,14 @@ def canopen_emulator(
     serial: int = 1,
     faults: CanFaults | None = None,
     station_changes: dict[str, Any] | None = None,
+    base_station: CanOpenStation | None = None,
     **emulator_options: Any,
 ) -> Iterator[tuple[Any, CanOpenStation]]:
-    """A running CiA 402 emulator on a private virtual channel, and its station."""
+    """A running CiA 402 emulator on a private virtual channel, and its station (the
+    built-in emulator station's settings, or ``base_station``'s, on that channel)."""
     from hil.drives.cia402.emulator import Cia402Emulator
 
-    station = load_station(builtin_station(CANOPEN_STATION))
+    station = base_station or load_station(builtin_station(CANOPEN_STATION))
     assert isinstance(station, CanOpenStation)
     channel = f"gimbal-hil-{uuid.uuid4().hex[:12]}"
     station = dataclasses.replace(station, channel=channel, **(station_changes or {}))
@@ -77,12 +79,15 @@ def modbus_emulator(
     transport: str = "tcp",
     faults: ModbusFaults | None = None,
     station_changes: dict[str, Any] | None = None,
+    base_station: ModbusStation | None = None,
     **emulator_options: Any,
 ) -> Iterator[tuple[Any, ModbusStation]]:
-    """A running Modbus emulator on 127.0.0.1 (TCP, or RTU framing over ``socket://``)."""
+    """A running Modbus emulator on 127.0.0.1 (TCP, or RTU framing over ``socket://``),
+    and its station (the built-in emulator station's settings, or ``base_station``'s,
+    at the emulator's port)."""
     from hil.drives.modbus.emulator import ModbusEmulator
 
-    station = load_station(builtin_station(MODBUS_STATION))
+    station = base_station or load_station(builtin_station(MODBUS_STATION))
     assert isinstance(station, ModbusStation)
     emulator = ModbusEmulator(
         _plant(profile, "modbus-emulator"),

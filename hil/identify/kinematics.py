@@ -49,8 +49,35 @@ def phase_free_derivatives(
         velocity = savgol_filter(position, window, 5, deriv=1, delta=step)
         acceleration = savgol_filter(position, window, 5, deriv=2, delta=step)
         return np.asarray(velocity, dtype=np.float64), np.asarray(acceleration, dtype=np.float64)
-    grid = time_s[0] + step * np.arange(int((time_s[-1] - time_s[0]) / step) + 1)
-    uniform = CubicSpline(time_s, position)(grid)
+    grid, uniform = uniform_position(position, time_s=time_s, step_s=step)
     velocity = savgol_filter(uniform, window, 5, deriv=1, delta=step)
     acceleration = savgol_filter(uniform, window, 5, deriv=2, delta=step)
     return np.interp(time_s, grid, velocity), np.interp(time_s, grid, acceleration)
+
+
+def uniform_position(
+    position: FloatArray, *, time_s: FloatArray, step_s: float
+) -> tuple[FloatArray, FloatArray]:
+    """Position on a uniform grid from irregular samples, by a cubic spline.
+
+    The one resampling rule of identification and diagnosis: linear interpolation across
+    a missed poll cuts the corner of the path (and biased J low, see
+    :func:`phase_free_derivatives`); a cubic spline follows it.
+
+    Parameters
+    ----------
+    position : array
+        Encoder position (rad, or m on a linear axis) at ``time_s``.
+    time_s : array
+        Strictly increasing sample times (s).
+    step_s : float
+        The grid's period (s), usually the median sample step.
+
+    Returns
+    -------
+    grid_s, position_on_grid : array
+        ``time_s[0] + step_s·i`` for ``i = 0 … ⌊(time_s[−1] − time_s[0]) / step_s⌋``, and
+        the spline there.
+    """
+    grid = time_s[0] + step_s * np.arange(int((time_s[-1] - time_s[0]) / step_s) + 1)
+    return grid, np.asarray(CubicSpline(time_s, position)(grid), dtype=np.float64)

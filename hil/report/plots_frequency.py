@@ -27,18 +27,7 @@ MAP_BINS = 120
 
 
 def current_loop(data: ProtocolData) -> Figure | None:
-    """The lag phase at each frequency (± 2u) and the sampled-data model with the fitted τ.
-
-    Parameters
-    ----------
-    data : ProtocolData
-        The protocol's details, judged results and raw recordings.
-
-    Returns
-    -------
-    Figure or None
-        ``None`` when the run kept too little to draw.
-    """
+    """The lag phase at each frequency (± 2u) and the sampled-data model with the fitted τ."""
     points = data.details.get("points") or []
     tau_ms = data.value("current_loop_time_constant_ms")
     sines = data.recording("sines")
@@ -75,18 +64,7 @@ def current_loop(data: ProtocolData) -> Figure | None:
 
 
 def resonance(data: ProtocolData) -> Figure | None:
-    """Bode plot of the measured FRF (± 2u) and the fitted two-mass model.
-
-    Parameters
-    ----------
-    data : ProtocolData
-        The protocol's details, judged results and raw recordings.
-
-    Returns
-    -------
-    Figure or None
-        ``None`` when the run kept too little to draw.
-    """
+    """Bode plot of the measured FRF (± 2u) and the fitted two-mass model."""
     frf = data.details.get("frf") or []
     f_r, f_a = data.value("resonance_frequency_hz"), data.value("antiresonance_frequency_hz")
     zeta_r = data.value("resonance_damping_ratio")
@@ -131,18 +109,7 @@ def resonance(data: ProtocolData) -> Figure | None:
 def cogging(data: ProtocolData) -> Figure | None:
     """The order spectrum of the detrended torque of both passes, orders found marked, and
     the map: the residual against the position within one period of the orders found, with
-    the compensation table's cogging + K_t ripple at each pass's torque level.
-
-    Parameters
-    ----------
-    data : ProtocolData
-        The protocol's details, judged results and raw recordings.
-
-    Returns
-    -------
-    Figure or None
-        ``None`` when the run kept too little to draw.
-    """
+    the compensation table's cogging + K_t ripple at each pass's torque level."""
     passes = data.recording("passes")
     orders = [int(o) for o in data.details.get("orders") or []]
     if passes is None or not orders:

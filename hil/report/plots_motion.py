@@ -22,18 +22,7 @@ SINE_NAME = re.compile(r"sine_(?P<hz>[0-9.]+)hz")
 
 def inertia_friction(data: ProtocolData) -> Figure | None:
     """Measured torque against the fitted ``J·α + B·ω + T_c·sgn ω`` over the last two
-    periods of each amplitude, and the friction the fit leaves, ``τ − J·α``, against ω.
-
-    Parameters
-    ----------
-    data : ProtocolData
-        The protocol's details, judged results and raw recordings.
-
-    Returns
-    -------
-    Figure or None
-        ``None`` when the run kept too little to draw.
-    """
+    periods of each amplitude, and the friction the fit leaves, ``τ − J·α``, against ω."""
     j, b, tc = (data.value(p) for p in ("inertia_kg_m2", "viscous_nm_s_rad", "coulomb_nm"))
     runs = data.recordings_named("sine_")
     if j is None or b is None or tc is None or not runs:
@@ -77,18 +66,7 @@ def inertia_friction(data: ProtocolData) -> Figure | None:
 
 
 def stribeck(data: ProtocolData) -> Figure | None:
-    """The staircase's speed points (± 2u; stick-slip speeds marked) and the fitted curve.
-
-    Parameters
-    ----------
-    data : ProtocolData
-        The protocol's details, judged results and raw recordings.
-
-    Returns
-    -------
-    Figure or None
-        ``None`` when the run kept too little to draw.
-    """
+    """The staircase's speed points (± 2u; stick-slip speeds marked) and the fitted curve."""
     points = data.details.get("points") or []
     static, vs = data.value("static_friction_nm"), data.value("stribeck_velocity_rad_s")
     coulomb, viscous = data.number("coulomb_nm"), data.number("viscous_nm_s_rad")
@@ -120,18 +98,7 @@ def stribeck(data: ProtocolData) -> Figure | None:
 
 def gravity_cable(data: ProtocolData) -> Figure | None:
     """The raw two-way sweep (torque against position: the hysteresis loop) with the load
-    model ± the loop's half width, and the load per position bin with its fit.
-
-    Parameters
-    ----------
-    data : ProtocolData
-        The protocol's details, judged results and raw recordings.
-
-    Returns
-    -------
-    Figure or None
-        ``None`` when the run kept too little to draw.
-    """
+    model ± the loop's half width, and the load per position bin with its fit."""
     sweep = data.recording("sweep")
     if sweep is None or "load_nm_by_elevation_rad" not in data.details:
         return None
@@ -174,18 +141,7 @@ def gravity_cable(data: ProtocolData) -> Figure | None:
 
 
 def inertia_elevation(data: ProtocolData) -> Figure | None:
-    """J at each elevation (± 2u) and ``J(el) = J_zenith + ΔJ·cos²(el)``.
-
-    Parameters
-    ----------
-    data : ProtocolData
-        The protocol's details, judged results and raw recordings.
-
-    Returns
-    -------
-    Figure or None
-        ``None`` when the run kept too little to draw.
-    """
+    """J at each elevation (± 2u) and ``J(el) = J_zenith + ΔJ·cos²(el)``."""
     per = data.details.get("per_elevation") or []
     level, zenith = data.value("azimuth_inertia_level_kg_m2"), data.value(
         "azimuth_inertia_zenith_kg_m2")
@@ -207,18 +163,7 @@ def inertia_elevation(data: ProtocolData) -> Figure | None:
 
 def torque_constant(data: ProtocolData) -> Figure | None:
     """Shaft torque against current at each locked angle with its line, and what the line
-    leaves (the linearity).
-
-    Parameters
-    ----------
-    data : ProtocolData
-        The protocol's details, judged results and raw recordings.
-
-    Returns
-    -------
-    Figure or None
-        ``None`` when the run kept too little to draw.
-    """
+    leaves (the linearity)."""
     per_angle = data.details.get("per_angle") or []
     sweeps = data.recordings_named("locked_sweep")
     kt = data.value("torque_constant_nm_a")

@@ -24,7 +24,7 @@ log = logging.getLogger(__name__)
 
 ENV_VAR = "GIMBAL_HIL_STORE"
 SQLITE_NAME = "results.sqlite"
-HEAD_REVISION = "0002"  # the newest migration in migrations/versions (a test checks it)
+HEAD_REVISION = "0003"  # the newest migration in migrations/versions (a test checks it)
 SQLITE_BUSY_TIMEOUT_MS = 30_000  # a writer waits this long for another station's ingest
 CONNECT_TIMEOUT_S = 5
 MIGRATIONS = Path(__file__).resolve().parent / "migrations"
@@ -79,13 +79,16 @@ def resolve_store_url(
     str
         A SQLAlchemy URL (``postgresql://`` becomes ``postgresql+psycopg://``).
     """
-    chosen = option or os.environ.get(ENV_VAR) or station_store
+    sources = (("--store", option), (f"${ENV_VAR}", os.environ.get(ENV_VAR)),
+               ("the station file's [station] store", station_store))
+    origin, chosen = next(((o, c) for o, c in sources if c), ("", None))
     if not chosen:
         return f"sqlite:///{(out_dir / SQLITE_NAME).resolve()}"
     if "://" not in chosen:
         return f"sqlite:///{Path(chosen).resolve()}"
     if chosen.startswith(("postgresql://", "postgres://")):
-        return "postgresql+psycopg://" + chosen.split("://", 1)[1]
+        chosen = "postgresql+psycopg://" + chosen.split("://", 1)[1]
+    parse_store_url(chosen, source=origin)  # a bad URL is named by where it came from
     return chosen
 
 
@@ -152,8 +155,9 @@ def _revision(engine: Engine) -> str | None:
     return None if row is None else str(row[0])
 
 
-def parse_store_url(url: str) -> URL:
-    """``url`` checked: SQLite or PostgreSQL (through psycopg 3).
+def parse_store_url(url: str, *, source: str = "--store") -> URL:
+    """``url`` checked: SQLite or PostgreSQL (through psycopg 3); ``source`` names where it
+    came from in an error.
 
     Raises
     ------
@@ -163,11 +167,11 @@ def parse_store_url(url: str) -> URL:
     try:
         parsed = make_url(url)
     except ArgumentError:
-        raise InputError(f"not a database URL: {url!r}", source="--store") from None
+        raise InputError(f"not a database URL: {url!r}", source=source) from None
     if parsed.get_backend_name() not in ("sqlite", "postgresql"):
         raise InputError(
             f"store must be sqlite:///FILE or postgresql://…, got {parsed.drivername!r}",
-            source="--store",
+            source=source,
         )
     if parsed.get_backend_name() == "postgresql" and parsed.get_driver_name() != "psycopg":
         parsed = parsed.set(drivername="postgresql+psycopg")

@@ -52,6 +52,7 @@ runs = Table(
     Column("ingested_at", DateTime(timezone=True), nullable=False),
     Index("ix_runs_serial_started", "serial", "started_at"),
     Index("ix_runs_started", "started_at"),
+    Index("ix_runs_station_started", "station", "started_at"),
 )
 
 protocol_outcomes = Table(

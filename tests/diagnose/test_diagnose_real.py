@@ -10,7 +10,7 @@ from typing import Any
 import pytest
 
 from hil.diagnose.core import diagnose
-from hil.diagnose.report import report
+from hil.diagnose.report import model_parameters, report
 from hil.recording import read_recording
 
 REAL = Path(__file__).resolve().parents[3] / "shared" / "real-data"
@@ -25,22 +25,42 @@ PUBLISHED = {"inertia_kg_m2": 95.1089, "viscous_nm_s_rad": 203.5034, "coulomb_nm
 
 @cache
 def _emps() -> dict[str, Any]:
-    return report(diagnose(read_recording(EMPS_TRAIN), validate=read_recording(EMPS_PULSES)))
+    diagnosis = diagnose(read_recording(EMPS_TRAIN), validate=read_recording(EMPS_PULSES))
+    data = report(diagnosis)
+    offset = next(c for c in diagnosis.selection.rounds[0] if c.effect == "offset")
+    data["offset_alone"] = model_parameters(offset.fit)
+    return data
 
 
 @pytest.mark.skipif(not EMPS_PULSES.is_file(), reason="EMPS data not present")
-def test_emps_names_offset_and_reproduces_published_model() -> None:
+def test_emps_offset_alone_reproduces_published_model() -> None:
+    """The published symmetric model with its offset: the offset is the first candidate."""
     data = _emps()
     assert data["axis_kind"] == "linear"
     assert data["units"]["effort (every *_nm)"] == "N"
-    names = [cause["name"] for cause in data["causes"]]
-    assert "offset" in names
-    offset = next(cause for cause in data["causes"] if cause["name"] == "offset")
-    model = offset["model_parameters"]
-    if names[0] != "offset":  # the base model extended with the offset alone
-        pytest.fail(f"offset should be the first cause, got {names}")
+    offset = next(c for c in data["candidates_by_round"][0] if c["name"] == "offset")
+    assert offset["gain"]["significant"]
+    model = data["offset_alone"]
     for name, published in PUBLISHED.items():
         assert math.isclose(model[name], published, rel_tol=0.02), (name, model[name])
+
+
+@pytest.mark.skipif(not EMPS_PULSES.is_file(), reason="EMPS data not present")
+def test_emps_asymmetric_friction_holds_the_offset() -> None:
+    """Held out, the asymmetric friction explains what the offset did and more: its Coulomb
+    difference is the offset (a constant while moving), and the offset adds nothing."""
+    data = _emps()
+    names = [cause["name"] for cause in data["causes"]]
+    assert names == ["asymmetric_friction"], names
+    cause = data["causes"][0]
+    parameters = cause["parameters"]
+    # the published asymmetric fit: Fv+ 166.7, Fv- 240.4 N s/m
+    assert math.isclose(parameters["viscous_pos"], 166.7, rel_tol=0.05)
+    assert math.isclose(parameters["viscous_neg"], 240.4, rel_tol=0.05)
+    for name in ("coulomb_pos_nm", "coulomb_neg_nm", "viscous_pos", "viscous_neg"):
+        low, high = cause["uncertainty"][name]["ci95"]
+        assert low < parameters[name] < high
+    assert parameters["coulomb_neg_nm"] > parameters["coulomb_pos_nm"]
 
 
 @pytest.mark.skipif(not EMPS_PULSES.is_file(), reason="EMPS data not present")

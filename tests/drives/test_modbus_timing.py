@@ -301,3 +301,45 @@ def test_instantaneous_torque_on_request(profile: UnitProfile) -> None:
     assert recording.metadata["torque_sample"] == "instantaneous"
     assert "torque_mean_period_s" not in recording.metadata
     assert "torque_mean_window_s" not in recording.columns
+
+
+def test_a_master_behind_its_setpoint_lead_is_refused_in_one_line() -> None:
+    """A run whose setpoint held (writes later than the drive's ramp lasted) for more than
+    1 % of it is not the planned excitation: a communication error naming the lead, the
+    hold and the station file; a hold within the allowance passes."""
+    from hil.drives.modbus.acquire import PolledRun, setpoint_holds
+
+    station = ModbusStation(transport="tcp", register_map_path=REGMAP, source="bench.toml")
+    excitation = sine(1.0, fs_hz=100.0, periods=10)  # 5 s
+    assert setpoint_holds(excitation, PolledRun(setpoint_held_s=0.04), station, "drive") is None
+    error = setpoint_holds(excitation, PolledRun(setpoint_held_s=0.06, longest_pause_s=0.07),
+                           station, "drive")
+    assert error is not None
+    message = str(error)
+    assert "\n" not in message
+    assert "held for 60 ms of 5 s" in message
+    assert "lead (3 periods)" in message
+    assert "setpoint_lead_periods in bench.toml" in message
+
+
+def test_an_emulator_takes_the_station_files_settings(tmp_path: Path,
+                                                      profile: UnitProfile) -> None:
+    """``--drive modbus-emulator --station FILE``: the file's settings at the emulator's
+    endpoint (they were ignored: the built-in station was used whatever the file said); a
+    CANopen file for a Modbus emulator is refused."""
+    from hil.drives.connect import open_drive
+
+    text = builtin_station("station_modbus_emulator.toml").read_text(encoding="utf-8")
+    path = tmp_path / "station.toml"
+    path.write_text(text.replace("setpoint_lead_periods = 3 ", "setpoint_lead_periods = 5 ")
+                    .replace('register_map = "', f'register_map = "{REGMAP.parent}/'),
+                    encoding="utf-8")
+    with open_drive("modbus-emulator", profile=profile, unit_serial="S", station=path) as drive:
+        assert isinstance(drive, ModbusDrive)
+        assert drive.link.station.setpoint_lead_periods == 5  # the built-in file says 3
+    with (
+        pytest.raises(ProfileError, match="not a modbus station file"),
+        open_drive("modbus-emulator", profile=profile, unit_serial="S",
+                   station=builtin_station("station_canopen_emulator.toml")),
+    ):
+        pass

@@ -1,5 +1,5 @@
-"""Plain dataclasses with the attributes the fleet functions read (what the results store's
-``StoredResult`` and run rows carry), and a synthetic fleet with a drift."""
+"""Results as the store returns them (``StoredResult``), a plain run row with the attributes
+the fleet functions read, and a synthetic fleet with a drift."""
 
 from __future__ import annotations
 
@@ -8,23 +8,7 @@ from datetime import UTC, datetime, timedelta
 
 import numpy as np
 
-
-@dataclass(frozen=True)
-class Point:
-    run_id: str
-    certificate_id: str
-    serial: str
-    station: str
-    started_at: datetime
-    value: float
-    standard_uncertainty: float
-    expanded_uncertainty: float
-    unit: str
-    nominal: float | None
-    lower_limit: float | None
-    upper_limit: float | None
-    outcome: str
-    is_reference: bool
+from hil.store.query import StoredResult as Point
 
 
 @dataclass(frozen=True)

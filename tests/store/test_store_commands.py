@@ -92,3 +92,12 @@ def test_bad_input_is_one_line_and_exit_2(
     assert out == ""
     assert len(err.strip().splitlines()) == 1
     assert message in err
+
+
+def test_a_bad_store_from_the_environment_is_blamed_on_it(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    monkeypatch.setenv("GIMBAL_HIL_STORE", "mysql://db/x")
+    code, out, err = _run(capsys, "units", "--out", str(tmp_path))
+    assert (code, out) == (2, "")
+    assert "error: $GIMBAL_HIL_STORE: store must be sqlite:///FILE or" in err, err

@@ -1,7 +1,11 @@
 """Acquisition over Modbus: the feedback block, the polled run and its recording.
 
-Sample ``k`` of a run: the command sample ``k`` is written at ``k/fs`` and the feedback
-block read half a period later (away from the loop's response to the new setpoint). Timing:
+Sample ``k`` of a run: a setpoint is written at ``k/fs`` and the feedback block read half a
+period later (away from the loop's response to the new setpoint). A drive that interpolates
+its setpoint (``setpoint_interpolation_time``) is sent the command ``lead`` periods ahead
+(``setpoint_lead_periods``) and ramps to it over them (each write restarting the ramp: a
+first-order approach to the command, no delay at low frequency), so a host that is late by
+less than the lead leaves no hold in it; a drive that steps is sent command sample ``k``. Timing:
 with a ``timestamp`` register (the drive's free-running clock, latched with the feedback
 and read in the same request) ``time_s`` is that clock, unwrapped; otherwise the host's
 monotonic clock at the middle of the read, which carries the link's jitter. It uses the
@@ -26,6 +30,7 @@ from hil.drives.modbus.regmap import (
     TORQUE_OFFSET,
     RegisterMap,
 )
+from hil.drives.station import ModbusStation
 from hil.errors import (
     DriveCommunicationError,
     DriveError,
@@ -37,6 +42,7 @@ from hil.motion import COMMAND_COLUMN, Excitation
 from hil.recording import Recording
 
 MIN_RATE_FRACTION = 0.7  # of the requested sample rate a run must achieve
+MAX_HELD_FRACTION = 0.01  # of a run the drive's setpoint may hold (a late master)
 WATCHDOG_FAULT = 0x8130  # CiA-style life guard / heartbeat error: the drive lost its master
 
 
@@ -93,16 +99,19 @@ class Feedback:
 
 @dataclass(slots=True)
 class PolledRun:
-    """What one run collected so far: ``(host time, command, feedback values)`` rows and the
-    longest pause between two feedback reads."""
+    """What one run collected so far: ``(host time, command, feedback values)`` rows, the
+    longest pause between two feedback reads, and how long the setpoint held because a
+    write came later than the drive's ramp lasted."""
 
     rows: list[tuple[float, float, dict[str, float]]] = field(default_factory=list)
     longest_pause_s: float = 0.0
+    setpoint_held_s: float = 0.0  # time the drive's ramp had ended before the next write
 
 
 def poll(excitation: Excitation, run: PolledRun, feedback: Feedback) -> None:
-    """Write each command sample at its time and read the feedback half a period later,
-    appending ``(host time, command, values)`` rows to ``run`` (kept when this raises).
+    """Write the setpoint each sample period (see the module's docstring) and read the
+    feedback half a period later, appending ``(host time, command sample due, values)`` rows
+    to ``run`` (kept when this raises).
 
     Raises
     ------
@@ -117,9 +126,13 @@ def poll(excitation: Excitation, run: PolledRun, feedback: Feedback) -> None:
     offset = excitation.torque_offset_nm
     name = f"{excitation.mode.value}_cmd"
     fs, n = excitation.fs_hz, len(command)
+    lead = feedback.link.station.setpoint_lead_periods
+    ahead = SETPOINT_INTERPOLATION in feedback.link.map.registers
+    samples = np.arange(n, dtype=np.float64)
     last_index = -1
     t0 = time.monotonic()
-    run.longest_pause_s = 0.0
+    written = t0
+    run.longest_pause_s = run.setpoint_held_s = 0.0
     previous = t0
     while True:
         index = int((time.monotonic() - t0) * fs)
@@ -127,8 +140,15 @@ def poll(excitation: Excitation, run: PolledRun, feedback: Feedback) -> None:
             if offset is not None:
                 feedback.link.write_value(TORQUE_OFFSET, 0.0)
             return
-        if index != last_index:
+        if ahead:
+            now = time.monotonic()
+            run.setpoint_held_s += max(0.0, now - written - lead / fs)
+            written = now
+            due = (now - t0) * fs + lead
+            feedback.link.write_value(name, float(np.interp(due, samples, command)))
+        elif index != last_index:
             feedback.link.write_value(name, float(command[index]))
+        if index != last_index:
             if offset is not None:
                 feedback.link.write_value(TORQUE_OFFSET, float(offset[index]))
             last_index = index
@@ -181,8 +201,26 @@ def rate_shortfall(excitation: Excitation, run: PolledRun, link: ModbusLink) -> 
     )
 
 
+def setpoint_holds(
+    excitation: Excitation, run: PolledRun, station: ModbusStation, where: str
+) -> DriveError | None:
+    """The master fell behind the setpoint lead so often that the drive's setpoint held
+    for more than ``MAX_HELD_FRACTION`` of the run: a jerk within rows the polled samples
+    cannot resolve (J read up to 5 % low), so the recording is not the planned excitation."""
+    if run.setpoint_held_s <= MAX_HELD_FRACTION * excitation.duration_s:
+        return None
+    lead = station.setpoint_lead_periods
+    return DriveCommunicationError(
+        f"{where}: '{excitation.name}': the host fell behind the setpoint lead "
+        f"({lead} period{'s' if lead > 1 else ''}) and the drive's setpoint held for "
+        f"{1000 * run.setpoint_held_s:.0f} ms of {excitation.duration_s:g} s (longest pause "
+        f"{run.longest_pause_s:.3f} s): the recording is not the planned excitation; raise "
+        f"setpoint_lead_periods in {station.source} or unload the machine"
+    )
+
+
 def set_interpolation(link: ModbusLink, period_s: float) -> None:
-    """Let the drive ramp over one sample period to each new setpoint (if it can)."""
+    """Let the drive ramp to each new setpoint over ``period_s`` (if it can)."""
     if SETPOINT_INTERPOLATION not in link.map.registers:
         return
     register = link.map[SETPOINT_INTERPOLATION]
@@ -217,7 +255,11 @@ def to_recording(
         time_s = host_s
         acquisition = "polled; time_s = host clock at mid-read (irregular, link jitter)"
     if SETPOINT_INTERPOLATION in feedback.link.map.registers:
-        acquisition += f"; setpoint interpolated over {1.0 / excitation.fs_hz:g} s"
+        lead = feedback.link.station.setpoint_lead_periods
+        acquisition += (
+            f"; setpoint interpolated by the drive over {lead / excitation.fs_hz:g} s to the "
+            f"command {lead} sample period{'s' if lead > 1 else ''} ahead"
+        )
     else:
         acquisition += "; setpoint stepped at each write"
     mean = feedback.torque_sample == "mean"
@@ -265,6 +307,7 @@ def to_recording(
         "requested_rate_hz": f"{excitation.fs_hz:g}",
         "longest_gap_s": f"{float(np.max(np.diff(time_s), initial=0.0)):.4f}",
         "duplicate_reads_dropped": str(duplicates),
+        "setpoint_held_s": f"{run.setpoint_held_s:.4f}",
         # row k: the drive's state latched at one control period (position measured at
         # its start, torque commanded over it, or with "mean" the mean of the torque
         # commanded per control period over the row's window ending with that period),

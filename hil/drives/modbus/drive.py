@@ -32,6 +32,7 @@ from hil.drives.modbus.acquire import (
     poll,
     rate_shortfall,
     set_interpolation,
+    setpoint_holds,
     to_recording,
 )
 from hil.drives.modbus.link import ModbusLink
@@ -218,7 +219,7 @@ class ModbusDrive(Drive):
                                   f"register map has no '{TORQUE_OFFSET}' register")
         if excitation.mode is not states.mode:
             states.select(excitation.mode)
-        set_interpolation(self.link, 1.0 / excitation.fs_hz)
+        set_interpolation(self.link, self.link.station.setpoint_lead_periods / excitation.fs_hz)
         run = PolledRun()
         error: DriveError | None = None
         try:
@@ -230,7 +231,8 @@ class ModbusDrive(Drive):
             raise
         recording = to_recording(excitation, run, self.feedback, self._info)
         if error is None:
-            error = rate_shortfall(excitation, run, self.link)
+            error = rate_shortfall(excitation, run, self.link) or setpoint_holds(
+                excitation, run, self.link.station, self.link.where)
             if error is not None:
                 states.hold(excitation.mode)
         if error is not None:

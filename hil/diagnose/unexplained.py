@@ -1,0 +1,198 @@
+"""Is anything left? The final model's held-out residual judged for structure.
+
+After the named causes, the held-out residual of the final model is tested for structure
+that a model of the axis could still explain: a mean that depends on the position or on
+the velocity, or friction-like torque (the residual times the direction of travel) that
+depends on the position. The residual is binned (:data:`BINS` equal-width bins of position, or of
+velocity); a one-way analysis of variance compares the spread of the bin means with the
+spread inside the bins, on the effective sample count (the residual is low-passed, so
+only ``2·f_c/f_s`` of the samples are independent). Structure is *unexplained* when it is
+significant (F-test p below :data:`ALPHA`) and material: the bin means carry at least
+:data:`MIN_SHARE` of the residual's variance. Whiteness (Ljung–Box) and the
+cross-correlation with the input are reported beside it but do not decide: a model of a
+real axis never leaves a white residual (sensor and loop dynamics), and a residual that is
+coloured but unrelated to position and velocity holds no effect a model could name.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy.special import fdtrc
+
+FloatArray = NDArray[np.float64]
+
+BINS = 40
+#: Significance of the structure tests (F-test; Bonferroni over the three).
+ALPHA = 0.001
+#: Least share of the residual variance the bin means must carry to count as structure.
+MIN_SHARE = 0.10
+#: Bins with fewer held-out rows than this are left out of the test.
+MIN_BIN_ROWS = 10
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class Structure:
+    """The residual's dependence on one variable.
+
+    Attributes
+    ----------
+    variable : {"position", "velocity"}
+    share : float
+        Variance of the bin means (weighted by rows) over the residual's variance.
+    p_value : float
+        Of the F-test that all bin means are equal.
+    peak : float
+        Centre of the bin whose mean is largest in magnitude (rad, m, rad/s or m/s).
+    peak_mean_nm : float
+        That bin's mean residual (N·m, or N on a linear axis).
+    directions : str
+        Where the peak bin's residual lies: ``"both directions"``, ``"moving
+        positive"`` or ``"moving negative"``.
+    """
+
+    variable: str
+    share: float
+    p_value: float
+    peak: float
+    peak_mean_nm: float
+    directions: str
+
+    @property
+    def found(self) -> bool:
+        """Significant at :data:`ALPHA` / 3 and at least :data:`MIN_SHARE` of the variance."""
+        return self.p_value < ALPHA / 3 and self.share >= MIN_SHARE
+
+
+def structure(variable: str, x: FloatArray, residual: FloatArray, direction: FloatArray,
+              independence: float) -> Structure:
+    """One-way ANOVA of ``residual`` over equal-width bins of ``x``.
+
+    Parameters
+    ----------
+    variable : str
+        Names ``x`` in the result.
+    x, residual, direction : ndarray
+        Same length: the binning variable, the residual, and the direction of travel
+        (−1, 0, 1) of each row.
+    independence : float
+        Fraction of the rows that are statistically independent (scales both degrees of
+        freedom' sample count).
+
+    Returns
+    -------
+    Structure
+    """
+    edges = np.linspace(float(np.min(x)), float(np.max(x)), BINS + 1)
+    index = np.clip(np.digitize(x, edges) - 1, 0, BINS - 1)
+    count = np.bincount(index, minlength=BINS).astype(np.float64)
+    keep_bin = count >= MIN_BIN_ROWS
+    rows = keep_bin[index]
+    index, values, sense = index[rows], residual[rows], direction[rows]
+    count = np.bincount(index, minlength=BINS).astype(np.float64)
+    total = float(np.sum(values**2)) - values.size * float(np.mean(values)) ** 2 \
+        if values.size else 0.0
+    used = count > 0
+    groups = int(np.count_nonzero(used))
+    if groups < 2 or total <= 0.0:
+        return Structure(variable=variable, share=0.0, p_value=1.0, peak=math.nan,
+                         peak_mean_nm=0.0, directions="")
+    sums = np.bincount(index, weights=values, minlength=BINS)
+    means = np.where(used, sums / np.maximum(count, 1.0), 0.0)
+    grand = float(np.mean(values))
+    between = float(np.sum(count[used] * (means[used] - grand) ** 2))
+    within = max(total - between, 1e-300)
+    n_eff = max(values.size * independence, groups + 1.0)
+    dof_between, dof_within = groups - 1.0, n_eff - groups
+    f_statistic = (between / dof_between) / (within * n_eff / values.size / dof_within)
+    p_value = float(fdtrc(dof_between, dof_within, f_statistic))
+    peak_bin = int(np.argmax(np.where(used, np.abs(means), -1.0)))
+    centre = 0.5 * (edges[peak_bin] + edges[peak_bin + 1])
+    in_peak = index == peak_bin
+    return Structure(variable=variable, share=between / total, p_value=p_value, peak=centre,
+                     peak_mean_nm=float(means[peak_bin]),
+                     directions=_directions(values[in_peak], sense[in_peak]))
+
+
+def _directions(values: FloatArray, sense: FloatArray) -> str:
+    """Which directions of travel carry the residual of one bin."""
+    means = {}
+    for sign, name in ((1.0, "moving positive"), (-1.0, "moving negative")):
+        part = values[sense == sign]
+        if part.size >= MIN_BIN_ROWS // 2:
+            means[name] = float(np.mean(part))
+    if len(means) == 2:
+        a, b = means.values()
+        if a * b > 0 and min(abs(a), abs(b)) >= 0.3 * max(abs(a), abs(b)):
+            return "both directions"
+    if not means:
+        return "standing still"
+    return max(means, key=lambda name: abs(means[name]))
+
+
+def judge(*, position: FloatArray, velocity: FloatArray, residual: FloatArray,
+          independence: float, rotary: bool) -> dict[str, Any]:
+    """Whether the final model leaves structure against position or velocity.
+
+    Parameters
+    ----------
+    position, velocity, residual : ndarray
+        On the held-out rows: position and velocity (rad, rad/s or m, m/s) and the final
+        model's residual (N·m or N).
+    independence : float
+        Fraction of the rows that are statistically independent.
+    rotary : bool
+        Names the position ``θ`` (rad) or ``x`` (m) in the text.
+
+    Returns
+    -------
+    dict of str to Any
+        ``unexplained`` (bool), ``where`` (one sentence per structure found, empty when
+        none), and per variable the test (``share``, ``p_value``, ``peak``,
+        ``peak_mean_nm``, ``directions``, ``found``), with the rule's thresholds.
+    """
+    band = 1e-3 * float(np.percentile(np.abs(velocity), 99)) if velocity.size else 0.0
+    direction = np.sign(velocity) * (np.abs(velocity) > band)
+    moving = direction != 0
+    tests = {
+        "position": structure("position", position, residual, direction, independence),
+        # friction-like torque changes sign with the direction of travel: against position
+        # it cancels in the plain residual and shows in residual·sgn(ω)
+        "position_friction": structure("position_friction", position[moving],
+                                       residual[moving] * direction[moving], direction[moving],
+                                       independence),
+        "velocity": structure("velocity", velocity, residual, direction, independence),
+    }
+    symbol, unit = ("θ", "rad") if rotary else ("x", "m")
+    where = []
+    for test in tests.values():
+        if not test.found:
+            continue
+        if test.variable == "position":
+            where.append(f"torque residual concentrated near {symbol} = {test.peak:.3g} {unit}, "
+                         f"{test.directions} ({100 * test.share:.0f} % of its variance "
+                         "in position bins)")
+        elif test.variable == "position_friction":
+            where.append(f"friction-like torque residual (opposing the motion) concentrated "
+                         f"near {symbol} = {test.peak:.3g} {unit}, both directions "
+                         f"({100 * test.share:.0f} % of its variance in position bins)")
+        else:
+            where.append(f"torque residual depends on velocity, largest near "
+                         f"{test.peak:.3g} {unit}/s ({100 * test.share:.0f} % of its "
+                         "variance in velocity bins)")
+    return {
+        "unexplained": bool(where),
+        "where": where,
+        "rule": {"alpha": ALPHA, "min_share": MIN_SHARE, "bins": BINS},
+        "tests": {
+            name: {"share": t.share, "p_value": t.p_value, "peak": t.peak,
+                   "peak_mean_nm": t.peak_mean_nm, "directions": t.directions,
+                   "found": t.found}
+            for name, t in tests.items()
+        },
+    }
+
