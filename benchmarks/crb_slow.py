@@ -247,6 +247,7 @@ def gravity_cable(profile: UnitProfile, plant: PlantParams, runs: int, case: str
         plan = spec.plan
         (a0, a1), (b0, b1), (c0, c1) = plan.up, plan.down, plan.probe
         p1, p2 = rec.position[a0:a1], rec.position[b0:b1]
+        p_ref = rec.position[plan.reference[0]:plan.reference[1]]
         # the load fit's samples: bins of both passes inside the excluded ends (as
         # hil.identify.gravity_cable.identify_gravity_cable bins them)
         low = max(p1.min(), p2.min()) + spec.exclude_rad
@@ -282,7 +283,7 @@ def gravity_cable(profile: UnitProfile, plant: PlantParams, runs: int, case: str
         used = 0
         for lo, hi in itertools.pairwise(edges):
             m = (s >= lo) & (s < hi)
-            j = (p2 >= reversal - hi) & (p2 < reversal - lo)
+            j = (p_ref >= reversal - hi) & (p_ref < reversal - lo)
             if m.sum() < 3 or j.sum() < 3:
                 continue
             s_used.append(s[m])

@@ -55,7 +55,8 @@ def result(drive: Drive, calibration: CalibrationRun, profile: UnitProfile) -> C
         pytest.skip(shortfall)
     analysed_elsewhere: dict[str, str] = {}
     if spec.passes == SWEEP_PASSES:
-        position, torque, passes_from = sweep_passes(calibration, profile, drive.info)
+        position, torque, passes_from, first_sample = sweep_passes(calibration, profile,
+                                                                   drive.info)
         rows = len(position)
         analysed_elsewhere["passes"] = Path(passes_from).relative_to(calibration.unit_dir
                                                                       ).as_posix()
@@ -65,6 +66,7 @@ def result(drive: Drive, calibration: CalibrationRun, profile: UnitProfile) -> C
         recording = calibration.run(drive, passes, protocol=NAME)
         position, torque, rows = on_command_grid(recording, passes)
         passes_from = "passes (this protocol's own)"
+        first_sample = 0
     inertia, source = inertia_for_correction(calibration, profile)
     time_s = np.arange(len(position)) / spec.fs_hz
     analysed = analyse(time_s, position, torque, spec, inertia_kg_m2=inertia)
@@ -80,6 +82,7 @@ def result(drive: Drive, calibration: CalibrationRun, profile: UnitProfile) -> C
         "passes": passes_from,
         "recordings_analysed": analysed_elsewhere,
         "pass_samples": spec.pass_samples,
+        "pass_first_sample": first_sample,
         "speed_rad_s": spec.speed_rad_s,
         "orders": [h.order for h in analysed.cogging],
         "cogging": table["cogging"],

@@ -61,7 +61,7 @@ def test_cogging_from_the_gravity_sweep_finds_the_hidden_ripple(seed: int,
             calibration.run(drive, excitation, protocol=gravity.NAME)
         passes = cogging.Spec.from_profile(unit, drive.info)
         assert cogging.excitation(passes, position_rad=0.0) == []  # no motion of its own
-        position, torque, path = cogging.sweep_passes(calibration, unit, drive.info)
+        position, torque, path, _ = cogging.sweep_passes(calibration, unit, drive.info)
     assert path.endswith("gravity_cable__sweep.csv.gz")
     found = cogging.analyse(np.arange(len(position)) / passes.fs_hz, position, torque, passes,
                             inertia_kg_m2=unit.measurement("inertia_kg_m2").nominal)

@@ -115,10 +115,12 @@ def cogging(data: ProtocolData) -> Figure | None:
     if passes is None or not orders:
         return None
     position, torque = passes.position, passes.effort
-    # one pass up, one down, of equal length (the gravity sweep's go on: rewind and probe)
+    # one pass up, one down, of equal length (the gravity sweep's have a run-in and a
+    # reference before them, a probe after)
     half = int(data.number("pass_samples") or len(position) // 2)
+    first = int(data.number("pass_first_sample") or 0)
     segments, levels = [], []
-    for start in (0, half):
+    for start in (first, first + half):
         index = np.arange(start + int(PASS_SETTLE * half), start + half)
         if len(index) < 100:
             return None

@@ -235,7 +235,7 @@ def inertia_for_correction(calibration: CalibrationRun, profile: UnitProfile) ->
 
 def sweep_passes(
     calibration: CalibrationRun, profile: UnitProfile, info: DriveInfo
-) -> tuple[np.ndarray, np.ndarray, str]:
+) -> tuple[np.ndarray, np.ndarray, str, int]:
     """Position and torque of the gravity sweep (command grid), read back from its raw
     recording: the cogging passes when ``passes = "gravity_cable"``.
 
@@ -251,9 +251,11 @@ def sweep_passes(
     Returns
     -------
     position_rad, torque_nm : ndarray
-        The sweep from its start (the up pass, then the down pass, then the rest).
+        The sweep from its up pass on (the up pass, then the down pass, then the rest).
     path : str
         The raw recording read, for the certificate's details.
+    first_sample : int
+        Where the up pass begins in that recording (its run-in and reference come first).
 
     Raises
     ------
@@ -270,4 +272,5 @@ def sweep_passes(
     sweep = gravity_cable.excitation(spec, position_rad=spec.start_rad)[-1]
     recording = read_recording(raw[-1].path, log_warnings=False)
     position, torque, _ = on_command_grid(recording, sweep)
-    return position, torque, str(raw[-1].path)
+    first = spec.plan.up[0]
+    return position[first:], torque[first:], str(raw[-1].path), first

@@ -26,7 +26,7 @@ from hil.identify.gravity_cable import (
 )
 from hil.motion import Excitation, Mode
 from hil.profile import UnitProfile
-from hil.suite.travel import TravelSpec
+from hil.suite.travel import TravelSpec, move_excitation
 
 log = logging.getLogger(__name__)
 
@@ -36,10 +36,9 @@ NAME = "gravity_cable"
 
 @dataclass(frozen=True, slots=True, kw_only=True)
 class Spec(TravelSpec):
-    """One slow sweep up the travel and back, with probes at the turnarounds."""
+    """One sweep up the travel and back, between a slow reference and a slow probe."""
 
     speed_rad_s: float
-    rewind_speed_rad_s: float
     probe_rad: float
     probe_speed_rad_s: float
     probe_settle_s: float
@@ -72,8 +71,7 @@ class Spec(TravelSpec):
         spec = cls(
             **TravelSpec.envelope(settings, profile, info),
             speed_rad_s=settings.number("speed_rad_s", 0.15),
-            rewind_speed_rad_s=settings.number("rewind_speed_rad_s", 0.6),
-            probe_rad=settings.number("probe_rad", 0.2),
+            probe_rad=settings.number("probe_rad", 0.12),
             probe_speed_rad_s=settings.number("probe_speed_rad_s", 0.05),
             probe_settle_s=settings.number("probe_settle_s", 0.12),
             exclude_rad=settings.number("exclude_rad", 0.1),
@@ -95,7 +93,6 @@ class Spec(TravelSpec):
             start_rad=self.start_rad,
             stop_rad=self.stop_rad,
             speed_rad_s=self.speed_rad_s,
-            rewind_speed_rad_s=self.rewind_speed_rad_s,
             probe_rad=self.probe_rad,
             probe_speed_rad_s=self.probe_speed_rad_s,
             fs_hz=self.fs_hz,
@@ -103,7 +100,7 @@ class Spec(TravelSpec):
 
 
 def excitation(spec: Spec, *, position_rad: float) -> list[Excitation]:
-    """A position move to the lower end of the travel, then the sweep.
+    """A position move to where the sweep's command begins, then the sweep.
 
     Parameters
     ----------
@@ -115,13 +112,15 @@ def excitation(spec: Spec, *, position_rad: float) -> list[Excitation]:
     Returns
     -------
     list of Excitation
-        The move to :attr:`Spec.start_rad`, then the sweep (velocity mode).
+        The move to the plan's start (above :attr:`Spec.start_rad` by its run-in and
+        reference), then the sweep (velocity mode).
     """
+    plan = spec.plan
     return [
-        spec.move_to_start(position_rad, hold_s=0.2),
-        Excitation(
-            name="sweep", mode=Mode.VELOCITY, fs_hz=spec.fs_hz, command=spec.plan.command_rad_s
-        ),
+        move_excitation("move_to_start", position_rad, plan.start_rad, fs_hz=spec.fs_hz,
+                        speed_rad_s=spec.move_speed_rad_s, hold_s=0.2),
+        Excitation(name="sweep", mode=Mode.VELOCITY, fs_hz=spec.fs_hz,
+                   command=plan.command_rad_s),
     ]
 
 

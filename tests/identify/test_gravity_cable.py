@@ -21,6 +21,7 @@ from hil.identify.gravity_cable import (
     identify_gravity_cable,
     sweep_plan,
 )
+from hil.measurement import load_method_bias, with_method_terms
 from hil.motion import Mode
 from hil.profile import load_profile
 from plant_sim.model import Plant
@@ -32,7 +33,6 @@ FS = 4000.0
 
 def demo_plan(start: float = -1.3, stop: float = 1.3, fs_hz: float = FS) -> SweepPlan:
     return sweep_plan(start_rad=start, stop_rad=stop, speed_rad_s=SETTINGS["speed_rad_s"],
-                      rewind_speed_rad_s=SETTINGS["rewind_speed_rad_s"],
                       probe_rad=SETTINGS["probe_rad"],
                       probe_speed_rad_s=SETTINGS["probe_speed_rad_s"], fs_hz=fs_hz)
 
@@ -45,18 +45,24 @@ def analyse(position: FloatArray, torque: FloatArray, plan: SweepPlan) -> Gravit
 
 def test_plan_passes_cover_the_travel_and_come_back() -> None:
     plan = demo_plan()
-    position = -1.3 + np.cumsum(plan.command_rad_s) / FS
+    position = plan.start_rad + np.cumsum(plan.command_rad_s) / FS
+    assert position[plan.up[0]] == pytest.approx(-1.3, abs=1e-3)
     assert position.max() == pytest.approx(1.3, abs=1e-3)
     assert position[plan.down[1] - 1] == pytest.approx(-1.3, abs=1e-3)
     probe = position[plan.probe[0]:plan.probe[1]]
+    reference = position[plan.reference[0]:plan.reference[1]]
     assert np.all(np.diff(probe) < 0)
-    assert probe.max() < 1.3
+    assert np.all(np.diff(reference) < 0)
+    # the same speed, and the reference covers the probe's positions with room above
+    assert np.diff(probe).mean() == pytest.approx(np.diff(reference).mean())
+    assert reference.min() <= probe.min() + 1e-9
+    assert reference.max() > probe.max() + 0.2 * SETTINGS["probe_rad"]
 
 
 def _ideal(plan: SweepPlan, *, mge: float, phase: float, k: float, friction: float,
            h: float, s0: float, fs_hz: float = FS) -> tuple[FloatArray, FloatArray]:
     """Kinematic positions and a torque with a Dahl hysteresis integrated along the path."""
-    position = -1.3 + np.cumsum(plan.command_rad_s) / fs_hz
+    position = plan.start_rad + np.cumsum(plan.command_rad_s) / fs_hz
     step = np.diff(position, prepend=position[0])
     hyst = np.empty_like(position)
     state = -h
@@ -117,7 +123,7 @@ def run_demo_plant(seed: int, **changes: float) -> GravityCableResult:
     plan = demo_plan()
     plant = Plant(PROFILE.plant.with_changes(**changes), firmware=PROFILE.firmware, fs_hz=FS,
                   seed=seed,
-                  initial_position_rad=-1.3)
+                  initial_position_rad=plan.start_rad)
     trace = plant.run(Mode.VELOCITY, plan.command_rad_s)
     return analyse(trace.position_rad, trace.torque_nm, plan)
 
@@ -141,16 +147,26 @@ def test_hidden_gravity_and_cable_are_recovered_within_the_claimed_accuracy(
     # relative to the nominal stiffness: a stiffness near zero is judged on an absolute scale
     assert abs(result.stiffness.value - k) <= k_claim * PROFILE.measurement(
         "cable_stiffness_nm_rad").nominal
-    # φ carries no accuracy claim (its error scales with 1/m·g·e): its stated uncertainty
-    # must cover the error
-    assert abs(result.phase.value - phase) <= 3 * result.phase.standard_uncertainty
-    # the hysteresis is noise-limited (no accuracy claim): its uncertainty must cover it
-    assert abs(result.hysteresis.value - h) <= 3 * result.hysteresis.standard_uncertainty
+    # φ and h carry no accuracy claim (φ's error scales with 1/m·g·e, h is noise-limited):
+    # what the certificate states must cover the error — Type A with the method map's
+    # correction and line. Type A alone does not: φ's bins hold aliased cogging (z RMS
+    # 1.2–1.5 over hidden units), h's slow passes the Stribeck dip at the reversal (−3 % at
+    # h = 2 mN·m, noise-free)
+    for found, truth in ((result.phase, phase), (result.hysteresis, h)):
+        stated = certificate_estimate(found)
+        assert abs(stated.value - truth) <= 3 * stated.standard_uncertainty
+
+
+def certificate_estimate(found: Estimate) -> Estimate:
+    """``found`` as the certificate states it: the method map's correction and line added."""
+    method = load_method_bias(axis=PROFILE.unit["axis"]).entries[found.name]
+    return with_method_terms(found, PROFILE.measurement(found.name), method)
 
 
 def test_a_sparse_polled_reference_pass_still_gives_the_loop() -> None:
-    """At a polled link's ~100 Hz the settled pass has < 1 sample per hysteresis bin; the
-    fit then averages the nearest settled samples instead of refusing."""
+    """At a polled link's ~100 Hz the reference has a few samples per hysteresis bin (fewer
+    than REFERENCE_SAMPLES in some); the fit then averages the nearest reference samples
+    instead of refusing."""
     plan = demo_plan(fs_hz=100.0)
     sparse_position, sparse_torque = _ideal(plan, mge=0.015, phase=0.1, k=0.004,
                                             friction=0.02, h=0.001, s0=0.02, fs_hz=100.0)
