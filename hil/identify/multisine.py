@@ -87,7 +87,7 @@ def log_harmonics(low_hz: float, high_hz: float, count: int, *, period_s: float)
 
 def multisine(
     *, harmonics: Sequence[int], amplitudes_rad_s: Sequence[float], period_s: float,
-    periods: int, fs_hz: float, phases: Sequence[float] | None = None,
+    periods: int, fs_hz: float, phases: Sequence[float] | FloatArray | None = None,
 ) -> FloatArray:
     """``Σ aₖ·cos(2π·hₖ·t/T₀ + φₖ)`` over ``periods`` periods (zero mean), sampled at ``fs_hz``;
     ``phases`` φₖ, by default Schroeder's for equal lines (:func:`schroeder_phases`).
@@ -106,10 +106,9 @@ def multisine(
     if phases is not None and len(phases) != len(harmonics):
         raise ValueError("one phase per harmonic")
     t = np.arange(round(samples) * periods) / fs_hz
-    if phases is None:
-        phases = schroeder_phases(len(harmonics))
+    chosen = schroeder_phases(len(harmonics)) if phases is None else np.asarray(phases)
     out = np.zeros_like(t)
-    for h, a, phi in zip(harmonics, amplitudes_rad_s, phases, strict=True):
+    for h, a, phi in zip(harmonics, amplitudes_rad_s, chosen, strict=True):
         out += a * np.cos(2 * math.pi * h * t / period_s + phi)
     return out
 
