@@ -153,16 +153,16 @@ class MultisineSpec(TravelSpec):
         spec = cls(
             **TravelSpec.envelope(settings, profile, info),
             band_hz=(low, high),
-            lines=settings.integer("lines", 32),
+            lines=settings.integer("lines", 16),
             dense_hz=_band(settings.numbers("dense_hz", count=2)) if "dense_hz" in settings
             else None,
             speed_rad_s=settings.positive("speed_rad_s", 0.5),
-            amplitude_rad_s=settings.positive("amplitude_rad_s", 0.05),
+            amplitude_rad_s=settings.positive("amplitude_rad_s", 0.07),
             amplitude_knee_hz=settings.positive("amplitude_knee_hz", 15.0),
-            max_amplitude_rad_s=settings.positive("max_amplitude_rad_s", 0.12),
+            max_amplitude_rad_s=settings.positive("max_amplitude_rad_s", 0.08),
             period_s=settings.positive("period_s", 0.25),
-            settle_periods=settings.integer("settle_periods", 2),
-            periods=settings.integer("periods", 12),
+            settle_periods=settings.integer("settle_periods", 1),
+            periods=settings.integer("periods", 17),
             ramp_s=settings.positive("ramp_s", 0.1),
         )
         settings.done()
@@ -170,7 +170,24 @@ class MultisineSpec(TravelSpec):
         return spec
 
     def check(self, *, source: str, velocity_limit_rad_s: float) -> None:
-        """Refuse a design the drive cannot run or the analysis cannot use (ProfileError)."""
+        """Refuse a design the drive cannot run or the analysis cannot use.
+
+        The torque the lines need depends on the plant (unknown here): the drive's torque
+        limit is the profile author's to respect (the demo's peak is 0.35 of 0.5 N·m).
+
+        Parameters
+        ----------
+        source : str
+            The profile's path, for the error.
+        velocity_limit_rad_s : float
+            The unit's velocity limit: carrier plus the multisine's peak stays below it.
+
+        Raises
+        ------
+        ProfileError
+            A period that is not a whole number of samples, fewer than 3 analysed periods,
+            fewer than 6 lines, a command past the velocity limit, or a run past the travel.
+        """
         where = f"[protocols.{NAME}]"
         samples = self.period_s * self.fs_hz
         if abs(samples - round(samples)) > 1e-6:
