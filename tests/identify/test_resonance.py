@@ -166,3 +166,22 @@ def test_hidden_shaft_is_recovered_within_the_claimed_accuracy(
     b = PROFILE.plant.viscous_nm_s_rad
     zeta = damping + b / (2 * j_m * 2 * math.pi * plant.resonance_hz) * (j_l / j_total)
     assert result.damping.value == pytest.approx(zeta, rel=_accuracy("resonance_damping_ratio"))
+
+
+def test_the_stepped_sine_stays_available_through_the_profile() -> None:
+    """``excitation = "stepped_sine"`` runs the former protocol: it still finds the demo's
+    shaft within the claimed accuracy (effects on)."""
+    profile = dataclasses.replace(PROFILE, protocols={**PROFILE.protocols,
+                                                      "resonance": STEPPED_TABLE})
+    spec = protocol.spec_from_profile(profile, INFO)
+    assert isinstance(spec, protocol.SteppedSpec)
+    plant = PROFILE.plant
+    assert plant is not None
+    with SimDrive(plant, firmware=PROFILE.firmware, limits=PROFILE.limits, fs_hz=FS,
+                  seed=5) as drive:
+        drive.enable()
+        move, sine = protocol.excitation(spec, position_rad=drive.status().position_rad)
+        drive.run(move)
+        result = protocol.analyse(drive.run(sine), spec)
+    assert result.resonance.value == pytest.approx(plant.resonance_hz,
+                                                   rel=_accuracy("resonance_frequency_hz"))
