@@ -39,7 +39,7 @@ from scipy.optimize import least_squares
 from hil.errors import IdentificationError
 from hil.identify.current_loop import IMAGES, block_phasors
 from hil.identify.estimate import TYPE_A_SOURCE, Component, Estimate, with_budget
-from hil.identify.multisine import period_phasors
+from hil.identify.multisine import jackknife, period_phasors
 
 FloatArray = NDArray[np.float64]
 ComplexArray = NDArray[np.complex128]
@@ -262,17 +262,16 @@ def frf_lines(position_rad: FloatArray, torque_nm: FloatArray, command_rad_s: Fl
         raise IdentificationError("a multisine line without torque in some period")
     cross, power = p * np.conj(t), np.abs(t) ** 2  # (periods, lines)
     h1 = cross.sum(axis=0) / power.sum(axis=0)
-    left_out = (cross.sum(axis=0) - cross) / (power.sum(axis=0) - power)
-    spread = np.sum(np.abs(left_out - left_out.mean(axis=0)) ** 2, axis=0)
-    se = np.sqrt((periods - 1) / periods * spread)
+    left_out = (cross.sum(axis=0) - cross) / (power.sum(axis=0) - power)  # H1 without p
+    se = np.hypot(jackknife(left_out.real, h1.real)[1], jackknife(left_out.imag, h1.imag)[1])
     coherence = np.abs(cross.sum(axis=0)) ** 2 / (
         np.sum(np.abs(p) ** 2, axis=0) * power.sum(axis=0))
-    omega = 2 * math.pi * np.asarray(harmonics, dtype=np.float64) / period_s
-    closed = 1j * omega * p.sum(axis=0) / v.sum(axis=0)
-    return [FrfPoint(frequency_hz=float(w / (2 * math.pi)), frf_rad_nm=complex(h1[k]),
+    frequency_hz = np.asarray(harmonics, dtype=np.float64) / period_s
+    closed = 2j * math.pi * frequency_hz * p.sum(axis=0) / v.sum(axis=0)
+    return [FrfPoint(frequency_hz=float(f), frf_rad_nm=complex(h1[k]),
                      relative_u=float(se[k] / abs(h1[k])), coherence=float(coherence[k]),
                      closed_loop=complex(closed[k]), blocks=periods)
-            for k, w in enumerate(omega)]
+            for k, f in enumerate(frequency_hz)]
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
