@@ -28,6 +28,7 @@ import json
 import math
 
 import numpy as np
+from crb_frf import stepped_sine_profile
 from scipy import signal
 
 import hil.suite.resonance as protocol
@@ -64,7 +65,7 @@ def main() -> None:
     info = DriveInfo(vendor="bench", model="bench", firmware_version="0", serial="0",
                      rated_torque_nm=0.5, limits=profile.limits, modes=tuple(Mode),
                      max_sample_rate_hz=fs)
-    spec = protocol.Spec.from_profile(profile, info)
+    spec = protocol.SteppedSpec.from_profile(stepped_sine_profile(profile), info)
     freqs = np.array(spec.frequencies_hz)
     j_total = plant.total_inertia_kg_m2
     j_load = plant.load_at_elevation_kg_m2

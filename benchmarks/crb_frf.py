@@ -155,6 +155,19 @@ def current_loop_white(plant: PlantParams) -> PlantParams:
 
 # ----------------------------------------------------------------------------- resonance
 
+# the azimuth demo's stepped sine before the designed multisine (issue 13): what these
+# benchmarks measure as "the stepped sine"
+STEPPED_SINE = {"excitation": "stepped_sine", "band_hz": [6.0, 300.0], "points": 24,
+                "speed_rad_s": 0.5, "amplitude_rad_s": 0.25, "amplitude_knee_hz": 15.0,
+                "max_amplitude_rad_s": 0.6, "segment_s": 0.1, "min_periods": 5,
+                "settle_s": 0.12, "blocks": 5}
+
+
+def stepped_sine_profile(profile: UnitProfile) -> UnitProfile:
+    """``profile`` with its ``[protocols.resonance]`` table replaced by :data:`STEPPED_SINE`."""
+    return dataclasses.replace(profile, protocols={**profile.protocols,
+                                                   "resonance": STEPPED_SINE})
+
 
 def two_mass_truth(plant: PlantParams, *, time_constant_s: float) -> TwoMassModel:
     """The fitted model's parameters for the simulated plant (as ``bench_frf.py`` derives
@@ -186,7 +199,9 @@ def resonance(
 ) -> MonteCarlo:
     """f_res, f_anti, ζ_res. ``settle_s``: a diagnostic that overrides the profile's
     settling time per frequency (the travel limits widened to make room: the simulator has
-    no end stops); ``None`` runs the protocol as the profile sets it."""
+    no end stops); ``None`` runs the protocol as the profile sets it. Always the stepped
+    sine (:data:`STEPPED_SINE`); ``bench_excitation.py`` measures the multisine."""
+    profile = stepped_sine_profile(profile)
     truth = two_mass_truth(plant, time_constant_s=profile.firmware.current_loop_time_constant_s)
     result = MonteCarlo(
         estimator="resonance",
@@ -206,7 +221,7 @@ def resonance(
         if settle_s is not None:
             limits = dataclasses.replace(limits, travel_min_rad=-30.0, travel_max_rad=30.0)
         drive = sim_drive(plant, firmware=profile.firmware, limits=limits, fs_hz=fs, seed=seed)
-        spec = resonance_protocol.Spec.from_profile(profile, drive.info)
+        spec = resonance_protocol.SteppedSpec.from_profile(profile, drive.info)
         if settle_s is not None:
             spec = dataclasses.replace(spec, settle_s=settle_s)
         ran = _stepped_sine(resonance_protocol, spec, drive, sigma=sigma, fs_hz=fs)

@@ -1,7 +1,8 @@
-"""Two-mass resonance f_r, anti-resonance f_a, damping and f_r / velocity-loop bandwidth from a
-stepped-sine FRF (numerics in :mod:`hil.identify.resonance`).
+"""Two-mass resonance f_r, anti-resonance f_a, damping and f_r / velocity-loop bandwidth from
+the FRF of a periodic multisine (or, if the profile asks, a stepped sine; numerics in
+:mod:`hil.identify.resonance`).
 
-Velocity-mode sines over the profile's band, on a constant-speed carrier (no reversal, so
+Velocity-mode lines over the profile's band, on a constant-speed carrier (no reversal, so
 friction stays linear). Skips on a unit whose profile has no ``[protocols.resonance]``
 (a rigid axis: nothing to find).
 
@@ -20,7 +21,14 @@ from hil.identify.estimate import Estimate
 from hil.identify.resonance import ResonanceResult
 from hil.profile import UnitProfile
 from hil.suite.rate import sample_rate_shortfall
-from hil.suite.resonance import NAME, Spec, analyse, excitation, measured_time_constant_s
+from hil.suite.resonance import (
+    NAME,
+    MultisineSpec,
+    analyse,
+    excitation,
+    measured_time_constant_s,
+    spec_from_profile,
+)
 
 MEASUREMENTS = (
     "resonance_frequency_hz",
@@ -38,7 +46,7 @@ def result(drive: Drive, calibration: CalibrationRun, profile: UnitProfile) -> R
             f"the profile has no [protocols.{NAME}] table: a rigid axis, no shaft "
             "resonance to identify"
         )
-    spec = Spec.from_profile(profile, drive.info)
+    spec = spec_from_profile(profile, drive.info)
     shortfall = sample_rate_shortfall(
         spec.needed_sample_rate_hz,
         drive.info,
@@ -47,12 +55,14 @@ def result(drive: Drive, calibration: CalibrationRun, profile: UnitProfile) -> R
     )
     if shortfall is not None:
         pytest.skip(shortfall)
-    move, sine = excitation(spec, position_rad=drive.status().position_rad)
-    calibration.run(drive, move, protocol=NAME)
-    recording = calibration.run(drive, sine, protocol=NAME)
+    *moves, measured = excitation(spec, position_rad=drive.status().position_rad)
+    for move in moves:
+        calibration.run(drive, move, protocol=NAME)
+    recording = calibration.run(drive, measured, protocol=NAME)
     analysed = analyse(recording, spec, time_constant_s=measured_time_constant_s(calibration))
     m = analysed.model
     calibration.details[NAME] = {
+        "excitation": "multisine" if isinstance(spec, MultisineSpec) else "stepped_sine",
         "model": "P/T = (s²/ωa² + 2ζa s/ωa + 1)/(s²/ωr² + 2ζr s/ωr + 1) / (J s (s + B/J)(τ s + 1))",
         "inertia_total_kg_m2": m.inertia_kg_m2,
         "antiresonance_damping_ratio": m.antiresonance_damping,

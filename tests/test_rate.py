@@ -82,7 +82,7 @@ def test_protocol_needs_follow_their_settings(elevation: UnitProfile, azimuth: U
     # but 4000 samples over a 2.6 rad pass at 0.4 rad/s need more
     assert cogging.needed_sample_rate_hz == pytest.approx(4000 / (2.6 / 0.4))
     assert cogging.needed_sample_rate_hz > 4 * 200 * 0.4 / (2 * math.pi)
-    resonance = resonance_suite.Spec.from_profile(azimuth, _info(azimuth, 4000.0))
+    resonance = resonance_suite.spec_from_profile(azimuth, _info(azimuth, 4000.0))
     assert resonance.needed_sample_rate_hz == pytest.approx(4 * 300.0)  # band up to 300 Hz
     # the needs do not depend on the rate a drive offers (no circular planning)
     slow = current_loop_suite.Spec.from_profile(

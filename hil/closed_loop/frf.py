@@ -33,6 +33,10 @@ from numpy.typing import NDArray
 
 from hil.errors import IdentificationError
 from hil.identify.estimate import Estimate
+from hil.identify.multisine import jackknife as jackknife
+from hil.identify.multisine import multisine as multisine
+from hil.identify.multisine import period_phasors as period_phasors
+from hil.identify.multisine import schroeder_phases as schroeder_phases
 
 FloatArray = NDArray[np.float64]
 ComplexArray = NDArray[np.complex128]
@@ -41,66 +45,7 @@ MARGIN_NAMES = ("bandwidth_hz", "peak_gain_db", "gain_margin_db", "phase_margin_
                 "sensitivity_peak_db")
 
 
-def schroeder_phases(count: int) -> FloatArray:
-    """Schroeder's phases ``−π·k(k−1)/K`` for ``K`` equal lines: a low crest factor."""
-    k = np.arange(1, count + 1)
-    return np.asarray(-math.pi * k * (k - 1) / count, dtype=np.float64)
 
-
-def multisine(
-    *, harmonics: Sequence[int], amplitudes_rad_s: Sequence[float], period_s: float,
-    periods: int, fs_hz: float,
-) -> FloatArray:
-    """``Σ aₖ·cos(2π·hₖ·t/T₀ + φₖ)`` over ``periods`` periods (zero mean), sampled at ``fs_hz``.
-
-    Raises
-    ------
-    ValueError
-        A period that is not a whole number of samples, or lines and amplitudes that differ
-        in number.
-    """
-    samples = period_s * fs_hz
-    if abs(samples - round(samples)) > 1e-9 or round(samples) < 4:
-        raise ValueError(f"period {period_s} s is not a whole number of samples at {fs_hz} Hz")
-    if len(harmonics) != len(amplitudes_rad_s):
-        raise ValueError("one amplitude per harmonic")
-    t = np.arange(round(samples) * periods) / fs_hz
-    phases = schroeder_phases(len(harmonics))
-    out = np.zeros_like(t)
-    for h, a, phi in zip(harmonics, amplitudes_rad_s, phases, strict=True):
-        out += a * np.cos(2 * math.pi * h * t / period_s + phi)
-    return out
-
-
-def period_phasors(signal: FloatArray, *, period_samples: int, periods: int,
-                   harmonics: Sequence[int]) -> ComplexArray:
-    """Fourier coefficients ``X[p, k]`` of each period at each harmonic, fitted jointly with
-    a constant and a straight line (a slow drift would leak into the low lines; the line is
-    not orthogonal to them, so it is fitted with them, not taken out first).
-
-    Parameters
-    ----------
-    signal : ndarray
-        ``periods·period_samples`` samples, the analysed periods back to back.
-    period_samples : int
-    periods : int
-    harmonics : sequence of int
-        Line numbers (cycles per period).
-
-    Returns
-    -------
-    ndarray, shape (periods, len(harmonics)), complex
-        ``X`` with ``x = Re(X·e^{iωt}) = |X|·cos(ωt + ∠X)``.
-    """
-    n = period_samples
-    blocks = np.asarray(signal[: n * periods], dtype=np.float64).reshape(periods, n)
-    phase = 2 * math.pi * np.outer(np.arange(n) / n, np.asarray(harmonics, dtype=np.float64))
-    ramp = (np.arange(n) - (n - 1) / 2) / n
-    design = np.column_stack([np.ones(n), ramp, np.cos(phase), np.sin(phase)])
-    coef = np.linalg.lstsq(design, blocks.T, rcond=None)[0]  # (2 + 2K, periods)
-    k = len(harmonics)
-    cosine, sine = coef[2: 2 + k].T, coef[2 + k:].T
-    return np.asarray(cosine - 1j * sine, dtype=np.complex128)
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -215,27 +160,6 @@ class FrfResult:
 UNITS = {"bandwidth_hz": "Hz", "peak_gain_db": "dB", "gain_margin_db": "dB",
          "phase_margin_deg": "°", "sensitivity_peak_db": "dB"}
 
-
-def jackknife(values: FloatArray, full: FloatArray) -> tuple[FloatArray, FloatArray]:
-    """Delete-one jackknife: bias-corrected values and standard errors of each column.
-
-    Parameters
-    ----------
-    values : ndarray, shape (P, m)
-        The figures with each of the ``P`` groups left out in turn.
-    full : ndarray, shape (m,)
-        The figures from every group.
-
-    Returns
-    -------
-    estimate, standard_error : ndarray, shape (m,)
-        ``full`` (not bias-corrected: the correction's noise is larger than the bias) and
-        ``√((P−1)/P·Σ(θ₋ᵢ − θ̄)²)``.
-    """
-    p = values.shape[0]
-    mean = values.mean(axis=0)
-    se = np.sqrt((p - 1) / p * np.sum((values - mean) ** 2, axis=0))
-    return full, se
 
 
 def analyse_frf(

@@ -1,10 +1,17 @@
-"""Two-mass resonance from a stepped-sine FRF (orthogonal correlation per frequency).
+"""Two-mass resonance from a measured FRF: a periodic multisine's lines or a stepped sine.
 
-Each frequency of the stepped sine (velocity mode, on a constant-speed carrier so friction
-stays linear) is cut into blocks of whole periods; per block the orthogonal correlation
-gives the phasors of the encoder position ``P``, the reported torque ``T`` and the velocity
-command ``V``. Per frequency: the FRF ``P/T`` (H1: ``Σ P·T* / Σ |T|²``), its relative standard error
-(block scatter) and the coherence ``γ² = |Σ P·T*|² / (Σ|P|²·Σ|T|²)`` over the blocks.
+**Multisine** (:func:`frf_lines`): every line is a harmonic of the period, so each period's
+Fourier coefficients of position ``P``, reported torque ``T`` and velocity command ``V`` are
+exact (:func:`hil.identify.multisine.period_phasors`); per line the FRF is H1 over the
+periods, its standard error the delete-one-period jackknife's, and the coherence is taken
+over the periods as below.
+
+**Stepped sine** (:func:`frf_point`): each frequency (velocity mode, on a constant-speed
+carrier so friction stays linear) is cut into blocks of whole periods; per block the
+orthogonal correlation gives the phasors of the encoder position ``P``, the reported torque
+``T`` and the velocity command ``V``. Per frequency: the FRF ``P/T`` (H1:
+``Σ P·T* / Σ |T|²``), its relative standard error (block scatter) and the coherence
+``γ² = |Σ P·T*|² / (Σ|P|²·Σ|T|²)`` over the blocks.
 
 The fitted model is the motor side of a two-mass axis, with the current-loop lag and the
 drive's zero-order hold (exact sampled-data response, as in :mod:`hil.identify.current_loop`):
@@ -32,6 +39,7 @@ from scipy.optimize import least_squares
 from hil.errors import IdentificationError
 from hil.identify.current_loop import IMAGES, block_phasors
 from hil.identify.estimate import TYPE_A_SOURCE, Component, Estimate, with_budget
+from hil.identify.multisine import jackknife, period_phasors
 
 FloatArray = NDArray[np.float64]
 ComplexArray = NDArray[np.complex128]
@@ -129,7 +137,7 @@ def two_mass_response(model: TwoMassModel, frequency_hz: FloatArray, *, fs_hz: f
 
 @dataclass(frozen=True, slots=True, kw_only=True)
 class FrfPoint:
-    """One stepped-sine frequency of the FRF.
+    """One frequency of the FRF (a stepped-sine frequency or a multisine line).
 
     Attributes
     ----------
@@ -145,7 +153,7 @@ class FrfPoint:
     closed_loop : complex
         ``jω·P / V``, motor velocity over velocity command, the mean over the blocks.
     blocks : int
-        Blocks of whole periods used.
+        Blocks of whole periods used (a multisine: its analysed periods).
     """
 
     frequency_hz: float
@@ -213,9 +221,62 @@ def frf_point(time_s: FloatArray, position_rad: FloatArray, torque_nm: FloatArra
         blocks=blocks)
 
 
+def frf_lines(position_rad: FloatArray, torque_nm: FloatArray, command_rad_s: FloatArray, *,
+              harmonics: Sequence[int], period_s: float, fs_hz: float,
+              periods: int) -> list[FrfPoint]:
+    """One :class:`FrfPoint` per multisine line from the analysed periods.
+
+    Parameters
+    ----------
+    position_rad, torque_nm, command_rad_s : array
+        Encoder position (rad), reported torque (N·m) and velocity command (rad/s) over the
+        analysed periods (settling dropped), one sample per control period.
+    harmonics : sequence of int
+        The lines (cycles per period), increasing.
+    period_s, fs_hz : float
+        The period (s; a whole number of samples) and the sample rate (Hz).
+    periods : int
+        Analysed periods (at least 3: the jackknife leaves one out).
+
+    Returns
+    -------
+    list of FrfPoint
+        Per line: H1 ``Σ P·T* / Σ|T|²`` over the periods, the jackknife standard error of H1
+        relative to ``|H1|``, γ² over the periods, and ``jω·ΣP / ΣV``.
+
+    Raises
+    ------
+    IdentificationError
+        Fewer than 3 periods, fewer samples than the periods need, or a line without
+        torque in some period.
+    """
+    n = round(period_s * fs_hz)
+    if periods < 3:
+        raise IdentificationError(f"{periods} analysed periods, need at least 3")
+    if min(len(position_rad), len(torque_nm), len(command_rad_s)) < n * periods:
+        raise IdentificationError(f"the recording holds fewer than {periods} periods of {n} "
+                                  "samples after the settling")
+    p, t, v = (period_phasors(x, period_samples=n, periods=periods, harmonics=harmonics)
+               for x in (position_rad, torque_nm, command_rad_s))
+    if np.any(t == 0):
+        raise IdentificationError("a multisine line without torque in some period")
+    cross, power = p * np.conj(t), np.abs(t) ** 2  # (periods, lines)
+    h1 = cross.sum(axis=0) / power.sum(axis=0)
+    left_out = (cross.sum(axis=0) - cross) / (power.sum(axis=0) - power)  # H1 without p
+    se = np.hypot(jackknife(left_out.real, h1.real)[1], jackknife(left_out.imag, h1.imag)[1])
+    coherence = np.abs(cross.sum(axis=0)) ** 2 / (
+        np.sum(np.abs(p) ** 2, axis=0) * power.sum(axis=0))
+    frequency_hz = np.asarray(harmonics, dtype=np.float64) / period_s
+    closed = 2j * math.pi * frequency_hz * p.sum(axis=0) / v.sum(axis=0)
+    return [FrfPoint(frequency_hz=float(f), frf_rad_nm=complex(h1[k]),
+                     relative_u=float(se[k] / abs(h1[k])), coherence=float(coherence[k]),
+                     closed_loop=complex(closed[k]), blocks=periods)
+            for k, f in enumerate(frequency_hz)]
+
+
 @dataclass(frozen=True, slots=True, kw_only=True)
 class ResonanceResult:
-    """The two-mass fit to a stepped-sine FRF.
+    """The two-mass fit to a measured FRF.
 
     Attributes
     ----------
@@ -299,7 +360,7 @@ def identify_resonance(points: Sequence[FrfPoint], *, fs_hz: float,
     Parameters
     ----------
     points : sequence of FrfPoint
-        The stepped-sine FRF, at least 6 frequencies.
+        The measured FRF (:func:`frf_lines` or :func:`frf_point`), at least 6 frequencies.
     fs_hz : float
         The recording's sample rate (Hz): the model's zero-order hold and its images.
     time_constant_s : float

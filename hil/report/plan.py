@@ -85,7 +85,7 @@ PLANNERS: dict[str, Callable[[UnitProfile, DriveInfo, float], list[Excitation]]]
         cogging.Spec.from_profile(p, i), position_rad=at),
     "torque_constant": _torque_constant,
     "resonance": lambda p, i, at: resonance.excitation(
-        resonance.Spec.from_profile(p, i), position_rad=at),
+        resonance.spec_from_profile(p, i), position_rad=at),
     "inertia_elevation": _elevation,
     "velocity_loop_frf": lambda p, i, at: velocity_loop_frf.excitation(
         velocity_loop_frf.Spec.from_profile(p, i), position_rad=at),

@@ -69,7 +69,7 @@ def resonance(data: ProtocolData) -> Figure | None:
     f_r, f_a = data.value("resonance_frequency_hz"), data.value("antiresonance_frequency_hz")
     zeta_r = data.value("resonance_damping_ratio")
     inertia = data.number("inertia_total_kg_m2")
-    sine = data.recording("stepped_sine")
+    sine = data.recording("multisine") or data.recording("stepped_sine")
     if not frf or sine is None or f_r is None or f_a is None or zeta_r is None or inertia is None:
         return None
     fs_hz = sample_rate_hz(sine)

@@ -1,12 +1,17 @@
 """resonance: the protocol's library (spec, excitation, analysis); the test and its
 declared measurements are in ``protocols/test_resonance.py``.
 
-Two-mass resonance f_r, anti-resonance f_a, damping and f_r / velocity-loop bandwidth from a
-stepped-sine FRF (numerics in :mod:`hil.identify.resonance`).
+Two-mass resonance f_r, anti-resonance f_a, damping and f_r / velocity-loop bandwidth from
+the FRF of encoder position over reported torque (numerics in
+:mod:`hil.identify.resonance`), excited in velocity mode on a constant-speed carrier (no
+reversal, so friction stays linear). Skips on a unit whose profile has no
+``[protocols.resonance]`` (a rigid axis: nothing to find).
 
-Velocity-mode sines over the profile's band, on a constant-speed carrier (no reversal, so
-friction stays linear). Skips on a unit whose profile has no ``[protocols.resonance]``
-(a rigid axis: nothing to find).
+``excitation = "multisine"`` (the default, :class:`MultisineSpec`): one periodic multisine of
+log-spaced lines on the period's grid, Schroeder phases for its amplitudes: one settling
+serves every line, and every analysed period measures every line.
+``excitation = "stepped_sine"`` (:class:`SteppedSpec`): one sine per frequency, each with
+its own settling.
 """
 
 from __future__ import annotations
@@ -15,20 +20,26 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+from numpy.typing import NDArray
 
 from hil.calibration import CalibrationRun
 from hil.drives.base import DriveInfo
-from hil.identify.resonance import ResonanceResult, frf_point, identify_resonance
+from hil.errors import ProfileError
+from hil.identify.multisine import log_harmonics, multisine, schroeder_phases_for
+from hil.identify.resonance import ResonanceResult, frf_lines, frf_point, identify_resonance
 from hil.motion import Excitation, Mode
 from hil.profile import UnitProfile
 from hil.recording import Recording
-from hil.suite.travel import SteppedSineSpec, TravelSpec
+from hil.suite.rate import needed_sample_rate_hz
+from hil.suite.travel import SteppedSineSpec, TravelSpec, speed_ramp
+from hil.suite.velocity_loop_frf import direction_from
 
 NAME = "resonance"
+EXCITATIONS = ("multisine", "stepped_sine")
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
-class Spec(SteppedSineSpec):
+class SteppedSpec(SteppedSineSpec):
     """A stepped sine over a geometric band on a constant-speed carrier."""
 
     amplitude_rad_s: float  # velocity sine amplitude up to amplitude_knee_hz
@@ -38,8 +49,9 @@ class Spec(SteppedSineSpec):
     min_periods: int
 
     @classmethod
-    def from_profile(cls, profile: UnitProfile, info: DriveInfo) -> Spec:
-        """The spec from the profile's ``[protocols.resonance]`` table and the drive.
+    def from_profile(cls, profile: UnitProfile, info: DriveInfo) -> SteppedSpec:
+        """The spec from the profile's ``[protocols.resonance]`` table (``excitation =
+        "stepped_sine"``) and the drive.
 
         Parameters
         ----------
@@ -50,14 +62,16 @@ class Spec(SteppedSineSpec):
 
         Returns
         -------
-        Spec
+        SteppedSpec
 
         Raises
         ------
         ProfileError
-            A missing, mistyped or unknown key, or a carrier that runs past the travel limits.
+            A missing, mistyped or unknown key, another excitation, or a carrier that runs
+            past the travel limits.
         """
         settings = profile.settings(NAME)
+        settings.choice("excitation", ("stepped_sine",), "stepped_sine")
         low, high = settings.numbers("band_hz", count=2)
         points = settings.integer("points", 28)
         spec = cls(
@@ -94,12 +108,198 @@ class Spec(SteppedSineSpec):
         return self.settle_samples(frequency_hz) + round(periods * self.fs_hz / frequency_hz)
 
 
-def excitation(spec: Spec, *, position_rad: float) -> list[Excitation]:
-    """Move to the lower end; ramp to the carrier speed; the stepped sine; ramp down.
+@dataclass(frozen=True, slots=True, kw_only=True)
+class MultisineSpec(TravelSpec):
+    """A periodic multisine of log-spaced lines over a band on a constant-speed carrier."""
+
+    band_hz: tuple[float, float]
+    lines: int  # asked for; fewer where the log spacing is finer than the grid
+    dense_hz: tuple[float, float] | None  # every grid line inside is excited too
+    speed_rad_s: float  # the carrier
+    amplitude_rad_s: float  # per line up to amplitude_knee_hz
+    amplitude_knee_hz: float  # above: amplitude ∝ f (the motor responds ∝ 1/f)
+    max_amplitude_rad_s: float
+    period_s: float
+    settle_periods: int
+    periods: int
+    ramp_s: float
+
+    @classmethod
+    def from_profile(cls, profile: UnitProfile, info: DriveInfo) -> MultisineSpec:
+        """The spec from the profile's ``[protocols.resonance]`` table (``excitation =
+        "multisine"``, the default) and the drive.
+
+        Parameters
+        ----------
+        profile : UnitProfile
+            The unit's profile.
+        info : DriveInfo
+            The drive: its limits and its highest sample rate.
+
+        Returns
+        -------
+        MultisineSpec
+
+        Raises
+        ------
+        ProfileError
+            A missing, mistyped or unknown key, another excitation, a period that is not a
+            whole number of samples, fewer than 6 lines or 3 analysed periods, a command
+            past the velocity limit, or a carrier that runs past the travel limits.
+        """
+        settings = profile.settings(NAME)
+        settings.choice("excitation", ("multisine",), "multisine")
+        low, high = settings.numbers("band_hz", count=2)
+        spec = cls(
+            **TravelSpec.envelope(settings, profile, info),
+            band_hz=(low, high),
+            lines=settings.integer("lines", 16),
+            dense_hz=_band(settings.numbers("dense_hz", count=2)) if "dense_hz" in settings
+            else None,
+            speed_rad_s=settings.positive("speed_rad_s", 0.5),
+            amplitude_rad_s=settings.positive("amplitude_rad_s", 0.07),
+            amplitude_knee_hz=settings.positive("amplitude_knee_hz", 15.0),
+            max_amplitude_rad_s=settings.positive("max_amplitude_rad_s", 0.08),
+            period_s=settings.positive("period_s", 0.25),
+            settle_periods=settings.integer("settle_periods", 1),
+            periods=settings.integer("periods", 17),
+            ramp_s=settings.positive("ramp_s", 0.1),
+        )
+        settings.done()
+        spec.check(source=profile.source, velocity_limit_rad_s=info.limits.velocity_rad_s)
+        return spec
+
+    def check(self, *, source: str, velocity_limit_rad_s: float) -> None:
+        """Refuse a design the drive cannot run or the analysis cannot use.
+
+        The torque the lines need depends on the plant (unknown here): the drive's torque
+        limit is the profile author's to respect (the demo's peak is 0.35 of 0.5 N·m).
+
+        Parameters
+        ----------
+        source : str
+            The profile's path, for the error.
+        velocity_limit_rad_s : float
+            The unit's velocity limit: carrier plus the multisine's peak stays below it.
+
+        Raises
+        ------
+        ProfileError
+            A period that is not a whole number of samples, fewer than 3 analysed periods,
+            fewer than 6 lines, a command past the velocity limit, or a run past the travel.
+        """
+        where = f"[protocols.{NAME}]"
+        samples = self.period_s * self.fs_hz
+        if abs(samples - round(samples)) > 1e-6:
+            raise ProfileError(f"{where} period_s = {self.period_s:g} s is not a whole number "
+                               f"of samples at {self.fs_hz:g} Hz", source=source)
+        if self.periods < 3 or self.settle_periods < 0:
+            raise ProfileError(f"{where} needs periods ≥ 3 (the jackknife) and settle_periods "
+                               "≥ 0", source=source)
+        try:
+            count = len(self.harmonics)
+        except ValueError as error:
+            raise ProfileError(f"{where} {error}", source=source) from None
+        if count < 6:
+            raise ProfileError(f"{where} gives {count} lines on the {1 / self.period_s:g} Hz "
+                               "grid, the fit needs at least 6", source=source)
+        peak = self.speed_rad_s + float(np.max(np.abs(self.lines_command(periods=1))))
+        if peak > velocity_limit_rad_s:
+            raise ProfileError(f"{where} commands {peak:.3g} rad/s (carrier + multisine "
+                               f"peak), above the {velocity_limit_rad_s:g} rad/s limit",
+                               source=source)
+        self.require_travel(self.speed_rad_s * self.duration_s, protocol=NAME, source=source)
+
+    @property
+    def harmonics(self) -> tuple[int, ...]:
+        """The lines in cycles per period: log-spaced over the band on the grid, and every
+        grid line inside ``dense_hz``."""
+        lines = set(log_harmonics(*self.band_hz, self.lines, period_s=self.period_s))
+        if self.dense_hz is not None:
+            low, high = self.dense_hz
+            lines.update(range(max(math.ceil(low * self.period_s - 1e-9), 1),
+                               math.floor(high * self.period_s + 1e-9) + 1))
+        return tuple(sorted(lines))
+
+    @property
+    def frequencies_hz(self) -> tuple[float, ...]:
+        """The lines (Hz)."""
+        return tuple(h / self.period_s for h in self.harmonics)
+
+    @property
+    def amplitudes_rad_s(self) -> tuple[float, ...]:
+        """Each line's velocity amplitude: ``amplitude_rad_s``, ∝ f above the knee, capped."""
+        return tuple(min(self.amplitude_rad_s * max(1.0, f / self.amplitude_knee_hz),
+                         self.max_amplitude_rad_s) for f in self.frequencies_hz)
+
+    @property
+    def needed_sample_rate_hz(self) -> float:
+        """4 × the highest line (Hz)."""
+        return needed_sample_rate_hz(max(self.frequencies_hz))
+
+    @property
+    def duration_s(self) -> float:
+        """Ramps and periods of the multisine run (s)."""
+        return 2 * self.ramp_s + (self.settle_periods + self.periods) * self.period_s
+
+    @property
+    def analysed(self) -> slice:
+        """The analysed periods' samples in the multisine excitation."""
+        n = round(self.period_s * self.fs_hz)
+        start = round(self.ramp_s * self.fs_hz) + self.settle_periods * n
+        return slice(start, start + self.periods * n)
+
+    def lines_command(self, *, periods: int) -> NDArray[np.float64]:
+        """The multisine alone (rad/s, zero mean) over ``periods`` periods, Schroeder phases
+        for its amplitudes."""
+        amplitudes = self.amplitudes_rad_s
+        return multisine(harmonics=self.harmonics, amplitudes_rad_s=amplitudes,
+                         period_s=self.period_s, periods=periods, fs_hz=self.fs_hz,
+                         phases=schroeder_phases_for(amplitudes))
+
+
+Spec = SteppedSpec | MultisineSpec
+
+
+def _band(values: tuple[float, ...]) -> tuple[float, float]:
+    return values[0], values[1]
+
+
+def spec_from_profile(profile: UnitProfile, info: DriveInfo) -> Spec:
+    """The spec of the excitation the profile's ``[protocols.resonance]`` names.
 
     Parameters
     ----------
-    spec : Spec
+    profile : UnitProfile
+        The unit's profile; ``excitation`` is ``"multisine"`` (default) or ``"stepped_sine"``.
+    info : DriveInfo
+        The drive: its limits and its highest sample rate.
+
+    Returns
+    -------
+    SteppedSpec or MultisineSpec
+
+    Raises
+    ------
+    ProfileError
+        An unknown excitation, or see the spec's ``from_profile``.
+    """
+    kind = profile.settings(NAME).choice("excitation", EXCITATIONS, "multisine")
+    if kind == "stepped_sine":
+        return SteppedSpec.from_profile(profile, info)
+    return MultisineSpec.from_profile(profile, info)
+
+
+def excitation(spec: Spec, *, position_rad: float) -> list[Excitation]:
+    """The protocol's excitations (velocity mode after any move).
+
+    Multisine: ramp to the carrier, the periods, ramp down, from where the axis is, up or
+    down where that fits (else a move to the lower end first). Stepped sine: the move to the
+    lower end, then ramp, the sines, ramp down.
+
+    Parameters
+    ----------
+    spec : SteppedSpec or MultisineSpec
         The protocol's spec.
     position_rad : float
         Where the axis is now.
@@ -107,28 +307,33 @@ def excitation(spec: Spec, *, position_rad: float) -> list[Excitation]:
     Returns
     -------
     list of Excitation
-        The move to the start, then the stepped sine (velocity mode).
+        Any move first, the measured run last.
     """
-    return [
-        spec.move_to_start(position_rad, hold_s=0.1),
-        Excitation(
-            name="stepped_sine",
-            mode=Mode.VELOCITY,
-            fs_hz=spec.fs_hz,
-            command=spec.carrier_command(),
-        ),
-    ]
+    if isinstance(spec, SteppedSpec):
+        return [
+            spec.move_to_start(position_rad, hold_s=0.1),
+            Excitation(name="stepped_sine", mode=Mode.VELOCITY, fs_hz=spec.fs_hz,
+                       command=spec.carrier_command()),
+        ]
+    up = speed_ramp(spec.speed_rad_s, ramp_s=spec.ramp_s, fs_hz=spec.fs_hz, up=True)
+    down = speed_ramp(spec.speed_rad_s, ramp_s=spec.ramp_s, fs_hz=spec.fs_hz, up=False)
+    lines = spec.lines_command(periods=spec.settle_periods + spec.periods)
+    command = np.concatenate([up, spec.speed_rad_s + lines, down])
+    sign = direction_from(spec, position_rad, float(np.sum(command)) / spec.fs_hz)
+    moves = [] if sign is not None else [spec.move_to_start(position_rad, hold_s=0.1)]
+    return [*moves, Excitation(name="multisine", mode=Mode.VELOCITY, fs_hz=spec.fs_hz,
+                               command=(sign or 1.0) * command)]
 
 
 def analyse(recording: Recording, spec: Spec, *, time_constant_s: float = 2e-4) -> ResonanceResult:
-    """The FRF point of each frequency's segment, and the two-mass model fitted to them.
+    """The FRF (per line or per frequency) and the two-mass model fitted to it.
 
     Parameters
     ----------
     recording : Recording
-        The stepped sine's recording, with its velocity command.
-    spec : Spec
-        The protocol's spec (frequencies, segments, carrier).
+        The measured run's recording (the last excitation), with its velocity command.
+    spec : SteppedSpec or MultisineSpec
+        The protocol's spec.
     time_constant_s : float
         The current loop's τ, the fit's start value (see :func:`measured_time_constant_s`).
 
@@ -142,12 +347,18 @@ def analyse(recording: Recording, spec: Spec, *, time_constant_s: float = 2e-4) 
     ValueError
         The recording has no velocity command.
     IdentificationError
-        A segment too short for its blocks or without torque at its frequency, fewer
-        than 6 frequencies, or a model fit that fails.
+        Too few samples, periods or frequencies, a line or segment without torque, or a
+        model fit that fails.
     """
     command = recording.velocity_cmd
     if command is None:
-        raise ValueError("the stepped-sine recording lacks its velocity command")
+        raise ValueError("the resonance recording lacks its velocity command")
+    if isinstance(spec, MultisineSpec):
+        window = spec.analysed
+        points = frf_lines(recording.position[window], recording.effort[window],
+                           command[window], harmonics=spec.harmonics, period_s=spec.period_s,
+                           fs_hz=spec.fs_hz, periods=spec.periods)
+        return identify_resonance(points, fs_hz=spec.fs_hz, time_constant_s=time_constant_s)
     start = round(spec.ramp_s * spec.fs_hz)
     points = []
     for f in spec.frequencies_hz:

@@ -13,9 +13,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from hil.closed_loop.frf import FrfResult, analyse_frf, multisine
+from hil.closed_loop.frf import FrfResult, analyse_frf
 from hil.drives.base import DriveInfo
 from hil.errors import ProfileError
+from hil.identify.multisine import multisine
 from hil.motion import Excitation, Mode
 from hil.profile import UnitProfile
 from hil.recording import Recording

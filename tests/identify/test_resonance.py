@@ -1,9 +1,11 @@
-"""Two-mass resonance: the model, exact recovery from synthetic FRF data, the quality
-measures, the bandwidth, the skip on a rigid profile, and recovery of a hidden shaft from
-the azimuth demo plant (effects on)."""
+"""Two-mass resonance: the model, exact recovery from synthetic stepped-sine FRF data, the
+quality measures, the bandwidth, and recovery of a hidden shaft from the azimuth demo plant
+(effects on) by the profile's excitation (the multisine; its design and FRF in
+``test_resonance_multisine.py``)."""
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -32,7 +34,13 @@ FS = 4000.0
 INFO = DriveInfo(vendor="test", model="test", firmware_version="0", serial="0",
                  rated_torque_nm=0.5, limits=PROFILE.limits, modes=tuple(Mode),
                  max_sample_rate_hz=FS)
-SPEC = protocol.Spec.from_profile(PROFILE, INFO)
+STEPPED_TABLE = {"excitation": "stepped_sine", "band_hz": [6.0, 300.0], "points": 24,
+                 "amplitude_rad_s": 0.25, "max_amplitude_rad_s": 0.6, "segment_s": 0.1,
+                 "min_periods": 5, "settle_s": 0.12, "blocks": 5}
+SPEC = protocol.SteppedSpec.from_profile(
+    dataclasses.replace(PROFILE, protocols={**PROFILE.protocols, "resonance": STEPPED_TABLE}),
+    INFO)
+DESIGNED = protocol.spec_from_profile(PROFILE, INFO)
 TRUTH = TwoMassModel(inertia_kg_m2=0.008, antiresonance_hz=50.0, antiresonance_damping=0.03,
                      resonance_hz=81.65, resonance_damping=0.05, viscous_over_inertia_1_s=0.75,
                      time_constant_s=2e-4)
@@ -115,7 +123,8 @@ def test_bandwidth_needs_the_band_to_bracket_it() -> None:
         velocity_loop_bandwidth_hz(points)
 
 
-def test_excitation_is_inside_the_limits_and_the_followed_sines_stay_on_the_carrier() -> None:
+def test_stepped_sine_is_inside_the_limits_and_the_followed_sines_stay_on_the_carrier(
+) -> None:
     for start in (-3.0, 0.0, 3.0):
         move, sine = protocol.excitation(SPEC, position_rad=start)
         check_limits(move, PROFILE.limits, start_position_rad=start)
@@ -144,9 +153,11 @@ def test_hidden_shaft_is_recovered_within_the_claimed_accuracy(
     with SimDrive(plant, firmware=PROFILE.firmware, limits=PROFILE.limits, fs_hz=FS,
                   seed=seed) as drive:
         drive.enable()
-        move, sine = protocol.excitation(SPEC, position_rad=drive.status().position_rad)
-        drive.run(move)
-        result = protocol.analyse(drive.run(sine), SPEC)
+        *moves, measured = protocol.excitation(DESIGNED,
+                                               position_rad=drive.status().position_rad)
+        for move in moves:
+            drive.run(move)
+        result = protocol.analyse(drive.run(measured), DESIGNED)
     assert result.resonance.value == pytest.approx(plant.resonance_hz,
                                                    rel=_accuracy("resonance_frequency_hz"))
     assert result.antiresonance.value == pytest.approx(
@@ -155,3 +166,22 @@ def test_hidden_shaft_is_recovered_within_the_claimed_accuracy(
     b = PROFILE.plant.viscous_nm_s_rad
     zeta = damping + b / (2 * j_m * 2 * math.pi * plant.resonance_hz) * (j_l / j_total)
     assert result.damping.value == pytest.approx(zeta, rel=_accuracy("resonance_damping_ratio"))
+
+
+def test_the_stepped_sine_stays_available_through_the_profile() -> None:
+    """``excitation = "stepped_sine"`` runs the former protocol: it still finds the demo's
+    shaft within the claimed accuracy (effects on)."""
+    profile = dataclasses.replace(PROFILE, protocols={**PROFILE.protocols,
+                                                      "resonance": STEPPED_TABLE})
+    spec = protocol.spec_from_profile(profile, INFO)
+    assert isinstance(spec, protocol.SteppedSpec)
+    plant = PROFILE.plant
+    assert plant is not None
+    with SimDrive(plant, firmware=PROFILE.firmware, limits=PROFILE.limits, fs_hz=FS,
+                  seed=5) as drive:
+        drive.enable()
+        move, sine = protocol.excitation(spec, position_rad=drive.status().position_rad)
+        drive.run(move)
+        result = protocol.analyse(drive.run(sine), spec)
+    assert result.resonance.value == pytest.approx(plant.resonance_hz,
+                                                   rel=_accuracy("resonance_frequency_hz"))
