@@ -18,6 +18,7 @@ from hil.calibration import CalibrationRun
 from hil.drives.base import Drive
 from hil.identify.torque_constant import (
     TorqueConstantResult,
+    balanced_angles,
     datasheet_torque_constant_nm_a,
     identify_torque_constant,
 )
@@ -51,8 +52,10 @@ def result(
     if locked_rotor is None:
         pytest.skip(f"{type(drive).__name__} offers no locked-rotor fixture (locked_rotor())")
     spec = Spec.from_profile(profile, drive.info)
+    ripple = kt_ripple_from_cogging(calibration)
+    angles = balanced_angles(spec.angles_rad, ripple)
     sweeps = []
-    for angle in spec.angles_rad:
+    for angle in angles:
         calibration.run(
             drive,
             move(spec, position_rad=drive.status().position_rad, angle_rad=angle),
@@ -61,10 +64,11 @@ def result(
         with cast(AbstractContextManager[Any], locked_rotor()):
             recording = calibration.run(drive, sweep(spec, angle_rad=angle), protocol=NAME)
         sweeps.append(analyse_sweep(recording, spec, angle_rad=angle))
-    ripple = kt_ripple_from_cogging(calibration)
     analysed = identify_torque_constant(sweeps, ripple=ripple)
     calibration.details[NAME] = {
         "kt_ripple_correction": "cogging protocol's table" if ripple else "none",
+        "angles": ("configured, each nudged so the largest K_t ripple harmonic averages out"
+                   if ripple else "configured"),
         "per_angle": [
             {
                 "angle_rad": s.angle_rad,

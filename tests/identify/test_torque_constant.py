@@ -19,6 +19,7 @@ from hil.identify.cogging import compensation_table
 from hil.identify.torque_constant import (
     LockedSweep,
     analyse_locked_sweep,
+    balanced_angles,
     datasheet_deviation,
     datasheet_torque_constant_nm_a,
     identify_torque_constant,
@@ -160,3 +161,22 @@ def test_hidden_torque_constant_is_recovered_within_the_claimed_accuracy(
     truth = plant.torque_constant_nm_a * (1 + error)
     assert result.torque_constant.value == pytest.approx(truth, rel=ACCURACY)
     assert result.gain_error.value == pytest.approx(100 * error, abs=100 * ACCURACY)
+
+
+@settings(max_examples=25, deadline=None)
+@given(order=st.integers(10, 200), count=st.integers(2, 8), start=st.floats(-2.5, 0.0),
+       step=st.floats(0.05, 1.2), phase=st.floats(-math.pi, math.pi))
+def test_balanced_angles_average_the_largest_ripple_harmonic_out(
+    order: int, count: int, start: float, step: float, phase: float
+) -> None:
+    configured = [start + k * step for k in range(count)]
+    ripple = [(order, 0.01, phase), (2 * order + 1, 0.002, 0.3)]
+    angles = np.array(balanced_angles(configured, ripple))
+    # the largest harmonic sums to zero over the angles: its table's error cannot bias K_t
+    assert abs(np.exp(1j * order * angles).mean()) < 1e-9
+    # each angle stays within half a period of that harmonic of where it was configured
+    assert np.all(np.abs(angles - configured) <= math.pi / order + 1e-12)
+
+
+def test_balanced_angles_without_a_ripple_table_are_the_configured_ones() -> None:
+    assert balanced_angles([-0.9, 0.0, 0.9], []) == (-0.9, 0.0, 0.9)
