@@ -47,6 +47,10 @@ def result(
     spec = Spec.from_profile(profile, drive.info)
     gain = reported_torque_gain(calibration)
     move_elevation = cast(Callable[[float], None], set_elevation)
+    if spec.sine.centre_rad is not None:
+        calibration.run(drive, sine.move_to_centre(spec.sine, spec.sine.centre_rad,
+                                                   position_rad=drive.status().position_rad),
+                        protocol=NAME)
     inertias: list[Estimate] = []
     try:
         for elevation in spec.elevations_rad:

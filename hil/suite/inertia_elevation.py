@@ -8,6 +8,11 @@ Skips without a ``[protocols.inertia_elevation]`` table (not an azimuth axis) an
 station whose drive cannot move the elevation axis (``drive.set_elevation``). When the
 torque-constant protocol ran first, J is scaled by its reported-torque gain (shaft torque
 over reported torque): the result is in shaft-torque units.
+
+The sines run at ``centre_rad`` when the table gives it (else where the previous protocol
+left the axis): J's misfit to the sine model depends on the stretch of travel (cogging and
+K_t ripple there; on the azimuth demo J's Type A is 2–11 × 10⁻⁶ kg·m² from one stretch to
+the next), so the stretch is stated rather than inherited.
 """
 
 from __future__ import annotations
@@ -21,6 +26,7 @@ from hil.identify.inertia_elevation import scale_by_gain
 from hil.profile import UnitProfile
 from hil.recording import Recording
 from hil.suite import inertia_friction as sine
+from hil.suite.travel import move_speed_rad_s
 
 NAME = "inertia_elevation"
 
@@ -31,7 +37,7 @@ class Spec:
 
     elevations_rad: tuple[float, ...]
     park_elevation_rad: float  # where the elevation axis is left afterwards
-    sine: sine.Spec
+    sine: sine.Spec  # centre_rad: where the sines run (None: where the axis is)
 
     @classmethod
     def from_profile(cls, profile: UnitProfile, info: DriveInfo) -> Spec:
@@ -63,6 +69,9 @@ class Spec:
                 settle_periods=settings.integer("settle_periods", 2),
                 periods=settings.integer("periods", 8),
                 fs_hz=min(profile.sample_rate_hz, info.max_sample_rate_hz),
+                centre_rad=(settings.number("centre_rad") if "centre_rad" in settings
+                            else None),
+                move_speed_rad_s=move_speed_rad_s(settings, info),
             ),
         )
         settings.done()

@@ -3,6 +3,7 @@ simulator's elevation-dependent inertia, and recovery of a hidden payload (effec
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -164,3 +165,12 @@ def test_max_min_ratio_and_its_uncertainty() -> None:
         reported.append(result.ratio.standard_uncertainty)
     assert np.mean(ratios) == pytest.approx((zenith + delta) / zenith, rel=1e-3)
     assert np.std(ratios) == pytest.approx(np.mean(reported), rel=0.15)
+
+
+def test_the_sines_run_at_the_stated_stretch_or_where_the_axis_is() -> None:
+    assert SPEC.sine.centre_rad == PROFILE.protocol("inertia_elevation")["centre_rad"]
+    table = {k: v for k, v in PROFILE.protocols["inertia_elevation"].items()
+             if k != "centre_rad"}
+    inherited = dataclasses.replace(PROFILE, protocols={**PROFILE.protocols,
+                                                        "inertia_elevation": table})
+    assert protocol.Spec.from_profile(inherited, INFO).sine.centre_rad is None
