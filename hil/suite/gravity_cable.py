@@ -26,7 +26,7 @@ from hil.identify.gravity_cable import (
 )
 from hil.motion import Excitation, Mode
 from hil.profile import UnitProfile
-from hil.suite.travel import TravelSpec, move_excitation
+from hil.suite.travel import TravelSpec
 
 log = logging.getLogger(__name__)
 
@@ -87,6 +87,11 @@ class Spec(TravelSpec):
         return self.travel_max_rad - self.margin_rad
 
     @property
+    def excitation_start_rad(self) -> float:
+        """Above :attr:`start_rad` by the run-in and the reference (see :attr:`plan`)."""
+        return self.plan.start_rad
+
+    @property
     def plan(self) -> SweepPlan:
         """The sweep's command and its phases (:func:`hil.identify.gravity_cable.sweep_plan`)."""
         return sweep_plan(
@@ -115,12 +120,10 @@ def excitation(spec: Spec, *, position_rad: float) -> list[Excitation]:
         The move to the plan's start (above :attr:`Spec.start_rad` by its run-in and
         reference), then the sweep (velocity mode).
     """
-    plan = spec.plan
     return [
-        move_excitation("move_to_start", position_rad, plan.start_rad, fs_hz=spec.fs_hz,
-                        speed_rad_s=spec.move_speed_rad_s, hold_s=0.2),
+        spec.move_to_start(position_rad, hold_s=0.2),
         Excitation(name="sweep", mode=Mode.VELOCITY, fs_hz=spec.fs_hz,
-                   command=plan.command_rad_s),
+                   command=spec.plan.command_rad_s),
     ]
 
 

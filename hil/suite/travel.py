@@ -197,8 +197,14 @@ class TravelSpec:
 
     @property
     def start_rad(self) -> float:
-        """Where the excitation starts: the lower travel limit plus the margin."""
+        """Where the passes start: the lower travel limit plus the margin."""
         return self.travel_min_rad + self.margin_rad
+
+    @property
+    def excitation_start_rad(self) -> float:
+        """Where the excitation's command begins (the repositioning move's end):
+        :attr:`start_rad` unless a protocol runs in before its passes."""
+        return self.start_rad
 
     def require_travel(self, needed_rad: float, *, protocol: str, source: str) -> None:
         """Refuse a profile whose one-way excitation needs more travel than the limits leave.
@@ -231,12 +237,12 @@ class TravelSpec:
             )
 
     def move_to_start(self, position_rad: float, *, hold_s: float) -> Excitation:
-        """The repositioning move from ``position_rad`` to :attr:`start_rad`, then a hold
-        of ``hold_s`` (see :func:`move_excitation`)."""
+        """The repositioning move from ``position_rad`` to :attr:`excitation_start_rad`,
+        then a hold of ``hold_s`` (see :func:`move_excitation`)."""
         return move_excitation(
             "move_to_start",
             position_rad,
-            self.start_rad,
+            self.excitation_start_rad,
             fs_hz=self.fs_hz,
             speed_rad_s=self.move_speed_rad_s,
             hold_s=hold_s,

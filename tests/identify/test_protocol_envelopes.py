@@ -33,8 +33,8 @@ def test_every_excitation_is_inside_the_limits(module: object, start: float) -> 
     spec = module.Spec.from_profile(OWN_PASSES, INFO)  # type: ignore[attr-defined]
     move, main = module.excitation(spec, position_rad=start)  # type: ignore[attr-defined]
     check_limits(move, PROFILE.limits, start_position_rad=start)
-    assert move.command[-1] == pytest.approx(spec.start_rad)
-    check_limits(main, PROFILE.limits, start_position_rad=spec.start_rad)
+    assert move.command[-1] == pytest.approx(spec.excitation_start_rad)
+    check_limits(main, PROFILE.limits, start_position_rad=spec.excitation_start_rad)
     assert main.mode is Mode.VELOCITY
     assert np.all(np.isfinite(main.command))
 
