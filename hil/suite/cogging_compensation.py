@@ -27,6 +27,7 @@ from hil.motion import CompensationTable, Excitation, Mode, PositionHarmonic
 from hil.profile import UnitProfile
 from hil.recording import Recording
 from hil.suite.cogging import MIN_SAMPLES_PER_PASS
+from hil.suite.stop_rule import StopRule
 from hil.suite.travel import TravelSpec, on_command_grid, speed_ramp
 
 NAME = "cogging_compensation"
@@ -43,6 +44,7 @@ class Spec(TravelSpec):
     ramp_s: float
     skip_s: float
     min_samples_per_pass: int  # as the cogging protocol: the ripple's floor falls as 1/√N
+    stop: StopRule | None = None  # run again until U is reached (hil.suite.stop_rule)
 
     @classmethod
     def from_profile(cls, profile: UnitProfile, info: DriveInfo) -> Spec:
@@ -61,6 +63,7 @@ class Spec(TravelSpec):
             ramp_s=settings.positive("ramp_s", 0.1),
             skip_s=settings.positive("skip_s", 0.2),
             min_samples_per_pass=settings.integer("min_samples_per_pass", MIN_SAMPLES_PER_PASS),
+            stop=StopRule.from_settings(settings),
         )
         settings.done()
         spec.require_travel(spec.speed_rad_s * (spec.pass_s + spec.ramp_s), protocol=NAME,

@@ -21,6 +21,7 @@ from hil.identify.inertia_elevation import scale_by_gain
 from hil.profile import UnitProfile
 from hil.recording import Recording
 from hil.suite import inertia_friction as sine
+from hil.suite.stop_rule import StopRule
 
 NAME = "inertia_elevation"
 
@@ -32,6 +33,7 @@ class Spec:
     elevations_rad: tuple[float, ...]
     park_elevation_rad: float  # where the elevation axis is left afterwards
     sine: sine.Spec
+    stop: StopRule | None = None  # run again until U is reached (hil.suite.stop_rule)
 
     @classmethod
     def from_profile(cls, profile: UnitProfile, info: DriveInfo) -> Spec:
@@ -64,6 +66,7 @@ class Spec:
                 periods=settings.integer("periods", 8),
                 fs_hz=min(profile.sample_rate_hz, info.max_sample_rate_hz),
             ),
+            stop=StopRule.from_settings(settings),
         )
         settings.done()
         return spec

@@ -22,11 +22,16 @@ import dataclasses
 import math
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
+from typing import Generic, TypeVar
 
+from hil.calibration import CalibrationRun
 from hil.config import ConfigTable
 from hil.identify.estimate import Component, Estimate, with_budget
 from hil.measurement import MethodBiasMap, with_method_terms
 from hil.profile import MeasurementSpec
+
+KEYS = ("stop_at_u_fraction", "max_runs", "stop_results")
+T = TypeVar("T")
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -56,6 +61,19 @@ class StopRule:
         results = (tuple(n.strip() for n in settings.string("stop_results").split(",")
                          if n.strip()) if "stop_results" in settings else None)
         return cls(fraction=fraction, max_runs=runs, results=results)
+
+    @staticmethod
+    def refuse(settings: ConfigTable, why: str) -> None:
+        """Refuse the rule's keys in a table whose protocol cannot pool repeated runs.
+
+        Raises
+        ------
+        ProfileError
+            One of :data:`KEYS` is in ``settings``; the line says ``why``.
+        """
+        for key in KEYS:
+            if key in settings:
+                raise settings.error(key, f"no stop rule here: {why}")
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -182,3 +200,47 @@ def repeat_until(run_once: Callable[[], Mapping[str, Estimate]], *,
         if not decision.again:
             return now, decision
         runs.append(dict(run_once()))
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class Repeated(Generic[T]):
+    """A protocol's runs under its rule: pooled results, the first run's analysis."""
+
+    estimates: dict[str, Estimate]  # pooled over the runs (:func:`pooled`)
+    first: T  # the first run's analysis, for the certificate's details
+    decision: StopDecision
+
+    def details(self) -> dict[str, object]:
+        """The certificate's lines: how many runs, and why the protocol stopped."""
+        return {"runs": self.decision.runs, "stop_rule": self.decision.reason}
+
+
+def run_repeated(run_once: Callable[[], T], results: Callable[[T], Mapping[str, Estimate]],
+                 *, rule: StopRule | None, calibration: CalibrationRun) -> Repeated[T]:
+    """A protocol's excitation and analysis, run again while its rule asks for it.
+
+    Parameters
+    ----------
+    run_once : callable
+        Runs the excitation once (moves included) and returns its analysis.
+    results : callable
+        The analysis's results by name (the estimates pooled and judged).
+    rule : StopRule or None
+        The profile's rule; ``None``: one run.
+    calibration : CalibrationRun
+        The calibration in progress: the profile's declarations and the method map.
+
+    Returns
+    -------
+    Repeated
+        Pooled results, the first run's analysis and the last decision.
+    """
+    analyses: list[T] = []
+
+    def once() -> Mapping[str, Estimate]:
+        analyses.append(run_once())
+        return results(analyses[-1])
+
+    estimates, decision = repeat_until(once, specs=calibration.profile.measurements,
+                                       method_bias=calibration.method_bias, rule=rule)
+    return Repeated(estimates=estimates, first=analyses[0], decision=decision)

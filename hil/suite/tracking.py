@@ -34,6 +34,7 @@ from hil.identify.quantisation import quantisation_step
 from hil.motion import Excitation, Mode
 from hil.profile import UnitProfile
 from hil.recording import Recording
+from hil.suite.stop_rule import StopRule
 from hil.suite.travel import TravelSpec, on_command_grid
 
 NAME = "tracking"
@@ -53,6 +54,7 @@ class Spec(TravelSpec):
     track_s: float
     reversal_s: float
     min_sample_rate_hz: float  # the offset follows ω* sample by sample (not a polled link)
+    stop: StopRule | None = None  # run again until U is reached (hil.suite.stop_rule)
 
     @classmethod
     def from_profile(cls, profile: UnitProfile, info: DriveInfo) -> Spec:
@@ -73,6 +75,7 @@ class Spec(TravelSpec):
             track_s=settings.positive("track_s", 0.5),
             reversal_s=settings.positive("reversal_s", 0.5),
             min_sample_rate_hz=settings.positive("min_sample_rate_hz", 1000.0),
+            stop=StopRule.from_settings(settings),
         )
         settings.done()
         spec.require_travel(float(np.sum(spec.command())) / spec.fs_hz, protocol=NAME,
