@@ -21,6 +21,7 @@ from hil.profile import UnitProfile
 from hil.suite.cogging_compensation import (
     MEASUREMENTS,
     NAME,
+    TABLE_LINE,
     Spec,
     analyse,
     excitation,
@@ -81,7 +82,7 @@ def result(cleared: Drive, calibration: CalibrationRun, profile: UnitProfile
                        table_relative_u=relative_u)
 
     runs = run_repeated(run_once, lambda found: found[0], rule=spec.stop,
-                        calibration=calibration)
+                        calibration=calibration, shared=(TABLE_LINE,))
     largest = runs.first[1]
     calibration.details[NAME] = {
         **runs.details(),

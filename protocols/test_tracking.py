@@ -17,6 +17,7 @@ from hil.profile import UnitProfile
 from hil.suite.rate import sample_rate_shortfall
 from hil.suite.stop_rule import run_repeated
 from hil.suite.tracking import (
+    FEEDFORWARD_LINE,
     MEASUREMENTS,
     MICRO,
     NAME,
@@ -54,7 +55,7 @@ def result(drive: Drive, calibration: CalibrationRun, profile: UnitProfile
         return analyse((recorded_off, off), (recorded_on, on), spec, feedforward_u_rel=u_rel)
 
     runs = run_repeated(run_once, lambda found: found[0], rule=spec.stop,
-                        calibration=calibration)
+                        calibration=calibration, shared=(FEEDFORWARD_LINE,))
     _, f_off, f_on = runs.first
     calibration.details[NAME] = {
         **runs.details(),

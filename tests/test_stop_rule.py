@@ -11,7 +11,7 @@ import pytest
 import hil.suite.inertia_friction as sine
 from hil.config import ConfigTable
 from hil.drives.sim import SimDrive
-from hil.errors import ProfileError
+from hil.errors import IdentificationError, ProfileError
 from hil.identify.estimate import Component, Estimate
 from hil.measurement import MethodBiasMap
 from hil.profile import load_profile
@@ -102,3 +102,38 @@ def test_the_sines_run_again_only_while_the_noise_keeps_u_above_its_target(
         assert "every U ≤" in decision.reason
     else:
         assert decision.reason.startswith("max_runs = 3 reached with inertia_kg_m2 U =")
+
+
+def test_a_type_a_line_every_run_shares_is_not_divided_by_the_number_of_runs() -> None:
+    """The tracking feedforward's u (an earlier result's, Type A) is the same error in each
+    run: pooled like a Type B line."""
+    def run(value: float) -> Estimate:
+        lines = (Component(source="noise", kind="A", standard_uncertainty=4e-4, unit="N·m",
+                           dof=7),
+                 Component(source="earlier u [with feedforward]", kind="A",
+                           standard_uncertainty=3e-4, unit="N·m"))
+        return Estimate(name="coulomb_nm", value=value, standard_uncertainty=5e-4,
+                        unit="N·m", dof=7, budget=lines)
+
+    noise, shared = pooled([run(0.020), run(0.021)], shared=("earlier u",)).budget
+    assert noise.contribution == pytest.approx(4e-4 / math.sqrt(2))
+    assert shared.contribution == pytest.approx(3e-4)
+    assert shared.source == "earlier u [with feedforward]"
+
+
+def test_a_run_whose_budget_has_other_lines_is_left_out_and_the_rule_says_so() -> None:
+    """A detection in one run and only a bound in the next are not repeats of one
+    measurement: the protocol keeps the runs before and stops."""
+    bound = Estimate(name="coulomb_nm", value=0.02, standard_uncertainty=1e-3, unit="N·m",
+                     budget=(Component(source="bound", kind="B", standard_uncertainty=1e-3,
+                                       unit="N·m"),))
+    runs = iter([_estimate(0.02, 9e-4, 1e-4), bound])
+    rule = StopRule(fraction=0.25, max_runs=3, results=None)
+    found, decision = repeat_until(lambda: {"coulomb_nm": next(runs)},
+                                   specs={"coulomb_nm": PROFILE.measurement("coulomb_nm")},
+                                   method_bias=NO_MAP, rule=rule)
+    assert decision.runs == 1
+    assert decision.reason.startswith("run 2 left out: its coulomb_nm has other budget lines")
+    assert found["coulomb_nm"].value == 0.02
+    with pytest.raises(IdentificationError, match="budgets differ"):
+        pooled([_estimate(0.02, 9e-4, 1e-4), bound])

@@ -31,6 +31,7 @@ from hil.suite.stop_rule import StopRule
 from hil.suite.travel import TravelSpec, on_command_grid, speed_ramp
 
 NAME = "cogging_compensation"
+TABLE_LINE = "the table's own uncertainty"  # shared by repeated runs (stop_rule)
 MEASUREMENTS = ("cogging_ripple_uncompensated_urad", "cogging_ripple_compensated_urad",
                 "cogging_compensation_removed_pct")
 
@@ -160,7 +161,7 @@ def analyse(off: tuple[Recording, Excitation], on: tuple[Recording, Excitation],
     delta = by_order.get(n_off, max(by_order.values(), default=0.0))
     if delta > 0:
         with_table = with_table.with_components(Component(
-            source="the table's own uncertainty (cogging_compensation.json amplitude_u), times "
+            source=f"{TABLE_LINE} (cogging_compensation.json amplitude_u), times "
                    "the ripple it cancels, amplitude and phase (Type A)", kind="A",
             standard_uncertainty=math.sqrt(2) * delta * without.value, unit="µrad"))
     removed = removed_fraction(without, with_table)

@@ -13,7 +13,9 @@ noisy one runs again and its certificate says why (:attr:`StopDecision.reason`).
 
 Repeated runs are pooled as independent repeats of one measurement: the mean value, each
 Type A line divided by √n with its degrees of freedom summed, the Type B lines (inputs
-that every run shares: earlier protocols' results) kept as the first run states them.
+that every run shares: earlier protocols' results) kept as the first run states them, as
+are Type A lines that carry an earlier result into every run (``shared``).
+:func:`run_repeated` is the protocols' one shape: run, pool, say why in the details.
 """
 
 from __future__ import annotations
@@ -26,6 +28,7 @@ from typing import Generic, TypeVar
 
 from hil.calibration import CalibrationRun
 from hil.config import ConfigTable
+from hil.errors import IdentificationError
 from hil.identify.estimate import Component, Estimate, with_budget
 from hil.measurement import MethodBiasMap, with_method_terms
 from hil.profile import MeasurementSpec
@@ -90,35 +93,53 @@ def target_expanded_u(spec: MeasurementSpec, fraction: float) -> float:
     return fraction * (spec.upper_limit - spec.lower_limit) / 2
 
 
-def pooled(runs: Sequence[Estimate]) -> Estimate:
+def same_lines(runs: Sequence[Estimate]) -> bool:
+    """Whether the runs' budgets have the same lines (number and kinds, in one order)."""
+    kinds = [[line.kind for line in r.components()] for r in runs]
+    return all(k == kinds[0] for k in kinds)
+
+
+def pooled(runs: Sequence[Estimate], *, shared: Sequence[str] = ()) -> Estimate:
     """Independent repeats of one measurement as one estimate.
 
     Parameters
     ----------
     runs : sequence of Estimate
-        The same result from each run (same name, unit and budget lines).
+        The same result from each run (same name, unit and budget lines, in one order).
+    shared : sequence of str
+        Beginnings of the sources of Type A lines that carry an earlier result's u into
+        every run (the same error in each): kept as the first run states them.
 
     Returns
     -------
     Estimate
-        The mean value; Type A lines ``u/√n`` with ``n·ν`` degrees of freedom; Type B lines
-        of the first run (shared inputs do not average out). One run is returned as is.
+        The mean value; Type A lines ``u/√n`` (root sum of squares over ``n``) with the
+        degrees of freedom summed; Type B and shared lines of the first run (shared inputs
+        do not average out). One run is returned as is.
+
+    Raises
+    ------
+    IdentificationError
+        The runs' budgets differ in their number or kinds of lines.
     """
     if len(runs) == 1:
         return runs[0]
     n = len(runs)
     first = runs[0]
-    by_source = [{c.source: c for c in r.components()} for r in runs]
+    budgets = [r.components() for r in runs]
+    if not same_lines(runs):
+        raise IdentificationError(f"{first.name}: the {n} runs' uncertainty budgets differ "
+                                  "in their lines, so the runs cannot be pooled")
     lines: list[Component] = []
-    for line in first.components():
-        if line.kind == "A":
-            same = [found[line.source] for found in by_source if line.source in found]
-            u = math.sqrt(sum(c.contribution ** 2 for c in same)) / n
-            lines.append(dataclasses.replace(
-                line, standard_uncertainty=u, sensitivity=1.0, unit=first.unit,
-                dof=sum(c.dof for c in same), source=f"{line.source}, mean of {n} runs"))
-        else:
+    for i, line in enumerate(budgets[0]):
+        if line.kind == "B" or line.source.startswith(tuple(shared)):
             lines.append(line)
+            continue
+        same = [budget[i] for budget in budgets]
+        u = math.sqrt(sum(c.contribution ** 2 for c in same)) / n
+        lines.append(dataclasses.replace(
+            line, standard_uncertainty=u, sensitivity=1.0, unit=first.unit,
+            dof=sum(c.dof for c in same), source=f"{line.source}, mean of {n} runs"))
     value = math.fsum(r.value for r in runs) / n
     return with_budget(dataclasses.replace(first, cramer_rao_std=None), lines, value=value)
 
@@ -170,7 +191,8 @@ def decide(estimates: Mapping[str, Estimate], specs: Mapping[str, MeasurementSpe
 
 def repeat_until(run_once: Callable[[], Mapping[str, Estimate]], *,
                  specs: Mapping[str, MeasurementSpec], method_bias: MethodBiasMap,
-                 rule: StopRule | None) -> tuple[dict[str, Estimate], StopDecision]:
+                 rule: StopRule | None, shared: Sequence[str] = ()
+                 ) -> tuple[dict[str, Estimate], StopDecision]:
     """Run a protocol's measurement once, then again while :func:`decide` asks for it.
 
     Parameters
@@ -183,6 +205,8 @@ def repeat_until(run_once: Callable[[], Mapping[str, Estimate]], *,
         The calibration's map.
     rule : StopRule or None
         The profile's rule; ``None``: one run.
+    shared : sequence of str
+        Type A lines every run shares (see :func:`pooled`).
 
     Returns
     -------
@@ -192,14 +216,20 @@ def repeat_until(run_once: Callable[[], Mapping[str, Estimate]], *,
         The last decision: why the protocol stopped, after how many runs.
     """
     runs = [dict(run_once())]
+    now = runs[0]
     while True:
-        now = {name: pooled([r[name] for r in runs]) for name in runs[0]}
         if rule is None:
             return now, StopDecision(again=False, runs=1, reason="one run (no stop rule)")
         decision = decide(now, specs, method_bias, rule, runs=len(runs))
         if not decision.again:
             return now, decision
         runs.append(dict(run_once()))
+        other = [name for name in runs[0] if not same_lines([r[name] for r in runs])]
+        if other:  # e.g. a detection in one run, only a bound in another: no repeat
+            return now, StopDecision(again=False, runs=len(runs) - 1, reason=(
+                f"run {len(runs)} left out: its {', '.join(other)} has other budget lines "
+                f"than run 1's, so it is no repeat of the same measurement ({decision.reason})"))
+        now = {name: pooled([r[name] for r in runs], shared=shared) for name in runs[0]}
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -216,7 +246,8 @@ class Repeated(Generic[T]):
 
 
 def run_repeated(run_once: Callable[[], T], results: Callable[[T], Mapping[str, Estimate]],
-                 *, rule: StopRule | None, calibration: CalibrationRun) -> Repeated[T]:
+                 *, rule: StopRule | None, calibration: CalibrationRun,
+                 shared: Sequence[str] = ()) -> Repeated[T]:
     """A protocol's excitation and analysis, run again while its rule asks for it.
 
     Parameters
@@ -229,6 +260,8 @@ def run_repeated(run_once: Callable[[], T], results: Callable[[T], Mapping[str, 
         The profile's rule; ``None``: one run.
     calibration : CalibrationRun
         The calibration in progress: the profile's declarations and the method map.
+    shared : sequence of str
+        Type A lines every run shares (see :func:`pooled`).
 
     Returns
     -------
@@ -242,5 +275,6 @@ def run_repeated(run_once: Callable[[], T], results: Callable[[T], Mapping[str, 
         return results(analyses[-1])
 
     estimates, decision = repeat_until(once, specs=calibration.profile.measurements,
-                                       method_bias=calibration.method_bias, rule=rule)
+                                       method_bias=calibration.method_bias, rule=rule,
+                                       shared=shared)
     return Repeated(estimates=estimates, first=analyses[0], decision=decision)

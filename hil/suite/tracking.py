@@ -38,6 +38,7 @@ from hil.suite.stop_rule import StopRule
 from hil.suite.travel import TravelSpec, on_command_grid
 
 NAME = "tracking"
+FEEDFORWARD_LINE = "the feedforward's B and T_c"  # shared by repeated runs (stop_rule)
 MEASUREMENTS = ("tracking_rms_error_urad", "tracking_peak_error_urad",
                 "tracking_rms_error_no_ff_urad", "tracking_ff_reduction")
 MICRO = 1e6
@@ -143,7 +144,7 @@ def analyse(off: tuple[Recording, Excitation], on: tuple[Recording, Excitation],
     peak_on = est("tracking_peak_error_urad", f_on.peak_rad, f_on.noise_rad)
     if feedforward_u_rel > 0:
         d_rms, d_peak = feedforward_change(f_off, f_on, relative=feedforward_u_rel)
-        lines = [Component(source="the feedforward's B and T_c (this calibration's u), by "
+        lines = [Component(source=f"{FEEDFORWARD_LINE} (this calibration's u), by "
                                   "superposition of the runs without and with it (Type A)",
                            kind="A", standard_uncertainty=abs(change) * MICRO, unit="µrad")
                  for change in (d_rms, d_peak)]
