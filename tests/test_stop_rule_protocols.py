@@ -54,11 +54,9 @@ def _profile(tmp_path: Path, *, noise_scale: float, tables: dict[str, str]) -> P
     return path
 
 
-def _certificate(pytester: pytest.Pytester, tmp_path: Path, noise_scale: float
-                 ) -> dict[str, Any]:
-    rules = {name: f'stop_at_u_fraction = {FRACTION}\nmax_runs = {MAX_RUNS}\n'
-                   f'stop_results = "{result}"' for name, result in JUDGED.items()}
-    profile = _profile(tmp_path, noise_scale=noise_scale, tables=rules)
+def _certificate(pytester: pytest.Pytester, tmp_path: Path, noise_scale: float,
+                 tables: dict[str, str]) -> dict[str, Any]:
+    profile = _profile(tmp_path, noise_scale=noise_scale, tables=tables)
     out = tmp_path / "certs"
     # a subprocess, as tests/test_plugin.py: one calibration per interpreter
     pytester.runpytest_subprocess(
@@ -72,7 +70,9 @@ def _certificate(pytester: pytest.Pytester, tmp_path: Path, noise_scale: float
 @pytest.mark.parametrize(("noise_scale", "runs"), [(1.0, 1), (20.0, MAX_RUNS)])
 def test_a_clean_unit_runs_once_and_a_noisy_one_until_max_runs_saying_why(
         pytester: pytest.Pytester, tmp_path: Path, noise_scale: float, runs: int) -> None:
-    cert = _certificate(pytester, tmp_path, noise_scale)
+    rules = {name: f'stop_at_u_fraction = {FRACTION}\nmax_runs = {MAX_RUNS}\n'
+                   f'stop_results = "{result}"' for name, result in JUDGED.items()}
+    cert = _certificate(pytester, tmp_path, noise_scale, rules)
     results = {r["parameter"]: r for r in cert["results"]}
     for protocol, judged in JUDGED.items():
         details = cert["method"]["details"][protocol]
@@ -96,6 +96,20 @@ def test_a_clean_unit_runs_once_and_a_noisy_one_until_max_runs_saying_why(
         assert u > target
         assert noise_line["type"] == "A"
         assert noise_line["component"].endswith(f"mean of {MAX_RUNS} runs")
+
+
+def test_cogging_analyses_the_first_of_the_gravity_protocols_repeated_sweeps(
+        pytester: pytest.Pytester, tmp_path: Path) -> None:
+    """The sweep a calibration without the gravity protocol's rule has too: the cogging
+    result does not depend on how many times the sweep ran."""
+    never = f"stop_at_u_fraction = 1e-6\nmax_runs = {MAX_RUNS}"  # no U reaches it
+    cert = _certificate(pytester, tmp_path, 1.0, {"gravity_cable": never, "cogging": ""})
+    details = cert["method"]["details"]
+    assert details["gravity_cable"]["runs"] == MAX_RUNS
+    sweeps = [f["file"] for f in cert["raw_data"] if f["excitation"] == "sweep"]
+    assert sweeps == ["recordings/gravity_cable__sweep.csv.gz",
+                      "recordings/gravity_cable__sweep__2.csv.gz"]
+    assert details["cogging"]["recordings_analysed"] == {"passes": sweeps[0]}
 
 
 def test_cogging_on_the_gravity_sweeps_passes_refuses_the_rule(tmp_path: Path) -> None:

@@ -259,7 +259,8 @@ def sweep_passes(
     position_rad, torque_nm : ndarray
         The sweep from its up pass on (the up pass, then the down pass, then the rest).
     path : str
-        The raw recording read, for the certificate's details.
+        The raw recording read, for the certificate's details: the first complete sweep
+        (the gravity protocol's stop rule may have run more; this one every calibration has).
     first_sample : int
         Where the up pass begins in that recording (its run-in and reference come first).
 
