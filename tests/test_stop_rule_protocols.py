@@ -5,7 +5,7 @@ says which U was above which target; a protocol that cannot pool refuses the rul
 The noisy unit's plant has 20 × the demo's torque noise. The target, 0.05 of the
 half-width, sits between the two units' Us (U over the half-width after one run, clean →
 noisy, on the simulator's deterministic seed: τ 0.017 → 0.18, T_s 0.012 → 0.15, torque
-ripple 0.023 → 0.29): at least 2.2 × below the noisy one's even pooled over two runs
+ripple 0.023 → 0.29): at least 2 × below the noisy one's even pooled over two runs
 (÷ √2), 2.2 × above the clean one's. The noisy Us are the Type A lines, which scale with
 the noise; the clean ones are mostly not (quantisation, method).
 """
