@@ -70,6 +70,13 @@ def test_the_rule_is_read_from_the_protocol_table_and_bad_values_are_refused() -
     rule = StopRule.from_settings(table(stop_at_u_fraction=0.25, max_runs=4,
                                         stop_results="inertia_kg_m2, coulomb_nm"))
     assert rule == StopRule(fraction=0.25, max_runs=4, results=("inertia_kg_m2", "coulomb_nm"))
+    misspelt = StopRule.from_settings(table(stop_at_u_fraction=0.25, stop_results="coulomb"))
+    assert misspelt is not None
+    with pytest.raises(ProfileError, match=r"^unit.toml: \[protocols.inertia_friction\] "
+                                           r"'stop_results': 'coulomb' is not a result of this "
+                                           r"protocol \(its results: coulomb_nm\)$"):
+        repeat_until(lambda: {"coulomb_nm": _estimate(0.02, 3e-4, 1e-4)}, specs={},
+                     method_bias=NO_MAP, rule=misspelt)
     with pytest.raises(ProfileError, match="max_runs"):
         StopRule.from_settings(table(stop_at_u_fraction=0.25, max_runs=0))
     with pytest.raises(ProfileError, match="stop_at_u_fraction"):

@@ -28,7 +28,7 @@ from typing import Generic, TypeVar
 
 from hil.calibration import CalibrationRun
 from hil.config import ConfigTable
-from hil.errors import IdentificationError
+from hil.errors import IdentificationError, ProfileError
 from hil.identify.estimate import Component, Estimate, with_budget
 from hil.measurement import MethodBiasMap, with_method_terms
 from hil.profile import MeasurementSpec
@@ -44,6 +44,7 @@ class StopRule:
     fraction: float
     max_runs: int
     results: tuple[str, ...] | None  # judged results; None: all of the protocol's
+    table: ConfigTable | None = dataclasses.field(default=None, compare=False)  # for errors
 
     @classmethod
     def from_settings(cls, settings: ConfigTable) -> StopRule | None:
@@ -63,7 +64,24 @@ class StopRule:
             raise settings.error("max_runs", f"must be at least 1, not {runs}")
         results = (tuple(n.strip() for n in settings.string("stop_results").split(",")
                          if n.strip()) if "stop_results" in settings else None)
-        return cls(fraction=fraction, max_runs=runs, results=results)
+        return cls(fraction=fraction, max_runs=runs, results=results, table=settings)
+
+    def check(self, found: Sequence[str]) -> None:
+        """Refuse ``stop_results`` naming a result the protocol does not give.
+
+        Raises
+        ------
+        ProfileError
+            A judged result is not among ``found``, the names of the protocol's results.
+        """
+        unknown = [name for name in self.results or () if name not in found]
+        if not unknown:
+            return
+        message = (f"{', '.join(map(repr, unknown))} is not a result of this protocol "
+                   f"(its results: {', '.join(found)})")
+        if self.table is None:
+            raise ProfileError(f"'stop_results': {message}")
+        raise self.table.error("stop_results", message)
 
     @staticmethod
     def refuse(settings: ConfigTable, why: str) -> None:
@@ -214,9 +232,16 @@ def repeat_until(run_once: Callable[[], Mapping[str, Estimate]], *,
         Pooled over the runs made (:func:`pooled`).
     decision : StopDecision
         The last decision: why the protocol stopped, after how many runs.
+
+    Raises
+    ------
+    ProfileError
+        The rule's ``stop_results`` names a result the first run did not give.
     """
     runs = [dict(run_once())]
     now = runs[0]
+    if rule is not None:
+        rule.check(list(now))
     while True:
         if rule is None:
             return now, StopDecision(again=False, runs=1, reason="one run (no stop rule)")
