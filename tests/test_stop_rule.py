@@ -57,6 +57,9 @@ def test_the_rule_judges_the_certificates_u_against_its_share_of_the_tolerance()
                   rule, runs=2)
     assert not last.again
     assert last.reason.startswith("max_runs = 2 reached with coulomb_nm")
+    stuck = decide({"coulomb_nm": _estimate(0.02, 9e-4, 1e-3)}, {"coulomb_nm": spec}, NO_MAP,
+                   rule, runs=1)  # the Type B line alone: U = 2 × 0.001 > 0.0015
+    assert stuck.reason.endswith("(runs cannot take it below 0.002: Type B and shared lines)")
     other = dataclasses.replace(rule, results=("inertia_kg_m2",))
     assert not decide({"coulomb_nm": _estimate(0.02, 9e-4, 1e-4)}, {"coulomb_nm": spec},
                       NO_MAP, other, runs=1).again  # not a judged result

@@ -7,9 +7,10 @@ tolerance half-width ``(upper − lower)/2``), ``max_runs`` (default 3) and opti
 ``stop_results`` (the results judged, comma-separated; default every result of the
 protocol). The judged U is
 the certificate's: the method's line from the bias map and the profile's allowance are
-added first (:func:`hil.measurement.with_method_terms`), so a result whose U is mostly the
-method's does not ask for runs that cannot shrink it. A clean unit stops after one run; a
-noisy one runs again and its certificate says why (:attr:`StopDecision.reason`).
+added first (:func:`hil.measurement.with_method_terms`). Runs cannot shrink those, nor the
+other Type B lines: when they alone exceed the target the reason says so. A clean unit
+stops after one run; a noisy one runs again and its certificate says why
+(:attr:`StopDecision.reason`).
 
 Repeated runs are pooled as independent repeats of one measurement: the mean value, each
 Type A line divided by √n with its degrees of freedom summed, the Type B lines (inputs
@@ -162,8 +163,16 @@ def pooled(runs: Sequence[Estimate], *, shared: Sequence[str] = ()) -> Estimate:
     return with_budget(dataclasses.replace(first, cramer_rao_std=None), lines, value=value)
 
 
+def floor_expanded_u(estimate: Estimate, *, shared: Sequence[str] = ()) -> float:
+    """The U that no number of runs shrinks: Type B and shared lines alone (:func:`pooled`)."""
+    kept = [line for line in estimate.components()
+            if line.kind == "B" or line.source.startswith(tuple(shared))]
+    return with_budget(estimate, kept, value=estimate.value).expanded_uncertainty if kept else 0.0
+
+
 def decide(estimates: Mapping[str, Estimate], specs: Mapping[str, MeasurementSpec],
-           method_bias: MethodBiasMap, rule: StopRule, *, runs: int) -> StopDecision:
+           method_bias: MethodBiasMap, rule: StopRule, *, runs: int,
+           shared: Sequence[str] = ()) -> StopDecision:
     """Run again? Only while some result's certificate U exceeds its target and runs remain.
 
     Parameters
@@ -178,12 +187,15 @@ def decide(estimates: Mapping[str, Estimate], specs: Mapping[str, MeasurementSpe
         The profile's rule.
     runs : int
         Runs made so far.
+    shared : sequence of str
+        Type A lines every run shares (see :func:`pooled`).
 
     Returns
     -------
     StopDecision
-        ``again`` and the reason: which result's U was above its target, or that every U
-        was below, or that the maximum number of runs was reached first.
+        ``again`` and the reason: which result's U was above its target (and, when the
+        lines runs cannot shrink exceed the target alone, their U), or that every U was
+        below, or that the maximum number of runs was reached first.
     """
     above = []
     for name, estimate in estimates.items():
@@ -193,8 +205,11 @@ def decide(estimates: Mapping[str, Estimate], specs: Mapping[str, MeasurementSpe
         final = with_method_terms(estimate, spec, method_bias.entries.get(name))
         target = target_expanded_u(spec, rule.fraction)
         if final.expanded_uncertainty > target:
+            floor = floor_expanded_u(final, shared=shared)
             above.append(f"{name} U = {final.expanded_uncertainty:.2g} > {target:.2g} "
-                         f"{spec.unit}".rstrip())
+                         f"{spec.unit}".rstrip() + (
+                             f" (runs cannot take it below {floor:.2g}: Type B and shared "
+                             "lines)" if floor > target else ""))
     if not above:
         return StopDecision(again=False, runs=runs, reason=(
             f"every U ≤ {rule.fraction:g} × the tolerance half-width after {runs} run"
@@ -245,7 +260,7 @@ def repeat_until(run_once: Callable[[], Mapping[str, Estimate]], *,
     while True:
         if rule is None:
             return now, StopDecision(again=False, runs=1, reason="one run (no stop rule)")
-        decision = decide(now, specs, method_bias, rule, runs=len(runs))
+        decision = decide(now, specs, method_bias, rule, runs=len(runs), shared=shared)
         if not decision.again:
             return now, decision
         runs.append(dict(run_once()))
