@@ -32,6 +32,7 @@ from hil.suite.cogging import (
     sweep_passes,
 )
 from hil.suite.rate import sample_rate_shortfall
+from hil.suite.stop_rule import run_repeated
 from hil.suite.travel import on_command_grid
 
 MEASUREMENTS = ("cogging_peak_nm", "kt_ripple_peak_pct")
@@ -39,7 +40,8 @@ pytestmark = pytest.mark.protocol(NAME)
 
 
 @pytest.fixture(scope="module")
-def result(drive: Drive, calibration: CalibrationRun, profile: UnitProfile) -> CoggingResult:
+def result(drive: Drive, calibration: CalibrationRun, profile: UnitProfile
+           ) -> dict[str, Estimate]:
     spec = Spec.from_profile(profile, drive.info)
     shortfall = sample_rate_shortfall(
         spec.needed_sample_rate_hz,
@@ -54,22 +56,31 @@ def result(drive: Drive, calibration: CalibrationRun, profile: UnitProfile) -> C
     if shortfall is not None:
         pytest.skip(shortfall)
     analysed_elsewhere: dict[str, str] = {}
-    if spec.passes == SWEEP_PASSES:
+    if spec.passes == SWEEP_PASSES:  # the sweep's one recording: the spec refuses a rule
         position, torque, passes_from, first_sample = sweep_passes(calibration, profile,
                                                                    drive.info)
-        rows = len(position)
         analysed_elsewhere["passes"] = Path(passes_from).relative_to(calibration.unit_dir
                                                                       ).as_posix()
     else:
-        move, passes = excitation(spec, position_rad=drive.status().position_rad)
-        calibration.run(drive, move, protocol=NAME)
-        recording = calibration.run(drive, passes, protocol=NAME)
-        position, torque, rows = on_command_grid(recording, passes)
         passes_from = "passes (this protocol's own)"
         first_sample = 0
     inertia, source = inertia_for_correction(calibration, profile)
-    time_s = np.arange(len(position)) / spec.fs_hz
-    analysed = analyse(time_s, position, torque, spec, inertia_kg_m2=inertia)
+
+    def run_once() -> tuple[CoggingResult, int]:
+        if spec.passes == SWEEP_PASSES:
+            at_rad, torque_nm, rows = position, torque, len(position)
+        else:
+            move, passes = excitation(spec, position_rad=drive.status().position_rad)
+            calibration.run(drive, move, protocol=NAME)
+            recording = calibration.run(drive, passes, protocol=NAME)
+            at_rad, torque_nm, rows = on_command_grid(recording, passes)
+        time_s = np.arange(len(at_rad)) / spec.fs_hz
+        return analyse(time_s, at_rad, torque_nm, spec, inertia_kg_m2=inertia), rows
+
+    runs = run_repeated(run_once, lambda found: {
+        e.name: e for e in (found[0].cogging_peak, found[0].kt_ripple_peak)},
+        rule=spec.stop, calibration=calibration)
+    analysed, rows = runs.first  # the table is the first run's passes
     table = compensation_table(analysed)
     path = calibration.write_artifact(
         NAME,
@@ -78,6 +89,7 @@ def result(drive: Drive, calibration: CalibrationRun, profile: UnitProfile) -> C
         description="cogging and K_t ripple compensation table (format: hil/identify/cogging.py)",
     )
     calibration.details[NAME] = {
+        **runs.details(),
         "compensation_table": str(path),
         "passes": passes_from,
         "recordings_analysed": analysed_elsewhere,
@@ -93,13 +105,11 @@ def result(drive: Drive, calibration: CalibrationRun, profile: UnitProfile) -> C
         "noise_rms_nm": analysed.noise_rms_nm,
         "recorded_rows": rows,
     }
-    return analysed
+    return runs.estimates
 
 
 @pytest.mark.parametrize("parameter", MEASUREMENTS)
-def test_cogging(parameter: str, result: CoggingResult, calibration: CalibrationRun) -> None:
-    estimates: dict[str, Estimate] = {
-        e.name: e for e in (result.cogging_peak, result.kt_ripple_peak)
-    }
-    measurement = calibration.record(NAME, estimates[parameter])
+def test_cogging(parameter: str, result: dict[str, Estimate],
+                 calibration: CalibrationRun) -> None:
+    measurement = calibration.record(NAME, result[parameter])
     assert measurement.conforms, measurement.verdict()

@@ -21,6 +21,7 @@ from hil.profile import UnitProfile
 from hil.suite.cogging_compensation import (
     MEASUREMENTS,
     NAME,
+    TABLE_LINE,
     Spec,
     analyse,
     excitation,
@@ -29,6 +30,7 @@ from hil.suite.cogging_compensation import (
     table_relative_uncertainty,
 )
 from hil.suite.rate import sample_rate_shortfall
+from hil.suite.stop_rule import run_repeated
 
 pytestmark = pytest.mark.protocol(NAME)
 
@@ -65,24 +67,31 @@ def result(cleared: Drive, calibration: CalibrationRun, profile: UnitProfile
     if shortfall is not None:
         pytest.skip(shortfall)
     off, on = excitation(spec)
-    recorded = []
-    for loaded, run in ((None, off), (table, on)):
-        calibration.run(drive, spec.move_to_start(drive.status().position_rad, hold_s=0.2),
-                        protocol=NAME)
-        drive.load_compensation(loaded)
-        recorded.append(calibration.run(drive, run, protocol=NAME))
-    drive.load_compensation(None)
-    recorded_off, recorded_on = recorded
     relative_u = table_relative_uncertainty(data)
-    estimates, largest = analyse((recorded_off, off), (recorded_on, on), spec, table,
-                                 table_relative_u=relative_u)
+
+    def run_once() -> tuple[dict[str, Estimate], list[int]]:
+        recorded = []
+        for loaded, run in ((None, off), (table, on)):
+            calibration.run(drive, spec.move_to_start(drive.status().position_rad, hold_s=0.2),
+                            protocol=NAME)
+            drive.load_compensation(loaded)
+            recorded.append(calibration.run(drive, run, protocol=NAME))
+        drive.load_compensation(None)
+        recorded_off, recorded_on = recorded
+        return analyse((recorded_off, off), (recorded_on, on), spec, table,
+                       table_relative_u=relative_u)
+
+    runs = run_repeated(run_once, lambda found: found[0], rule=spec.stop,
+                        calibration=calibration, shared=(TABLE_LINE,))
+    largest = runs.first[1]
     calibration.details[NAME] = {
+        **runs.details(),
         "table": path,
         "orders": orders(table),
         "table_relative_uncertainty": {str(n): u for n, u in relative_u.items()},
         "largest_order": {"cleared": largest[0], "loaded": largest[1]},
     }
-    return estimates
+    return runs.estimates
 
 
 @pytest.mark.parametrize("parameter", MEASUREMENTS)

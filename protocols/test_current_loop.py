@@ -18,16 +18,20 @@ from hil.identify.current_loop import (
     CurrentLoopResult,
     torque_hold_s,
 )
+from hil.identify.estimate import Estimate
 from hil.profile import UnitProfile
+from hil.recording import Recording
 from hil.suite.current_loop import NAME, Spec, analyse, excitation
 from hil.suite.rate import sample_rate_shortfall
+from hil.suite.stop_rule import run_repeated
 
 MEASUREMENTS = ("current_loop_time_constant_ms",)
 pytestmark = pytest.mark.protocol(NAME)
 
 
 @pytest.fixture(scope="module")
-def result(drive: Drive, calibration: CalibrationRun, profile: UnitProfile) -> CurrentLoopResult:
+def result(drive: Drive, calibration: CalibrationRun, profile: UnitProfile
+           ) -> dict[str, Estimate]:
     spec = Spec.from_profile(profile, drive.info)
     shortfall = sample_rate_shortfall(
         spec.needed_sample_rate_hz,
@@ -37,11 +41,18 @@ def result(drive: Drive, calibration: CalibrationRun, profile: UnitProfile) -> C
     )
     if shortfall is not None:
         pytest.skip(shortfall)
-    move, sines = excitation(spec, position_rad=drive.status().position_rad)
-    calibration.run(drive, move, protocol=NAME)
-    recording = calibration.run(drive, sines, protocol=NAME)
-    analysed = analyse(recording, spec)
+
+    def run_once() -> tuple[CurrentLoopResult, Recording]:
+        move, sines = excitation(spec, position_rad=drive.status().position_rad)
+        calibration.run(drive, move, protocol=NAME)
+        recording = calibration.run(drive, sines, protocol=NAME)
+        return analyse(recording, spec), recording
+
+    runs = run_repeated(run_once, lambda found: {MEASUREMENTS[0]: found[0].time_constant},
+                        rule=spec.stop, calibration=calibration)
+    analysed, recording = runs.first
     calibration.details[NAME] = {
+        **runs.details(),
         "torque_hold": dataclasses.asdict(torque_hold_s(recording.metadata, fs_hz=spec.fs_hz)),
         "viscous_over_inertia_1_s": analysed.viscous_over_inertia_1_s,
         "chi2_per_dof": analysed.chi2_per_dof,
@@ -56,12 +67,12 @@ def result(drive: Drive, calibration: CalibrationRun, profile: UnitProfile) -> C
             for p in analysed.points
         ],
     }
-    return analysed
+    return runs.estimates
 
 
 @pytest.mark.parametrize("parameter", MEASUREMENTS)
 def test_current_loop(
-    parameter: str, result: CurrentLoopResult, calibration: CalibrationRun
+    parameter: str, result: dict[str, Estimate], calibration: CalibrationRun
 ) -> None:
-    measurement = calibration.record(NAME, {MEASUREMENTS[0]: result.time_constant}[parameter])
+    measurement = calibration.record(NAME, result[parameter])
     assert measurement.conforms, measurement.verdict()

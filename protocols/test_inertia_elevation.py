@@ -24,6 +24,7 @@ from hil.identify.inertia_elevation import InertiaElevationResult, fit_inertia_e
 from hil.profile import UnitProfile
 from hil.suite import inertia_friction as sine
 from hil.suite.inertia_elevation import NAME, Spec, inertia_at_elevation, reported_torque_gain
+from hil.suite.stop_rule import run_repeated
 
 MEASUREMENTS = (
     "azimuth_inertia_level_kg_m2",
@@ -36,7 +37,7 @@ pytestmark = pytest.mark.protocol(NAME)
 @pytest.fixture(scope="module")
 def result(
     drive: Drive, calibration: CalibrationRun, profile: UnitProfile
-) -> InertiaElevationResult:
+) -> dict[str, Estimate]:
     if NAME not in profile.protocols:
         pytest.skip(f"the profile has no [protocols.{NAME}] table (not an azimuth axis)")
     set_elevation = getattr(drive, "set_elevation", None)
@@ -47,12 +48,13 @@ def result(
     spec = Spec.from_profile(profile, drive.info)
     gain = reported_torque_gain(calibration)
     move_elevation = cast(Callable[[float], None], set_elevation)
-    if spec.sine.centre_rad is not None:
-        calibration.run(drive, sine.move_to_centre(spec.sine, spec.sine.centre_rad,
-                                                   position_rad=drive.status().position_rad),
-                        protocol=NAME)
-    inertias: list[Estimate] = []
-    try:
+
+    def run_once() -> tuple[InertiaElevationResult, list[Estimate]]:
+        if spec.sine.centre_rad is not None:
+            calibration.run(drive, sine.move_to_centre(
+                spec.sine, spec.sine.centre_rad, position_rad=drive.status().position_rad),
+                protocol=NAME)
+        inertias: list[Estimate] = []
         for elevation in spec.elevations_rad:
             move_elevation(elevation)
             recordings = [
@@ -61,10 +63,17 @@ def result(
                 for e in sine.excitation(spec.sine)
             ]
             inertias.append(inertia_at_elevation(recordings, spec, calibration, gain=gain))
+        return fit_inertia_elevation(spec.elevations_rad, inertias), inertias
+
+    try:
+        runs = run_repeated(run_once, lambda found: {
+            e.name: e for e in (found[0].level, found[0].zenith, found[0].ratio)},
+            rule=spec.stop, calibration=calibration)
     finally:
         move_elevation(spec.park_elevation_rad)
-    analysed = fit_inertia_elevation(spec.elevations_rad, inertias)
+    analysed, inertias = runs.first
     calibration.details[NAME] = {
+        **runs.details(),
         "model": "J(el) = J_zenith + ΔJ·cos²(el)",
         "per_elevation": [
             {
@@ -81,13 +90,12 @@ def result(
         ),
         "chi2_per_dof": analysed.chi2_per_dof,
     }
-    return analysed
+    return runs.estimates
 
 
 @pytest.mark.parametrize("parameter", MEASUREMENTS)
 def test_inertia_elevation(
-    parameter: str, result: InertiaElevationResult, calibration: CalibrationRun
+    parameter: str, result: dict[str, Estimate], calibration: CalibrationRun
 ) -> None:
-    found = {e.name: e for e in (result.level, result.zenith, result.ratio)}
-    measurement = calibration.record(NAME, found[parameter])
+    measurement = calibration.record(NAME, result[parameter])
     assert measurement.conforms, measurement.verdict()

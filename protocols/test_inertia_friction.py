@@ -23,7 +23,7 @@ from hil.suite.inertia_friction import (
     excitation,
     move_to_centre,
 )
-from hil.suite.stop_rule import repeat_until
+from hil.suite.stop_rule import run_repeated
 
 MEASUREMENTS = ("inertia_kg_m2", "viscous_nm_s_rad", "coulomb_nm", "inertia_amplitude_spread_pct")
 pytestmark = pytest.mark.protocol(NAME)
@@ -37,22 +37,15 @@ def result(
     if spec.centre_rad is not None:
         move = move_to_centre(spec, spec.centre_rad, position_rad=drive.status().position_rad)
         calibration.run(drive, move, protocol=NAME)
-    runs: list[tuple[InertiaFrictionResult, dict[str, object]]] = []
 
-    def run_once() -> dict[str, Estimate]:
+    def run_once() -> tuple[InertiaFrictionResult, dict[str, Estimate], dict[str, object]]:
         recordings = [calibration.run(drive, e, protocol=NAME) for e in excitation(spec)]
-        analysed, estimates, corrections = analyse_in_calibration(recordings, spec, calibration)
-        runs.append((analysed, corrections))
-        return estimates
+        return analyse_in_calibration(recordings, spec, calibration)
 
-    specs = {name: profile.measurement(name) for name in MEASUREMENTS
-             if name in profile.measurements}
-    estimates, decision = repeat_until(run_once, specs=specs,
-                                       method_bias=calibration.method_bias, rule=spec.stop)
-    analysed, corrections = runs[0]  # the first run's fit and inputs, for the details
+    runs = run_repeated(run_once, lambda found: found[1], rule=spec.stop, calibration=calibration)
+    analysed, _, corrections = runs.first  # the first run's fit and inputs, for the details
     calibration.details[NAME] = {
-        "runs": decision.runs,
-        "stop_rule": decision.reason,
+        **runs.details(),
         "method": spec.method,
         "frequency_hz": spec.frequency_hz,
         "settle_periods": spec.settle_periods,
@@ -69,7 +62,7 @@ def result(
             for r in analysed.runs
         ],
     }
-    return estimates
+    return runs.estimates
 
 
 @pytest.mark.parametrize("parameter", MEASUREMENTS)

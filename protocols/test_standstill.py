@@ -8,10 +8,13 @@ from __future__ import annotations
 import pytest
 
 from hil.calibration import CalibrationRun
+from hil.closed_loop.standstill import Standstill
 from hil.drives.base import Drive
 from hil.identify.estimate import Estimate
+from hil.motion import Excitation
 from hil.profile import UnitProfile
 from hil.suite.standstill import MEASUREMENTS, NAME, Spec, analyse, excitation
+from hil.suite.stop_rule import run_repeated
 
 pytestmark = pytest.mark.protocol(NAME)
 
@@ -20,14 +23,21 @@ pytestmark = pytest.mark.protocol(NAME)
 def result(drive: Drive, calibration: CalibrationRun, profile: UnitProfile
            ) -> dict[str, Estimate]:
     spec = Spec.from_profile(profile, drive.info)
-    hold = excitation(spec, position_rad=drive.status().position_rad)
-    estimates, blocks = analyse(calibration.run(drive, hold, protocol=NAME), hold, spec)
+
+    def run_once() -> tuple[dict[str, Estimate], Standstill, Excitation]:
+        hold = excitation(spec, position_rad=drive.status().position_rad)
+        return (*analyse(calibration.run(drive, hold, protocol=NAME), hold, spec), hold)
+
+    runs = run_repeated(run_once, lambda found: found[0], rule=spec.stop,
+                        calibration=calibration)
+    _, blocks, hold = runs.first
     calibration.details[NAME] = {
+        **runs.details(),
         "position_rad": float(hold.command[-1]),
         "block_torque_rms_mnm": [float(v) * 1e3 for v in blocks.torque_rms_nm],
         "block_position_rms_urad": [float(v) * 1e6 for v in blocks.position_rms_rad],
     }
-    return estimates
+    return runs.estimates
 
 
 @pytest.mark.parametrize("parameter", MEASUREMENTS)

@@ -13,6 +13,7 @@ from hil.drives.base import Drive
 from hil.identify.estimate import Estimate
 from hil.identify.stribeck import StribeckResult
 from hil.profile import UnitProfile
+from hil.suite.stop_rule import run_repeated
 from hil.suite.stribeck import NAME, Spec, analyse, cross_check, excitation, finite_or_none
 from hil.suite.torque_constant import kt_ripple_from_cogging
 from hil.suite.travel import on_command_grid
@@ -22,16 +23,25 @@ pytestmark = pytest.mark.protocol(NAME)
 
 
 @pytest.fixture(scope="module")
-def result(drive: Drive, calibration: CalibrationRun, profile: UnitProfile) -> StribeckResult:
+def result(drive: Drive, calibration: CalibrationRun, profile: UnitProfile
+           ) -> dict[str, Estimate]:
     spec = Spec.from_profile(profile, drive.info)
-    move, stairs = excitation(spec, position_rad=drive.status().position_rad)
-    calibration.run(drive, move, protocol=NAME)
-    recording = calibration.run(drive, stairs, protocol=NAME)
-    position, torque, rows = on_command_grid(recording, stairs)
-    time_s = np.arange(len(position)) / stairs.fs_hz
     ripple = kt_ripple_from_cogging(calibration)
-    analysed = analyse(time_s, position, torque, spec, ripple=ripple)
+
+    def run_once() -> tuple[StribeckResult, int]:
+        move, stairs = excitation(spec, position_rad=drive.status().position_rad)
+        calibration.run(drive, move, protocol=NAME)
+        recording = calibration.run(drive, stairs, protocol=NAME)
+        position, torque, rows = on_command_grid(recording, stairs)
+        time_s = np.arange(len(position)) / stairs.fs_hz
+        return analyse(time_s, position, torque, spec, ripple=ripple), rows
+
+    runs = run_repeated(run_once, lambda found: {
+        e.name: e for e in (found[0].static, found[0].stribeck_velocity)},
+        rule=spec.stop, calibration=calibration)
+    analysed, rows = runs.first
     calibration.details[NAME] = {
+        **runs.details(),
         "recorded_rows": rows,
         "coulomb_nm": analysed.coulomb.value,
         "viscous_nm_s_rad": analysed.viscous.value,
@@ -52,11 +62,11 @@ def result(drive: Drive, calibration: CalibrationRun, profile: UnitProfile) -> S
         "note": "steady sliding friction includes the cable's hysteresis half-width "
         "(direction-dependent, not separable at constant speed)",
     }
-    return analysed
+    return runs.estimates
 
 
 @pytest.mark.parametrize("parameter", MEASUREMENTS)
-def test_stribeck(parameter: str, result: StribeckResult, calibration: CalibrationRun) -> None:
-    estimates: dict[str, Estimate] = {e.name: e for e in (result.static, result.stribeck_velocity)}
-    measurement = calibration.record(NAME, estimates[parameter])
+def test_stribeck(parameter: str, result: dict[str, Estimate],
+                  calibration: CalibrationRun) -> None:
+    measurement = calibration.record(NAME, result[parameter])
     assert measurement.conforms, measurement.verdict()

@@ -16,13 +16,16 @@ import pytest
 
 from hil.calibration import CalibrationRun
 from hil.drives.base import Drive
+from hil.identify.estimate import Estimate
 from hil.identify.torque_constant import (
+    LockedSweep,
     TorqueConstantResult,
     balanced_angles,
     datasheet_torque_constant_nm_a,
     identify_torque_constant,
 )
 from hil.profile import UnitProfile
+from hil.suite.stop_rule import run_repeated
 from hil.suite.torque_constant import (
     NAME,
     Spec,
@@ -45,7 +48,7 @@ pytestmark = pytest.mark.protocol(NAME)
 @pytest.fixture(scope="module")
 def result(
     drive: Drive, calibration: CalibrationRun, profile: UnitProfile
-) -> tuple[TorqueConstantResult, Spec]:
+) -> dict[str, Estimate]:
     if not drive.info.has_torque_sensor:
         pytest.skip("the station has no shaft torque sensor (drive.info.has_torque_sensor)")
     locked_rotor = getattr(drive, "locked_rotor", None)
@@ -54,18 +57,25 @@ def result(
     spec = Spec.from_profile(profile, drive.info)
     ripple = kt_ripple_from_cogging(calibration)
     angles = balanced_angles(spec.angles_rad, ripple)
-    sweeps = []
-    for angle in angles:
-        calibration.run(
-            drive,
-            move(spec, position_rad=drive.status().position_rad, angle_rad=angle),
-            protocol=NAME,
-        )
-        with cast(AbstractContextManager[Any], locked_rotor()):
-            recording = calibration.run(drive, sweep(spec, angle_rad=angle), protocol=NAME)
-        sweeps.append(analyse_sweep(recording, spec, angle_rad=angle))
-    analysed = identify_torque_constant(sweeps, ripple=ripple)
+
+    def run_once() -> tuple[TorqueConstantResult, list[LockedSweep]]:
+        sweeps = []
+        for angle in angles:
+            calibration.run(
+                drive,
+                move(spec, position_rad=drive.status().position_rad, angle_rad=angle),
+                protocol=NAME,
+            )
+            with cast(AbstractContextManager[Any], locked_rotor()):
+                recording = calibration.run(drive, sweep(spec, angle_rad=angle), protocol=NAME)
+            sweeps.append(analyse_sweep(recording, spec, angle_rad=angle))
+        return identify_torque_constant(sweeps, ripple=ripple), sweeps
+
+    runs = run_repeated(run_once, lambda found: estimates(found[0], spec), rule=spec.stop,
+                        calibration=calibration)
+    sweeps = runs.first[1]
     calibration.details[NAME] = {
+        **runs.details(),
         "kt_ripple_correction": "cogging protocol's table" if ripple else "none",
         "angles": ("configured, each nudged so the largest K_t ripple harmonic averages out"
                    if ripple else "configured"),
@@ -83,15 +93,14 @@ def result(
             None if spec.kv_rpm_per_v is None else datasheet_torque_constant_nm_a(spec.kv_rpm_per_v)
         ),
     }
-    return analysed, spec
+    return runs.estimates
 
 
 @pytest.mark.parametrize("parameter", MEASUREMENTS)
 def test_torque_constant(
-    parameter: str, result: tuple[TorqueConstantResult, Spec], calibration: CalibrationRun
+    parameter: str, result: dict[str, Estimate], calibration: CalibrationRun
 ) -> None:
-    found = estimates(*result)
-    if parameter not in found:
+    if parameter not in result:
         pytest.skip("the profile's [unit] has no kv_rpm_per_v (datasheet KV)")
-    measurement = calibration.record(NAME, found[parameter])
+    measurement = calibration.record(NAME, result[parameter])
     assert measurement.conforms, measurement.verdict()

@@ -10,11 +10,14 @@ from __future__ import annotations
 import pytest
 
 from hil.calibration import CalibrationRun
+from hil.closed_loop.tracking import Following
 from hil.drives.base import Drive
 from hil.identify.estimate import Estimate
 from hil.profile import UnitProfile
 from hil.suite.rate import sample_rate_shortfall
+from hil.suite.stop_rule import run_repeated
 from hil.suite.tracking import (
+    FEEDFORWARD_LINE,
     MEASUREMENTS,
     MICRO,
     NAME,
@@ -39,17 +42,23 @@ def result(drive: Drive, calibration: CalibrationRun, profile: UnitProfile
         pytest.skip(shortfall)
     viscous, coulomb, u_rel, source = feedforward_values(calibration, profile, spec)
     off, on = excitation(spec, viscous_nm_s_rad=viscous, coulomb_nm=coulomb)
-    recorded = []
-    for move in (off, on):
-        calibration.run(drive, spec.move_to_start(drive.status().position_rad, hold_s=0.2),
-                        protocol=NAME)
-        drive.disable()  # re-enabled: the velocity integrator starts empty for either run
-        drive.enable()
-        recorded.append(calibration.run(drive, move, protocol=NAME))
-    recorded_off, recorded_on = recorded
-    estimates, f_off, f_on = analyse((recorded_off, off), (recorded_on, on), spec,
-                                     feedforward_u_rel=u_rel)
+
+    def run_once() -> tuple[dict[str, Estimate], Following, Following]:
+        recorded = []
+        for move in (off, on):
+            calibration.run(drive, spec.move_to_start(drive.status().position_rad, hold_s=0.2),
+                            protocol=NAME)
+            drive.disable()  # re-enabled: the velocity integrator starts empty for either run
+            drive.enable()
+            recorded.append(calibration.run(drive, move, protocol=NAME))
+        recorded_off, recorded_on = recorded
+        return analyse((recorded_off, off), (recorded_on, on), spec, feedforward_u_rel=u_rel)
+
+    runs = run_repeated(run_once, lambda found: found[0], rule=spec.stop,
+                        calibration=calibration, shared=(FEEDFORWARD_LINE,))
+    _, f_off, f_on = runs.first
     calibration.details[NAME] = {
+        **runs.details(),
         "feedforward": {"viscous_nm_s_rad": viscous, "coulomb_nm": coulomb,
                         "relative_uncertainty": u_rel, "source": source,
                         "sent_as": "torque offset (CiA 402 0x60B2)"},
@@ -57,7 +66,7 @@ def result(drive: Drive, calibration: CalibrationRun, profile: UnitProfile
         "peak_error_no_ff_urad": f_off.peak_rad * MICRO,
         "move_s": len(on.command) / on.fs_hz,
     }
-    return estimates
+    return runs.estimates
 
 
 @pytest.mark.parametrize("parameter", MEASUREMENTS)

@@ -12,10 +12,12 @@ import dataclasses
 import pytest
 
 from hil.calibration import CalibrationRun
+from hil.closed_loop.step import StepFigures
 from hil.drives.base import Drive
 from hil.identify.estimate import Estimate
 from hil.profile import UnitProfile
 from hil.suite.rate import sample_rate_shortfall
+from hil.suite.stop_rule import run_repeated
 from hil.suite.velocity_step import MEASUREMENTS, NAME, Spec, analyse, excitation
 
 pytestmark = pytest.mark.protocol(NAME)
@@ -29,17 +31,24 @@ def result(drive: Drive, calibration: CalibrationRun, profile: UnitProfile
                                       why="≥ 10 samples in a 10 ms rise")
     if shortfall is not None:
         pytest.skip(shortfall)
-    *moves, forward, backward = excitation(spec, position_rad=drive.status().position_rad)
-    for move in moves:
-        calibration.run(drive, move, protocol=NAME)
-    runs = [(calibration.run(drive, e, protocol=NAME), e) for e in (forward, backward)]
-    estimates, steps = analyse(runs, spec)
+
+    def run_once() -> tuple[dict[str, Estimate], list[tuple[str, StepFigures]]]:
+        *moves, forward, backward = excitation(spec, position_rad=drive.status().position_rad)
+        for move in moves:
+            calibration.run(drive, move, protocol=NAME)
+        return analyse([(calibration.run(drive, e, protocol=NAME), e)
+                        for e in (forward, backward)], spec)
+
+    runs = run_repeated(run_once, lambda found: found[0], rule=spec.stop,
+                        calibration=calibration)
+    steps = runs.first[1]
     calibration.details[NAME] = {
+        **runs.details(),
         "velocity": f"encoder position, central difference, {spec.smooth_s * 1e3:g} ms "
                     "zero-phase moving average",
         "steps": [{"size": size, **dataclasses.asdict(f)} for size, f in steps],
     }
-    return estimates
+    return runs.estimates
 
 
 @pytest.mark.parametrize("parameter", MEASUREMENTS)

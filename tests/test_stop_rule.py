@@ -11,7 +11,7 @@ import pytest
 import hil.suite.inertia_friction as sine
 from hil.config import ConfigTable
 from hil.drives.sim import SimDrive
-from hil.errors import ProfileError
+from hil.errors import IdentificationError, ProfileError
 from hil.identify.estimate import Component, Estimate
 from hil.measurement import MethodBiasMap
 from hil.profile import load_profile
@@ -57,6 +57,9 @@ def test_the_rule_judges_the_certificates_u_against_its_share_of_the_tolerance()
                   rule, runs=2)
     assert not last.again
     assert last.reason.startswith("max_runs = 2 reached with coulomb_nm")
+    stuck = decide({"coulomb_nm": _estimate(0.02, 9e-4, 1e-3)}, {"coulomb_nm": spec}, NO_MAP,
+                   rule, runs=1)  # the Type B line alone: U = 2 × 0.001 > 0.0015
+    assert stuck.reason.endswith("(runs cannot take it below 0.002: Type B and shared lines)")
     other = dataclasses.replace(rule, results=("inertia_kg_m2",))
     assert not decide({"coulomb_nm": _estimate(0.02, 9e-4, 1e-4)}, {"coulomb_nm": spec},
                       NO_MAP, other, runs=1).again  # not a judged result
@@ -70,6 +73,13 @@ def test_the_rule_is_read_from_the_protocol_table_and_bad_values_are_refused() -
     rule = StopRule.from_settings(table(stop_at_u_fraction=0.25, max_runs=4,
                                         stop_results="inertia_kg_m2, coulomb_nm"))
     assert rule == StopRule(fraction=0.25, max_runs=4, results=("inertia_kg_m2", "coulomb_nm"))
+    misspelt = StopRule.from_settings(table(stop_at_u_fraction=0.25, stop_results="coulomb"))
+    assert misspelt is not None
+    with pytest.raises(ProfileError, match=r"^unit.toml: \[protocols.inertia_friction\] "
+                                           r"'stop_results': 'coulomb' is not a result of this "
+                                           r"protocol \(its results: coulomb_nm\)$"):
+        repeat_until(lambda: {"coulomb_nm": _estimate(0.02, 3e-4, 1e-4)}, specs={},
+                     method_bias=NO_MAP, rule=misspelt)
     with pytest.raises(ProfileError, match="max_runs"):
         StopRule.from_settings(table(stop_at_u_fraction=0.25, max_runs=0))
     with pytest.raises(ProfileError, match="stop_at_u_fraction"):
@@ -102,3 +112,38 @@ def test_the_sines_run_again_only_while_the_noise_keeps_u_above_its_target(
         assert "every U ≤" in decision.reason
     else:
         assert decision.reason.startswith("max_runs = 3 reached with inertia_kg_m2 U =")
+
+
+def test_a_type_a_line_every_run_shares_is_not_divided_by_the_number_of_runs() -> None:
+    """The tracking feedforward's u (an earlier result's, Type A) is the same error in each
+    run: pooled like a Type B line."""
+    def run(value: float) -> Estimate:
+        lines = (Component(source="noise", kind="A", standard_uncertainty=4e-4, unit="N·m",
+                           dof=7),
+                 Component(source="earlier u [with feedforward]", kind="A",
+                           standard_uncertainty=3e-4, unit="N·m"))
+        return Estimate(name="coulomb_nm", value=value, standard_uncertainty=5e-4,
+                        unit="N·m", dof=7, budget=lines)
+
+    noise, shared = pooled([run(0.020), run(0.021)], shared=("earlier u",)).budget
+    assert noise.contribution == pytest.approx(4e-4 / math.sqrt(2))
+    assert shared.contribution == pytest.approx(3e-4)
+    assert shared.source == "earlier u [with feedforward]"
+
+
+def test_a_run_whose_budget_has_other_lines_is_left_out_and_the_rule_says_so() -> None:
+    """A detection in one run and only a bound in the next are not repeats of one
+    measurement: the protocol keeps the runs before and stops."""
+    bound = Estimate(name="coulomb_nm", value=0.02, standard_uncertainty=1e-3, unit="N·m",
+                     budget=(Component(source="bound", kind="B", standard_uncertainty=1e-3,
+                                       unit="N·m"),))
+    runs = iter([_estimate(0.02, 9e-4, 1e-4), bound])
+    rule = StopRule(fraction=0.25, max_runs=3, results=None)
+    found, decision = repeat_until(lambda: {"coulomb_nm": next(runs)},
+                                   specs={"coulomb_nm": PROFILE.measurement("coulomb_nm")},
+                                   method_bias=NO_MAP, rule=rule)
+    assert decision.runs == 1
+    assert decision.reason.startswith("run 2 left out: its coulomb_nm has other budget lines")
+    assert found["coulomb_nm"].value == 0.02
+    with pytest.raises(IdentificationError, match="budgets differ"):
+        pooled([_estimate(0.02, 9e-4, 1e-4), bound])

@@ -30,6 +30,7 @@ from hil.profile import UnitProfile
 from hil.recording import read_recording
 from hil.suite import gravity_cable
 from hil.suite.rate import needed_sample_rate_hz
+from hil.suite.stop_rule import StopRule
 from hil.suite.travel import TravelSpec, on_command_grid
 
 NAME = "cogging"
@@ -59,6 +60,7 @@ class Spec(TravelSpec):
     min_samples_per_pass: int
     passes: str  # OWN_PASSES or SWEEP_PASSES
     pass_range_rad: tuple[float, float]  # the travel a pass covers (start, stop)
+    stop: StopRule | None = None  # run again until U is reached (hil.suite.stop_rule)
 
     @classmethod
     def from_profile(cls, profile: UnitProfile, info: DriveInfo) -> Spec:
@@ -87,6 +89,9 @@ class Spec(TravelSpec):
             if "speed_rad_s" in settings:
                 raise settings.error("speed_rad_s", "is the sweep's with passes = "
                                      f"'{SWEEP_PASSES}' (set it in [protocols.{SWEEP_PASSES}])")
+            StopRule.refuse(settings, f"passes = '{SWEEP_PASSES}' analyses the sweep's one "
+                            "recording, and pooling it with itself is not a repeat (set "
+                            f"the rule in [protocols.{SWEEP_PASSES}], or passes = '{OWN_PASSES}')")
             sweep = gravity_cable.Spec.from_profile(profile, info)
             speed = sweep.speed_rad_s
             pass_range = (sweep.start_rad, sweep.stop_rad)
@@ -103,6 +108,7 @@ class Spec(TravelSpec):
             min_samples_per_pass=settings.integer("min_samples_per_pass", MIN_SAMPLES_PER_PASS),
             passes=passes,
             pass_range_rad=pass_range,
+            stop=StopRule.from_settings(settings),
         )
         settings.done()
         return spec
@@ -253,7 +259,8 @@ def sweep_passes(
     position_rad, torque_nm : ndarray
         The sweep from its up pass on (the up pass, then the down pass, then the rest).
     path : str
-        The raw recording read, for the certificate's details.
+        The raw recording read, for the certificate's details: the first complete sweep
+        (the gravity protocol's stop rule may have run more; this one every calibration has).
     first_sample : int
         Where the up pass begins in that recording (its run-in and reference come first).
 
@@ -270,7 +277,8 @@ def sweep_passes(
             "complete sweep earlier in this calibration (its table before this one)")
     spec = gravity_cable.Spec.from_profile(profile, info)
     sweep = gravity_cable.excitation(spec, position_rad=spec.start_rad)[-1]
-    recording = read_recording(raw[-1].path, log_warnings=False)
+    # the first sweep: the one a calibration without the gravity stop rule has too
+    recording = read_recording(raw[0].path, log_warnings=False)
     position, torque, _ = on_command_grid(recording, sweep)
     first = spec.plan.up[0]
-    return position[first:], torque[first:], str(raw[-1].path), first
+    return position[first:], torque[first:], str(raw[0].path), first

@@ -27,9 +27,11 @@ from hil.motion import CompensationTable, Excitation, Mode, PositionHarmonic
 from hil.profile import UnitProfile
 from hil.recording import Recording
 from hil.suite.cogging import MIN_SAMPLES_PER_PASS
+from hil.suite.stop_rule import StopRule
 from hil.suite.travel import TravelSpec, on_command_grid, speed_ramp
 
 NAME = "cogging_compensation"
+TABLE_LINE = "the table's own uncertainty"  # shared by repeated runs (stop_rule)
 MEASUREMENTS = ("cogging_ripple_uncompensated_urad", "cogging_ripple_compensated_urad",
                 "cogging_compensation_removed_pct")
 
@@ -43,6 +45,7 @@ class Spec(TravelSpec):
     ramp_s: float
     skip_s: float
     min_samples_per_pass: int  # as the cogging protocol: the ripple's floor falls as 1/√N
+    stop: StopRule | None = None  # run again until U is reached (hil.suite.stop_rule)
 
     @classmethod
     def from_profile(cls, profile: UnitProfile, info: DriveInfo) -> Spec:
@@ -61,6 +64,7 @@ class Spec(TravelSpec):
             ramp_s=settings.positive("ramp_s", 0.1),
             skip_s=settings.positive("skip_s", 0.2),
             min_samples_per_pass=settings.integer("min_samples_per_pass", MIN_SAMPLES_PER_PASS),
+            stop=StopRule.from_settings(settings),
         )
         settings.done()
         spec.require_travel(spec.speed_rad_s * (spec.pass_s + spec.ramp_s), protocol=NAME,
@@ -157,7 +161,7 @@ def analyse(off: tuple[Recording, Excitation], on: tuple[Recording, Excitation],
     delta = by_order.get(n_off, max(by_order.values(), default=0.0))
     if delta > 0:
         with_table = with_table.with_components(Component(
-            source="the table's own uncertainty (cogging_compensation.json amplitude_u), times "
+            source=f"{TABLE_LINE} (cogging_compensation.json amplitude_u), times "
                    "the ripple it cancels, amplitude and phase (Type A)", kind="A",
             standard_uncertainty=math.sqrt(2) * delta * without.value, unit="µrad"))
     removed = removed_fraction(without, with_table)

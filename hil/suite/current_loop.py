@@ -22,6 +22,7 @@ from hil.identify.current_loop import (
 from hil.motion import Excitation, Mode
 from hil.profile import UnitProfile
 from hil.recording import Recording
+from hil.suite.stop_rule import StopRule
 from hil.suite.travel import SteppedSineSpec, TravelSpec
 
 NAME = "current_loop"
@@ -33,6 +34,7 @@ class Spec(SteppedSineSpec):
 
     amplitude_rad_s: float  # velocity command sine amplitude
     segment_s: float  # analysed time per frequency
+    stop: StopRule | None = None  # run again until U is reached (hil.suite.stop_rule)
 
     @classmethod
     def from_profile(cls, profile: UnitProfile, info: DriveInfo) -> Spec:
@@ -64,6 +66,7 @@ class Spec(SteppedSineSpec):
             settle_s=settings.number("settle_s", 0.05),
             ramp_s=settings.number("ramp_s", 0.1),
             blocks=settings.integer("blocks", 5),
+            stop=StopRule.from_settings(settings),
         )
         spec.require_carrier_travel(protocol=NAME, source=profile.source)
         settings.done()

@@ -26,6 +26,7 @@ from hil.identify.gravity_cable import (
 )
 from hil.motion import Excitation, Mode
 from hil.profile import UnitProfile
+from hil.suite.stop_rule import StopRule
 from hil.suite.travel import TravelSpec
 
 log = logging.getLogger(__name__)
@@ -45,6 +46,7 @@ class Spec(TravelSpec):
     exclude_rad: float
     bins: int
     mass_kg: float | None
+    stop: StopRule | None = None  # run again until U is reached (hil.suite.stop_rule)
 
     @classmethod
     def from_profile(cls, profile: UnitProfile, info: DriveInfo) -> Spec:
@@ -77,6 +79,7 @@ class Spec(TravelSpec):
             exclude_rad=settings.number("exclude_rad", 0.1),
             bins=settings.integer("bins", 48),
             mass_kg=None if mass is None else float(mass),
+            stop=StopRule.from_settings(settings),
         )
         settings.done()
         return spec

@@ -26,6 +26,7 @@ from hil.identify.inertia_elevation import scale_by_gain
 from hil.profile import UnitProfile
 from hil.recording import Recording
 from hil.suite import inertia_friction as sine
+from hil.suite.stop_rule import StopRule
 from hil.suite.travel import move_speed_rad_s
 
 NAME = "inertia_elevation"
@@ -38,6 +39,7 @@ class Spec:
     elevations_rad: tuple[float, ...]
     park_elevation_rad: float  # where the elevation axis is left afterwards
     sine: sine.Spec  # centre_rad: where the sines run (None: where the axis is)
+    stop: StopRule | None = None  # run again until U is reached (hil.suite.stop_rule)
 
     @classmethod
     def from_profile(cls, profile: UnitProfile, info: DriveInfo) -> Spec:
@@ -73,6 +75,7 @@ class Spec:
                             else None),
                 move_speed_rad_s=move_speed_rad_s(settings, info),
             ),
+            stop=StopRule.from_settings(settings),
         )
         settings.done()
         return spec

@@ -19,6 +19,7 @@ from hil.identify.quantisation import quantisation_step
 from hil.motion import Excitation
 from hil.profile import UnitProfile
 from hil.recording import Recording
+from hil.suite.stop_rule import StopRule
 from hil.suite.travel import TravelSpec, move_excitation, on_command_grid
 
 NAME = "standstill"
@@ -35,6 +36,7 @@ class Spec(TravelSpec):
     settle_s: float
     hold_s: float
     blocks: int
+    stop: StopRule | None = None  # run again until U is reached (hil.suite.stop_rule)
 
     @classmethod
     def from_profile(cls, profile: UnitProfile, info: DriveInfo) -> Spec:
@@ -52,6 +54,7 @@ class Spec(TravelSpec):
             settle_s=settings.positive("settle_s", 0.2),
             hold_s=settings.positive("hold_s", 1.0),
             blocks=settings.integer("blocks", 5),
+            stop=StopRule.from_settings(settings),
         )
         settings.done()
         return spec

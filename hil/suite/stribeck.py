@@ -19,6 +19,7 @@ from hil.identify.stribeck import Staircase, StribeckResult, identify_stribeck, 
 from hil.identify.torque_constant import ripple_factors
 from hil.motion import Excitation, Mode
 from hil.profile import UnitProfile
+from hil.suite.stop_rule import StopRule
 from hil.suite.travel import TravelSpec
 
 log = logging.getLogger(__name__)
@@ -43,6 +44,7 @@ class Spec(TravelSpec):
     settle_s: float
     turnaround_rad: float
     turnaround_speed_rad_s: float
+    stop: StopRule | None = None  # run again until U is reached (hil.suite.stop_rule)
 
     @classmethod
     def from_profile(cls, profile: UnitProfile, info: DriveInfo) -> Spec:
@@ -72,6 +74,7 @@ class Spec(TravelSpec):
             settle_s=settings.number("settle_s", 0.3),
             turnaround_rad=settings.number("turnaround_rad", 0.08),
             turnaround_speed_rad_s=settings.number("turnaround_speed_rad_s", 0.1),
+            stop=StopRule.from_settings(settings),
         )
         settings.done()
         return spec

@@ -28,6 +28,7 @@ from hil.identify.torque_constant import (
 from hil.motion import Excitation, Mode
 from hil.profile import UnitProfile
 from hil.recording import Recording
+from hil.suite.stop_rule import StopRule
 from hil.suite.travel import move_excitation, move_speed_rad_s
 
 NAME = "torque_constant"
@@ -45,6 +46,7 @@ class Spec:
     move_speed_rad_s: float
     fs_hz: float
     kv_rpm_per_v: float | None
+    stop: StopRule | None = None  # run again until U is reached (hil.suite.stop_rule)
 
     @classmethod
     def from_profile(cls, profile: UnitProfile, info: DriveInfo) -> Spec:
@@ -78,6 +80,7 @@ class Spec:
             move_speed_rad_s=move_speed_rad_s(settings, info),
             fs_hz=min(profile.sample_rate_hz, info.max_sample_rate_hz),
             kv_rpm_per_v=None if kv is None else float(kv),
+            stop=StopRule.from_settings(settings),
         )
         settings.done()
         return spec

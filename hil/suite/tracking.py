@@ -34,9 +34,11 @@ from hil.identify.quantisation import quantisation_step
 from hil.motion import Excitation, Mode
 from hil.profile import UnitProfile
 from hil.recording import Recording
+from hil.suite.stop_rule import StopRule
 from hil.suite.travel import TravelSpec, on_command_grid
 
 NAME = "tracking"
+FEEDFORWARD_LINE = "the feedforward's B and T_c"  # shared by repeated runs (stop_rule)
 MEASUREMENTS = ("tracking_rms_error_urad", "tracking_peak_error_urad",
                 "tracking_rms_error_no_ff_urad", "tracking_ff_reduction")
 MICRO = 1e6
@@ -53,6 +55,7 @@ class Spec(TravelSpec):
     track_s: float
     reversal_s: float
     min_sample_rate_hz: float  # the offset follows ω* sample by sample (not a polled link)
+    stop: StopRule | None = None  # run again until U is reached (hil.suite.stop_rule)
 
     @classmethod
     def from_profile(cls, profile: UnitProfile, info: DriveInfo) -> Spec:
@@ -73,6 +76,7 @@ class Spec(TravelSpec):
             track_s=settings.positive("track_s", 0.5),
             reversal_s=settings.positive("reversal_s", 0.5),
             min_sample_rate_hz=settings.positive("min_sample_rate_hz", 1000.0),
+            stop=StopRule.from_settings(settings),
         )
         settings.done()
         spec.require_travel(float(np.sum(spec.command())) / spec.fs_hz, protocol=NAME,
@@ -140,7 +144,7 @@ def analyse(off: tuple[Recording, Excitation], on: tuple[Recording, Excitation],
     peak_on = est("tracking_peak_error_urad", f_on.peak_rad, f_on.noise_rad)
     if feedforward_u_rel > 0:
         d_rms, d_peak = feedforward_change(f_off, f_on, relative=feedforward_u_rel)
-        lines = [Component(source="the feedforward's B and T_c (this calibration's u), by "
+        lines = [Component(source=f"{FEEDFORWARD_LINE} (this calibration's u), by "
                                   "superposition of the runs without and with it (Type A)",
                            kind="A", standard_uncertainty=abs(change) * MICRO, unit="µrad")
                  for change in (d_rms, d_peak)]

@@ -21,6 +21,7 @@ from hil.motion import Excitation, Mode
 from hil.profile import UnitProfile
 from hil.recording import Recording
 from hil.suite.rate import needed_sample_rate_hz
+from hil.suite.stop_rule import StopRule
 from hil.suite.travel import TravelSpec, speed_ramp
 
 NAME = "velocity_loop_frf"
@@ -41,6 +42,7 @@ class Spec(TravelSpec):
     settle_periods: int
     periods: int
     ramp_s: float
+    stop: StopRule | None = None  # run again until U is reached (hil.suite.stop_rule)
 
     @classmethod
     def from_profile(cls, profile: UnitProfile, info: DriveInfo) -> Spec:
@@ -64,6 +66,7 @@ class Spec(TravelSpec):
             settle_periods=settings.integer("settle_periods", 1),
             periods=settings.integer("periods", 4),
             ramp_s=settings.positive("ramp_s", 0.2),
+            stop=StopRule.from_settings(settings),
         )
         settings.done()
         for f in spec.frequencies_hz:

@@ -19,6 +19,7 @@ from hil.identify.estimate import Estimate
 from hil.motion import Excitation, Mode
 from hil.profile import UnitProfile
 from hil.recording import Recording
+from hil.suite.stop_rule import StopRule
 from hil.suite.travel import TravelSpec, on_command_grid, speed_ramp
 from hil.suite.velocity_loop_frf import direction_from
 
@@ -43,6 +44,7 @@ class Spec(TravelSpec):
     ramp_s: float
     smooth_s: float
     min_sample_rate_hz: float  # a rise of ~10 ms needs ~10 samples: not over a polled link
+    stop: StopRule | None = None  # run again until U is reached (hil.suite.stop_rule)
 
     @classmethod
     def from_profile(cls, profile: UnitProfile, info: DriveInfo) -> Spec:
@@ -63,6 +65,7 @@ class Spec(TravelSpec):
             ramp_s=settings.positive("ramp_s", 0.1),
             smooth_s=settings.positive("smooth_s", 0.005),
             min_sample_rate_hz=settings.positive("min_sample_rate_hz", 1000.0),
+            stop=StopRule.from_settings(settings),
         )
         settings.done()
         spec.require_travel(spec.travel_rad, protocol=NAME, source=profile.source)
