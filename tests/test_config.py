@@ -97,7 +97,9 @@ def _load_profile_and_protocols(path: Path) -> None:
     info = drive.info
     for name in profile.protocols:
         module = importlib.import_module(f"hil.suite.{name}")
-        module.Spec.from_profile(profile, info)
+        # a protocol with several excitations chooses its spec class by the table
+        read = getattr(module, "spec_from_profile", None) or module.Spec.from_profile
+        read(profile, info)
 
 
 LOADERS: dict[str, Callable[[Path], object]] = {
