@@ -20,9 +20,9 @@ long settled going the same way over the same positions at the same speed, then 
 ``D(s) = c − 2h·exp(−s/s₀)`` in the travel ``s`` since reversal (separable least squares,
 1-D search over ``s₀``; ``c`` takes what the two slow passes still differ by). Taking the
 reference from the fast full-travel pass instead left the velocity loop's response to
-cogging at the two speeds in ``D``: over 16 noise seeds on the azimuth demo its h read
-+0.28 mN·m (28 %) noise-free, with a scatter of 0.26 mN·m; with the slow reference
-−0.02 mN·m and 0.09 mN·m.
+cogging at the two speeds in ``D``: on the azimuth demo its h read +0.28 mN·m (28 %)
+noise-free and scattered by 0.26 mN·m over 16 noise seeds; with the slow reference
+−0.03 mN·m and 0.09 mN·m (the fit's u 0.09).
 """
 
 from __future__ import annotations
