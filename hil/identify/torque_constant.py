@@ -303,7 +303,11 @@ def identify_torque_constant(
         K_t, the mean of the slopes, its standard uncertainty the larger of their scatter
         and the RMS within-fit standard error, over √angles (angles − 1 degrees of
         freedom); the linearity, its uncertainty from the within-fit noise at full-scale
-        current; the gain error from the gains likewise (scatter only).
+        current; the gain error from the gains likewise (scatter only). When the angles
+        balance the ripple's largest harmonic (:func:`balanced_angles`, five angles or
+        more) the slopes' scatter is taken after that harmonic is fitted out: the table's
+        error at that order spreads the angles but cancels in their mean (angles − 3
+        degrees of freedom when the scatter decides).
 
     Raises
     ------
@@ -317,8 +321,12 @@ def identify_torque_constant(
     slopes = np.array([s.slope_nm_a for s in sweeps]) / factors
     gains = np.array([s.gain for s in sweeps]) / factors
     within = np.array([s.slope_u_nm_a for s in sweeps])
+    scatter, scatter_dof = _slope_scatter(slopes, np.array([s.angle_rad for s in sweeps]),
+                                          ripple)
     # between-angle scatter (K_t ripple) and within-fit noise; the larger decides
-    u_slope = max(float(np.std(slopes, ddof=1)), float(np.sqrt(np.mean(within**2)))) / math.sqrt(n)
+    noise = float(np.sqrt(np.mean(within**2)))
+    u_slope = max(scatter, noise) / math.sqrt(n)
+    slope_dof = scatter_dof if scatter > noise else math.inf
     u_gain = float(np.std(gains, ddof=1)) / math.sqrt(n)
     full_scale = max(float(np.max(np.abs(s.sensor_torque_nm - s.intercept_nm))) for s in sweeps)
     linearity_pct = 100.0 * max(s.max_residual_nm for s in sweeps) / full_scale
@@ -328,13 +336,28 @@ def identify_torque_constant(
     return TorqueConstantResult(
         sweeps=tuple(sweeps),
         torque_constant=Estimate(name="torque_constant_nm_a", value=float(slopes.mean()),
-                                 standard_uncertainty=u_slope, unit="N·m/A", dof=n - 1),
+                                 standard_uncertainty=u_slope, unit="N·m/A", dof=slope_dof),
         linearity=Estimate(name="torque_linearity_pct", value=linearity_pct,
                            standard_uncertainty=100.0 * level_noise / full_scale, unit="%"),
         gain_error=Estimate(name="reported_torque_gain_error_pct",
                             value=100.0 * (float(gains.mean()) - 1.0),
                             standard_uncertainty=100.0 * u_gain, unit="%", dof=n - 1),
     )
+
+
+def _slope_scatter(slopes: FloatArray, angles_rad: FloatArray,
+                   ripple: Sequence[tuple[int, float, float]]) -> tuple[float, float]:
+    """The slopes' scatter and its degrees of freedom: plain, or about the ripple's largest
+    harmonic when the angles balance it (its sine and cosine sum to zero over them)."""
+    n = len(slopes)
+    if ripple and n >= 5:
+        order = max(ripple, key=lambda h: h[1])[0]
+        phasors = np.exp(1j * order * angles_rad)
+        if abs(phasors.mean()) < 1e-6:
+            design = np.column_stack([np.ones(n), phasors.real, phasors.imag])
+            residual = slopes - design @ np.linalg.lstsq(design, slopes, rcond=None)[0]
+            return float(np.sqrt(residual @ residual / (n - 3))), float(n - 3)
+    return float(np.std(slopes, ddof=1)), float(n - 1)
 
 
 def datasheet_deviation(torque_constant: Estimate, *, kv_rpm_per_v: float) -> Estimate:
