@@ -7,7 +7,7 @@ import math
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from hil.diagnose import interpret, intervals, unexplained
+from hil.diagnose import interpret, intervals, ripple, unexplained
 from hil.diagnose.model import Fit
 from hil.diagnose.profile_out import extended_firmware, extended_plant
 from hil.diagnose.select import DECISION_RULE, Candidate
@@ -60,7 +60,12 @@ def _gain(candidate: Candidate) -> dict[str, Any]:
 
 def _cause(rank: int, candidate: Candidate, diagnosis: Diagnosis) -> dict[str, Any]:
     train = diagnosis.train
-    fit = intervals.robust_fit(diagnosis.designer, candidate.fit, train.signals, train.rows)
+    rows = train.rows
+    fitted = candidate.fit
+    if candidate.effect == "kt_ripple":  # stage one: the rows where the angle sweeps
+        rows = ripple.sweep_rows_of(fitted, train.signals, rows)
+        fitted = diagnosis.designer.fit(fitted.model, train.signals, rows)
+    fit = intervals.robust_fit(diagnosis.designer, fitted, train.signals, rows)
     lag_std_s = candidate.lag_std_s
     if candidate.effect == "current_lag":
         lag_std_s = diagnosis.selection_lag_std(candidate.fit)
