@@ -19,7 +19,7 @@ import numpy as np
 
 from hil.diagnose import data_issues, interpret
 from hil.diagnose.data_issues import DataIssue
-from hil.diagnose.model import Designer, Fit, Model, base_terms, fit_percent, rms
+from hil.diagnose.model import Designer, Fit, IndexArray, Model, base_terms, fit_percent, rms
 from hil.diagnose.residual import analyse
 from hil.diagnose.ripple import two_stage
 from hil.diagnose.select import Candidate, DataSet, Evaluator, Selection, select
@@ -86,6 +86,18 @@ class Diagnosis:
     def causes(self) -> tuple[Candidate, ...]:
         """The causes named, ranked (:attr:`Selection.accepted`)."""
         return self.selection.accepted
+
+    @property
+    def estimation_rows(self) -> tuple[Signals, IndexArray]:
+        """The signals and rows a named cause's parameters and intervals are estimated on.
+
+        Every usable row of the recording (training and held-out: the held-out rows judged
+        the selection, and then estimate too); with a separate validation recording, the
+        training recording's rows.
+        """
+        if self.heldout.signals is self.train.signals:
+            return self.train.signals, np.union1d(self.train.rows, self.heldout.rows)
+        return self.train.signals, self.train.rows
 
     @property
     def cause_names(self) -> list[str]:

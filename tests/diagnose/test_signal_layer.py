@@ -18,7 +18,8 @@ def test_diagnosis_derivatives_are_exact_on_a_quartic_to_the_segment_ends() -> N
                                rtol=0, atol=1e-9)
     np.testing.assert_allclose(second[inside], (36 * t**2 - 12 * t + 2)[inside],
                                rtol=0, atol=1e-6)
-    assert not first[150:160].any() and not second[150:160].any()
+    assert not first[150:160].any()
+    assert not second[150:160].any()
 
 
 def test_identification_and_diagnosis_agree_on_a_slow_sine() -> None:
