@@ -77,6 +77,8 @@ def hidden(count: int, *, pairs: bool, unknown: bool, seed: int,
     stats: Counter[str] = Counter()
     per_effect: Counter[str] = Counter()
     per_effect_ok: Counter[str] = Counter()
+    per_effect_intervals: Counter[str] = Counter()
+    per_effect_covered: Counter[str] = Counter()
     z_scores: list[float] = []
     started = time.perf_counter()
     for case in range(count):
@@ -119,9 +121,13 @@ def hidden(count: int, *, pairs: bool, unknown: bool, seed: int,
                 covered = interval[0] <= truth.truth <= interval[1]
                 stats["intervals"] += 1
                 stats["covered"] += covered
-                half = 0.5 * (interval[1] - interval[0])
-                if half > 0 and not flagged:
-                    z_scores.append((value - truth.truth) / (half / 2.0))
+                per_effect_intervals[truth.effect] += 1
+                per_effect_covered[truth.effect] += covered
+                std = cause["uncertainty"].get(truth.key, {}).get("std")
+                if std and not flagged:
+                    z_scores.append((value - truth.truth) / std)
+                    notes.append(f"err/u {(value - truth.truth) / std:+.2f}"
+                                 f"{'' if covered else ' MISSED'}")
             good = within or (flagged and interval is not None
                               and interval[0] <= truth.truth <= interval[1])
             per_effect_ok[truth.effect] += good
@@ -140,6 +146,8 @@ def hidden(count: int, *, pairs: bool, unknown: bool, seed: int,
     summary: dict[str, Any] = dict(stats)
     summary["per_effect_named_within_15pct"] = {
         e: f"{per_effect_ok[e]}/{per_effect[e]}" for e in per_effect}
+    summary["per_effect_intervals_holding_truth"] = {
+        e: f"{per_effect_covered[e]}/{per_effect_intervals[e]}" for e in per_effect_intervals}
     if z_scores:
         summary["z_rms"] = float(np.sqrt(np.mean(np.square(z_scores))))
     summary["seconds_per_case"] = elapsed / max(count, 1)
