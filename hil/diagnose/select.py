@@ -326,7 +326,7 @@ class Evaluator:
             rows = sweep_rows_of(fit, signals, rows)
         labels = tuple(label for term in fit.model.terms if term.effect == effect
                        for label in term.labels)
-        if effect == "cogging":  # the strongest order (taken first) carries the effect
+        if effect in ("cogging", "kt_ripple"):  # the strongest order (taken first) carries it
             labels = labels[:2]
         if not labels:
             return True
