@@ -23,6 +23,7 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
+from scipy import stats
 
 from hil.diagnose.model import Designer, Fit, IndexArray, Model, Term
 from hil.diagnose.signals import Signals
@@ -99,6 +100,8 @@ def robust_fit(designer: Designer, fit: Fit, signals: Signals, rows: IndexArray)
 JACKKNIFE_GROUPS = 16
 #: The 95 % coverage factor of a jackknife standard uncertainty (Student t, 15 dof).
 JACKKNIFE_COVERAGE = coverage_factor(JACKKNIFE_GROUPS - 1)
+#: ... and the 99 % one.
+JACKKNIFE_COVERAGE_99 = float(stats.t.ppf(0.995, JACKKNIFE_GROUPS - 1))
 
 
 def jackknife_fit(designer: Designer, fit: Fit, signals: Signals, rows: IndexArray,

@@ -68,7 +68,8 @@ def _cause(rank: int, candidate: Candidate, diagnosis: Diagnosis) -> dict[str, A
     if candidate.effect == "current_lag":
         lag_std_s = diagnosis.selection_lag_std(candidate.fit)
     named = interpret.effect_parameters(candidate.effect, fit, lag_std_s=lag_std_s,
-                                        coverage=intervals.JACKKNIFE_COVERAGE)
+                                        coverage=intervals.JACKKNIFE_COVERAGE,
+                                        coverage99=intervals.JACKKNIFE_COVERAGE_99)
     if candidate.effect == "stribeck":
         profile = intervals.stribeck_profile(diagnosis.designer, fit, signals, rows)
         if profile is not None:
