@@ -2,14 +2,16 @@
 
 The residual of a fitted model is not white (the effort and every regressor are low-passed
 alike, and no model of a real axis is complete), so ``σ²(ΦᵀΦ)⁻¹`` understates the spread
-of the coefficients. The reported covariance is the Newey–West (heteroscedasticity and
-autocorrelation consistent) sandwich ``(ΦᵀΦ)⁻¹ S (ΦᵀΦ)⁻¹``, ``S = Σ_l w_l (Γ_l + Γ_lᵀ)``
-over :data:`HAC_LAGS` lags of the training rows with Bartlett weights ``w_l = 1 − l/(L+1)``.
-The 95 % interval is ``value ± k·u`` with ``k`` from
-:func:`hil.identify.estimate.coverage_factor` on the residual's degrees of freedom.
+of the coefficients, and so does a noise-only sandwich: what the model still misses
+projects onto a cause's columns differently in each experiment of the recording. The
+reported covariance is a delete-a-group jackknife over :data:`JACKKNIFE_GROUPS`
+contiguous groups of the rows (:func:`jackknife_fit`), its 95 % interval ``value ± k·u``
+with ``k`` Student's t for 15 degrees of freedom. The Newey–West sandwich
+``(ΦᵀΦ)⁻¹ S (ΦᵀΦ)⁻¹`` (``S = Σ_l w_l (Γ_l + Γ_lᵀ)`` over :data:`HAC_LAGS` lags, Bartlett
+weights) still scales the profile likelihood below and the selection's lag.
 
 A searched (nonlinear) parameter gets a profile-likelihood interval: the values whose
-training RSS exceeds the best by at most ``χ²₁(0.95)·σ²_HAC`` (the HAC-inflated residual
+RSS (on the rows given) exceeds the best by at most ``χ²₁(0.95)·σ²_HAC`` (the HAC-inflated residual
 variance). Where that interval reaches the edge of what the data can show (a Stribeck
 velocity below the slowest motion recorded), the parameters are *not separable* and the
 report says which excitation would separate them.

@@ -1,4 +1,4 @@
-"""K_t ripple's coefficients from the rows where the angle moves (stage one of two).
+"""K_t ripple's coefficients from the rows where the angle sweeps (a two-stage fit).
 
 The ripple's column ``T̂·sin kθ`` is largest where the torque is. Where the angle stands
 nearly still (a chirp, a staircase step) ``sin kθ`` is a constant and the column a copy of
@@ -6,9 +6,10 @@ nearly still (a chirp, a staircase step) ``sin kθ`` is a constant and the colum
 torque they dominate the ripple's normal equations, and whatever the model misses there
 along ``T̂`` (mostly ``J·α`` at high frequency) is taken as ripple at that one angle. On
 example_07 (a chirp at a nearly fixed angle) this pulled the depth 23 % low. So the
-ripple's parameters and intervals are estimated from the training rows over which the
+ripple's parameters, their intervals and its halves test use only the rows over which the
 angle sweeps at least a quarter period of the ripple's lowest order within a block; the
-base model (and the selection, which judges the whole model) keeps every row.
+rest of the extended model is fitted on every training row with the ripple subtracted
+(:func:`two_stage`), and the selection judges the jointly fitted model as before.
 """
 
 from __future__ import annotations
