@@ -7,9 +7,10 @@ Run:
 - ``python benchmarks/bench_diagnose.py --hidden N [--pairs] [--unknown] [--seed S]``: N
   simulated units (``tests/diagnose/diagnose_simdata.py``), each with one hidden effect,
   two (``--pairs``: every unordered pair of the seven effects in turn) or one effect outside
-  the library (``--unknown``), sizes drawn; prints, per case, what was named, and the
-  rates: every hidden effect named with its key parameter within 15 %, nothing else named,
-  the 95 % intervals' coverage of the truth, and ``unexplained`` flags.
+  the library (``--unknown``), sizes drawn (``--only E ...``: only those single effects);
+  prints, per case, what was named, and the rates: every hidden effect named with its key
+  parameter within 15 %, nothing else named, the 95 % intervals' coverage of the truth,
+  and ``unexplained`` flags.
 """
 
 from __future__ import annotations
@@ -60,7 +61,8 @@ def _interval(cause: dict[str, Any], key: str) -> list[float] | None:
     return None if entry is None else entry.get("ci95")
 
 
-def hidden(count: int, *, pairs: bool, unknown: bool, seed: int) -> int:
+def hidden(count: int, *, pairs: bool, unknown: bool, seed: int,
+           only: tuple[str, ...] = ()) -> int:
     from diagnose_simdata import plant_with, record
     from unknown_effects import hide_unknown
 
@@ -71,10 +73,12 @@ def hidden(count: int, *, pairs: bool, unknown: bool, seed: int) -> int:
     elif pairs:
         combos = list(itertools.combinations(SEVEN, 2))
     else:
-        combos = [(e,) for e in SINGLE]
+        combos = [(e,) for e in (only or SINGLE)]
     stats: Counter[str] = Counter()
     per_effect: Counter[str] = Counter()
     per_effect_ok: Counter[str] = Counter()
+    per_effect_intervals: Counter[str] = Counter()
+    per_effect_covered: Counter[str] = Counter()
     z_scores: list[float] = []
     started = time.perf_counter()
     for case in range(count):
@@ -117,9 +121,13 @@ def hidden(count: int, *, pairs: bool, unknown: bool, seed: int) -> int:
                 covered = interval[0] <= truth.truth <= interval[1]
                 stats["intervals"] += 1
                 stats["covered"] += covered
-                half = 0.5 * (interval[1] - interval[0])
-                if half > 0 and not flagged:
-                    z_scores.append((value - truth.truth) / (half / 2.0))
+                per_effect_intervals[truth.effect] += 1
+                per_effect_covered[truth.effect] += covered
+                std = cause["uncertainty"].get(truth.key, {}).get("std")
+                if std and not flagged:
+                    z_scores.append((value - truth.truth) / std)
+                    notes.append(f"err/u {(value - truth.truth) / std:+.2f}"
+                                 f"{'' if covered else ' MISSED'}")
             good = within or (flagged and interval is not None
                               and interval[0] <= truth.truth <= interval[1])
             per_effect_ok[truth.effect] += good
@@ -138,6 +146,8 @@ def hidden(count: int, *, pairs: bool, unknown: bool, seed: int) -> int:
     summary: dict[str, Any] = dict(stats)
     summary["per_effect_named_within_15pct"] = {
         e: f"{per_effect_ok[e]}/{per_effect[e]}" for e in per_effect}
+    summary["per_effect_intervals_holding_truth"] = {
+        e: f"{per_effect_covered[e]}/{per_effect_intervals[e]}" for e in per_effect_intervals}
     if z_scores:
         summary["z_rms"] = float(np.sqrt(np.mean(np.square(z_scores))))
     summary["seconds_per_case"] = elapsed / max(count, 1)
@@ -152,9 +162,12 @@ def main(argv: list[str]) -> int:
     parser.add_argument("--pairs", action="store_true")
     parser.add_argument("--unknown", action="store_true")
     parser.add_argument("--seed", type=int, default=2026)
+    parser.add_argument("--only", nargs="*", default=[], choices=SINGLE,
+                        help="single effects to hide (default: all nine in turn)")
     args = parser.parse_args(argv)
     if args.hidden:
-        return hidden(args.hidden, pairs=args.pairs, unknown=args.unknown, seed=args.seed)
+        return hidden(args.hidden, pairs=args.pairs, unknown=args.unknown, seed=args.seed,
+                      only=tuple(args.only))
     return speed(args.paths)
 
 

@@ -19,8 +19,9 @@ import numpy as np
 
 from hil.diagnose import data_issues, interpret
 from hil.diagnose.data_issues import DataIssue
-from hil.diagnose.model import Designer, Fit, Model, base_terms, fit_percent, rms
+from hil.diagnose.model import Designer, Fit, IndexArray, Model, base_terms, fit_percent, rms
 from hil.diagnose.residual import analyse
+from hil.diagnose.ripple import two_stage
 from hil.diagnose.select import Candidate, DataSet, Evaluator, Selection, select
 from hil.diagnose.signals import Signals, prepare
 from hil.errors import IdentificationError
@@ -60,6 +61,9 @@ class Diagnosis:
         How training and held-out rows were chosen, in words.
     designer : Designer
         The design-matrix builder the fits used (its caches are kept).
+    final : Fit
+        The extended model: the last cause's fit, or the base fit when none was named;
+        with K_t ripple, fitted in two stages (:func:`hil.diagnose.ripple.two_stage`).
     """
 
     recording: Recording
@@ -71,6 +75,7 @@ class Diagnosis:
     residual: dict[str, Any]
     split: str
     designer: Designer
+    final: Fit
 
     @property
     def base(self) -> Fit:
@@ -83,9 +88,16 @@ class Diagnosis:
         return self.selection.accepted
 
     @property
-    def final(self) -> Fit:
-        """The extended model: the last cause's fit, or the base fit when none was named."""
-        return self.selection.final
+    def estimation_rows(self) -> tuple[Signals, IndexArray]:
+        """The signals and rows a named cause's parameters and intervals are estimated on.
+
+        Every usable row of the recording (training and held-out: the held-out rows judged
+        the selection, and then estimate too); with a separate validation recording, the
+        training recording's rows.
+        """
+        if self.heldout.signals is self.train.signals:
+            return self.train.signals, np.union1d(self.train.rows, self.heldout.rows)
+        return self.train.signals, self.train.rows
 
     @property
     def cause_names(self) -> list[str]:
@@ -225,7 +237,8 @@ def diagnose(
     log.info("%s: causes %s", recording.source, [c.effect for c in selection.accepted])
     return Diagnosis(recording=recording, signals=signals, heldout=test, train=train,
                      selection=selection, issues=tuple(issues), residual=residual,
-                     split=split, designer=designer)
+                     split=split, designer=designer,
+                     final=two_stage(designer, selection.final, train.signals, train.rows))
 
 
 def summary_metrics(diagnosis: Diagnosis, fit: Fit) -> dict[str, float]:

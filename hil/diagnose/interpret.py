@@ -39,10 +39,11 @@ class FittedParameter:
     value: float
     std: float
     coverage: float = 2.0
+    coverage99: float = Z99
 
     def as_dict(self) -> dict[str, float | list[float] | None]:
         """``value``, ``std``, the 95 % interval ``ci95`` (``value ± coverage·std``) and the
-        99 % interval ``ci99`` (``value ± 2.576·std``).
+        99 % interval ``ci99`` (``value ± coverage99·std``, by default 2.576).
 
         ``std``, ``ci95`` and ``ci99`` are ``None`` when ``std`` is not finite.
         """
@@ -52,7 +53,8 @@ class FittedParameter:
             "value": self.value,
             "std": self.std if finite else None,
             "ci95": [self.value - k * self.std, self.value + k * self.std] if finite else None,
-            "ci99": [self.value - Z99 * self.std, self.value + Z99 * self.std] if finite else None,
+            "ci99": ([self.value - self.coverage99 * self.std,
+                      self.value + self.coverage99 * self.std] if finite else None),
         }
 
 
@@ -144,7 +146,7 @@ def _harmonics(fit: Fit, effect: str) -> list[dict[str, float]]:
 
 
 def effect_parameters(effect: str, fit: Fit, *, lag_std_s: float = math.nan,
-                      coverage: float = 2.0) -> dict[str, Any]:
+                      coverage: float = 2.0, coverage99: float = Z99) -> dict[str, Any]:
     """Named parameters of ``effect`` in ``fit``: values and :class:`FittedParameter` s.
 
     Parameters
@@ -156,8 +158,10 @@ def effect_parameters(effect: str, fit: Fit, *, lag_std_s: float = math.nan,
     lag_std_s : float
         Standard deviation of the current-loop time constant, s (used for
         ``current_lag``).
-    coverage : float
-        Coverage factor of the 95 % intervals.
+    coverage, coverage99 : float
+        Coverage factors of the 95 % and 99 % intervals from ``fit``'s covariance (the
+        current-loop time constant keeps 2 and 2.576: its ``lag_std_s`` is not from
+        ``fit``).
 
     Returns
     -------
@@ -231,7 +235,8 @@ def effect_parameters(effect: str, fit: Fit, *, lag_std_s: float = math.nan,
     elif effect == "two_mass":
         extra.update(two_mass_parameters(fit))
         estimates["load_inertia_kg_m2"] = _linear(fit, {"load_inertia": 1.0})
-    estimates = {name: replace(e, coverage=coverage) for name, e in estimates.items()}
+    estimates = {name: e if e is lag else replace(e, coverage=coverage, coverage99=coverage99)
+                 for name, e in estimates.items()}
     parameters: dict[str, Any] = {name: e.value for name, e in estimates.items()}
     parameters.update({k: v for k, v in extra.items() if k != "note"})
     result: dict[str, Any] = {

@@ -2,14 +2,16 @@
 
 The residual of a fitted model is not white (the effort and every regressor are low-passed
 alike, and no model of a real axis is complete), so ``σ²(ΦᵀΦ)⁻¹`` understates the spread
-of the coefficients. The reported covariance is the Newey–West (heteroscedasticity and
-autocorrelation consistent) sandwich ``(ΦᵀΦ)⁻¹ S (ΦᵀΦ)⁻¹``, ``S = Σ_l w_l (Γ_l + Γ_lᵀ)``
-over :data:`HAC_LAGS` lags of the training rows with Bartlett weights ``w_l = 1 − l/(L+1)``.
-The 95 % interval is ``value ± k·u`` with ``k`` from
-:func:`hil.identify.estimate.coverage_factor` on the residual's degrees of freedom.
+of the coefficients, and so does a noise-only sandwich: what the model still misses
+projects onto a cause's columns differently in each experiment of the recording. The
+reported covariance is a delete-a-group jackknife over :data:`JACKKNIFE_GROUPS`
+contiguous groups of the rows (:func:`jackknife_fit`), its 95 % interval ``value ± k·u``
+with ``k`` Student's t for 15 degrees of freedom. The Newey–West sandwich
+``(ΦᵀΦ)⁻¹ S (ΦᵀΦ)⁻¹`` (``S = Σ_l w_l (Γ_l + Γ_lᵀ)`` over :data:`HAC_LAGS` lags, Bartlett
+weights) still scales the profile likelihood below and the selection's lag.
 
 A searched (nonlinear) parameter gets a profile-likelihood interval: the values whose
-training RSS exceeds the best by at most ``χ²₁(0.95)·σ²_HAC`` (the HAC-inflated residual
+RSS (on the rows given) exceeds the best by at most ``χ²₁(0.95)·σ²_HAC`` (the HAC-inflated residual
 variance). Where that interval reaches the edge of what the data can show (a Stribeck
 velocity below the slowest motion recorded), the parameters are *not separable* and the
 report says which excitation would separate them.
@@ -23,6 +25,7 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
+from scipy import stats
 
 from hil.diagnose.model import Designer, Fit, IndexArray, Model, Term
 from hil.diagnose.signals import Signals
@@ -93,6 +96,52 @@ def robust_fit(designer: Designer, fit: Fit, signals: Signals, rows: IndexArray)
     matrix = designer.design(fit.model, signals, rows)
     residual = signals.effort_filtered[rows] - matrix @ fit.coefficients
     return replace(fit, covariance=hac_covariance(matrix, residual))
+
+
+#: Contiguous groups of rows of the delete-a-group jackknife (its degrees of freedom: 15).
+JACKKNIFE_GROUPS = 16
+#: The 95 % coverage factor of a jackknife standard uncertainty (Student t, 15 dof).
+JACKKNIFE_COVERAGE = coverage_factor(JACKKNIFE_GROUPS - 1)
+#: ... and the 99 % one.
+JACKKNIFE_COVERAGE_99 = float(stats.t.ppf(0.995, JACKKNIFE_GROUPS - 1))
+
+
+def jackknife_fit(designer: Designer, fit: Fit, signals: Signals, rows: IndexArray,
+                  groups: int = JACKKNIFE_GROUPS) -> Fit:
+    """``fit``'s model fitted on ``rows``, its covariance from a delete-a-group jackknife.
+
+    The rows are cut into ``groups`` contiguous runs; the model is fitted again without
+    each, and the coefficients' covariance is ``(G − 1)/G · Σ (β₋g − β̄)(β₋g − β̄)ᵀ``.
+    Unlike Newey–West it also covers what the model still misses where that differs
+    along the recording (a misfit that projects onto a cause's columns differently in
+    each experiment), which the noise-based covariance does not.
+
+    Parameters
+    ----------
+    designer : Designer
+    fit : Fit
+        Gives the model (its searched parameters stay fixed).
+    signals : Signals
+    rows : ndarray of intp
+        The rows to fit, in time order.
+    groups : int
+        Number of contiguous groups.
+
+    Returns
+    -------
+    Fit
+        Fitted on ``rows``; the covariance stays infinite when that fit's is.
+    """
+    full = designer.fit(fit.model, signals, rows)
+    if not np.all(np.isfinite(full.covariance)):
+        return full
+    parts = np.array_split(rows, groups)
+    estimates = np.array([
+        designer.fit(fit.model, signals, np.concatenate(parts[:g] + parts[g + 1 :])).coefficients
+        for g in range(groups)
+    ])
+    centred = estimates - estimates.mean(axis=0)
+    return replace(full, covariance=(groups - 1) / groups * (centred.T @ centred))
 
 
 def coverage(fit: Fit) -> float:

@@ -17,8 +17,9 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 from numpy.typing import NDArray
 
-from hil.diagnose.signals import Signals, zero_phase_lowpass
+from hil.diagnose.signals import Signals
 from hil.errors import IdentificationError
+from hil.identify.kinematics import zero_phase_lowpass
 
 FloatArray = NDArray[np.float64]
 IndexArray = NDArray[np.intp]

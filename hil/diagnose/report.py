@@ -7,7 +7,7 @@ import math
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from hil.diagnose import interpret, intervals, unexplained
+from hil.diagnose import interpret, intervals, ripple, unexplained
 from hil.diagnose.model import Fit
 from hil.diagnose.profile_out import extended_firmware, extended_plant
 from hil.diagnose.select import DECISION_RULE, Candidate
@@ -59,16 +59,19 @@ def _gain(candidate: Candidate) -> dict[str, Any]:
 
 
 def _cause(rank: int, candidate: Candidate, diagnosis: Diagnosis) -> dict[str, Any]:
-    train = diagnosis.train
-    fit = intervals.robust_fit(diagnosis.designer, candidate.fit, train.signals, train.rows)
+    # the held-out data judged the model; once judged, every usable row estimates it
+    signals, rows = diagnosis.estimation_rows
+    if candidate.effect == "kt_ripple":  # stage one: the rows where the angle sweeps
+        rows = ripple.sweep_rows_of(candidate.fit, signals, rows)
+    fit = intervals.jackknife_fit(diagnosis.designer, candidate.fit, signals, rows)
     lag_std_s = candidate.lag_std_s
     if candidate.effect == "current_lag":
         lag_std_s = diagnosis.selection_lag_std(candidate.fit)
     named = interpret.effect_parameters(candidate.effect, fit, lag_std_s=lag_std_s,
-                                        coverage=intervals.coverage(fit))
+                                        coverage=intervals.JACKKNIFE_COVERAGE,
+                                        coverage99=intervals.JACKKNIFE_COVERAGE_99)
     if candidate.effect == "stribeck":
-        profile = intervals.stribeck_profile(diagnosis.designer, candidate.fit, train.signals,
-                                             train.rows)
+        profile = intervals.stribeck_profile(diagnosis.designer, fit, signals, rows)
         if profile is not None:
             for name in ("static_torque_nm", "stribeck_velocity_rad_s"):
                 # the profile likelihood's interval: T_s and v_s trade off against each other

@@ -44,6 +44,7 @@ from hil.diagnose.effects import (
     search_shift,
 )
 from hil.diagnose.model import Designer, Fit, IndexArray, Model, Term, fit_percent, rms, solve
+from hil.diagnose.ripple import sweep_rows_of
 from hil.diagnose.signals import Signals
 
 log = logging.getLogger(__name__)
@@ -64,11 +65,11 @@ PERIODIC_ALPHA = 1e-3
 #: ...and by at least this fraction of their size: not the same effect over the travel.
 PERIODIC_MISMATCH = 0.5
 
-#: Effects exempt from the halves test: the lag has no linear coefficient; K_t ripple's
-#: fits on the two halves differ on true ripple (example_07: by 57 %, even with the rows
-#: weighted by their block's misfit): its column is largest where the torque is, in the
-#: chirp, at one angle in one half (docs/diagnose.md).
-NOT_HALVED = frozenset({"current_lag", "kt_ripple"})
+#: Effects exempt from the halves test: the lag has no linear coefficient. K_t ripple is
+#: halved on the rows where the angle sweeps only (:mod:`hil.diagnose.ripple`): on every
+#: row its halves differ on true ripple (example_07: by 57 %), its column being largest
+#: where the torque is, in the chirp, at one angle in one half (docs/diagnose.md).
+NOT_HALVED = frozenset({"current_lag"})
 
 KEY_LABELS = {
     "offset": ("offset",),
@@ -321,9 +322,11 @@ class Evaluator:
             True when consistent, or when a half has too few rows to tell.
         """
         signals, rows = self.train.signals, self.train.rows
+        if effect == "kt_ripple":
+            rows = sweep_rows_of(fit, signals, rows)
         labels = tuple(label for term in fit.model.terms if term.effect == effect
                        for label in term.labels)
-        if effect == "cogging":  # the strongest order (taken first) carries the effect
+        if effect in ("cogging", "kt_ripple"):  # the strongest order (taken first) carries it
             labels = labels[:2]
         if not labels:
             return True

@@ -1,10 +1,12 @@
 """From a Recording to phase-free motion signals on a uniform grid, with the data's problems.
 
-The regressors of every model in :mod:`hil.diagnose` come from here. Velocity and
-acceleration are derivatives of the *measured position* after a zero-phase Butterworth
-low-pass (``sosfiltfilt``), so they carry no phase lag; the drive's own velocity column is
-never used as a regressor (it is only compared with the zero-phase derivative to detect a
-lagging velocity filter, see :mod:`hil.diagnose.data_issues`).
+The regressors of every model in :mod:`hil.diagnose` come from here, through the signal
+layer identification uses too (:mod:`hil.identify.kinematics`: the cubic-spline
+resampling, the zero-phase Butterworth low-pass and the Savitzky–Golay derivatives).
+Velocity and acceleration are derivatives of the *measured position* after the low-pass,
+so they carry no phase lag; the drive's own velocity column is never used as a regressor
+(it is only compared with the zero-phase derivative to detect a lagging velocity filter,
+see :mod:`hil.diagnose.data_issues`).
 
 Irregular timestamps and gaps are handled by resampling onto a uniform grid at the median
 sample period; samples inside a gap, next to a gap, next to the ends of a segment (filter
@@ -20,10 +22,9 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 from scipy import stats
-from scipy.signal import butter, sosfiltfilt
 
 from hil.errors import IdentificationError
-from hil.identify.kinematics import uniform_position
+from hil.identify.kinematics import savgol_derivatives, uniform_position, zero_phase_lowpass
 from hil.recording import GAP_FACTOR, AxisKind, Recording, saturated_mask
 
 log = logging.getLogger(__name__)
@@ -36,6 +37,10 @@ CUTOFF_FRACTION = 0.125
 #: Relative spread of sample periods above which sampling counts as irregular.
 IRREGULAR_TOLERANCE = 0.01
 MIN_VALID_SAMPLES = 200
+#: The derivative after the low-pass: Savitzky–Golay over 5 samples, quartic (the five-point
+#: central differences; gain error (ωh)⁴/30 for the first, (ωh)⁴/90 for the second).
+DERIVATIVE_WINDOW = 5
+DERIVATIVE_ORDER = 4
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -147,7 +152,7 @@ class Signals:
                                   segments=self.segments)
 
     def derivative(self, values: FloatArray) -> FloatArray:
-        """Five-point central-difference time derivative (zero phase), per segment.
+        """Five-point Savitzky–Golay time derivative (zero phase), per segment.
 
         Parameters
         ----------
@@ -157,47 +162,41 @@ class Signals:
         Returns
         -------
         ndarray
-            ``d(values)/dt`` (per second); two-point differences at a segment's first and
-            last two samples, 0 outside every segment.
+            ``d(values)/dt`` (per second); see :func:`derivatives`.
         """
-        out = np.zeros_like(values)
-        for start, stop in self.segments:
-            out[start:stop] = _first_derivative(values[start:stop], 1.0 / self.fs_hz)
-        return out
+        return derivatives(values, step_s=1.0 / self.fs_hz, segments=self.segments)[0]
 
 
-def zero_phase_lowpass(
-    values: FloatArray,
-    *,
-    fs_hz: float,
-    cutoff_hz: float,
-    segments: tuple[tuple[int, int], ...],
-) -> FloatArray:
-    """4th-order Butterworth applied forward and backward (no phase), per segment.
+def derivatives(
+    values: FloatArray, *, step_s: float, segments: tuple[tuple[int, int], ...]
+) -> tuple[FloatArray, FloatArray]:
+    """First and second derivatives of a band-limited column, segment by segment.
 
     Parameters
     ----------
     values : ndarray
-        The column to filter.
-    fs_hz : float
-        Its sample rate.
-    cutoff_hz : float
-        Cutoff of the 2nd-order Butterworth run in each direction.
+        A column on a uniform grid, already low-passed.
+    step_s : float
+        The grid's period (s).
     segments : tuple of (int, int)
-        ``(start, stop)`` index ranges filtered separately.
+        ``(start, stop)`` index ranges differentiated separately.
 
     Returns
     -------
-    ndarray
-        A filtered copy of ``values``; segments of 30 samples or fewer, and samples
-        outside every segment, are copied unfiltered.
+    first, second : ndarray
+        :func:`hil.identify.kinematics.savgol_derivatives` over
+        :data:`DERIVATIVE_WINDOW` samples of order :data:`DERIVATIVE_ORDER` (the local
+        quartic at a segment's first and last two samples); 0 outside every segment and
+        on segments shorter than the window.
     """
-    sos = butter(2, cutoff_hz, fs=fs_hz, output="sos")  # doubled by filtfilt: 4th order
-    out = np.array(values, dtype=np.float64, copy=True)
+    first = np.zeros_like(values)
+    second = np.zeros_like(values)
     for start, stop in segments:
-        if stop - start > 30:
-            out[start:stop] = sosfiltfilt(sos, values[start:stop])
-    return out
+        if stop - start >= DERIVATIVE_WINDOW:
+            first[start:stop], second[start:stop] = savgol_derivatives(
+                values[start:stop], step_s=step_s, window=DERIVATIVE_WINDOW,
+                order=DERIVATIVE_ORDER)
+    return first, second
 
 
 def prepare(recording: Recording, *, cutoff_hz: float | None = None) -> Signals:
@@ -269,11 +268,7 @@ def prepare(recording: Recording, *, cutoff_hz: float | None = None) -> Signals:
     velocity_reported = on_grid(recording.velocity)
     segments = _segments(in_gap)
     smooth = zero_phase_lowpass(position, fs_hz=fs_hz, cutoff_hz=cutoff_hz, segments=segments)
-    velocity = np.zeros_like(position)
-    acceleration = np.zeros_like(position)
-    for start, stop in segments:
-        velocity[start:stop] = _first_derivative(smooth[start:stop], period_s)
-        acceleration[start:stop] = _second_derivative(smooth[start:stop], period_s)
+    velocity, acceleration = derivatives(smooth, step_s=period_s, segments=segments)
 
     margin = max(3, math.ceil(2.0 * fs_hz / cutoff_hz))
     valid = ~in_gap & ~_dilate(saturated, 2)
@@ -307,26 +302,6 @@ def prepare(recording: Recording, *, cutoff_hz: float | None = None) -> Signals:
         saturated_count=int(sat_raw.sum()),
         saturation_level=level,
     )
-
-
-def _first_derivative(x: FloatArray, step_s: float) -> FloatArray:
-    """Five-point central difference (gain error ~(ωh)⁴/30); 2-point at the ends."""
-    out = np.gradient(x, step_s) if len(x) >= 2 else np.zeros_like(x)
-    if len(x) >= 5:
-        out[2:-2] = (-x[4:] + 8.0 * x[3:-1] - 8.0 * x[1:-3] + x[:-4]) / (12.0 * step_s)
-    return out
-
-
-def _second_derivative(x: FloatArray, step_s: float) -> FloatArray:
-    """Five-point central second difference (gain error ~(ωh)⁴/90); 0 at the ends."""
-    out = np.zeros_like(x)
-    if len(x) >= 5:
-        out[2:-2] = (
-            -x[4:] + 16.0 * x[3:-1] - 30.0 * x[2:-2] + 16.0 * x[1:-3] - x[:-4]
-        ) / (12.0 * step_s**2)
-        out[:2] = out[2]
-        out[-2:] = out[-3]
-    return out
 
 
 def _segments(in_gap: BoolArray) -> tuple[tuple[int, int], ...]:

@@ -1,14 +1,62 @@
-"""Phase-free velocity and acceleration from encoder position (no filter lag)."""
+"""The signal layer of identification and diagnosis: phase-free motion from encoder position.
+
+One implementation of each step, used by both:
+
+* resampling irregular samples onto a uniform grid (:func:`uniform_position`, a cubic
+  spline: linear interpolation across a missed poll cuts the corner of the path);
+* differentiation (:func:`savgol_derivatives`, a centred Savitzky–Golay fit: zero phase);
+* band-limiting (:func:`zero_phase_lowpass`, a Butterworth run forward and backward).
+
+Identification's sine runs differentiate the raw position with a wide quintic window
+(:func:`phase_free_derivatives`). Diagnosis band-limits first and differentiates with the
+narrowest window (5 samples, quartic: the five-point central differences), because it
+filters the effort and every regressor with the same low-pass ("parallel filtering") and
+needs derivatives that are exact across that band: a quintic window wide enough to
+band-limit by itself differentiates twice with a gain 4 % low at half its cutoff.
+"""
 
 from __future__ import annotations
 
 import numpy as np
 from numpy.typing import NDArray
 from scipy.interpolate import CubicSpline
-from scipy.signal import savgol_filter
+from scipy.signal import butter, savgol_filter, sosfiltfilt
 
 FloatArray = NDArray[np.float64]
 IRREGULAR_JITTER = 0.01  # relative spread of sample steps above which we resample
+#: Polynomial order of identification's wide derivative window.
+QUINTIC = 5
+#: Segments this short or shorter are left unfiltered by :func:`zero_phase_lowpass`.
+MIN_FILTER_SAMPLES = 30
+
+
+def savgol_derivatives(
+    values: FloatArray, *, step_s: float, window: int, order: int
+) -> tuple[FloatArray, FloatArray]:
+    """First and second time derivatives of uniformly sampled ``values``, zero phase.
+
+    The centred Savitzky–Golay fit of degree ``order`` over ``window`` samples; window 5
+    with order 4 is the five-point central difference (interior samples).
+
+    Parameters
+    ----------
+    values : array
+        Samples at the uniform period ``step_s``.
+    step_s : float
+        Sample period (s).
+    window : int
+        Odd window length (samples), longer than ``order``.
+    order : int
+        Degree of the local polynomial.
+
+    Returns
+    -------
+    first, second : array
+        ``d(values)/dt`` and ``d²(values)/dt²`` at every sample (per s, per s²).
+    """
+    first = savgol_filter(values, window, order, deriv=1, delta=step_s)
+    second = savgol_filter(values, window, order, deriv=2, delta=step_s)
+    return np.asarray(first, dtype=np.float64), np.asarray(second, dtype=np.float64)
 
 
 def phase_free_derivatives(
@@ -46,12 +94,10 @@ def phase_free_derivatives(
     if window >= len(position):
         raise ValueError(f"derivative window {window} samples exceeds the {len(position)} given")
     if np.ptp(steps) <= IRREGULAR_JITTER * step:
-        velocity = savgol_filter(position, window, 5, deriv=1, delta=step)
-        acceleration = savgol_filter(position, window, 5, deriv=2, delta=step)
-        return np.asarray(velocity, dtype=np.float64), np.asarray(acceleration, dtype=np.float64)
+        return savgol_derivatives(position, step_s=step, window=window, order=QUINTIC)
     grid, uniform = uniform_position(position, time_s=time_s, step_s=step)
-    velocity = savgol_filter(uniform, window, 5, deriv=1, delta=step)
-    acceleration = savgol_filter(uniform, window, 5, deriv=2, delta=step)
+    velocity, acceleration = savgol_derivatives(uniform, step_s=step, window=window,
+                                                order=QUINTIC)
     return np.interp(time_s, grid, velocity), np.interp(time_s, grid, acceleration)
 
 
@@ -81,3 +127,37 @@ def uniform_position(
     """
     grid = time_s[0] + step_s * np.arange(int((time_s[-1] - time_s[0]) / step_s) + 1)
     return grid, np.asarray(CubicSpline(time_s, position)(grid), dtype=np.float64)
+
+
+def zero_phase_lowpass(
+    values: FloatArray,
+    *,
+    fs_hz: float,
+    cutoff_hz: float,
+    segments: tuple[tuple[int, int], ...],
+) -> FloatArray:
+    """4th-order Butterworth applied forward and backward (no phase), per segment.
+
+    Parameters
+    ----------
+    values : ndarray
+        The column to filter.
+    fs_hz : float
+        Its sample rate.
+    cutoff_hz : float
+        Cutoff of the 2nd-order Butterworth run in each direction.
+    segments : tuple of (int, int)
+        ``(start, stop)`` index ranges filtered separately.
+
+    Returns
+    -------
+    ndarray
+        A filtered copy of ``values``; segments of 30 samples or fewer, and samples
+        outside every segment, are copied unfiltered.
+    """
+    sos = butter(2, cutoff_hz, fs=fs_hz, output="sos")  # doubled by filtfilt: 4th order
+    out = np.array(values, dtype=np.float64, copy=True)
+    for start, stop in segments:
+        if stop - start > MIN_FILTER_SAMPLES:
+            out[start:stop] = sosfiltfilt(sos, values[start:stop])
+    return out

@@ -12,7 +12,7 @@ from diagnose_simdata import FS_HZ, plant, record
 from hil.diagnose import cli
 from hil.diagnose.core import diagnose
 from hil.diagnose.profile_out import data_fields, model_fields, split_firmware, write_profile
-from hil.diagnose.signals import zero_phase_lowpass
+from hil.identify.kinematics import zero_phase_lowpass
 from hil.motion import Mode
 from hil.profile import load_profile
 from plant_sim.firmware import Firmware

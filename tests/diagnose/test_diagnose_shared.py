@@ -54,7 +54,8 @@ def test_names_the_hidden_effect_and_nothing_else(answer: dict[str, Any]) -> Non
                                                         rel_tol=0.15)),
         ("example_06.csv.gz", lambda p, t: math.isclose(p["resonance_hz"], t["f_res_hz"],
                                                         rel_tol=0.15)),
-        ("example_07.csv.gz", lambda p, t: p["periods_per_rev"] == t["kt_periods"]),
+        ("example_07.csv.gz", lambda p, t: p["periods_per_rev"] == t["kt_periods"]
+         and math.isclose(p["relative_amplitude"], t["kt_ripple"], rel_tol=0.15)),
     ],
 )
 def test_key_parameter(name: str, check: Any) -> None:

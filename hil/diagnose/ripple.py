@@ -1,0 +1,125 @@
+"""K_t ripple's coefficients from the rows where the angle sweeps (a two-stage fit).
+
+The ripple's column ``T̂·sin kθ`` is largest where the torque is. Where the angle stands
+nearly still (a chirp, a staircase step) ``sin kθ`` is a constant and the column a copy of
+``T̂``: those rows say nothing about how the torque depends on θ, but with their large
+torque they dominate the ripple's normal equations, and whatever the model misses there
+along ``T̂`` (mostly ``J·α`` at high frequency) is taken as ripple at that one angle. On
+example_07 (a chirp at a nearly fixed angle) this pulled the depth 23 % low. So the
+ripple's parameters, their intervals and its halves test use only the rows over which the
+angle sweeps at least a quarter period of the ripple's lowest order within a block; the
+rest of the extended model is fitted on every training row with the ripple subtracted
+(:func:`two_stage`), and the selection judges the jointly fitted model as before.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import replace
+
+import numpy as np
+
+from hil.diagnose.model import Designer, Fit, IndexArray, solve
+from hil.diagnose.signals import Signals
+
+#: Blocks over which the angle's sweep is judged, s (those of the order search's weights).
+SWEEP_BLOCK_S = 0.25
+#: A block informs θ-dependence when kθ sweeps at least this much of a period.
+SWEEP_FRACTION = 0.25
+#: Fewer sweeping rows than this fraction of the training rows: keep every row.
+MIN_SWEEP_SHARE = 0.2
+
+
+def sweep_rows(signals: Signals, rows: IndexArray, lowest_order: int) -> IndexArray:
+    """The rows whose block's angle covers a quarter period of ``lowest_order``.
+
+    Parameters
+    ----------
+    signals : Signals
+    rows : ndarray of intp
+        Candidate rows (the training rows).
+    lowest_order : int
+        The ripple's lowest order, periods per revolution.
+
+    Returns
+    -------
+    ndarray of intp
+        The subset of ``rows``; all of ``rows`` when fewer than :data:`MIN_SWEEP_SHARE` of
+        them sweep (the ripple is then estimated as before, from every row).
+    """
+    block = rows // max(1, round(SWEEP_BLOCK_S * signals.fs_hz))
+    _, index = np.unique(block, return_inverse=True)
+    position = signals.position[rows]
+    high = np.full(index.max() + 1, -np.inf)
+    low = np.full(index.max() + 1, np.inf)
+    np.maximum.at(high, index, position)
+    np.minimum.at(low, index, position)
+    sweeps = (high - low)[index] * lowest_order >= SWEEP_FRACTION * 2.0 * math.pi
+    if sweeps.sum() < MIN_SWEEP_SHARE * rows.size:
+        return rows
+    return rows[sweeps]
+
+
+def sweep_rows_of(fit: Fit, signals: Signals, rows: IndexArray) -> IndexArray:
+    """:func:`sweep_rows` for the ``kt_ripple`` term of ``fit``.
+
+    Parameters
+    ----------
+    fit : Fit
+        A model that holds a ``kt_ripple`` term (otherwise ``rows`` is returned).
+    signals : Signals
+    rows : ndarray of intp
+        The training rows ``fit`` was fitted on.
+
+    Returns
+    -------
+    ndarray of intp
+        The rows from which the ripple's parameters are estimated.
+    """
+    term = fit.model.term("kt_ripple")
+    if term is None:
+        return rows
+    lowest = min(int(label.removeprefix("kt_sin")) for label in term.labels[::2])
+    return sweep_rows(signals, rows, lowest)
+
+
+def two_stage(designer: Designer, fit: Fit, signals: Signals, rows: IndexArray) -> Fit:
+    """``fit``'s model in two stages: the ripple from the sweeping rows, the rest from all.
+
+    Parameters
+    ----------
+    designer : Designer
+    fit : Fit
+        Fitted on ``rows``; returned unchanged without a ``kt_ripple`` term.
+    signals : Signals
+    rows : ndarray of intp
+        The training rows.
+
+    Returns
+    -------
+    Fit
+        Stage one: ``fit``'s model on :func:`sweep_rows_of` gives the ripple's coefficients
+        and their covariance; stage two: every other coefficient by least squares on
+        ``rows`` with the ripple's contribution subtracted (its covariance from that fit;
+        the two blocks uncorrelated). ``rss`` on ``rows``.
+    """
+    term = fit.model.term("kt_ripple")
+    if term is None:
+        return fit
+    stage_one = designer.fit(fit.model, signals, sweep_rows_of(fit, signals, rows))
+    labels = fit.model.labels
+    ripple = np.isin(labels, term.labels)
+    matrix = designer.design(fit.model, signals, rows)
+    target = signals.effort_filtered[rows] - matrix[:, ripple] @ stage_one.coefficients[ripple]
+    rest = replace(fit.model, terms=tuple(t for t in fit.model.terms if t is not term))
+    stage_two = solve(rest, matrix[:, ~ripple], target, n_effective=fit.n_effective)
+    coefficients = np.empty(len(labels))
+    coefficients[ripple] = stage_one.coefficients[ripple]
+    coefficients[~ripple] = stage_two.coefficients
+    covariance = np.zeros((len(labels), len(labels)))
+    covariance[np.ix_(ripple, ripple)] = stage_one.covariance[np.ix_(ripple, ripple)]
+    covariance[np.ix_(~ripple, ~ripple)] = stage_two.covariance
+    residual = signals.effort_filtered[rows] - matrix @ coefficients
+    rss = float(residual @ residual)
+    return replace(fit, coefficients=coefficients, covariance=covariance, rss=rss,
+                   sigma2=rss / max(rows.size - len(labels), 1))
