@@ -33,19 +33,13 @@ from numpy.typing import NDArray
 
 from hil.errors import IdentificationError
 from hil.identify.estimate import Estimate
-from hil.identify.multisine import jackknife as jackknife
-from hil.identify.multisine import multisine as multisine
-from hil.identify.multisine import period_phasors as period_phasors
-from hil.identify.multisine import schroeder_phases as schroeder_phases
+from hil.identify.multisine import jackknife, period_phasors
 
 FloatArray = NDArray[np.float64]
 ComplexArray = NDArray[np.complex128]
 
 MARGIN_NAMES = ("bandwidth_hz", "peak_gain_db", "gain_margin_db", "phase_margin_deg",
                 "sensitivity_peak_db")
-
-
-
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)

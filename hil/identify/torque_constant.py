@@ -240,6 +240,11 @@ def ripple_factors(angles_rad: FloatArray, ripple: Sequence[tuple[int, float, fl
     return factors
 
 
+def largest_order(ripple: Sequence[tuple[int, float, float]]) -> int:
+    """The order of the ripple table's largest harmonic (the one the angles balance)."""
+    return max(ripple, key=lambda h: h[1])[0]
+
+
 def balanced_angles(angles_rad: Sequence[float], ripple: Sequence[tuple[int, float, float]]
                     ) -> tuple[float, ...]:
     """The locked angles nudged so the largest K_t ripple harmonic averages out over them.
@@ -267,7 +272,7 @@ def balanced_angles(angles_rad: Sequence[float], ripple: Sequence[tuple[int, flo
     angles = np.asarray(angles_rad, dtype=np.float64)
     if not ripple or len(angles) < 2:
         return tuple(float(a) for a in angles)
-    order = max(ripple, key=lambda h: h[1])[0]
+    order = largest_order(ripple)
     count = len(angles)
     phases = np.mod(order * angles, 2 * math.pi)
     ranked = np.argsort(phases)
@@ -351,7 +356,7 @@ def _slope_scatter(slopes: FloatArray, angles_rad: FloatArray,
     harmonic when the angles balance it (its sine and cosine sum to zero over them)."""
     n = len(slopes)
     if ripple and n >= 5:
-        order = max(ripple, key=lambda h: h[1])[0]
+        order = largest_order(ripple)
         phasors = np.exp(1j * order * angles_rad)
         if abs(phasors.mean()) < 1e-6:
             design = np.column_stack([np.ones(n), phasors.real, phasors.imag])

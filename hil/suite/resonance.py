@@ -38,6 +38,13 @@ NAME = "resonance"
 EXCITATIONS = ("multisine", "stepped_sine")
 
 
+def shaped_amplitude_rad_s(frequency_hz: float, amplitude_rad_s: float, *, knee_hz: float,
+                           cap_rad_s: float) -> float:
+    """``amplitude_rad_s`` up to ``knee_hz``, ∝ f above it (the motor responds ∝ 1/f),
+    capped at ``cap_rad_s``."""
+    return min(amplitude_rad_s * max(1.0, frequency_hz / knee_hz), cap_rad_s)
+
+
 @dataclass(frozen=True, slots=True, kw_only=True)
 class SteppedSpec(SteppedSineSpec):
     """A stepped sine over a geometric band on a constant-speed carrier."""
@@ -92,9 +99,10 @@ class SteppedSpec(SteppedSineSpec):
         return spec
 
     def amplitude(self, frequency_hz: float) -> float:
-        """``amplitude_rad_s``, ∝ f above the knee, capped at ``max_amplitude_rad_s``."""
-        scaled = self.amplitude_rad_s * max(1.0, frequency_hz / self.amplitude_knee_hz)
-        return min(scaled, self.max_amplitude_rad_s)
+        """The sine's velocity amplitude at ``frequency_hz`` (:func:`shaped_amplitude_rad_s`)."""
+        return shaped_amplitude_rad_s(frequency_hz, self.amplitude_rad_s,
+                                      knee_hz=self.amplitude_knee_hz,
+                                      cap_rad_s=self.max_amplitude_rad_s)
 
     def settle_samples(self, frequency_hz: float) -> int:
         """Samples discarded at the start of a segment: ≥ 2 whole periods covering
@@ -228,9 +236,11 @@ class MultisineSpec(TravelSpec):
 
     @property
     def amplitudes_rad_s(self) -> tuple[float, ...]:
-        """Each line's velocity amplitude: ``amplitude_rad_s``, ∝ f above the knee, capped."""
-        return tuple(min(self.amplitude_rad_s * max(1.0, f / self.amplitude_knee_hz),
-                         self.max_amplitude_rad_s) for f in self.frequencies_hz)
+        """Each line's velocity amplitude (:func:`shaped_amplitude_rad_s`)."""
+        return tuple(shaped_amplitude_rad_s(f, self.amplitude_rad_s,
+                                            knee_hz=self.amplitude_knee_hz,
+                                            cap_rad_s=self.max_amplitude_rad_s)
+                     for f in self.frequencies_hz)
 
     @property
     def needed_sample_rate_hz(self) -> float:

@@ -255,11 +255,10 @@ def repeat_until(run_once: Callable[[], Mapping[str, Estimate]], *,
     """
     runs = [dict(run_once())]
     now = runs[0]
-    if rule is not None:
-        rule.check(list(now))
+    if rule is None:
+        return now, StopDecision(again=False, runs=1, reason="one run (no stop rule)")
+    rule.check(list(now))
     while True:
-        if rule is None:
-            return now, StopDecision(again=False, runs=1, reason="one run (no stop rule)")
         decision = decide(now, specs, method_bias, rule, runs=len(runs), shared=shared)
         if not decision.again:
             return now, decision

@@ -10,8 +10,9 @@ import numpy as np
 import pytest
 from scipy.optimize import brentq
 
-from hil.closed_loop.frf import analyse_frf, multisine, period_phasors, schroeder_phases
+from hil.closed_loop.frf import analyse_frf
 from hil.errors import IdentificationError
+from hil.identify.multisine import multisine, period_phasors, schroeder_phases
 
 J, B, KP, KI, DELAY_S = 0.0036, 0.005, 0.45, 12.0, 1.2e-3
 FS, PERIOD_S, PERIODS = 4000.0, 0.5, 6
