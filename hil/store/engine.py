@@ -10,6 +10,8 @@ from __future__ import annotations
 
 import logging
 import os
+import sqlite3
+import time
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -27,6 +29,7 @@ SQLITE_NAME = "results.sqlite"
 HEAD_REVISION = "0003"  # the newest migration in migrations/versions (a test checks it)
 SQLITE_BUSY_TIMEOUT_MS = 30_000  # a writer waits this long for another station's ingest
 CONNECT_TIMEOUT_S = 5
+WAL_SWITCH_POLL_S = 0.02
 MIGRATIONS = Path(__file__).resolve().parent / "migrations"
 
 
@@ -135,10 +138,12 @@ def upgrade(engine: Engine, revision: str = "head") -> None:
 
     config = Config()
     config.set_main_option("script_location", str(MIGRATIONS))
-    with engine.connect() as connection:
+    # one transaction around all of it (SQLite: BEGIN IMMEDIATE), the version read included:
+    # alembic's own per-migration transactions on SQLite would let two stations both
+    # start from an empty database
+    with engine.connect() as connection, connection.begin():
         config.attributes["connection"] = connection
         command.upgrade(config, revision)
-        connection.commit()
 
 
 def _revision(engine: Engine) -> str | None:
@@ -196,11 +201,29 @@ def _sqlite_connect(dbapi_connection: Any, _record: Any) -> None:
     # deferred reader upgrading to writer under WAL gets SQLITE_BUSY without waiting
     dbapi_connection.isolation_level = None
     cursor = dbapi_connection.cursor()
-    cursor.execute("PRAGMA journal_mode=WAL")
     cursor.execute(f"PRAGMA busy_timeout={SQLITE_BUSY_TIMEOUT_MS}")
+    _switch_to_wal(cursor)
     cursor.execute("PRAGMA foreign_keys=ON")
     cursor.execute("PRAGMA synchronous=NORMAL")
     cursor.close()
+
+
+def _switch_to_wal(cursor: Any) -> None:
+    """Put the database in WAL mode (it stays so, in the file). SQLite answers the switch
+    with SQLITE_BUSY at once, without its busy handler, while another connection holds the
+    file (stations opening a new store together), so the wait is ours, as long as the
+    busy timeout."""
+    if str(cursor.execute("PRAGMA journal_mode").fetchone()[0]).lower() == "wal":
+        return
+    deadline = time.monotonic() + SQLITE_BUSY_TIMEOUT_MS / 1000
+    while True:
+        try:
+            cursor.execute("PRAGMA journal_mode=WAL")
+            return
+        except sqlite3.OperationalError as exc:
+            if "locked" not in str(exc) or time.monotonic() > deadline:
+                raise
+        time.sleep(WAL_SWITCH_POLL_S)
 
 
 def _sqlite_begin(connection: Any) -> None:
