@@ -33,6 +33,7 @@ import math
 from dataclasses import dataclass, replace
 
 import numpy as np
+from numpy.typing import NDArray
 from scipy.special import chdtri
 
 from hil.diagnose.effects import (
@@ -48,6 +49,9 @@ from hil.diagnose.ripple import sweep_rows_of
 from hil.diagnose.signals import Signals
 
 log = logging.getLogger(__name__)
+
+FloatArray = NDArray[np.float64]
+BoolArray = NDArray[np.bool_]
 
 DELTA_BIC_MAX = -10.0
 MIN_HELDOUT_RMS_REDUCTION = 0.01
@@ -331,7 +335,6 @@ class Evaluator:
         if not labels:
             return True
         position = signals.position[rows]
-        median = float(np.median(position))
         matrix = self.designer.design(fit.model, signals, rows)
         target = signals.effort_filtered[rows]
         # weighted by each block's misfit: where the model misses most (a chirp, large
@@ -339,14 +342,26 @@ class Evaluator:
         # soak up that misfit, in whichever half the chirp lies
         weight = 1.0 / local_scale(target - matrix @ fit.coefficients, rows,
                                    signals.fs_hz)
+        splits = travel_splits(effect, position)
+        for index, part in enumerate(splits):
+            if not self._same_on_both_sides(fit, labels, matrix * weight[:, None],
+                                            target * weight, part, len(splits)):
+                log.debug("consistency of %s fails on split %d", effect, index)
+                return False
+        return True
+
+    @staticmethod
+    def _same_on_both_sides(fit: Fit, labels: tuple[str, ...], matrix: FloatArray,
+                            target: FloatArray, part: BoolArray, tests: int) -> bool:
+        """Whether ``labels``' coefficients agree on the rows in ``part`` and the others
+        (χ² at :data:`PERIODIC_ALPHA` / ``tests`` and :data:`PERIODIC_MISMATCH`)."""
         halves = []
-        for part in (position < median, position >= median):
-            if np.count_nonzero(part) <= 4 * len(fit.model.labels):
+        for side in (part, ~part):
+            if np.count_nonzero(side) <= 4 * len(fit.model.labels):
                 return True
-            half = solve(fit.model, matrix[part] * weight[part, None],
-                         target[part] * weight[part], n_effective=float(np.count_nonzero(part)))
-            values, covariance = half.block(labels)
-            halves.append((values, covariance))
+            half = solve(fit.model, matrix[side], target[side],
+                         n_effective=float(np.count_nonzero(side)))
+            halves.append(half.block(labels))
         (a, ca), (b, cb) = halves
         difference = a - b
         try:
@@ -357,8 +372,9 @@ class Evaluator:
             return True
         size = 0.5 * (float(np.linalg.norm(a)) + float(np.linalg.norm(b)))
         mismatch = float(np.linalg.norm(difference)) / size if size > 0 else 0.0
-        significant = statistic > chi2_quantile(1.0 - PERIODIC_ALPHA, len(labels))
-        log.debug("consistency of %s: chi2 %.1f, mismatch %.2f", effect, statistic, mismatch)
+        significant = statistic > chi2_quantile(1.0 - PERIODIC_ALPHA / tests, len(labels))
+        log.debug("consistency of %s: chi2 %.1f, mismatch %.2f", labels[0], statistic,
+                  mismatch)
         return not (significant and mismatch >= PERIODIC_MISMATCH)
 
     def candidate(self, effect: str, model: Model, current: Fit) -> Candidate:
@@ -413,6 +429,39 @@ class Evaluator:
         )
         return Candidate(effect=effect, fit=fit, gain=gain, lag_std_s=lag_std,
                          added_params=max(1, model.n_params - current.model.n_params))
+
+
+#: Effects that are a function of the position over the whole travel: their middle is
+#: the middle of the travel's range (see :func:`travel_splits`).
+SHAPE_EFFECTS = frozenset({"gravity", "cable_spring"})
+
+
+def travel_splits(effect: str, position: FloatArray) -> list[BoolArray]:
+    """The cuts of the travel the halves test compares a known effect's coefficients across.
+
+    Parameters
+    ----------
+    effect : str
+    position : ndarray
+        Of the rows judged.
+
+    Returns
+    -------
+    list of ndarray of bool
+        The rows below the median position (the two halves), and the middle against the
+        two ends: for :data:`SHAPE_EFFECTS` the middle half of the travel's range (a
+        stiffening spring's slope differs there from the ends', while its two halves
+        agree), for the others the rows between the 25th and 75th percentile of the
+        positions, where the run's slow and small motions are (a friction raised there
+        fits a Stribeck term that the ends of the travel contradict).
+    """
+    if effect in SHAPE_EFFECTS:
+        low, high = float(np.min(position)), float(np.max(position))
+        middle = np.abs(position - 0.5 * (low + high)) < 0.25 * (high - low)
+    else:
+        low, high = (float(v) for v in np.percentile(position, [25, 75]))
+        middle = (position >= low) & (position <= high)
+    return [position < float(np.median(position)), middle]
 
 
 def model_key(model: Model) -> tuple[object, ...]:
