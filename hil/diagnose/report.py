@@ -7,7 +7,7 @@ import math
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from hil.diagnose import interpret, intervals, ripple, unexplained
+from hil.diagnose import constant, interpret, intervals, ripple, unexplained
 from hil.diagnose.model import Fit
 from hil.diagnose.profile_out import extended_firmware, extended_plant
 from hil.diagnose.select import DECISION_RULE, Candidate
@@ -92,6 +92,27 @@ def _cause(rank: int, candidate: Candidate, diagnosis: Diagnosis) -> dict[str, A
         out["separable"] = named["separable"]
     if "note" in named:
         out["note"] = named["note"]
+    # a constant and a Coulomb difference between the directions: one column (constant.py)
+    coverage = (intervals.JACKKNIFE_COVERAGE, intervals.JACKKNIFE_COVERAGE_99)
+    if candidate.effect == "offset":
+        constant.describe_offset(out, fit, *coverage)
+    elif candidate.effect == "asymmetric_friction":
+        part = constant.offset_part(out, candidate, fit, diagnosis, _gain, *coverage)
+        if part is not None:
+            out["offset_part"] = part
+    return out
+
+
+def _causes(diagnosis: Diagnosis) -> list[dict[str, Any]]:
+    """Every cause's entry, ranked; an asymmetric friction's constant follows it as its
+    own ``offset`` entry (:func:`hil.diagnose.constant.offset_part`)."""
+    out: list[dict[str, Any]] = []
+    for candidate in diagnosis.causes:
+        entry = _cause(len(out) + 1, candidate, diagnosis)
+        part = entry.pop("offset_part", None)
+        out.append(entry)
+        if part is not None:
+            out.append({**part, "rank": len(out) + 1})
     return out
 
 
@@ -153,7 +174,7 @@ def report(diagnosis: Diagnosis) -> dict[str, Any]:
         },
         "data_issues": [issue.as_dict() for issue in diagnosis.issues],
         "decision_rule": DECISION_RULE,
-        "causes": [_cause(rank, c, diagnosis) for rank, c in enumerate(diagnosis.causes, start=1)],
+        "causes": _causes(diagnosis),
         "candidates_by_round": rounds,
         **final_structure(diagnosis),
         "extended_model": {
