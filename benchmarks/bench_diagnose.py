@@ -127,7 +127,7 @@ def hidden(count: int, *, pairs: bool, unknown: bool, seed: int,
                 std = cause["uncertainty"].get(truth.key, {}).get("std")
                 # err/u where the interval is value ± k·u (not a profile likelihood's)
                 centred = math.isclose(interval[1] - value, value - interval[0], rel_tol=1e-6)
-                if std and centred:
+                if std and (centred or not flagged):
                     z_scores.append((value - truth.truth) / std)
                     notes.append(f"err/u {(value - truth.truth) / std:+.2f}"
                                  f"{'' if covered else ' MISSED'}")
@@ -144,7 +144,8 @@ def hidden(count: int, *, pairs: bool, unknown: bool, seed: int,
         stats["ok"] += all_ok and not extra
         stats["unexplained"] += data["unexplained"]
         print(f"{case:3d} {'+'.join(effects):24s} named {list(causes)} {'; '.join(notes)}"
-              f"{' EXTRA ' + str(extra) if extra else ''}", flush=True)
+              f"{' EXTRA ' + str(extra) if extra else ''}"
+              f"{' UNEXPLAINED' if data['unexplained'] else ''}", flush=True)
     elapsed = time.perf_counter() - started
     summary: dict[str, Any] = dict(stats)
     summary["per_effect_named_within_15pct"] = {

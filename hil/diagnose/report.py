@@ -212,7 +212,8 @@ def final_structure(diagnosis: Diagnosis) -> dict[str, Any]:
     judged = unexplained.judge(
         position=signals.position[rows], velocity=signals.velocity[rows], residual=residual,
         independence=min(1.0, signals.independence * signals.decimation),
-        rotary=signals.axis_kind == "rotary")
+        rotary=signals.axis_kind == "rotary",
+        travel=unexplained.travel_since_reversal(signals.position, signals.velocity)[rows])
     whiteness = residual_tests(residual, signals.velocity[rows], input_name="velocity")
     judged["ljung_box"] = whiteness["ljung_box"]
     judged["cross_correlation_independent"] = whiteness["cross_correlation"]["independent"]

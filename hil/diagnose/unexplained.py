@@ -17,7 +17,7 @@ coloured but unrelated to position and velocity holds no effect a model could na
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
@@ -27,10 +27,18 @@ from scipy.special import fdtrc
 FloatArray = NDArray[np.float64]
 
 BINS = 40
-#: Significance of the structure tests (F-test; Bonferroni over the three).
+#: Significance of the structure tests (F-test; Bonferroni over the :data:`TESTS`).
 ALPHA = 0.001
+TESTS = 4
 #: Least share of the residual variance the bin means must carry to count as structure.
 MIN_SHARE = 0.10
+#: ... against the travel since the last reversal: every friction model misses a little
+#: right after a reversal (presliding, the velocity loop's transient); known effects on
+#: this project's simulator leave up to 11 % there, a backlash dead zone 43–70 %.
+MIN_SHARE_REVERSAL = 0.25
+#: Travel since a reversal below this is binned with it (rad or m: below a count of a
+#: 2²⁰-count encoder).
+MIN_TRAVEL = 1e-6
 #: Bins with fewer held-out rows than this are left out of the test.
 MIN_BIN_ROWS = 10
 
@@ -61,11 +69,13 @@ class Structure:
     peak: float
     peak_mean_nm: float
     directions: str
+    min_share: float = MIN_SHARE
 
     @property
     def found(self) -> bool:
-        """Significant at :data:`ALPHA` / 3 and at least :data:`MIN_SHARE` of the variance."""
-        return self.p_value < ALPHA / 3 and self.share >= MIN_SHARE
+        """Significant at :data:`ALPHA` / :data:`TESTS` and at least ``min_share`` of the
+        variance."""
+        return self.p_value < ALPHA / TESTS and self.share >= self.min_share
 
 
 def structure(variable: str, x: FloatArray, residual: FloatArray, direction: FloatArray,
@@ -134,8 +144,34 @@ def _directions(values: FloatArray, sense: FloatArray) -> str:
     return max(means, key=lambda name: abs(means[name]))
 
 
+def travel_since_reversal(position: FloatArray, velocity: FloatArray) -> FloatArray:
+    """How far the axis has moved since its direction of travel last changed.
+
+    Parameters
+    ----------
+    position, velocity : ndarray
+        The whole recording (rad, rad/s or m, m/s).
+
+    Returns
+    -------
+    ndarray
+        ``|θ − θ_reversal|`` per sample, ``θ_reversal`` the position where the current
+        direction of travel (the sign of the velocity outside a band of 10⁻³ of its 99th
+        percentile, held through standstill) began; 0 before the first motion.
+    """
+    band = 1e-3 * float(np.percentile(np.abs(velocity), 99)) if velocity.size else 0.0
+    sense = np.sign(velocity) * (np.abs(velocity) > band)
+    index = np.arange(sense.size)
+    # the direction held through standstill: the last non-zero sign so far
+    held = sense[np.maximum.accumulate(np.where(sense != 0, index, 0))]
+    start = np.r_[True, held[1:] != held[:-1]]
+    anchor = np.maximum.accumulate(np.where(start, index, 0))
+    travel: FloatArray = np.where(held != 0, np.abs(position - position[anchor]), 0.0)
+    return travel
+
+
 def judge(*, position: FloatArray, velocity: FloatArray, residual: FloatArray,
-          independence: float, rotary: bool) -> dict[str, Any]:
+          independence: float, rotary: bool, travel: FloatArray | None = None) -> dict[str, Any]:
     """Whether the final model leaves structure against position or velocity.
 
     Parameters
@@ -147,6 +183,11 @@ def judge(*, position: FloatArray, velocity: FloatArray, residual: FloatArray,
         Fraction of the rows that are statistically independent.
     rotary : bool
         Names the position ``θ`` (rad) or ``x`` (m) in the text.
+    travel : ndarray, optional
+        On the held-out rows, :func:`travel_since_reversal`: when given, the friction-like
+        residual is also tested against it (log-spaced bins; a backlash dead zone or a
+        presliding loop lies within a few mrad of each reversal), at
+        :data:`MIN_SHARE_REVERSAL`.
 
     Returns
     -------
@@ -167,6 +208,12 @@ def judge(*, position: FloatArray, velocity: FloatArray, residual: FloatArray,
                                        independence),
         "velocity": structure("velocity", velocity, residual, direction, independence),
     }
+    if travel is not None:
+        log_travel = np.log10(np.maximum(travel[moving], MIN_TRAVEL))
+        test = structure("reversal", log_travel, residual[moving] * direction[moving],
+                         direction[moving], independence)
+        tests["reversal"] = replace(test, peak=10.0 ** test.peak,
+                                    min_share=MIN_SHARE_REVERSAL)
     symbol, unit = ("θ", "rad") if rotary else ("x", "m")
     where = []
     for test in tests.values():
@@ -180,6 +227,11 @@ def judge(*, position: FloatArray, velocity: FloatArray, residual: FloatArray,
             where.append(f"friction-like torque residual (opposing the motion) concentrated "
                          f"near {symbol} = {test.peak:.3g} {unit}, both directions "
                          f"({100 * test.share:.0f} % of its variance in position bins)")
+        elif test.variable == "reversal":
+            where.append(f"friction-like torque residual depends on the travel since the "
+                         f"last reversal, largest {test.peak:.3g} {unit} after it (backlash, "
+                         f"presliding or a friction loop; {100 * test.share:.0f} % of its "
+                         "variance in bins of that travel)")
         else:
             where.append(f"torque residual depends on velocity, largest near "
                          f"{test.peak:.3g} {unit}/s ({100 * test.share:.0f} % of its "
@@ -187,7 +239,8 @@ def judge(*, position: FloatArray, velocity: FloatArray, residual: FloatArray,
     return {
         "unexplained": bool(where),
         "where": where,
-        "rule": {"alpha": ALPHA, "min_share": MIN_SHARE, "bins": BINS},
+        "rule": {"alpha": ALPHA, "min_share": MIN_SHARE,
+                 "min_share_reversal": MIN_SHARE_REVERSAL, "bins": BINS},
         "tests": {
             name: {"share": t.share, "p_value": t.p_value, "peak": t.peak,
                    "peak_mean_nm": t.peak_mean_nm, "directions": t.directions,
