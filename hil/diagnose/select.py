@@ -433,7 +433,7 @@ class Evaluator:
 
 #: Effects that are a function of the position over the whole travel: their middle is
 #: the middle of the travel's range (see :func:`travel_splits`).
-SHAPE_EFFECTS = frozenset({"gravity", "cable_spring"})
+SHAPE_EFFECTS = frozenset({"offset", "gravity", "cable_spring"})
 
 
 def travel_splits(effect: str, position: FloatArray) -> list[BoolArray]:

@@ -229,9 +229,9 @@ def judge(*, position: FloatArray, velocity: FloatArray, residual: FloatArray,
                          f"({100 * test.share:.0f} % of its variance in position bins)")
         elif test.variable == "reversal":
             where.append(f"friction-like torque residual depends on the travel since the "
-                         f"last reversal, largest {test.peak:.3g} {unit} after it (backlash, "
-                         f"presliding or a friction loop; {100 * test.share:.0f} % of its "
-                         "variance in bins of that travel)")
+                         f"last reversal, largest {test.peak:.3g} {unit} after it "
+                         f"({100 * test.share:.0f} % of its variance in bins of that "
+                         "travel)")
         else:
             where.append(f"torque residual depends on velocity, largest near "
                          f"{test.peak:.3g} {unit}/s ({100 * test.share:.0f} % of its "
