@@ -61,6 +61,12 @@ def _interval(cause: dict[str, Any], key: str) -> list[float] | None:
     return None if entry is None else entry.get("ci95")
 
 
+def _found(data: dict[str, Any]) -> list[str]:
+    """The structure tests that found what the final model leaves."""
+    return [name for name, test in data["unexplained_structure"]["tests"].items()
+            if test["found"]]
+
+
 def hidden(count: int, *, pairs: bool, unknown: bool, seed: int,
            only: tuple[str, ...] = ()) -> int:
     from diagnose_simdata import plant_with, record
@@ -145,7 +151,8 @@ def hidden(count: int, *, pairs: bool, unknown: bool, seed: int,
         stats["unexplained"] += data["unexplained"]
         print(f"{case:3d} {'+'.join(effects):24s} named {list(causes)} {'; '.join(notes)}"
               f"{' EXTRA ' + str(extra) if extra else ''}"
-              f"{' UNEXPLAINED' if data['unexplained'] else ''}", flush=True)
+              f"{' UNEXPLAINED ' + str(_found(data)) if data['unexplained'] else ''}",
+              flush=True)
     elapsed = time.perf_counter() - started
     summary: dict[str, Any] = dict(stats)
     summary["per_effect_named_within_15pct"] = {

@@ -55,7 +55,9 @@ class Structure:
     p_value : float
         Of the F-test that all bin means are equal.
     peak : float
-        Centre of the bin whose mean is largest in magnitude (rad, m, rad/s or m/s).
+        Centre of the bin that carries the most of the structure, ``n·(mean − grand
+        mean)²`` (rad, m, rad/s or m/s): a sparse bin's noisy mean does not point away
+        from where the structure lies.
     peak_mean_nm : float
         That bin's mean residual (N·m, or N on a linear axis).
     directions : str
@@ -120,7 +122,7 @@ def structure(variable: str, x: FloatArray, residual: FloatArray, direction: Flo
     dof_between, dof_within = groups - 1.0, n_eff - groups
     f_statistic = (between / dof_between) / (within * n_eff / values.size / dof_within)
     p_value = float(fdtrc(dof_between, dof_within, f_statistic))
-    peak_bin = int(np.argmax(np.where(used, np.abs(means), -1.0)))
+    peak_bin = int(np.argmax(np.where(used, count * (means - grand) ** 2, -1.0)))
     centre = 0.5 * (edges[peak_bin] + edges[peak_bin + 1])
     in_peak = index == peak_bin
     return Structure(variable=variable, share=between / total, p_value=p_value, peak=centre,

@@ -29,11 +29,17 @@ def friction_bump(position: FloatArray, velocity: FloatArray, *, size: float,
     ``ΔT·sgn(ω)·exp(−½((θ − θ₀)/w)²)``, ``ΔT`` 10–30 mN·m, ``w`` = 30 mrad, ``θ₀`` between
     the 25th and 75th percentile of the positions.
     """
-    low, high = (float(v) for v in np.percentile(position, [25, 75]))
-    centre = low + (high - low) * detail
+    centre = bump_centre(position, detail)
     height = 0.01 + 0.02 * size
     bump: FloatArray = np.exp(-0.5 * ((position - centre) / 0.03) ** 2)
     return height * _direction(velocity) * bump
+
+
+def bump_centre(position: FloatArray, detail: float) -> float:
+    """Where :func:`friction_bump` puts the tight spot: ``detail`` of the way from the 25th
+    to the 75th percentile of the positions."""
+    low, high = (float(v) for v in np.percentile(position, [25, 75]))
+    return low + (high - low) * detail
 
 
 def backlash(position: FloatArray, velocity: FloatArray, *, size: float,
