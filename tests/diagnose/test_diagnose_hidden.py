@@ -55,8 +55,7 @@ def test_hidden_effect_is_named_and_recovered(effect: str, inertia: float, visco
                                               order: int, seed: int) -> None:
     hidden = plant(inertia, viscous, coulomb, effect, size, detail, order)
     data = report(diagnose(record(hidden.params, seed=seed)))
-    # an asymmetric friction's constant follows it as an offset "part_of" it (not a cause)
-    names = [cause["name"] for cause in data["causes"] if "part_of" not in cause]
+    names = [cause["name"] for cause in data["causes"]]
     assert names == [effect], names
     cause = data["causes"][0]
     assert hidden.key is not None
