@@ -434,6 +434,9 @@ class Evaluator:
 #: Effects that are a function of the position over the whole travel: their middle is
 #: the middle of the travel's range (see :func:`travel_splits`).
 SHAPE_EFFECTS = frozenset({"offset", "gravity", "cable_spring"})
+#: Effects whose information lies in the run's slow motions: their middle is the middle
+#: half of the rows.
+SLOW_EFFECTS = frozenset({"stribeck"})
 
 
 def travel_splits(effect: str, position: FloatArray) -> list[BoolArray]:
@@ -448,20 +451,25 @@ def travel_splits(effect: str, position: FloatArray) -> list[BoolArray]:
     Returns
     -------
     list of ndarray of bool
-        The rows below the median position (the two halves), and the middle against the
-        two ends: for :data:`SHAPE_EFFECTS` the middle half of the travel's range (a
-        stiffening spring's slope differs there from the ends', while its two halves
-        agree), for the others the rows between the 25th and 75th percentile of the
-        positions, where the run's slow and small motions are (a friction raised there
-        fits a Stribeck term that the ends of the travel contradict).
+        The rows below the median position (the two halves); for :data:`SHAPE_EFFECTS`
+        and :data:`SLOW_EFFECTS` also the middle against the two ends. For a function of
+        the position the middle half of the travel's range (a stiffening spring's slope
+        differs there from the ends', while its two halves agree); for Stribeck friction
+        the rows between the 25th and 75th percentile of the positions, where a gimbal
+        run's slow and small motions are (a friction raised there fits a Stribeck term
+        that the reversals at the ends of the travel contradict). The other effects are
+        only halved: their information lies in the speed and the acceleration, and the
+        ends of a run hold one constant speed (the sweep), where a velocity-dependent
+        friction's or a ripple's coefficients are not identifiable on their own.
     """
+    halves = position < float(np.median(position))
     if effect in SHAPE_EFFECTS:
         low, high = float(np.min(position)), float(np.max(position))
-        middle = np.abs(position - 0.5 * (low + high)) < 0.25 * (high - low)
-    else:
+        return [halves, np.abs(position - 0.5 * (low + high)) < 0.25 * (high - low)]
+    if effect in SLOW_EFFECTS:
         low, high = (float(v) for v in np.percentile(position, [25, 75]))
-        middle = (position >= low) & (position <= high)
-    return [position < float(np.median(position)), middle]
+        return [halves, (position >= low) & (position <= high)]
+    return [halves]
 
 
 def model_key(model: Model) -> tuple[object, ...]:
