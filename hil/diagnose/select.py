@@ -91,7 +91,8 @@ DECISION_RULE = {
         "an effect is significant against a model when delta_bic = BIC(extended) - "
         "BIC(model) <= -10 on the training data, the held-out residual RMS drops by >= 1 %, "
         "the 99 % confidence region of its new parameters excludes zero, it is physically "
-        "plausible and its coefficients agree on both halves of the travel; the causes are "
+        "plausible and its coefficients agree on both halves of the travel (offset, gravity, "
+        "spring and Stribeck friction also in its middle and at its ends); the causes are "
         "the combination of screened effects in which each is significant against the "
         "others, with the least held-out RMS (within 1 %: the fewest parameters); ranked by "
         "the held-out RMS their removal adds, each gain against the causes ranked before it"
@@ -307,12 +308,14 @@ class Evaluator:
         A known effect has one set of parameters over the whole travel: friction and
         inertia terms do not depend on the position, gravity and a spring are one function
         of it, cogging and K_t ripple repeat every revolution. Fitted on the rows below the
-        median position and on those above it, their coefficients agree. Structure local
-        to one stretch of travel (a tight spot in a bearing) or of another shape (a
-        stiffening spring) is soaked up by some known effect's columns too, but fits them
-        differently on the two halves. The coefficients are inconsistent when their
-        difference is significant (χ² on the effect's coefficients, at
-        :data:`PERIODIC_ALPHA`) and at least :data:`PERIODIC_MISMATCH` of their mean size.
+        median position and on those above it, their coefficients agree; for some effects
+        also in the middle of the travel and at its ends (:func:`travel_splits`).
+        Structure local to one stretch of travel (a tight spot in a bearing) or of another
+        shape (a stiffening spring) is soaked up by some known effect's columns too, but
+        fits them differently on the two sides of a cut. The coefficients are inconsistent
+        when, on some cut, their difference is significant (χ² on the effect's
+        coefficients, at :data:`PERIODIC_ALPHA` over the number of cuts) and at least
+        :data:`PERIODIC_MISMATCH` of their mean size.
 
         Parameters
         ----------
