@@ -3,12 +3,14 @@
 After the named causes, the held-out residual of the final model is tested for structure
 that a model of the axis could still explain: a mean that depends on the position or on
 the velocity, or friction-like torque (the residual times the direction of travel) that
-depends on the position. The residual is binned (:data:`BINS` equal-width bins of position, or of
-velocity); a one-way analysis of variance compares the spread of the bin means with the
-spread inside the bins, on the effective sample count (the residual is low-passed, so
+depends on the position or on the travel since the last reversal (backlash, presliding).
+The residual is binned (:data:`BINS` equal-width bins of position, of velocity, or of the
+logarithm of that travel); a one-way analysis of variance compares the spread of the bin
+means with the spread inside the bins, on the effective sample count (the residual is low-passed, so
 only ``2·f_c/f_s`` of the samples are independent). Structure is *unexplained* when it is
-significant (F-test p below :data:`ALPHA`) and material: the bin means carry at least
-:data:`MIN_SHARE` of the residual's variance. Whiteness (Ljung–Box) and the
+significant (F-test p below :data:`ALPHA` / :data:`TESTS`) and material: the bin means
+carry at least :data:`MIN_SHARE` of the residual's variance (:data:`MIN_SHARE_REVERSAL`
+against the travel since a reversal). Whiteness (Ljung–Box) and the
 cross-correlation with the input are reported beside it but do not decide: a model of a
 real axis never leaves a white residual (sensor and loop dynamics), and a residual that is
 coloured but unrelated to position and velocity holds no effect a model could name.
