@@ -21,6 +21,7 @@ from numpy.typing import NDArray
 from scipy.optimize import minimize_scalar
 from scipy.signal import bilinear, lfilter
 
+from hil.diagnose.lag import search_lag
 from hil.diagnose.model import Designer, Fit, IndexArray, Model, Term, friction_direction
 from hil.diagnose.signals import Signals
 from hil.identify.orders import PursuitLimits, Segment, matching_pursuit, order_range
@@ -396,29 +397,12 @@ def search_shift(ctx: Context, model: Model) -> Model:
     return best
 
 
-#: Effort/motion alignments (in sample periods) tried with a current-loop lag.
-LAG_SHIFTS = (0.0, 0.25, 0.5, 0.75, 1.0)
-
-
 def _current_lag(ctx: Context) -> Model | None:
-    """τ searched jointly with the effort's lead: at low frequency a first-order lag and a
-    delay look alike (a lag shifts the base model's best alignment by up to a sample),
-    at high frequency the lag's gain ``√(1 + (ωτ)²)`` tells them apart."""
-    fs = ctx.signals.fs_hz
-    grid = np.geomspace(0.5 / fs, min(0.05, 100.0 / fs), 20)
-    model = ctx.current.model
-    best_rss, best = math.inf, model
-    for shift in LAG_SHIFTS:
-        shifted = replace(model, shift_s=shift / fs)
-
-        def with_lag(lag_s: float, base: Model = shifted) -> Model:
-            return replace(base, lag_s=lag_s)
-
-        _, proposal = _search(ctx, with_lag, grid)
-        rss = _train_rss(ctx, proposal)
-        if rss < best_rss:
-            best_rss, best = rss, proposal
-    return best
+    """τ searched jointly with the effort's lead on the bias-compensated RSS
+    (:mod:`hil.diagnose.lag`): at low frequency a first-order lag and a delay look alike,
+    at high frequency the lag's gain ``√(1 + (ωτ)²)`` tells them apart, where the
+    position's quantisation noise would otherwise shorten τ."""
+    return search_lag(ctx.designer, ctx.signals, ctx.rows, ctx.current.model)
 
 
 def two_mass_term(antiresonance_hz: float, damping: float) -> Term:
