@@ -7,7 +7,7 @@ trade along a valley of the RSS (``τ + δ/f_s`` nearly constant); only the lag'
 position's quantisation noise, differentiated twice (inertia) or three times (the lag's
 lead): errors in the regressors shrink the coefficients they multiply, and the lag's lead
 most, so the least-squares valley tilts towards a short ``τ`` with a larger ``δ`` (1.19 ms
-for 1.5 ms with 2²⁰ counts/rev; 1.4 ms without quantisation).
+for 1.5 ms with 2²⁰ counts/rev; 1.44 ms without quantisation and torque noise).
 
 The search therefore minimises a *bias-compensated* RSS (errors-in-variables: the
 regressors' noise covariance ``Σ`` is taken off the normal matrix, ``θ = (ΦᵀΦ − Σ)⁻¹Φᵀy``,
@@ -19,8 +19,9 @@ viscous friction, a two-mass load) carry it. Without a quantisation step (contin
 resampled positions) the RSS is the plain one.
 
 Every evaluation uses Gram matrices (``AᵀA``, ``AᵀB``, ``BᵀB`` of the columns ``A`` and
-their leads ``B`` at one ``δ``), cut into contiguous groups so that the delete-a-group
-jackknife (:func:`jackknife_lag`) re-searches ``(τ, δ)`` without each group cheaply.
+their leads ``B`` at one ``δ``), summed per group of interleaved blocks so that the
+delete-a-group jackknife (:func:`jackknife_lag`) re-searches ``(τ, δ)`` without each group
+cheaply.
 """
 
 from __future__ import annotations
