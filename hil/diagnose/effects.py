@@ -49,8 +49,9 @@ ORDER_LIMITS = PursuitLimits(
     prominence=4.5, min_chi2=-2.0 * math.log(0.01 / 200), relative_power=0.02, max_orders=6
 )
 #: Effects whose searched parameters are kept from the round they were first searched in
-#: (the harmonic orders are searched again: the weight of K_t ripple is the current model).
-REUSABLE = frozenset({"stribeck", "cable_spring", "current_lag", "two_mass"})
+#: (the harmonic orders are searched again: the weight of K_t ripple is the current model;
+#: so are the lag and its lead, which an effect missing from the model biases).
+REUSABLE = frozenset({"stribeck", "cable_spring", "two_mass"})
 ROTARY_ONLY = frozenset({"cogging", "kt_ripple", "gravity"})
 #: BIC margin a Dahl loop must win by over the spring alone ("very strong", Kass–Raftery):
 #: the loop state is close to sgn(ω) and otherwise soaks up friction misfit.
@@ -149,8 +150,6 @@ def propose(effect: str, ctx: Context) -> Model | None:
 
 def _reuse(effect: str, earlier: Model, current: Model) -> Model:
     """``current`` extended with what ``earlier`` added for ``effect`` (no new search)."""
-    if effect == "current_lag":
-        return replace(current, lag_s=earlier.lag_s, shift_s=earlier.shift_s)
     added = tuple(term for term in earlier.terms if term.effect == effect)
     return _extend(current, *added)
 
