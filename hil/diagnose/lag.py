@@ -41,8 +41,9 @@ FloatArray = NDArray[np.float64]
 
 #: Offsets of the re-quantisation grid, in steps (their noise covariances are averaged).
 QUANT_PHASES = (0.125, 0.375, 0.625, 0.875)
-#: Effort/motion alignments tried, in sample periods (then refined by a parabola).
-SHIFT_GRID = tuple(np.linspace(0.0, 1.0, 9))
+#: Effort/motion alignments tried, in sample periods (then refined by a parabola; a 9-point
+#: grid gave the same τ within 0.4 % on the xfail run and example_05, at twice the cost).
+SHIFT_GRID = tuple(np.linspace(0.0, 1.0, 5))
 #: Base-model columns that are linear in the motion (and so carry the position's noise).
 NOISY_KEYS = frozenset({"inertia", "viscous"})
 NOISY_EFFECTS = frozenset({"two_mass"})
