@@ -104,29 +104,6 @@ class Diagnosis:
         """The effects of :attr:`causes`, in rank order."""
         return [c.effect for c in self.causes]
 
-    def selection_lag_std(self, fit: Fit) -> float:
-        """Newey–West standard uncertainty of ``fit``'s current-loop time constant, s.
-
-        Parameters
-        ----------
-        fit : Fit
-            A model with a current-loop lag, fitted on the training rows.
-
-        Returns
-        -------
-        float
-            Infinite when the Gauss–Newton normal matrix is singular.
-        """
-        from hil.diagnose.intervals import hac_covariance
-
-        signals, rows = self.train.signals, self.train.rows
-        matrix = self.designer.design(fit.model, signals, rows)
-        lead = self.designer.lead(fit.model, signals, rows)
-        jacobian = np.column_stack((matrix, lead @ fit.coefficients))
-        residual = signals.effort_filtered[rows] - matrix @ fit.coefficients
-        variance = float(hac_covariance(jacobian, residual)[-1, -1])
-        return math.sqrt(variance) if math.isfinite(variance) and variance >= 0 else math.inf
-
     def heldout_prediction(self, fit: Fit) -> tuple[np.ndarray, np.ndarray]:
         """Measured (filtered) and predicted effort on the held-out rows.
 

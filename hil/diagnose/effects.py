@@ -21,6 +21,7 @@ from numpy.typing import NDArray
 from scipy.optimize import minimize_scalar
 from scipy.signal import bilinear, lfilter
 
+from hil.diagnose.lag import search_lag
 from hil.diagnose.model import Designer, Fit, IndexArray, Model, Term, friction_direction
 from hil.diagnose.signals import Signals
 from hil.identify.orders import PursuitLimits, Segment, matching_pursuit, order_range
@@ -48,8 +49,9 @@ ORDER_LIMITS = PursuitLimits(
     prominence=4.5, min_chi2=-2.0 * math.log(0.01 / 200), relative_power=0.02, max_orders=6
 )
 #: Effects whose searched parameters are kept from the round they were first searched in
-#: (the harmonic orders are searched again: the weight of K_t ripple is the current model).
-REUSABLE = frozenset({"stribeck", "cable_spring", "current_lag", "two_mass"})
+#: (the harmonic orders are searched again: the weight of K_t ripple is the current model;
+#: so are the lag and its lead, which an effect missing from the model biases).
+REUSABLE = frozenset({"stribeck", "cable_spring", "two_mass"})
 ROTARY_ONLY = frozenset({"cogging", "kt_ripple", "gravity"})
 #: BIC margin a Dahl loop must win by over the spring alone ("very strong", Kass–Raftery):
 #: the loop state is close to sgn(ω) and otherwise soaks up friction misfit.
@@ -148,8 +150,6 @@ def propose(effect: str, ctx: Context) -> Model | None:
 
 def _reuse(effect: str, earlier: Model, current: Model) -> Model:
     """``current`` extended with what ``earlier`` added for ``effect`` (no new search)."""
-    if effect == "current_lag":
-        return replace(current, lag_s=earlier.lag_s, shift_s=earlier.shift_s)
     added = tuple(term for term in earlier.terms if term.effect == effect)
     return _extend(current, *added)
 
@@ -396,29 +396,12 @@ def search_shift(ctx: Context, model: Model) -> Model:
     return best
 
 
-#: Effort/motion alignments (in sample periods) tried with a current-loop lag.
-LAG_SHIFTS = (0.0, 0.25, 0.5, 0.75, 1.0)
-
-
 def _current_lag(ctx: Context) -> Model | None:
-    """τ searched jointly with the effort's lead: at low frequency a first-order lag and a
-    delay look alike (a lag shifts the base model's best alignment by up to a sample),
-    at high frequency the lag's gain ``√(1 + (ωτ)²)`` tells them apart."""
-    fs = ctx.signals.fs_hz
-    grid = np.geomspace(0.5 / fs, min(0.05, 100.0 / fs), 20)
-    model = ctx.current.model
-    best_rss, best = math.inf, model
-    for shift in LAG_SHIFTS:
-        shifted = replace(model, shift_s=shift / fs)
-
-        def with_lag(lag_s: float, base: Model = shifted) -> Model:
-            return replace(base, lag_s=lag_s)
-
-        _, proposal = _search(ctx, with_lag, grid)
-        rss = _train_rss(ctx, proposal)
-        if rss < best_rss:
-            best_rss, best = rss, proposal
-    return best
+    """τ searched jointly with the effort's lead on the bias-compensated RSS
+    (:mod:`hil.diagnose.lag`): at low frequency a first-order lag and a delay look alike,
+    at high frequency the lag's gain ``√(1 + (ωτ)²)`` tells them apart, where the
+    position's quantisation noise would otherwise shorten τ."""
+    return search_lag(ctx.designer, ctx.signals, ctx.rows, ctx.current.model)
 
 
 def two_mass_term(antiresonance_hz: float, damping: float) -> Term:

@@ -159,9 +159,8 @@ def effect_parameters(effect: str, fit: Fit, *, lag_std_s: float = math.nan,
         Standard deviation of the current-loop time constant, s (used for
         ``current_lag``).
     coverage, coverage99 : float
-        Coverage factors of the 95 % and 99 % intervals from ``fit``'s covariance (the
-        current-loop time constant keeps 2 and 2.576: its ``lag_std_s`` is not from
-        ``fit``).
+        Coverage factors of the 95 % and 99 % intervals (from ``fit``'s covariance, and
+        for the current-loop time constant from ``lag_std_s``).
 
     Returns
     -------
@@ -235,7 +234,7 @@ def effect_parameters(effect: str, fit: Fit, *, lag_std_s: float = math.nan,
     elif effect == "two_mass":
         extra.update(two_mass_parameters(fit))
         estimates["load_inertia_kg_m2"] = _linear(fit, {"load_inertia": 1.0})
-    estimates = {name: e if e is lag else replace(e, coverage=coverage, coverage99=coverage99)
+    estimates = {name: replace(e, coverage=coverage, coverage99=coverage99)
                  for name, e in estimates.items()}
     parameters: dict[str, Any] = {name: e.value for name, e in estimates.items()}
     parameters.update({k: v for k, v in extra.items() if k != "note"})

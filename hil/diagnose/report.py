@@ -4,10 +4,11 @@ from __future__ import annotations
 
 import json
 import math
+from dataclasses import replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from hil.diagnose import constant, interpret, intervals, ripple, unexplained
+from hil.diagnose import constant, interpret, intervals, lag, ripple, unexplained
 from hil.diagnose.model import Fit
 from hil.diagnose.profile_out import extended_firmware, extended_plant
 from hil.diagnose.select import DECISION_RULE, Candidate
@@ -63,10 +64,13 @@ def _cause(rank: int, candidate: Candidate, diagnosis: Diagnosis) -> dict[str, A
     signals, rows = diagnosis.estimation_rows
     if candidate.effect == "kt_ripple":  # stage one: the rows where the angle sweeps
         rows = ripple.sweep_rows_of(candidate.fit, signals, rows)
-    fit = intervals.jackknife_fit(diagnosis.designer, candidate.fit, signals, rows)
+    fitted = candidate.fit
     lag_std_s = candidate.lag_std_s
-    if candidate.effect == "current_lag":
-        lag_std_s = diagnosis.selection_lag_std(candidate.fit)
+    if candidate.effect == "current_lag":  # (τ, δ) searched again without each group
+        model, lag_std_s = lag.jackknife_lag(diagnosis.designer, signals, rows, fitted.model,
+                                             intervals.JACKKNIFE_GROUPS)
+        fitted = replace(fitted, model=model)
+    fit = intervals.jackknife_fit(diagnosis.designer, fitted, signals, rows)
     named = interpret.effect_parameters(candidate.effect, fit, lag_std_s=lag_std_s,
                                         coverage=intervals.JACKKNIFE_COVERAGE,
                                         coverage99=intervals.JACKKNIFE_COVERAGE_99)
