@@ -151,6 +151,9 @@ def _reuse(effect: str, earlier: Model, current: Model) -> Model:
     if effect == "current_lag":
         return replace(current, lag_s=earlier.lag_s, shift_s=earlier.shift_s)
     added = tuple(term for term in earlier.terms if term.effect == effect)
+    if effect == "cable_spring":  # its constant only where the model has none (else singular)
+        angle = added[0].nonlinear.get("hysteresis_angle_rad") if added else None
+        return _extend(current, _cable_term(angle, not _has_constant(current)))
     return _extend(current, *added)
 
 

@@ -659,13 +659,15 @@ def best_subset(evaluator: Evaluator, base: Fit,
             if (verdict := _judge_set(evaluator, base, parts, effects)) is not None]
     if not kept:
         return ()
-    # parsimony among the combinations the held-out data cannot tell apart (within 1 %
-    # of the least held-out RMS): fewest added parameters, then least RMS
+    # among the combinations the held-out data cannot tell apart (within 1 % of the least
+    # held-out RMS) the training evidence decides: the least BIC, which charges every
+    # parameter (fewest parameters alone named an offset for a gravity whose curvature
+    # the BIC shows by 50-150)
     least = min(entry[0] for entry in kept)
     close = [entry for entry in kept if entry[0] <= least * (1.0 + MIN_HELDOUT_RMS_REDUCTION)]
-    added = {entry[1]: _joint(base.model, parts, entry[1]).n_params - base.model.n_params
-             for entry in close}
-    best = min(close, key=lambda entry: (added[entry[1]], entry[0]))
+    evidence = {entry[1]: evaluator.fit(_joint(base.model, parts, entry[1])).bic
+                for entry in close}
+    best = min(close, key=lambda entry: (evidence[entry[1]], entry[0]))
     _, effects, losses = best
     ranked = sorted(effects, key=lambda e: -losses[e])
     accepted: list[Candidate] = []
