@@ -7,7 +7,7 @@ import math
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from hil.diagnose import interpret, intervals, ripple, unexplained
+from hil.diagnose import alias, interpret, intervals, ripple, unexplained
 from hil.diagnose.model import Fit
 from hil.diagnose.profile_out import extended_firmware, extended_plant
 from hil.diagnose.select import DECISION_RULE, Candidate
@@ -58,7 +58,8 @@ def _gain(candidate: Candidate) -> dict[str, Any]:
     }
 
 
-def _cause(rank: int, candidate: Candidate, diagnosis: Diagnosis) -> dict[str, Any]:
+def _cause(rank: int, candidate: Candidate, diagnosis: Diagnosis,
+           aliases: tuple[alias.Alias, ...] = ()) -> dict[str, Any]:
     # the held-out data judged the model; once judged, every usable row estimates it
     signals, rows = diagnosis.estimation_rows
     if candidate.effect == "kt_ripple":  # stage one: the rows where the angle sweeps
@@ -80,6 +81,15 @@ def _cause(rank: int, candidate: Candidate, diagnosis: Diagnosis) -> dict[str, A
             named["separable"] = profile["separable"]
             if "excitation" in profile:
                 named["note"] = profile["excitation"]
+    confounded = alias.declared(diagnosis, aliases, candidate.effect)
+    if confounded:  # the interval covers every split with the effect it cannot be told from
+        entry = named["uncertainty"][confounded["key"]]
+        own = entry["ci95"] or [-math.inf, math.inf]
+        entry["ci95"] = [min(own[0], confounded["ci95"][0]), max(own[1], confounded["ci95"][1])]
+        entry["ci99"] = None
+        named["separable"] = False
+        named["not_separable_from"] = confounded["not_separable_from"]
+        named["note"] = "; ".join(n for n in (named.get("note"), confounded["note"]) if n)
     out: dict[str, Any] = {
         "rank": rank,
         "name": candidate.effect,
@@ -90,6 +100,8 @@ def _cause(rank: int, candidate: Candidate, diagnosis: Diagnosis) -> dict[str, A
     }
     if "separable" in named:
         out["separable"] = named["separable"]
+    if "not_separable_from" in named:
+        out["not_separable_from"] = named["not_separable_from"]
     if "note" in named:
         out["note"] = named["note"]
     return out
@@ -119,6 +131,7 @@ def report(diagnosis: Diagnosis) -> dict[str, Any]:
     final_metrics = summary_metrics(diagnosis, diagnosis.final)
     tests = dict(diagnosis.residual["tests"])
     tests["spectrum_peaks_hz"] = diagnosis.residual["spectrum"]["peaks_hz"]
+    aliases = alias.find(diagnosis)
     rounds = [
         [{"name": c.effect, "gain": _gain(c)} for c in candidates]
         for candidates in diagnosis.selection.rounds
@@ -153,7 +166,8 @@ def report(diagnosis: Diagnosis) -> dict[str, Any]:
         },
         "data_issues": [issue.as_dict() for issue in diagnosis.issues],
         "decision_rule": DECISION_RULE,
-        "causes": [_cause(rank, c, diagnosis) for rank, c in enumerate(diagnosis.causes, start=1)],
+        "causes": [_cause(rank, c, diagnosis, aliases)
+                   for rank, c in enumerate(diagnosis.causes, start=1)],
         "candidates_by_round": rounds,
         **final_structure(diagnosis),
         "extended_model": {

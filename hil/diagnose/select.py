@@ -609,6 +609,55 @@ def _joint(base: Model, parts: dict[str, list[Part]], effects: tuple[str, ...]) 
     return replace(base, terms=terms, lag_s=lag, shift_s=shift)
 
 
+def screened_effects(rounds: tuple[tuple[Candidate, ...], ...]) -> tuple[str, ...]:
+    """The effects significant in any forward round (the best subset's candidates).
+
+    Parameters
+    ----------
+    rounds : tuple of tuple of Candidate
+        :attr:`Selection.rounds`.
+
+    Returns
+    -------
+    tuple of str
+        In the order the rounds met them.
+    """
+    return tuple(dict.fromkeys(c.effect for candidates in rounds for c in candidates
+                               if c.gain.significant))
+
+
+def _parts(rounds: tuple[tuple[Candidate, ...], ...],
+           effects: tuple[str, ...]) -> dict[str, list[Part]]:
+    parts: dict[str, list[Part]] = {effect: [] for effect in effects}
+    for candidates in rounds:  # every proposal of each screened effect, in round order
+        for candidate in candidates:
+            if candidate.effect in parts:
+                parts[candidate.effect].append(_effect_model(candidate))
+    return parts
+
+
+def joint_model(base: Model, rounds: tuple[tuple[Candidate, ...], ...],
+                effects: tuple[str, ...]) -> Model:
+    """``effects`` fitted jointly on ``base``, with the columns :func:`best_subset` uses.
+
+    Parameters
+    ----------
+    base : Model
+        The base model (with the effort's lead).
+    rounds : tuple of tuple of Candidate
+        :attr:`Selection.rounds`.
+    effects : tuple of str
+        Effects proposed in ``rounds``.
+
+    Returns
+    -------
+    Model
+        Each effect's columns from its latest proposal on a model holding only effects of
+        ``effects``.
+    """
+    return _joint(base, _parts(rounds, effects), effects)
+
+
 def _holds(gain: Gain) -> bool:
     """The decision rule (:attr:`Gain.significant`)."""
     return gain.significant
@@ -644,13 +693,8 @@ def best_subset(evaluator: Evaluator, base: Fit,
         The causes, ranked by the held-out RMS their removal would add (largest first),
         each gain measured against the model with the causes ranked before it.
     """
-    screened = tuple(dict.fromkeys(c.effect for candidates in rounds for c in candidates
-                                   if c.gain.significant))
-    parts: dict[str, list[Part]] = {effect: [] for effect in screened}
-    for candidates in rounds:  # every proposal of each screened effect, in round order
-        for candidate in candidates:
-            if candidate.effect in parts:
-                parts[candidate.effect].append(_effect_model(candidate))
+    screened = screened_effects(rounds)
+    parts = _parts(rounds, screened)
     if not screened:
         return ()
     kept = [(verdict[0], effects, verdict[1])
@@ -660,13 +704,17 @@ def best_subset(evaluator: Evaluator, base: Fit,
     if not kept:
         return ()
     # among the combinations the held-out data cannot tell apart (within 1 % of the least
-    # held-out RMS) the training evidence decides: the least BIC, which charges every
-    # parameter (fewest parameters alone named an offset for a gravity whose curvature
-    # the BIC shows by 50-150)
+    # held-out RMS) the training evidence decides, each added parameter charged the rule's
+    # "very strong" -ΔBIC on top of BIC's own: the fewest parameters unless more buy that
+    # (fewest parameters alone named an offset for a gravity whose curvature the BIC shows
+    # by 50-150; the least BIC alone an asymmetric friction for an offset, by 8.6)
     least = min(entry[0] for entry in kept)
     close = [entry for entry in kept if entry[0] <= least * (1.0 + MIN_HELDOUT_RMS_REDUCTION)]
-    evidence = {entry[1]: evaluator.fit(_joint(base.model, parts, entry[1])).bic
-                for entry in close}
+    evidence = {}
+    for entry in close:
+        model = _joint(base.model, parts, entry[1])
+        added = model.n_params - base.model.n_params
+        evidence[entry[1]] = evaluator.fit(model).bic - DELTA_BIC_MAX * added
     best = min(close, key=lambda entry: (evidence[entry[1]], entry[0]))
     _, effects, losses = best
     ranked = sorted(effects, key=lambda e: -losses[e])
