@@ -8,7 +8,7 @@ for every named cause ``C`` and every effect ``E`` significant in a screening ro
 named:
 
 1. *evidence*: ``E`` added to the named causes lowers the training BIC by at least
-   :data:`EVIDENCE_BIC` ("positive" on the Kass–Raftery scale) — the data hold something
+   :data:`EVIDENCE_BIC` (the decision rule's −10, "very strong") — the data hold something
    of ``E``'s shape that the named causes do not (it was not named because it failed the
    held-out gain, the Wald test or the halves test beside them);
 2. *confounding*: with ``E``'s columns in the model, the variance of ``C``'s key parameter
@@ -27,13 +27,13 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
 from hil.diagnose import interpret, intervals
-from hil.diagnose.select import joint_model, screened_effects
+from hil.diagnose.select import DELTA_BIC_MAX, joint_model, screened_effects
 
 if TYPE_CHECKING:
     from hil.diagnose.core import Diagnosis
 
-#: BIC drop ``E`` must bring beside the named causes ("positive" evidence, Kass–Raftery).
-EVIDENCE_BIC = -2.0
+#: BIC drop ``E`` must bring beside the named causes: the decision rule's "very strong" evidence.
+EVIDENCE_BIC = DELTA_BIC_MAX
 #: Variance inflation of ``C``'s key parameter by ``E``'s columns that makes them confounded
 #: (a multiple correlation of 0.95).
 INFLATION = 10.0

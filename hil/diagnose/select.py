@@ -550,11 +550,36 @@ def select(evaluator: Evaluator, base_model: Model, *,
         shift_s = hold_samples / evaluator.train.signals.fs_hz
         current = evaluator.fit(replace(base_model, shift_s=shift_s))
     base = current
-    accepted: list[Candidate] = []
     rounds: list[tuple[Candidate, ...]] = []
-    remaining = list(effects)
     memory: dict[str, Model] = {}
-    while remaining and len(accepted) < MAX_CAUSES:
+    path = _forward(evaluator, current, effects, memory, rounds)
+    chosen = best_subset(evaluator, base, tuple(rounds))
+    for _ in range(RESTARTS):
+        # the forward path proposed each effect on the models along it only: screen again
+        # from the chosen causes, so that the harmonic orders (searched on the model they
+        # extend) and the effects the path's model hid are proposed beside them too
+        named = {c.effect for c in chosen}
+        if not chosen or named == path:
+            break
+        start = chosen[-1].fit
+        path = named | _forward(evaluator, start, tuple(e for e in effects if e not in named),
+                                memory, rounds, len(named))
+        chosen = best_subset(evaluator, base, tuple(rounds))
+    return Selection(base=base, accepted=chosen, rounds=tuple(rounds))
+
+
+#: Forward passes restarted from the best subset when it left the forward path.
+RESTARTS = 2
+
+
+def _forward(evaluator: Evaluator, current: Fit, effects: tuple[str, ...],
+             memory: dict[str, Model], rounds: list[tuple[Candidate, ...]],
+             named: int = 0) -> set[str]:
+    """Forward screening rounds from ``current`` (appended to ``rounds``); the effects the
+    path added."""
+    accepted: set[str] = set()
+    remaining = list(effects)
+    while remaining and named + len(accepted) < MAX_CAUSES:
         ctx = Context(designer=evaluator.designer, signals=evaluator.train.signals,
                       rows=evaluator.train.rows, current=current,
                       counts_per_rev=evaluator.counts_per_rev, memory=memory)
@@ -571,11 +596,10 @@ def select(evaluator: Evaluator, base_model: Model, *,
         if not winners:
             break
         best = min(winners, key=lambda c: c.gain.delta_bic / c.added_params)
-        accepted.append(best)
+        accepted.add(best.effect)
         remaining.remove(best.effect)
         current = best.fit
-    return Selection(base=base, accepted=best_subset(evaluator, base, tuple(rounds)),
-                     rounds=tuple(rounds))
+    return accepted
 
 
 Part = tuple[frozenset[str], tuple[Term, ...], float, float]
