@@ -540,8 +540,9 @@ def _harmonic(ctx: Context, effect: str) -> Model | None:
         # holding torque (gravity, an offset) in the weight the ripple's own periodogram can
         # lose its peak; the joint-fit refinement keeps only orders significant as ripple
         cogging = ctx.memory.get("cogging")
-        term = cogging.term("cogging") if cogging is not None else None
-        if term is not None and cogging is not None and cogging.terms[:-1] == ctx.current.model.terms:
+        on_this_model = cogging is not None and cogging.terms[:-1] == ctx.current.model.terms
+        term = cogging.term("cogging") if cogging is not None and on_this_model else None
+        if term is not None:
             found = list(dict.fromkeys([*found, *(int(label.removeprefix("cog_sin"))
                                                   for label in term.labels[::2])]))
     if not found:
