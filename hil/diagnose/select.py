@@ -595,7 +595,10 @@ def _forward(evaluator: Evaluator, current: Fit, effects: tuple[str, ...],
         winners = [c for c in evaluated if c.gain.significant]
         if not winners:
             break
-        best = min(winners, key=lambda c: c.gain.delta_bic / c.added_params)
+        # the most evidence, each added parameter charged as in best_subset's tie-break
+        # (per added parameter, an offset went first for a gravity, and the orders of K_t
+        # ripple beside it were never searched without the offset)
+        best = min(winners, key=lambda c: c.gain.delta_bic - DELTA_BIC_MAX * c.added_params)
         accepted.add(best.effect)
         remaining.remove(best.effect)
         current = best.fit
