@@ -10,7 +10,8 @@ named:
 1. *evidence*: ``E`` added to the named causes lowers the training BIC by at least
    :data:`EVIDENCE_BIC` (the decision rule's −10, "very strong") — the data hold something
    of ``E``'s shape that the named causes do not (it was not named because it failed the
-   held-out gain, the Wald test or the halves test beside them);
+   held-out gain, the Wald test or the halves test beside them) — or ``E`` in place of
+   ``C`` raises it by less than that: the data do not choose ``C`` over ``E``;
 2. *confounding*: with ``E``'s columns in the model, the variance of ``C``'s key parameter
    grows by at least :data:`INFLATION` (its variance inflation factor: ``C``'s columns are
    ≥ 90 % explained by ``E``'s given the rest).
@@ -65,12 +66,16 @@ class Alias:
         Training BIC of the named causes with ``E`` minus without.
     inflation : float
         Variance inflation of ``C``'s key parameter by ``E``'s columns.
+    instead_delta_bic : float
+        Training BIC with ``E`` in place of ``C`` minus that of the named causes (NaN when
+        ``E`` beside them was evidence enough).
     """
 
     cause: str
     other: str
     delta_bic: float
     inflation: float
+    instead_delta_bic: float = math.nan
 
 
 def _key_std(effect: str, fit: Any) -> float:
@@ -106,14 +111,20 @@ def find(diagnosis: Diagnosis) -> tuple[Alias, ...]:
             continue
         joint = diagnosis.designer.fit(joint_model(base, rounds, (*named, other)), signals, rows)
         delta_bic = joint.bic - current.bic
-        if not delta_bic <= EVIDENCE_BIC:
-            continue
         for cause in judged:
+            instead_bic = math.nan
+            if delta_bic > EVIDENCE_BIC:  # no evidence of E beside C: can E stand for C?
+                swapped = tuple(other if e == cause else e for e in named)
+                instead_bic = diagnosis.designer.fit(joint_model(base, rounds, swapped),
+                                                     signals, rows).bic - current.bic
+                if instead_bic >= -EVIDENCE_BIC:
+                    continue
             before, after = _key_std(cause, current), _key_std(cause, joint)
             inflation = (after / before) ** 2 if before > 0 else math.nan
             if not math.isfinite(after) or inflation >= INFLATION:
                 found.append(Alias(cause=cause, other=other, delta_bic=delta_bic,
-                                   inflation=inflation if math.isfinite(after) else math.inf))
+                                   inflation=inflation if math.isfinite(after) else math.inf,
+                                   instead_delta_bic=instead_bic))
     return tuple(found)
 
 
@@ -188,11 +199,16 @@ def declared(diagnosis: Diagnosis, found: tuple[Alias, ...], cause: str) -> dict
             "uncertainty": {other_key: theirs["uncertainty"][other_key]},
             "delta_bic": alias.delta_bic,
             "inflation": alias.inflation,
+            "instead_delta_bic": alias.instead_delta_bic,
         }
+        evidence = (f"{alias.other} lowers the BIC by {-alias.delta_bic:.3g}"
+                    if math.isnan(alias.instead_delta_bic) else
+                    f"{alias.other} in its place raises the BIC by only "
+                    f"{alias.instead_delta_bic:.3g}")
         notes.append(f"{cause} is not separable from {alias.other} in this recording "
                      f"(with {alias.other} beside it the {key} variance grows "
-                     f"{alias.inflation:.3g}-fold, and {alias.other} lowers the BIC by "
-                     f"{-alias.delta_bic:.3g}); {excitation(cause, alias.other)}")
+                     f"{alias.inflation:.3g}-fold, and {evidence}); "
+                     f"{excitation(cause, alias.other)}")
     return {"key": key, "ci95": [low, high], "not_separable_from": others,
             "note": "; ".join(notes)}
 
