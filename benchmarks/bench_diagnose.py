@@ -164,7 +164,8 @@ def hidden(count: int, *, pairs: bool, unknown: bool, seed: int,
         stats["nothing_else_named"] += not extra
         stats["ok"] += all_ok and not extra
         stats["unexplained"] += data["unexplained"]
-        print(f"{case:3d} {'+'.join(effects):24s} named {list(causes)} {'; '.join(notes)}"
+        print(f"{case:3d} {'+'.join(effects):24s} {'ok  ' if all_ok and not extra else 'FAIL'} "
+              f"named {list(causes)} {'; '.join(notes)}"
               f"{' EXTRA ' + str(extra) if extra else ''}"
               f"{' ALIAS ' + ','.join(declared) if declared else ''}", flush=True)
     elapsed = time.perf_counter() - started
