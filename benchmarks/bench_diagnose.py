@@ -117,8 +117,8 @@ def hidden(count: int, *, pairs: bool, unknown: bool, seed: int,
         data = report(diagnose(record(hidden_set.params, seed=run_seed)))
         causes = {c["name"]: c for c in data["causes"]}
         hidden_names = {t.effect for t in hidden_set.truths}
-        declared = [f"{n}~{o}(dBIC {a['delta_bic']:.0f}, instead {a['instead_delta_bic']}, "
-                    f"VIF {a['inflation']:.0f})"
+        declared = [f"{n}~{o}(dBIC {a['delta_bic']}, instead {a['instead_delta_bic']}, "
+                    f"VIF {a['inflation']})"
                     for n, c in causes.items()
                     for o, a in c.get("not_separable_from", {}).items()]
         stats["declared_not_separable"] += bool(declared)
