@@ -727,7 +727,8 @@ def best_subset(evaluator: Evaluator, base: Fit,
     kept = [(verdict[0], effects, verdict[1])
             for size in range(1, min(MAX_CAUSES, len(screened)) + 1)
             for effects in itertools.combinations(screened, size)
-            if (verdict := _judge_set(evaluator, base, parts, effects)) is not None]
+            if (verdict := _judge_set(evaluator, base, parts, effects)
+                or _judge_reproposed(evaluator, base, parts, effects)) is not None]
     if not kept:
         return ()
     # among the combinations the held-out data cannot tell apart (within 1 % of the least
@@ -753,6 +754,39 @@ def best_subset(evaluator: Evaluator, base: Fit,
         accepted.append(candidate)
         current = candidate.fit
     return tuple(accepted)
+
+
+#: Effects whose searched parameters depend on the model they extend (the harmonic orders:
+#: searched beside an unmodelled gravity, cogging orders fit the gravity).
+RESEARCHED = ("cogging", "kt_ripple")
+#: Combinations up to this size are judged again with such effects searched on the others.
+RESEARCH_SIZE = 3
+
+
+def _judge_reproposed(evaluator: Evaluator, base: Fit, parts: dict[str, list[Part]],
+                      effects: tuple[str, ...]) -> tuple[float, dict[str, float]] | None:
+    """A rejected combination judged again with its harmonic effects searched on the model
+    of the others, when no screening round proposed them there (``parts`` gains them)."""
+    if len(effects) > RESEARCH_SIZE:
+        return None
+    changed = False
+    for effect in effects:
+        others = frozenset(effects) - {effect}
+        if effect not in RESEARCHED or not others:
+            continue
+        if any(part[0] == others for part in parts[effect]):
+            continue
+        current = evaluator.fit(_joint(base.model, parts, tuple(sorted(others))))
+        ctx = Context(designer=evaluator.designer, signals=evaluator.train.signals,
+                      rows=evaluator.train.rows, current=current,
+                      counts_per_rev=evaluator.counts_per_rev)
+        model = propose(effect, ctx)
+        if model is None:
+            continue
+        terms = tuple(term for term in model.terms if term.effect == effect)
+        parts[effect].append((others, terms, 0.0, math.nan))
+        changed = True
+    return _judge_set(evaluator, base, parts, effects) if changed else None
 
 
 def _judge_set(evaluator: Evaluator, base: Fit, parts: dict[str, list[Part]],
