@@ -74,7 +74,7 @@ def declared_alias(data: dict[str, Any], effect: str, key: str, truth: float) ->
 
 
 def hidden(count: int, *, pairs: bool, unknown: bool, seed: int,
-           only: tuple[str, ...] = ()) -> int:
+           only: tuple[str, ...] = (), first: int = 0) -> int:
     from diagnose_simdata import plant_with, record
     from unknown_effects import hide_unknown
 
@@ -99,6 +99,9 @@ def hidden(count: int, *, pairs: bool, unknown: bool, seed: int,
                                      rng.uniform(0.015, 0.03))
         order = int(rng.integers(24, 121))
         run_seed = int(rng.integers(0, 2**16))
+        if case < first:  # skipped: its draws taken all the same
+            rng.uniform(size=2 * (1 if unknown else len(effects)))
+            continue
         if unknown:
             base = plant_with(inertia, viscous, coulomb, (), order)
             recording = hide_unknown(record(base.params, seed=run_seed), effects[0],
@@ -188,12 +191,14 @@ def main(argv: list[str]) -> int:
     parser.add_argument("--pairs", action="store_true")
     parser.add_argument("--unknown", action="store_true")
     parser.add_argument("--seed", type=int, default=2026)
+    parser.add_argument("--first", type=int, default=0,
+                        help="skip the cases before this one (their draws are taken)")
     parser.add_argument("--only", nargs="*", default=[], choices=SINGLE,
                         help="single effects to hide (default: all nine in turn)")
     args = parser.parse_args(argv)
     if args.hidden:
         return hidden(args.hidden, pairs=args.pairs, unknown=args.unknown, seed=args.seed,
-                      only=tuple(args.only))
+                      only=tuple(args.only), first=args.first)
     return speed(args.paths)
 
 
