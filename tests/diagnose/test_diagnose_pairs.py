@@ -33,8 +33,8 @@ The pairs drawn are three of the seven that ``benchmarks/bench_diagnose.py --pai
 - Stribeck + cable spring and Stribeck + gravity, 5/5 each in the benchmark, but at this
   test's draws (T_s 1.4 × T_c beside the weakest spring; T_s 0.034 N·m beside gravity)
   the Stribeck term, though it gains (ΔBIC −190…−250, held-out RMS −2…−3.5 %, Wald ≫ χ²),
-  is judged not physically plausible beside them (the halves test, whose Stribeck
-  information lies in the stretch the slow steps cover, or T_s > T_c), and not named.
+  fails the halves test beside them (its coefficients differ between the halves of the
+  travel: its information lies in the stretch the slow steps cover), and is not named.
 """
 
 from __future__ import annotations
