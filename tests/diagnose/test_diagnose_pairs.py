@@ -80,7 +80,7 @@ def declared(data: dict[str, Any], truth: Truth) -> bool:
     return False
 
 
-@settings(DETERMINISTIC, max_examples=12)
+@settings(DETERMINISTIC, max_examples=24)
 @given(
     pair=st.sampled_from(PAIRS),
     sizes=st.lists(st.floats(0.0, 1.0), min_size=4, max_size=4),
