@@ -610,11 +610,36 @@ def select(evaluator: Evaluator, base_model: Model, *,
         shift_s = hold_samples / evaluator.train.signals.fs_hz
         current = evaluator.fit(replace(base_model, shift_s=shift_s))
     base = current
-    accepted: list[Candidate] = []
     rounds: list[tuple[Candidate, ...]] = []
-    remaining = list(effects)
     memory: dict[str, Model] = {}
-    while remaining and len(accepted) < MAX_CAUSES:
+    path = _forward(evaluator, current, effects, memory, rounds)
+    chosen = best_subset(evaluator, base, tuple(rounds))
+    for _ in range(RESTARTS):
+        # the forward path proposed each effect on the models along it only: screen again
+        # from the chosen causes, so that the harmonic orders (searched on the model they
+        # extend) and the effects the path's model hid are proposed beside them too
+        named = {c.effect for c in chosen}
+        if not chosen or named == path:
+            break
+        start = chosen[-1].fit
+        path = named | _forward(evaluator, start, tuple(e for e in effects if e not in named),
+                                memory, rounds, len(named))
+        chosen = best_subset(evaluator, base, tuple(rounds))
+    return Selection(base=base, accepted=chosen, rounds=tuple(rounds))
+
+
+#: Forward passes restarted from the best subset when it left the forward path.
+RESTARTS = 2
+
+
+def _forward(evaluator: Evaluator, current: Fit, effects: tuple[str, ...],
+             memory: dict[str, Model], rounds: list[tuple[Candidate, ...]],
+             named: int = 0) -> set[str]:
+    """Forward screening rounds from ``current`` (appended to ``rounds``); the effects the
+    path added."""
+    accepted: set[str] = set()
+    remaining = list(effects)
+    while remaining and named + len(accepted) < MAX_CAUSES:
         ctx = Context(designer=evaluator.designer, signals=evaluator.train.signals,
                       rows=evaluator.train.rows, current=current,
                       counts_per_rev=evaluator.counts_per_rev, memory=memory)
@@ -630,12 +655,14 @@ def select(evaluator: Evaluator, base_model: Model, *,
         winners = [c for c in evaluated if c.gain.significant]
         if not winners:
             break
-        best = min(winners, key=lambda c: c.gain.delta_bic / c.added_params)
-        accepted.append(best)
+        # the most evidence, each added parameter charged as in best_subset's tie-break
+        # (per added parameter, an offset went first for a gravity, and the orders of K_t
+        # ripple beside it were never searched without the offset)
+        best = min(winners, key=lambda c: c.gain.delta_bic - DELTA_BIC_MAX * c.added_params)
+        accepted.add(best.effect)
         remaining.remove(best.effect)
         current = best.fit
-    return Selection(base=base, accepted=best_subset(evaluator, base, tuple(rounds)),
-                     rounds=tuple(rounds))
+    return accepted
 
 
 Part = tuple[frozenset[str], tuple[Term, ...], float, float]
@@ -667,6 +694,55 @@ def _joint(base: Model, parts: dict[str, list[Part]], effects: tuple[str, ...]) 
     # a lag comes with the effort/motion alignment searched with it
     shift = next((part[3] for part in chosen if not math.isnan(part[3])), base.shift_s)
     return replace(base, terms=terms, lag_s=lag, shift_s=shift)
+
+
+def screened_effects(rounds: tuple[tuple[Candidate, ...], ...]) -> tuple[str, ...]:
+    """The effects significant in any forward round (the best subset's candidates).
+
+    Parameters
+    ----------
+    rounds : tuple of tuple of Candidate
+        :attr:`Selection.rounds`.
+
+    Returns
+    -------
+    tuple of str
+        In the order the rounds met them.
+    """
+    return tuple(dict.fromkeys(c.effect for candidates in rounds for c in candidates
+                               if c.gain.significant))
+
+
+def _parts(rounds: tuple[tuple[Candidate, ...], ...],
+           effects: tuple[str, ...]) -> dict[str, list[Part]]:
+    parts: dict[str, list[Part]] = {effect: [] for effect in effects}
+    for candidates in rounds:  # every proposal of each screened effect, in round order
+        for candidate in candidates:
+            if candidate.effect in parts:
+                parts[candidate.effect].append(_effect_model(candidate))
+    return parts
+
+
+def joint_model(base: Model, rounds: tuple[tuple[Candidate, ...], ...],
+                effects: tuple[str, ...]) -> Model:
+    """``effects`` fitted jointly on ``base``, with the columns :func:`best_subset` uses.
+
+    Parameters
+    ----------
+    base : Model
+        The base model (with the effort's lead).
+    rounds : tuple of tuple of Candidate
+        :attr:`Selection.rounds`.
+    effects : tuple of str
+        Effects proposed in ``rounds``.
+
+    Returns
+    -------
+    Model
+        Each effect's columns from its latest proposal on a model holding only effects of
+        ``effects``.
+    """
+    return _joint(base, _parts(rounds, effects), effects)
 
 
 def _holds(gain: Gain) -> bool:
@@ -704,28 +780,30 @@ def best_subset(evaluator: Evaluator, base: Fit,
         The causes, ranked by the held-out RMS their removal would add (largest first),
         each gain measured against the model with the causes ranked before it.
     """
-    screened = tuple(dict.fromkeys(c.effect for candidates in rounds for c in candidates
-                                   if c.gain.significant))
-    parts: dict[str, list[Part]] = {effect: [] for effect in screened}
-    for candidates in rounds:  # every proposal of each screened effect, in round order
-        for candidate in candidates:
-            if candidate.effect in parts:
-                parts[candidate.effect].append(_effect_model(candidate))
+    screened = screened_effects(rounds)
+    parts = _parts(rounds, screened)
     if not screened:
         return ()
     kept = [(verdict[0], effects, verdict[1])
             for size in range(1, min(MAX_CAUSES, len(screened)) + 1)
             for effects in itertools.combinations(screened, size)
-            if (verdict := _judge_set(evaluator, base, parts, effects)) is not None]
+            if (verdict := _judge_set(evaluator, base, parts, effects)
+                or _judge_reproposed(evaluator, base, parts, effects)) is not None]
     if not kept:
         return ()
-    # parsimony among the combinations the held-out data cannot tell apart (within 1 %
-    # of the least held-out RMS): fewest added parameters, then least RMS
+    # among the combinations the held-out data cannot tell apart (within 1 % of the least
+    # held-out RMS) the training evidence decides, each added parameter charged the rule's
+    # "very strong" -ΔBIC on top of BIC's own: the fewest parameters unless more buy that
+    # (fewest parameters alone named an offset for a gravity whose curvature the BIC shows
+    # by 50-150; the least BIC alone an asymmetric friction for an offset, by 8.6)
     least = min(entry[0] for entry in kept)
     close = [entry for entry in kept if entry[0] <= least * (1.0 + MIN_HELDOUT_RMS_REDUCTION)]
-    added = {entry[1]: _joint(base.model, parts, entry[1]).n_params - base.model.n_params
-             for entry in close}
-    best = min(close, key=lambda entry: (added[entry[1]], entry[0]))
+    evidence = {}
+    for entry in close:
+        model = _joint(base.model, parts, entry[1])
+        added = model.n_params - base.model.n_params
+        evidence[entry[1]] = evaluator.fit(model).bic - DELTA_BIC_MAX * added
+    best = min(close, key=lambda entry: (evidence[entry[1]], entry[0]))
     _, effects, losses = best
     ranked = sorted(effects, key=lambda e: -losses[e])
     accepted: list[Candidate] = []
@@ -736,6 +814,39 @@ def best_subset(evaluator: Evaluator, base: Fit,
         accepted.append(candidate)
         current = candidate.fit
     return tuple(accepted)
+
+
+#: Effects whose searched parameters depend on the model they extend (the harmonic orders:
+#: searched beside an unmodelled gravity, cogging orders fit the gravity).
+RESEARCHED = ("cogging", "kt_ripple")
+#: Combinations up to this size are judged again with such effects searched on the others.
+RESEARCH_SIZE = 3
+
+
+def _judge_reproposed(evaluator: Evaluator, base: Fit, parts: dict[str, list[Part]],
+                      effects: tuple[str, ...]) -> tuple[float, dict[str, float]] | None:
+    """A rejected combination judged again with its harmonic effects searched on the model
+    of the others, when no screening round proposed them there (``parts`` gains them)."""
+    if len(effects) > RESEARCH_SIZE:
+        return None
+    changed = False
+    for effect in effects:
+        others = frozenset(effects) - {effect}
+        if effect not in RESEARCHED or not others:
+            continue
+        if any(part[0] == others for part in parts[effect]):
+            continue
+        current = evaluator.fit(_joint(base.model, parts, tuple(sorted(others))))
+        ctx = Context(designer=evaluator.designer, signals=evaluator.train.signals,
+                      rows=evaluator.train.rows, current=current,
+                      counts_per_rev=evaluator.counts_per_rev)
+        model = propose(effect, ctx)
+        if model is None:
+            continue
+        terms = tuple(term for term in model.terms if term.effect == effect)
+        parts[effect].append((others, terms, 0.0, math.nan))
+        changed = True
+    return _judge_set(evaluator, base, parts, effects) if changed else None
 
 
 def _judge_set(evaluator: Evaluator, base: Fit, parts: dict[str, list[Part]],
