@@ -158,16 +158,20 @@ class CalibrationRun:
         found = [self.result(name) for name in names]
         return None if any(e is None for e in found) else tuple(e for e in found if e)
 
-    def record(self, protocol: str, estimate: Estimate) -> Measurement:
+    def record(self, protocol: str, estimate: Estimate, *,
+               method_of: str | None = None) -> Measurement:
         """Judge ``estimate`` against the profile's declared measurement of the same name,
         after the method's known bias is corrected and its budget completed
-        (:func:`hil.measurement.with_method_terms`)."""
+        (:func:`hil.measurement.with_method_terms`); ``method_of``: take the method terms
+        of that (relative) result, which this one is proportional to."""
         spec = self.profile.measurement(estimate.name)
-        bias = self.method_bias.entries.get(spec.name)
+        bias = self.method_bias.entries.get(method_of or spec.name)
+        if bias is not None and method_of is not None and not bias.relative:
+            bias = None
         estimate = with_method_terms(estimate, spec, bias)
         measurement = Measurement(
             protocol=protocol, spec=spec, estimate=estimate, outcome=judge(estimate, spec),
-            validation=None if bias is None else bias.validation(),
+            validation=None if bias is None or method_of else bias.validation(),
         )
         self.measurements = [m for m in self.measurements if m.spec.name != spec.name]
         self.measurements.append(measurement)

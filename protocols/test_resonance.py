@@ -89,5 +89,7 @@ def test_resonance(parameter: str, result: ResonanceResult, calibration: Calibra
     found: dict[str, Estimate] = {
         e.name: e for e in (result.resonance, result.antiresonance, result.damping, result.ratio)
     }
-    measurement = calibration.record(NAME, found[parameter])
+    # the ratio is f_r over a bandwidth read off the same FRF: f_r's method terms are its own
+    method_of = "resonance_frequency_hz" if parameter == "resonance_to_bandwidth_ratio" else None
+    measurement = calibration.record(NAME, found[parameter], method_of=method_of)
     assert measurement.conforms, measurement.verdict()

@@ -41,12 +41,6 @@ PAIRS_PER_PROFILE = 8
 POPULATION_SEED = 7  # the shipped map was measured on seed 11, the benchmark table on 2026
 MIN_COVERAGE = 0.80
 RMS_RANGE = (0.5, 2.0)
-# known defects, each asserted still present (so that mending it fails here until it is
-# taken off the list): the resonance multisine's per-period jackknife counts cogging and
-# K_t ripple that the carrier sweeps through and that average out over the run, so the
-# damping's Type A (and through f_res the ratio's) is 2–4 × its real scatter (the fit's
-# χ²/ν 0.05–0.2; benchmarks/RESULTS.md, resonance excitation and cycle-time sections)
-KNOWN_TOO_WIDE = {"resonance_damping_ratio", "resonance_to_bandwidth_ratio"}
 
 pytestmark = pytest.mark.slow
 
@@ -93,10 +87,7 @@ def test_intervals_cover_the_truth(population: Population) -> None:
         for name, s in summaries.items()
         if s.coverage < MIN_COVERAGE or not RMS_RANGE[0] <= s.rms_normalised <= RMS_RANGE[1]
     }
-    known = {name for name in KNOWN_TOO_WIDE
-             if name in summaries and summaries[name].rms_normalised < RMS_RANGE[0]}
-    assert known == KNOWN_TOO_WIDE & summaries.keys(), f"mended: {KNOWN_TOO_WIDE - known}"
-    assert not {n: m for n, m in misses.items() if n not in known}, misses
+    assert not misses, misses
 
 
 def test_results_without_a_truth_repeat_within_their_uncertainty(
@@ -108,7 +99,4 @@ def test_results_without_a_truth_repeat_within_their_uncertainty(
         n = len(paired[name])
         low, high = (math.sqrt(stats.chi2.ppf(p, n) / n) for p in (0.001, 0.999))
         rms = float(np.sqrt(np.mean(np.square(paired[name]))))
-        if name in KNOWN_TOO_WIDE:  # still too wide; mended, it fails here
-            assert rms < low, f"{name}: RMS {rms:.2f} no longer below {low:.2f}: mended"
-            continue
         assert low <= rms <= high, f"{name}: RMS {rms:.2f} outside [{low:.2f}, {high:.2f}]"

@@ -372,8 +372,10 @@ def identify_resonance(points: Sequence[FrfPoint], *, fs_hz: float,
     ResonanceResult
         f_res, f_anti, damping and f_res over the velocity-loop bandwidth as estimates, the
         fitted :class:`TwoMassModel`, the bandwidth, the points and the fit's χ²/dof.
-        Uncertainties from the fit covariance, scaled by ``√(χ²/ν)`` when above one; the
-        ratio's from f_r's alone.
+        Uncertainties from the fit covariance scaled by ``√(χ²/ν)``: below one the
+        residual's scatter is the noise (the per-period jackknife that weights the lines
+        also counts cogging that averages out over the run); above one the excess is a
+        Type B line (the model's misfit to this unit). The ratio's from f_r's alone.
 
     Raises
     ------
@@ -409,8 +411,10 @@ def identify_resonance(points: Sequence[FrfPoint], *, fs_hz: float,
 
     def estimate(name: str, value: float, index: int, unit: str) -> Estimate:
         # the scatter about the two-mass model beyond the FRF's noise is the model's misfit
-        # to this unit, the same on every run: a Type B line of its own, not more noise
-        u = value * float(log_u[index])
+        # to this unit, the same on every run: a Type B line of its own, not more noise;
+        # below the per-period noise (χ²/ν < 1: cogging that differs between periods
+        # averages out over the run) the residual's scatter is the noise
+        u = value * float(log_u[index]) * math.sqrt(min(chi2_per_dof, 1.0))
         lines = [Component(source=TYPE_A_SOURCE, kind="A", standard_uncertainty=u, unit=unit,
                            dof=float(dof))]
         if chi2_per_dof > 1.0:

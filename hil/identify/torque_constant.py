@@ -69,8 +69,8 @@ class LockedSweep:
         K, the slope of the sensor torque over the current, and its standard error (N·m/A).
     intercept_nm : float
         The line's intercept ``c``: what the clamp carries at this angle (N·m).
-    gain : float
-        Slope of the sensor torque over the reported torque.
+    gain, gain_u : float
+        Slope of the sensor torque over the reported torque, and its standard error.
     max_residual_nm : float
         Largest deviation of a level from the line (N·m).
     """
@@ -83,6 +83,7 @@ class LockedSweep:
     slope_u_nm_a: float
     intercept_nm: float
     gain: float  # slope of sensor torque over reported torque
+    gain_u: float
     max_residual_nm: float
 
 
@@ -206,10 +207,10 @@ def analyse_locked_sweep(
     if levels < 4 or float(np.ptp(i)) <= 0:
         raise IdentificationError("the sweep needs at least 4 levels of different current")
     slope, slope_u, intercept, residual = _line(i, t)
-    gain = _line(r, t)[0]
+    gain, gain_u, _, _ = _line(r, t)
     return LockedSweep(angle_rad=angle_rad, current_a=i, sensor_torque_nm=t,
                        reported_torque_nm=r, slope_nm_a=slope, slope_u_nm_a=slope_u,
-                       intercept_nm=intercept, gain=gain,
+                       intercept_nm=intercept, gain=gain, gain_u=gain_u,
                        max_residual_nm=float(np.max(np.abs(residual))))
 
 
@@ -308,9 +309,9 @@ def identify_torque_constant(
         K_t, the mean of the slopes, its standard uncertainty the larger of their scatter
         and the RMS within-fit standard error, over √angles (angles − 1 degrees of
         freedom); the linearity, its uncertainty from the within-fit noise at full-scale
-        current; the gain error from the gains likewise (scatter only). When the angles
+        current; the gain error from the gains likewise. When the angles
         balance the ripple's largest harmonic (:func:`balanced_angles`, five angles or
-        more) the slopes' scatter is taken after that harmonic is fitted out: the table's
+        more) the slopes' and the gains' scatter is taken after that harmonic is fitted out: the table's
         error at that order spreads the angles but cancels in their mean (angles − 3
         degrees of freedom when the scatter decides).
 
@@ -326,13 +327,16 @@ def identify_torque_constant(
     slopes = np.array([s.slope_nm_a for s in sweeps]) / factors
     gains = np.array([s.gain for s in sweeps]) / factors
     within = np.array([s.slope_u_nm_a for s in sweeps])
-    scatter, scatter_dof = _slope_scatter(slopes, np.array([s.angle_rad for s in sweeps]),
-                                          ripple)
+    angles_rad = np.array([s.angle_rad for s in sweeps])
+    scatter, scatter_dof = _slope_scatter(slopes, angles_rad, ripple)
+    gain_scatter, gain_dof = _slope_scatter(gains, angles_rad, ripple)
     # between-angle scatter (K_t ripple) and within-fit noise; the larger decides
     noise = float(np.sqrt(np.mean(within**2)))
     u_slope = max(scatter, noise) / math.sqrt(n)
     slope_dof = scatter_dof if scatter > noise else math.inf
-    u_gain = float(np.std(gains, ddof=1)) / math.sqrt(n)
+    gain_noise = float(np.sqrt(np.mean(np.array([s.gain_u for s in sweeps]) ** 2)))
+    u_gain = max(gain_scatter, gain_noise) / math.sqrt(n)
+    u_gain_dof = gain_dof if gain_scatter > gain_noise else math.inf
     full_scale = max(float(np.max(np.abs(s.sensor_torque_nm - s.intercept_nm))) for s in sweeps)
     linearity_pct = 100.0 * max(s.max_residual_nm for s in sweeps) / full_scale
     level_noise = float(np.sqrt(np.mean(within**2))) * max(
@@ -346,7 +350,7 @@ def identify_torque_constant(
                            standard_uncertainty=100.0 * level_noise / full_scale, unit="%"),
         gain_error=Estimate(name="reported_torque_gain_error_pct",
                             value=100.0 * (float(gains.mean()) - 1.0),
-                            standard_uncertainty=100.0 * u_gain, unit="%", dof=n - 1),
+                            standard_uncertainty=100.0 * u_gain, unit="%", dof=u_gain_dof),
     )
 
 
