@@ -518,16 +518,6 @@ def _harmonic(ctx: Context, effect: str) -> Model | None:
                       / scale)
     found = matching_pursuit([segment], orders=orders, limits=ORDER_LIMITS,
                              independence=min(1.0, signals.independence * signals.decimation))
-    if effect == "kt_ripple":
-        # the orders the cogging search took on this model are tried as ripple too: with a
-        # holding torque (gravity, an offset) in the weight the ripple's own periodogram can
-        # lose its peak; the joint-fit refinement keeps only orders significant as ripple
-        cogging = ctx.memory.get("cogging")
-        on_this_model = cogging is not None and cogging.terms[:-1] == ctx.current.model.terms
-        term = cogging.term("cogging") if cogging is not None and on_this_model else None
-        if term is not None:
-            found = list(dict.fromkeys([*found, *(int(label.removeprefix("cog_sin"))
-                                                  for label in term.labels[::2])]))
     if not found:
         return None
     key = f"{id(prediction_fit)}" if effect == "kt_ripple" else "1"

@@ -309,9 +309,10 @@ def identify_torque_constant(
         K_t, the mean of the slopes, its standard uncertainty the larger of their scatter
         and the RMS within-fit standard error, over √angles (angles − 1 degrees of
         freedom); the linearity, its uncertainty from the within-fit noise at full-scale
-        current; the gain error from the gains likewise. When the angles
-        balance the ripple's largest harmonic (:func:`balanced_angles`, five angles or
-        more) the slopes' and the gains' scatter is taken after that harmonic is fitted out: the table's
+        current; the gain error from the gains likewise (their scatter, floored by the
+        lines' within-fit noise). When the angles balance the ripple's largest harmonic
+        (:func:`balanced_angles`, five angles or more) the slopes' and the gains' scatter is
+        taken after that harmonic is fitted out: the table's
         error at that order spreads the angles but cancels in their mean (angles − 3
         degrees of freedom when the scatter decides).
 
