@@ -69,8 +69,8 @@ def describe_offset(entry: dict[str, Any], fit: Fit, coverage: float,
     difference = _estimate(fit, "offset", -2.0, coverage, coverage99)
     entry["parameters"]["coulomb_difference_nm"] = difference.value
     entry["uncertainty"]["coulomb_difference_nm"] = difference.as_dict()
-    entry["separable"] = False
-    entry["note"] = NOTE
+    entry["separable"] = False  # a note already there (an alias, alias.py) is kept
+    entry["note"] = "; ".join(n for n in (entry.get("note"), NOTE) if n)
 
 
 def offset_part(entry: dict[str, Any], candidate: Candidate, fit: Fit,
@@ -119,8 +119,9 @@ def offset_part(entry: dict[str, Any], candidate: Candidate, fit: Fit,
     for name in ("coulomb_pos_nm", "coulomb_neg_nm"):
         entry["parameters"][name] = coulomb.value
         entry["uncertainty"][name] = coulomb.as_dict()
-    entry["note"] = ("the Coulomb friction's difference between the directions is not "
-                     "separable from a constant: reported as the offset beside this cause")
+    entry["note"] = "; ".join(n for n in (
+        entry.get("note"), "the Coulomb friction's difference between the directions is not "
+        "separable from a constant: reported as the offset beside this cause") if n)
     offset = _estimate(fit, DIFFERENCE, -0.5, coverage, coverage99)
     difference = _estimate(fit, DIFFERENCE, 1.0, coverage, coverage99)
     return {
