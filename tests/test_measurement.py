@@ -238,6 +238,28 @@ def test_earlier_results_are_looked_up_by_name(tmp_path: Path) -> None:
     assert run.results("inertia_kg_m2") == (found,)
 
 
+def test_a_result_proportional_to_another_takes_its_method_terms(tmp_path: Path) -> None:
+    """f_res over the bandwidth carries f_res's relative bias and scatter, not its
+    validation (that was measured on f_res, not on the ratio)."""
+    from hil.calibration import CalibrationRun
+
+    f_r = MethodBias(name="resonance_frequency_hz", relative=True, bias=0.004, scatter=0.001,
+                     units=100, validated_coverage=0.96, validated_units=50)
+    bias = MethodBiasMap(source="test", sha256="", entries={f_r.name: f_r})
+    run = CalibrationRun(profile=load_profile(builtin_profile_path("demo_gimbal_azimuth")),
+                         unit_serial="X", out_dir=tmp_path, drive_kind="sim", method_bias=bias)
+    ratio = Estimate(name="resonance_to_bandwidth_ratio", value=6.0,
+                     standard_uncertainty=1e-4, unit="1")
+    alone = run.record("resonance", ratio)
+    assert alone.estimate.value == 6.0
+    assert alone.estimate.standard_uncertainty == 1e-4
+    borrowed = run.record("resonance", ratio, method_of="resonance_frequency_hz")
+    assert borrowed.estimate.value == pytest.approx(6.0 / 1.004)
+    assert borrowed.estimate.standard_uncertainty == pytest.approx(
+        math.hypot(1e-4, 0.001 * 6.0 / 1.004))
+    assert borrowed.validation is None
+
+
 def test_an_excitation_run_twice_keeps_both_recordings(tmp_path: Path) -> None:
     """Raw data is never overwritten within a run (the azimuth's sines at each elevation)."""
     import numpy as np
