@@ -323,24 +323,17 @@ def identify_torque_constant(
     """
     if len(sweeps) < 2:
         raise IdentificationError(f"{len(sweeps)} locked angle(s), need at least 2")
-    n = len(sweeps)
     factors = np.array([ripple_factor(s.angle_rad, ripple) for s in sweeps])
     slopes = np.array([s.slope_nm_a for s in sweeps]) / factors
     gains = np.array([s.gain for s in sweeps]) / factors
     within = np.array([s.slope_u_nm_a for s in sweeps])
     angles_rad = np.array([s.angle_rad for s in sweeps])
-    scatter, scatter_dof = _slope_scatter(slopes, angles_rad, ripple)
-    gain_scatter, gain_dof = _slope_scatter(gains, angles_rad, ripple)
-    # between-angle scatter (K_t ripple) and within-fit noise; the larger decides
-    noise = float(np.sqrt(np.mean(within**2)))
-    u_slope = max(scatter, noise) / math.sqrt(n)
-    slope_dof = scatter_dof if scatter > noise else math.inf
-    gain_noise = float(np.sqrt(np.mean(np.array([s.gain_u for s in sweeps]) ** 2)))
-    u_gain = max(gain_scatter, gain_noise) / math.sqrt(n)
-    u_gain_dof = gain_dof if gain_scatter > gain_noise else math.inf
+    u_slope, slope_dof = _u_of_mean(slopes, within, angles_rad, ripple)
+    u_gain, gain_dof = _u_of_mean(gains, np.array([s.gain_u for s in sweeps]), angles_rad,
+                                  ripple)
     full_scale = max(float(np.max(np.abs(s.sensor_torque_nm - s.intercept_nm))) for s in sweeps)
     linearity_pct = 100.0 * max(s.max_residual_nm for s in sweeps) / full_scale
-    level_noise = float(np.sqrt(np.mean(within**2))) * max(
+    level_noise = _rms(within) * max(
         float(np.max(np.abs(s.current_a))) for s in sweeps
     )
     return TorqueConstantResult(
@@ -351,8 +344,23 @@ def identify_torque_constant(
                            standard_uncertainty=100.0 * level_noise / full_scale, unit="%"),
         gain_error=Estimate(name="reported_torque_gain_error_pct",
                             value=100.0 * (float(gains.mean()) - 1.0),
-                            standard_uncertainty=100.0 * u_gain, unit="%", dof=u_gain_dof),
+                            standard_uncertainty=100.0 * u_gain, unit="%", dof=gain_dof),
     )
+
+
+def _u_of_mean(values: FloatArray, within_u: FloatArray, angles_rad: FloatArray,
+               ripple: Sequence[tuple[int, float, float]]) -> tuple[float, float]:
+    """Standard uncertainty of the mean over the angles and its degrees of freedom: the
+    larger of the values' scatter (K_t ripple left over) and their within-fit noise,
+    over √angles."""
+    scatter, scatter_dof = _slope_scatter(values, angles_rad, ripple)
+    noise = _rms(within_u)
+    return max(scatter, noise) / math.sqrt(len(values)), (
+        scatter_dof if scatter > noise else math.inf)
+
+
+def _rms(values: FloatArray) -> float:
+    return float(np.sqrt(np.mean(values**2)))
 
 
 def _slope_scatter(slopes: FloatArray, angles_rad: FloatArray,
