@@ -11,7 +11,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.linalg import expm
 
-from hil.drives.base import DriveInfo, check_limits
+from hil.drives.base import check_limits
 from hil.drives.sim import SimDrive
 from hil.errors import IdentificationError
 from hil.identify.current_loop import (
@@ -29,12 +29,11 @@ from hil.suite import current_loop as protocol
 from plant_sim.firmware import Firmware
 from plant_sim.model import Plant
 from plant_sim.params import PlantParams
+from tests.helpers import drive_info
 
 PROFILE = load_profile()
 FS = 4000.0
-INFO = DriveInfo(vendor="test", model="test", firmware_version="0", serial="0",
-                 rated_torque_nm=0.5, limits=PROFILE.limits, modes=tuple(Mode),
-                 max_sample_rate_hz=FS)
+INFO = drive_info(PROFILE, FS)
 SPEC = protocol.Spec.from_profile(PROFILE, INFO)
 ACCURACY = PROFILE.measurement("current_loop_time_constant_ms").accuracy_rel
 

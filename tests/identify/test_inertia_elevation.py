@@ -11,24 +11,21 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from hil.drives.base import DriveInfo
 from hil.drives.sim import SimDrive
 from hil.errors import IdentificationError
 from hil.identify.estimate import Estimate
 from hil.identify.inertia_elevation import fit_inertia_elevation, scale_by_gain
 from hil.identify.torque_constant import identify_torque_constant
-from hil.motion import Mode
 from hil.profile import load_profile
 from hil.suite import inertia_elevation as protocol
 from hil.suite import inertia_friction as sine
 from hil.suite import torque_constant as kt
 from plant_sim.params import PlantParams
+from tests.helpers import drive_info
 
 PROFILE = load_profile("demo_gimbal_azimuth")
 FS = 4000.0
-INFO = DriveInfo(vendor="test", model="test", firmware_version="0", serial="0",
-                 rated_torque_nm=0.5, limits=PROFILE.limits, modes=tuple(Mode),
-                 max_sample_rate_hz=FS, has_torque_sensor=True)
+INFO = drive_info(PROFILE, FS, has_torque_sensor=True)
 SPEC = protocol.Spec.from_profile(PROFILE, INFO)
 KT_SPEC = kt.Spec.from_profile(PROFILE, INFO)
 

@@ -8,12 +8,13 @@ import dataclasses
 import numpy as np
 import pytest
 
-from hil.drives.base import DriveInfo, check_limits
+from hil.drives.base import check_limits
 from hil.motion import Mode
 from hil.profile import load_profile
 from hil.suite import cogging as cogging_suite
 from hil.suite import gravity_cable as gravity_cable_suite
 from hil.suite import stribeck as stribeck_suite
+from tests.helpers import drive_info
 
 PROFILE = load_profile()
 # the demo's cogging protocol analyses the gravity sweep's passes (no motion of its own):
@@ -21,9 +22,7 @@ PROFILE = load_profile()
 OWN_PASSES = dataclasses.replace(PROFILE, protocols={
     **PROFILE.protocols, "cogging": {**PROFILE.protocols["cogging"], "passes": "own",
                                      "speed_rad_s": 0.6}})
-INFO = DriveInfo(vendor="test", model="test", firmware_version="0", serial="0",
-                 rated_torque_nm=0.5, limits=PROFILE.limits, modes=tuple(Mode),
-                 max_sample_rate_hz=PROFILE.sample_rate_hz)
+INFO = drive_info(PROFILE, PROFILE.sample_rate_hz)
 MODULES = (stribeck_suite, gravity_cable_suite, cogging_suite)
 
 

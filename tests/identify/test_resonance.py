@@ -13,7 +13,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from hil.drives.base import DriveInfo, check_limits
+from hil.drives.base import check_limits
 from hil.drives.sim import SimDrive
 from hil.errors import IdentificationError
 from hil.identify.current_loop import sampled_response
@@ -25,15 +25,13 @@ from hil.identify.resonance import (
     two_mass_response,
     velocity_loop_bandwidth_hz,
 )
-from hil.motion import Mode
 from hil.profile import load_profile
 from hil.suite import resonance as protocol
+from tests.helpers import drive_info
 
 PROFILE = load_profile("demo_gimbal_azimuth")
 FS = 4000.0
-INFO = DriveInfo(vendor="test", model="test", firmware_version="0", serial="0",
-                 rated_torque_nm=0.5, limits=PROFILE.limits, modes=tuple(Mode),
-                 max_sample_rate_hz=FS)
+INFO = drive_info(PROFILE, FS)
 STEPPED_TABLE = {"excitation": "stepped_sine", "band_hz": [6.0, 300.0], "points": 24,
                  "amplitude_rad_s": 0.25, "max_amplitude_rad_s": 0.6, "segment_s": 0.1,
                  "min_periods": 5, "settle_s": 0.12, "blocks": 5}

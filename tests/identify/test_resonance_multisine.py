@@ -11,7 +11,7 @@ from typing import Any
 import numpy as np
 import pytest
 
-from hil.drives.base import DriveInfo, check_limits
+from hil.drives.base import check_limits
 from hil.drives.sim import SimDrive
 from hil.errors import IdentificationError, ProfileError
 from hil.identify.multisine import (
@@ -22,15 +22,13 @@ from hil.identify.multisine import (
     schroeder_phases_for,
 )
 from hil.identify.resonance import TwoMassModel, frf_lines, identify_resonance, two_mass_response
-from hil.motion import Mode
 from hil.profile import UnitProfile, load_profile
 from hil.suite import resonance as protocol
+from tests.helpers import drive_info
 
 PROFILE = load_profile("demo_gimbal_azimuth")
 FS = 4000.0
-INFO = DriveInfo(vendor="test", model="test", firmware_version="0", serial="0",
-                 rated_torque_nm=0.5, limits=PROFILE.limits, modes=tuple(Mode),
-                 max_sample_rate_hz=FS)
+INFO = drive_info(PROFILE, FS)
 SPEC = protocol.spec_from_profile(PROFILE, INFO)
 assert isinstance(SPEC, protocol.MultisineSpec)
 TRUTH = TwoMassModel(inertia_kg_m2=0.008, antiresonance_hz=50.0, antiresonance_damping=0.03,

@@ -12,7 +12,6 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from hil.drives.base import DriveInfo
 from hil.drives.sim import SimDrive
 from hil.errors import IdentificationError
 from hil.identify.cogging import compensation_table
@@ -24,17 +23,15 @@ from hil.identify.torque_constant import (
     datasheet_torque_constant_nm_a,
     identify_torque_constant,
 )
-from hil.motion import Mode
 from hil.profile import load_profile
 from hil.suite import cogging as cogging_suite
 from hil.suite import torque_constant as torque_constant_suite
 from plant_sim.params import Harmonic
+from tests.helpers import drive_info
 
 PROFILE = load_profile()
 FS = 4000.0
-INFO = DriveInfo(vendor="test", model="test", firmware_version="0", serial="0",
-                 rated_torque_nm=0.5, limits=PROFILE.limits, modes=tuple(Mode),
-                 max_sample_rate_hz=FS, has_torque_sensor=True)
+INFO = drive_info(PROFILE, FS, has_torque_sensor=True)
 SPEC = torque_constant_suite.Spec.from_profile(PROFILE, INFO)
 ACCURACY = PROFILE.measurement("torque_constant_nm_a").accuracy_rel
 
