@@ -8,8 +8,10 @@ for every named cause ``C`` and every effect ``E`` significant in a screening ro
 named:
 
 1. *evidence*: ``E`` added to the named causes lowers the training BIC by at least
-   :data:`EVIDENCE_BIC` (the decision rule's −10, "very strong") — the data hold something
-   of ``E``'s shape that the named causes do not (it was not named because it failed the
+   :data:`EVIDENCE_BIC` (the decision rule's −10, "very strong"), or its key coefficients
+   there are significant (the decision rule's Wald test at 99 %: with one parameter the
+   BIC's penalty of ``ln n`` ≈ 9 hides a coefficient at 4 σ) — the data hold something of
+   ``E``'s shape that the named causes do not (it was not named because it failed the
    held-out gain, the Wald test or the halves test beside them) — or ``E`` in place of
    ``C`` raises it by less than that: the data do not choose ``C`` over ``E``;
 2. *confounding*: with ``E``'s columns in the model, the variance of ``C``'s key parameter
@@ -28,7 +30,7 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
 from hil.diagnose import interpret, intervals
-from hil.diagnose.select import DELTA_BIC_MAX, joint_model, screened_effects
+from hil.diagnose.select import DELTA_BIC_MAX, KEY_LABELS, joint_model, screened_effects, wald
 
 if TYPE_CHECKING:
     from hil.diagnose.core import Diagnosis
@@ -69,6 +71,9 @@ class Alias:
     instead_delta_bic : float
         Training BIC with ``E`` in place of ``C`` minus that of the named causes (NaN when
         ``E`` beside them was evidence enough).
+    wald_statistic, wald_threshold : float
+        Wald statistic of ``E``'s key coefficients beside the named causes, and its 99 %
+        χ² threshold.
     """
 
     cause: str
@@ -76,6 +81,8 @@ class Alias:
     delta_bic: float
     inflation: float
     instead_delta_bic: float = math.nan
+    wald_statistic: float = math.nan
+    wald_threshold: float = math.nan
 
 
 def _key_std(effect: str, fit: Any) -> float:
@@ -111,9 +118,13 @@ def find(diagnosis: Diagnosis) -> tuple[Alias, ...]:
             continue
         joint = diagnosis.designer.fit(joint_model(base, rounds, (*named, other)), signals, rows)
         delta_bic = joint.bic - current.bic
+        labels = KEY_LABELS.get(other) or tuple(
+            label for label in joint.model.labels if label not in current.model.labels)
+        statistic, threshold = wald(joint, labels)
+        evidence = delta_bic <= EVIDENCE_BIC or statistic > threshold
         for cause in judged:
             instead_bic = math.nan
-            if delta_bic > EVIDENCE_BIC:  # no evidence of E beside C: can E stand for C?
+            if not evidence:  # nothing of E beside C: can E stand for C?
                 swapped = tuple(other if e == cause else e for e in named)
                 instead_bic = diagnosis.designer.fit(joint_model(base, rounds, swapped),
                                                      signals, rows).bic - current.bic
@@ -124,8 +135,21 @@ def find(diagnosis: Diagnosis) -> tuple[Alias, ...]:
             if not math.isfinite(after) or inflation >= INFLATION:
                 found.append(Alias(cause=cause, other=other, delta_bic=delta_bic,
                                    inflation=inflation if math.isfinite(after) else math.inf,
-                                   instead_delta_bic=instead_bic))
+                                   instead_delta_bic=instead_bic,
+                                   wald_statistic=statistic, wald_threshold=threshold))
     return tuple(found)
+
+
+def _evidence_words(alias: Alias) -> str:
+    """Why the data may hold ``alias.other``, in words (condition 1 of the module)."""
+    if not math.isnan(alias.instead_delta_bic):
+        return (f"{alias.other} in its place raises the BIC by only "
+                f"{alias.instead_delta_bic:.3g}")
+    if alias.delta_bic <= EVIDENCE_BIC:
+        return f"{alias.other} lowers the BIC by {-alias.delta_bic:.3g}"
+    return (f"{alias.other}'s coefficients beside it are significant (Wald "
+            f"{alias.wald_statistic:.3g} > {alias.wald_threshold:.3g}) though the BIC "
+            f"changes by {alias.delta_bic:+.3g}")
 
 
 def excitation(cause: str, other: str) -> str:
@@ -200,11 +224,9 @@ def declared(diagnosis: Diagnosis, found: tuple[Alias, ...], cause: str) -> dict
             "delta_bic": alias.delta_bic,
             "inflation": alias.inflation,
             "instead_delta_bic": alias.instead_delta_bic,
+            "wald_statistic": alias.wald_statistic,
         }
-        evidence = (f"{alias.other} lowers the BIC by {-alias.delta_bic:.3g}"
-                    if math.isnan(alias.instead_delta_bic) else
-                    f"{alias.other} in its place raises the BIC by only "
-                    f"{alias.instead_delta_bic:.3g}")
+        evidence = _evidence_words(alias)
         notes.append(f"{cause} is not separable from {alias.other} in this recording "
                      f"(with {alias.other} beside it the {key} variance grows "
                      f"{alias.inflation:.3g}-fold, and {evidence}); "
