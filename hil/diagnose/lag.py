@@ -173,10 +173,8 @@ class LagProblem:
     """
 
     def __init__(self, designer: Designer, signals: Signals, rows: IndexArray, model: Model,
-                 groups: int = 1, shift_grid: tuple[float, ...] = SHIFT_GRID,
-                 weights: FloatArray | None = None) -> None:
+                 groups: int = 1, shift_grid: tuple[float, ...] = SHIFT_GRID) -> None:
         self.designer = designer
-        self.root_weights = None if weights is None else np.sqrt(weights)
         self.shift_grid = shift_grid
         self.signals = signals
         self.rows = rows
@@ -205,20 +203,14 @@ class LagProblem:
                                                                        strict=True)]
             self._full[key] = (np.hstack(columns), np.hstack(leads))
         full_columns, full_leads = self._full[key]
-        columns = fractional_shift(full_columns, shift, self.rows)
-        leads = fractional_shift(full_leads, shift, self.rows)
-        if self.root_weights is not None:
-            columns *= self.root_weights[:, None]
-            leads *= self.root_weights[:, None]
-        return columns, leads
+        return (fractional_shift(full_columns, shift, self.rows),
+                fractional_shift(full_leads, shift, self.rows))
 
     def grams(self, shift: float) -> list[_Grams]:
         """Per-group sums at the alignment ``shift`` (sample periods), cached."""
         if shift not in self._cache:
             a, b = self._pair(self.designer, self.model, self.signals, shift)
             y = self.signals.effort_filtered[self.rows]
-            if self.root_weights is not None:
-                y = y * self.root_weights
             noise = [(*self._pair(d, m, n, shift), w) for d, m, n, w in self.noise]
             groups = []
             for part in self.parts:
