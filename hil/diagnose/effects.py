@@ -174,6 +174,7 @@ def _train_rss(ctx: Context, model: Model) -> float:
     if (
         model.lag_s == current.lag_s
         and model.shift_s == current.shift_s
+        and model.friction_delay == current.friction_delay
         and model.terms[: len(current.terms)] == current.terms
     ):
         added = replace(model, terms=model.terms[len(current.terms) :])
@@ -267,7 +268,7 @@ def _asymmetric(ctx: Context) -> Model | None:
         return None
     # the velocity is already low-passed (like the base viscous column): not filtered again
     viscous = Term(effect="asymmetric_friction", labels=("viscous_neg_delta",),
-                   key="asymmetric:viscous", filtered=True,
+                   key="asymmetric:viscous", filtered=True, friction=True,
                    build=lambda s: s.velocity * _negative(s))
     if _has_constant(ctx.current.model):
         return _extend(ctx.current.model, viscous)
@@ -362,7 +363,7 @@ def stribeck_term(velocity_scale: float) -> Term:
         return np.exp(-(ratio**2)) * friction_direction(s)
 
     return Term(effect="stribeck", labels=("stribeck_delta",), key=f"stribeck:{velocity_scale:.9g}",
-                build=build, nonlinear={"stribeck_velocity": velocity_scale})
+                build=build, nonlinear={"stribeck_velocity": velocity_scale}, friction=True)
 
 
 def _stribeck(ctx: Context) -> Model | None:

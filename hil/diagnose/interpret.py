@@ -231,6 +231,8 @@ def effect_parameters(effect: str, fit: Fit, *, lag_std_s: float = math.nan,
             extra["hysteresis_nm"] = 0.0
     elif effect == "current_lag":
         estimates["time_constant_s"] = lag
+        # searched with τ: how many sample periods the friction's switching trails the motion
+        extra["friction_delay_samples"] = fit.model.friction_delay
     elif effect == "two_mass":
         extra.update(two_mass_parameters(fit))
         estimates["load_inertia_kg_m2"] = _linear(fit, {"load_inertia": 1.0})

@@ -33,7 +33,14 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.optimize import minimize_scalar
 
-from hil.diagnose.model import Designer, IndexArray, Model, Term, fractional_shift
+from hil.diagnose.model import (
+    Designer,
+    IndexArray,
+    Model,
+    Term,
+    fractional_shift,
+    friction_direction,
+)
 from hil.diagnose.signals import Signals, derivatives
 from hil.identify.quantisation import quantisation_step
 
@@ -143,7 +150,7 @@ def _noise_term(term: Term) -> Term:
     def build(signals: Signals) -> FloatArray:
         return np.zeros((len(signals), width))
 
-    return replace(term, key=f"quiet:{width}", filtered=True, build=build)
+    return replace(term, key=f"quiet:{width}", filtered=True, build=build, friction=False)
 
 
 class LagProblem:
@@ -174,21 +181,24 @@ class LagProblem:
         self.model = replace(model, lag_s=0.0, shift_s=0.0)
         block = (rows // max(1, round(BLOCK_S * signals.fs_hz))) % groups
         self.parts = [np.flatnonzero(block == g) for g in range(groups)]
-        self.noise = quantisation_noise(signals)
-        self._noise_designer = Designer()
-        self._noise_model = replace(self.model, terms=tuple(_noise_term(t) for t in model.terms))
+        noise_designer = Designer()
+        noise_model = replace(self.model, terms=tuple(_noise_term(t) for t in model.terms))
+        quantised = quantisation_noise(signals)
+        self.noise: list[tuple[Designer, Model, Signals, float]] = [
+            (noise_designer, noise_model, n, 1.0 / len(quantised)) for n in quantised]
         self._cache: dict[float, list[_Grams]] = {}
-        self._full: dict[int, tuple[FloatArray, FloatArray]] = {}
+        self._full: dict[tuple[int, int], tuple[FloatArray, FloatArray]] = {}
         fs = signals.fs_hz
         self.lag_grid = np.geomspace(0.5 / fs, min(MAX_LAG_S, 100.0 / fs), 20)
 
     def _pair(self, designer: Designer, model: Model, signals: Signals,
               shift: float) -> tuple[FloatArray, FloatArray]:
         """Columns and leads at ``t + shift`` on the rows (shifted there only)."""
-        key = id(signals)
+        key = (id(model), id(signals))
         if key not in self._full:
-            columns = [designer.columns(term, signals) for term in model.terms]
-            leads = [designer.lag_columns(term, signals) if term.lagged
+            delay = model.friction_delay
+            columns = [designer.columns(term, signals, delay) for term in model.terms]
+            leads = [designer.lag_columns(term, signals, delay) if term.lagged
                      else np.zeros_like(block) for term, block in zip(model.terms, columns,
                                                                        strict=True)]
             self._full[key] = (np.hstack(columns), np.hstack(leads))
@@ -201,15 +211,13 @@ class LagProblem:
         if shift not in self._cache:
             a, b = self._pair(self.designer, self.model, self.signals, shift)
             y = self.signals.effort_filtered[self.rows]
-            noise = [self._pair(self._noise_designer, self._noise_model, n, shift)
-                     for n in self.noise]
-            weight = 1.0 / max(len(noise), 1)
+            noise = [(*self._pair(d, m, n, shift), w) for d, m, n, w in self.noise]
             groups = []
             for part in self.parts:
                 ap, bp, yp = a[part], b[part], y[part]
                 p = ap.shape[1]
                 saa, sab, sbb = np.zeros((p, p)), np.zeros((p, p)), np.zeros((p, p))
-                for na, nb in noise:
+                for na, nb, weight in noise:
                     na, nb = na[part], nb[part]
                     saa += weight * na.T @ na
                     sab += weight * na.T @ nb
@@ -248,6 +256,10 @@ class LagProblem:
         ``δ`` is searched on ``shift_grid``, its profile minimum refined by a parabola
         through the best point and its neighbours, and ``τ`` searched again there.
         """
+        return self.estimate_rss(without)[1:]
+
+    def estimate_rss(self, without: int | None = None) -> tuple[float, float, float]:
+        """``(rss, τ, δ)``: :meth:`estimate` and the compensated RSS it reaches."""
         grid = self.shift_grid
         profile = [self.best_lag(float(s), without) for s in grid]
         costs = np.array([p[0] for p in profile])
@@ -261,12 +273,63 @@ class LagProblem:
                 shift += float(0.5 * step * (left - right) / curvature)
         rss, lag = self.best_lag(shift, without)
         if rss > costs[best]:
-            shift, lag = float(grid[best]), profile[best][1]
-        return lag, shift
+            rss, shift, lag = float(costs[best]), float(grid[best]), profile[best][1]
+        return rss, lag, shift
+
+
+#: Friction delays tried with the lag, sample periods (:attr:`Model.friction_delay`).
+FRICTION_DELAYS = (0.0, 0.25, 0.5, 0.75, 1.0)
+#: A standstill (velocity in the standstill band) lasting at least this many samples is
+#: sticking; shorter ones are a reversal passing through the band.
+MIN_STICKING_SAMPLES = 3
+#: The lag is searched on rows at least this part of the rows (else on every row).
+MIN_MOVING_SHARE = 0.5
+
+
+def moving_rows(signals: Signals, rows: IndexArray) -> IndexArray:
+    """``rows`` away from where the axis sticks: the rows the lag is searched on.
+
+    While the axis sticks, friction holds whatever torque is applied, which no friction
+    column expresses (the direction is 0 there): in a recording of this project's
+    simulator with Stribeck friction the stuck rows held 96 % of the residual's sum of
+    squares (the top of the chirp, where the lag's information lies, sticks for over half
+    its samples). Left out: every standstill of at least :data:`MIN_STICKING_SAMPLES`
+    samples and the low-pass's spread of it (the margin around a gap,
+    ``max(3, ⌈2·fs/f_c⌉)`` samples). When fewer than :data:`MIN_MOVING_SHARE` of the rows
+    are left, every row.
+
+    Parameters
+    ----------
+    signals : Signals
+    rows : ndarray of intp
+
+    Returns
+    -------
+    ndarray of intp
+    """
+    still = friction_direction(signals) == 0
+    edges = np.diff(np.concatenate(([0], still.astype(np.int8), [0])))
+    starts, stops = np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)
+    sticking = np.zeros(len(still))
+    for start, stop in zip(starts, stops, strict=True):
+        if stop - start >= MIN_STICKING_SAMPLES:
+            sticking[start:stop] = 1.0
+    margin = max(3, math.ceil(2.0 * signals.fs_hz / signals.cutoff_hz))
+    near = np.convolve(sticking, np.ones(2 * margin + 1), mode="same") > 0
+    moving = rows[~near[rows]]
+    return moving if moving.size >= MIN_MOVING_SHARE * rows.size else rows
 
 
 def search_lag(designer: Designer, signals: Signals, rows: IndexArray, model: Model) -> Model:
-    """``model`` with the current-loop lag and effort lead that fit ``rows`` best.
+    """``model`` with the current-loop lag, effort lead and friction delay that fit best.
+
+    Searched on :func:`moving_rows` of ``rows``: ``(τ, δ)`` at each of
+    :data:`FRICTION_DELAYS`, the least compensated RSS kept. The friction delay: a
+    simulator that steps friction on the previous step's velocity (explicit Euler, this
+    project's) switches it half a sample after the motion; the friction columns taken from
+    the velocity that much earlier (a switching instant a sample off at each reversal is an
+    error in the Coulomb column whose lead shortens τ). 0 for a drive whose friction
+    switches with the motion.
 
     Parameters
     ----------
@@ -280,10 +343,16 @@ def search_lag(designer: Designer, signals: Signals, rows: IndexArray, model: Mo
     Returns
     -------
     Model
-        With ``lag_s`` and ``shift_s`` minimising the bias-compensated RSS.
+        With ``lag_s``, ``shift_s`` and ``friction_delay`` minimising the bias-compensated
+        RSS.
     """
-    lag_s, shift = LagProblem(designer, signals, rows, model).estimate()
-    return replace(model, lag_s=lag_s, shift_s=shift / signals.fs_hz)
+    rows = moving_rows(signals, rows)
+    results = []
+    for delay in FRICTION_DELAYS:
+        delayed = replace(model, friction_delay=delay)
+        results.append((*LagProblem(designer, signals, rows, delayed).estimate_rss(), delay))
+    _, lag_s, shift, delay = min(results)
+    return replace(model, lag_s=lag_s, shift_s=shift / signals.fs_hz, friction_delay=delay)
 
 
 def jackknife_lag(designer: Designer, signals: Signals, rows: IndexArray, model: Model,
@@ -295,9 +364,10 @@ def jackknife_lag(designer: Designer, signals: Signals, rows: IndexArray, model:
     designer : Designer
     signals : Signals
     rows : ndarray of intp
-        Every usable row, in time order.
+        Every usable row, in time order (searched on their :func:`moving_rows`).
     model : Model
-        The named model (its lag and shift are searched again on ``rows``).
+        The named model (its lag and shift are searched again on ``rows``; its friction
+        delay is kept).
     groups : int
         Contiguous groups; each is left out once and ``(τ, δ)`` searched again.
 
@@ -307,6 +377,7 @@ def jackknife_lag(designer: Designer, signals: Signals, rows: IndexArray, model:
         ``model`` with the lag and shift found on every row, and
         ``√((G − 1)/G · Σ (τ₋g − τ̄)²)`` in s.
     """
+    rows = moving_rows(signals, rows)
     problem = LagProblem(designer, signals, rows, model, groups=groups,
                          shift_grid=JACKKNIFE_SHIFT_GRID)
     lag_s, shift = problem.estimate()

@@ -58,6 +58,9 @@ class Term:
         The columns are already band-limited; otherwise the designer low-passes them.
     lagged : bool
         The columns pass through the current-loop lag.
+    friction : bool
+        Friction columns, built from the velocity: the model's
+        ``friction_delay`` applies to the velocity they are built from.
     """
 
     effect: str
@@ -68,6 +71,7 @@ class Term:
     extra_params: int = 0  # search dimensions beyond ``nonlinear`` (e.g. chosen orders)
     filtered: bool = False  # columns already band-limited (built from filtered motion)
     lagged: bool = True  # passes through the current-loop lag (False: switching friction)
+    friction: bool = False  # friction, built from the velocity: the friction delay applies
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -86,11 +90,15 @@ class Model:
         Current-loop time constant τ, s; 0 for no lag.
     shift_s : float
         Time by which the effort leads the motion, s.
+    friction_delay : float
+        Sample periods by which the friction's switching trails the motion (searched with
+        the current-loop lag, :mod:`hil.diagnose.lag`); 0: none.
     """
 
     terms: tuple[Term, ...]
     lag_s: float = 0.0
     shift_s: float = 0.0
+    friction_delay: float = 0.0
 
     @property
     def labels(self) -> tuple[str, ...]:
@@ -110,9 +118,10 @@ class Model:
         """Coefficients plus searched parameters (the BIC's k).
 
         ``len(labels)``, plus every term's ``nonlinear`` and ``extra_params``, plus 1 when
-        ``lag_s > 0``, plus 1.
+        ``lag_s > 0``, plus 1 when ``friction_delay`` is not 0, plus 1.
         """
         searched = sum(len(t.nonlinear) + t.extra_params for t in self.terms)
+        searched += 1 if self.friction_delay else 0
         return len(self.labels) + searched + (1 if self.lag_s > 0 else 0) + 1
 
     def has(self, effect: str) -> bool:
@@ -237,8 +246,20 @@ class Designer:
         self._cache: dict[tuple[int, str], FloatArray] = {}
         self._lag_cache: dict[tuple[int, str], FloatArray] = {}
         self._shift_cache: dict[tuple[int, str, bool, float], FloatArray] = {}
+        self._delayed: dict[tuple[int, float], Signals] = {}
 
-    def columns(self, term: Term, signals: Signals) -> FloatArray:
+    def _source(self, term: Term, signals: Signals, delay: float) -> tuple[Signals, str]:
+        """The signals ``term`` is built from and its cache key (a friction term with
+        ``delay``: the velocity ``delay`` samples earlier)."""
+        if not (term.friction and delay):
+            return signals, term.key
+        key = (id(signals), delay)
+        if key not in self._delayed:
+            earlier = fractional_shift(signals.velocity[:, None], -delay, np.arange(len(signals)))
+            self._delayed[key] = replace(signals, velocity=earlier[:, 0])
+        return self._delayed[key], f"{term.key}@{delay:g}"
+
+    def columns(self, term: Term, signals: Signals, delay: float = 0.0) -> FloatArray:
         """A term's (low-passed) columns over the whole recording, cached.
 
         Parameters
@@ -246,6 +267,8 @@ class Designer:
         term : Term
             Its columns are low-passed by :meth:`Signals.lowpass` unless ``filtered``.
         signals : Signals
+        delay : float
+            Friction delay, sample periods (applies to a ``friction`` term only).
 
         Returns
         -------
@@ -257,9 +280,10 @@ class Designer:
         IdentificationError
             ``term.build`` returned another shape.
         """
-        key = (id(signals), term.key)
+        source, name = self._source(term, signals, delay)
+        key = (id(signals), name)
         if key not in self._cache:
-            block = np.asarray(term.build(signals), dtype=np.float64)
+            block = np.asarray(term.build(source), dtype=np.float64)
             if block.ndim == 1:
                 block = block[:, None]
             if block.shape != (len(signals), len(term.labels)):
@@ -274,7 +298,7 @@ class Designer:
             self._cache[key] = block
         return self._cache[key]
 
-    def lag_columns(self, term: Term, signals: Signals) -> FloatArray:
+    def lag_columns(self, term: Term, signals: Signals, delay: float = 0.0) -> FloatArray:
         """Time derivative of a term's columns, low-passed at ``LEAD_CUTOFF_RATIO·f_c``.
 
         The extra low-pass keeps the derivative of acceleration (jerk) from amplifying the
@@ -284,15 +308,17 @@ class Designer:
         ----------
         term : Term
         signals : Signals
+        delay : float
+            Friction delay, sample periods (a ``friction`` term only).
 
         Returns
         -------
         ndarray
             Shape ``(len(signals), len(term.labels))``, per second.
         """
-        key = (id(signals), term.key)
+        key = (id(signals), self._source(term, signals, delay)[1])
         if key not in self._lag_cache:
-            block = self.columns(term, signals)
+            block = self.columns(term, signals, delay)
             cutoff = LEAD_CUTOFF_RATIO * signals.cutoff_hz
             self._lag_cache[key] = np.column_stack([
                 signals.derivative(zero_phase_lowpass(block[:, j], fs_hz=signals.fs_hz,
@@ -316,20 +342,24 @@ class Designer:
         ndarray
             Shape ``(len(rows), len(model.labels))``.
         """
-        shifted = replace(model, lag_s=0.0, terms=tuple(
-            replace(term, key=f"lead:{term.key}", build=_lead_builder(self, term), filtered=True)
+        delay = model.friction_delay
+        shifted = replace(model, lag_s=0.0, friction_delay=0.0, terms=tuple(
+            replace(term, key=f"lead:{self._source(term, signals, delay)[1]}",
+                    build=_lead_builder(self, term, delay), filtered=True, friction=False)
             if term.lagged
             else replace(term, key=f"zero:{len(term.labels)}", build=_zero_builder(term),
-                         filtered=True)
+                         filtered=True, friction=False)
             for term in model.terms
         ))
         return self.design(shifted, signals, rows)
 
-    def _shifted(self, term: Term, signals: Signals, shift_s: float, lead: bool) -> FloatArray:
+    def _shifted(self, term: Term, signals: Signals, shift_s: float, lead: bool,
+                 delay: float = 0.0) -> FloatArray:
         """A term's columns (or their lead) at ``t + shift_s``, over the whole recording."""
-        key = (id(signals), term.key, lead, shift_s)
+        key = (id(signals), self._source(term, signals, delay)[1], lead, shift_s)
         if key not in self._shift_cache:
-            block = self.lag_columns(term, signals) if lead else self.columns(term, signals)
+            block = (self.lag_columns(term, signals, delay) if lead
+                     else self.columns(term, signals, delay))
             if shift_s != 0.0:
                 block = fractional_shift(block, shift_s * signals.fs_hz,
                                          np.arange(len(signals)))
@@ -360,11 +390,12 @@ class Designer:
         if not model.terms:
             return np.zeros((len(index), 0))
         blocks = []
+        delay = model.friction_delay
         for term in model.terms:
-            block = self._shifted(term, signals, model.shift_s, lead=False)[index]
+            block = self._shifted(term, signals, model.shift_s, lead=False, delay=delay)[index]
             if model.lag_s > 0 and term.lagged:
                 block = block + model.lag_s * self._shifted(term, signals, model.shift_s,
-                                                            lead=True)[index]
+                                                            lead=True, delay=delay)[index]
             blocks.append(block)
         return np.hstack(blocks)
 
@@ -492,8 +523,9 @@ def solve(model: Model, matrix: FloatArray, target: FloatArray, *, n_effective: 
                sigma2=sigma2, n_effective=n_effective)
 
 
-def _lead_builder(designer: Designer, term: Term) -> Callable[[Signals], FloatArray]:
-    return lambda s: designer.lag_columns(term, s)
+def _lead_builder(designer: Designer, term: Term,
+                  delay: float = 0.0) -> Callable[[Signals], FloatArray]:
+    return lambda s: designer.lag_columns(term, s, delay)
 
 
 def _zero_builder(term: Term) -> Callable[[Signals], FloatArray]:
@@ -558,7 +590,7 @@ def base_terms() -> tuple[Term, ...]:
         Term(effect="base", labels=("inertia",), key="inertia",
              build=lambda s: s.acceleration, filtered=True),
         Term(effect="base", labels=("viscous",), key="viscous", build=lambda s: s.velocity,
-             filtered=True),
+             filtered=True, friction=True),
         Term(effect="base", labels=("coulomb",), key="coulomb", build=friction_direction,
-             lagged=True),
+             lagged=True, friction=True),
     )

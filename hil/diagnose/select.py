@@ -487,7 +487,8 @@ def model_key(model: Model) -> tuple[object, ...]:
     tuple
         Equal for models with equal design matrices.
     """
-    return (tuple(term.key for term in model.terms), model.lag_s, model.shift_s)
+    return (tuple(term.key for term in model.terms), model.lag_s, model.shift_s,
+            model.friction_delay)
 
 
 def plausible(effect: str, fit: Fit, fs_hz: float, band_hz: float) -> bool:
@@ -665,20 +666,20 @@ def _forward(evaluator: Evaluator, current: Fit, effects: tuple[str, ...],
     return accepted
 
 
-Part = tuple[frozenset[str], tuple[Term, ...], float, float]
+Part = tuple[frozenset[str], tuple[Term, ...], float, float, float]
 
 
 def _effect_model(candidate: Candidate) -> Part:
-    """What ``candidate`` adds (its terms, the lag's time constant and the alignment searched
-    with it, NaN for other effects), and the effects of
+    """What ``candidate`` adds (its terms, the lag's time constant and the alignment and
+    friction delay searched with it, NaN for other effects), and the effects of
     the model it was proposed on (its columns can depend on them: a Coulomb asymmetry is
     only added without a constant, the K_t-ripple weight is that model's prediction)."""
     model = candidate.fit.model
     terms = tuple(term for term in model.terms if term.effect == candidate.effect)
     context = frozenset(model.effects) - {"base", candidate.effect}
     if candidate.effect == "current_lag":
-        return context, terms, model.lag_s, model.shift_s
-    return context, terms, 0.0, math.nan
+        return context, terms, model.lag_s, model.shift_s, model.friction_delay
+    return context, terms, 0.0, math.nan, math.nan
 
 
 def _variant(parts: list[Part], effects: tuple[str, ...]) -> Part:
@@ -691,9 +692,10 @@ def _joint(base: Model, parts: dict[str, list[Part]], effects: tuple[str, ...]) 
     chosen = [_variant(parts[e], effects) for e in effects]
     terms = base.terms + tuple(term for part in chosen for term in part[1])
     lag = max((part[2] for part in chosen), default=0.0)
-    # a lag comes with the effort/motion alignment searched with it
+    # a lag comes with the effort/motion alignment and the friction delay searched with it
     shift = next((part[3] for part in chosen if not math.isnan(part[3])), base.shift_s)
-    return replace(base, terms=terms, lag_s=lag, shift_s=shift)
+    delay = next((part[4] for part in chosen if not math.isnan(part[4])), base.friction_delay)
+    return replace(base, terms=terms, lag_s=lag, shift_s=shift, friction_delay=delay)
 
 
 def screened_effects(rounds: tuple[tuple[Candidate, ...], ...]) -> tuple[str, ...]:
@@ -844,7 +846,7 @@ def _judge_reproposed(evaluator: Evaluator, base: Fit, parts: dict[str, list[Par
         if model is None:
             continue
         terms = tuple(term for term in model.terms if term.effect == effect)
-        parts[effect].append((others, terms, 0.0, math.nan))
+        parts[effect].append((others, terms, 0.0, math.nan, math.nan))
         changed = True
     return _judge_set(evaluator, base, parts, effects) if changed else None
 

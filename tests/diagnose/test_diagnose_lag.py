@@ -3,10 +3,18 @@
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import numpy as np
 
-from hil.diagnose.lag import quantisation_noise
+from hil.diagnose.lag import moving_rows, quantisation_noise
+from hil.diagnose.model import (
+    Designer,
+    Model,
+    base_terms,
+    fractional_shift,
+    friction_direction,
+)
 from hil.diagnose.signals import prepare
 from hil.recording import Recording
 
@@ -34,3 +42,57 @@ def test_stand_in_error_stays_within_half_a_step() -> None:
     for signals in noise:
         assert np.max(np.abs(signals.position)) <= step / 2 * (1 + 1e-9)
         assert np.std(signals.position) > step / 6  # a real error, not zeros
+
+
+def test_moving_rows_leave_out_sticking_and_its_spread_only() -> None:
+    """A stretch standing still is left out with the low-pass's margin; a reversal is not."""
+    fs_hz = 2000.0
+    time_s = np.arange(12000) / fs_hz
+    paused = time_s.copy()  # the axis sticks for 0.2 s, then moves on
+    paused[5000:5400] = time_s[5000]
+    paused[5400:] -= 400 / fs_hz
+    position = 0.3 * np.sin(2 * np.pi * 1.3 * paused)
+    signals = prepare(_recording(position, fs_hz))
+    rows = signals.rows()
+    kept = moving_rows(signals, rows)
+    margin = math.ceil(2.0 * signals.fs_hz / signals.cutoff_hz)
+    assert not np.any((kept >= 5000) & (kept < 5400))
+    assert np.any((kept > 5400 + 3 * margin) & (kept < 5600))
+    assert np.any((kept < 5000 - 3 * margin) & (kept > 4800))
+    # a reversal of the sine passing through the standstill band in one sample: kept
+    reversal = round(3 * fs_hz / (4 * 1.3))
+    assert friction_direction(signals)[reversal] == 0
+    assert np.any(np.abs(kept - reversal) <= 2)
+    assert kept.size < rows.size
+
+
+def test_moving_rows_keep_every_row_when_most_stand_still() -> None:
+    fs_hz = 2000.0
+    time_s = np.arange(8000) / fs_hz
+    paused = np.minimum(time_s, 1000 / fs_hz) + np.maximum(time_s - 7000 / fs_hz, 0.0)
+    position = 0.3 * np.sin(2 * np.pi * 1.3 * paused)
+    signals = prepare(_recording(position, fs_hz))
+    rows = signals.rows()
+    assert np.array_equal(moving_rows(signals, rows), rows)
+
+
+def test_friction_delay_takes_friction_columns_from_the_earlier_velocity() -> None:
+    """Friction columns (Coulomb, viscous) are built from the velocity ``delay`` samples
+    earlier; the inertia column is not, and the delayed columns are cached apart."""
+    fs_hz = 2000.0
+    time_s = np.arange(8000) / fs_hz
+    signals = prepare(_recording(0.3 * np.sin(2 * np.pi * 1.3 * time_s), fs_hz))
+    inertia, viscous, coulomb = base_terms()
+    designer = Designer()
+    plain = designer.columns(coulomb, signals)
+    delayed = designer.columns(coulomb, signals, 0.5)
+    earlier = fractional_shift(signals.velocity[:, None], -0.5, np.arange(len(signals)))[:, 0]
+    expected = signals.lowpass(friction_direction(replace(signals, velocity=earlier)))
+    assert np.allclose(delayed[:, 0], expected)
+    assert not np.allclose(plain, delayed)
+    assert np.allclose(designer.columns(viscous, signals, 0.5)[:, 0], earlier)
+    assert np.array_equal(designer.columns(inertia, signals, 0.5),
+                          designer.columns(inertia, signals))
+    model = Model(terms=(inertia, viscous, coulomb), friction_delay=0.5)
+    assert model.n_params == Model(terms=(inertia, viscous, coulomb)).n_params + 1
+    assert np.allclose(designer.design(model, signals)[:, 2], expected)

@@ -15,9 +15,13 @@ resonance, and cogging beside a current-loop lag. Excluded, with that benchmark'
 (measured before session 8's merge; docs/diagnose.md gives the merged rates) and why
 (:data:`EXCLUDED`; docs/diagnose.md, Recovery rates):
 
-- the five other pairs with a current-loop lag (stribeck 1/5, K_t ripple 1/5, gravity 1/5,
-  resonance 0/5; cable spring 5/5 but the spring is named as gravity beside it after the
-  merge, 2/5): the lag comes out low beside them, or the other effect goes unnamed;
+- the five other pairs with a current-loop lag (stribeck 1/5, K_t ripple 1/5, gravity 2/5;
+  cable spring 5/5 but the spring is named as gravity beside it after the merge, 2/5):
+  the lag comes out low beside them (a large inertia: the quantisation noise's power
+  under-compensated), or the other effect goes unnamed; resonance 5/5 at seeds 7 and 11
+  since the lag is searched away from sticking with a friction delay (0/5 before), but
+  at the draws' edge (J 0.002, B 0.003, T_c 0.015, seed 45) the resonance goes unnamed
+  and the lag comes out at 1.60 for 3.33 ms (1.29 ms before);
 - K_t ripple + resonance (5/5 merged): the smallest ripple drawn (depth 0.1) beside a
   resonance goes unnamed;
 - stribeck + cogging 3/5 (cogging unnamed: its Wald/held-out gain fails beside Stribeck);
@@ -60,8 +64,8 @@ SEVEN = ("stribeck", "cogging", "kt_ripple", "gravity", "cable_spring", "current
 #: (pair, benchmark rate) not drawn; the reasons in the module docstring.
 EXCLUDED = {
     ("stribeck", "current_lag"): "1/5",
-    ("kt_ripple", "current_lag"): "1/5", ("gravity", "current_lag"): "1/5",
-    ("cable_spring", "current_lag"): "5/5", ("current_lag", "two_mass"): "0/5",
+    ("kt_ripple", "current_lag"): "1/5", ("gravity", "current_lag"): "2/5",
+    ("cable_spring", "current_lag"): "2/5", ("current_lag", "two_mass"): "5/5",
     ("stribeck", "cogging"): "3/5", ("stribeck", "kt_ripple"): "2/5",
     ("stribeck", "two_mass"): "3/5", ("cogging", "kt_ripple"): "2/5",
     ("kt_ripple", "gravity"): "4/5", ("kt_ripple", "two_mass"): "4/5",
