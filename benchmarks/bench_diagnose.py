@@ -7,7 +7,8 @@ Run:
 - ``python benchmarks/bench_diagnose.py --hidden N [--pairs] [--unknown] [--seed S]``: N
   simulated units (``tests/diagnose/diagnose_simdata.py``), each with one hidden effect,
   two (``--pairs``: every unordered pair of the seven effects in turn) or one effect outside
-  the library (``--unknown``), sizes drawn (``--only E ...``: only those single effects);
+  the library (``--unknown``), sizes drawn (``--only E ...``: only those single effects;
+  ``--with E``: only the pairs holding E, the other cases' draws taken all the same);
   prints, per case, what was named, and the rates: every hidden effect named with its key
   parameter within 15 %, nothing else named, the 95 % intervals' coverage of the truth,
   and ``unexplained`` flags.
@@ -80,7 +81,7 @@ def declared_alias(data: dict[str, Any], effect: str, key: str, truth: float) ->
 
 
 def hidden(count: int, *, pairs: bool, unknown: bool, seed: int,
-           only: tuple[str, ...] = (), first: int = 0) -> int:
+           only: tuple[str, ...] = (), first: int = 0, holding: str | None = None) -> int:
     from diagnose_simdata import plant_with, record
     from unknown_effects import hide_unknown
 
@@ -105,7 +106,8 @@ def hidden(count: int, *, pairs: bool, unknown: bool, seed: int,
                                      rng.uniform(0.015, 0.03))
         order = int(rng.integers(24, 121))
         run_seed = int(rng.integers(0, 2**16))
-        if case < first:  # skipped: its draws taken all the same
+        # skipped (before --first, or a pair without --with's effect): draws taken all the same
+        if case < first or (holding is not None and holding not in effects):
             rng.uniform(size=2 * (1 if unknown else len(effects)))
             continue
         if unknown:
@@ -206,10 +208,12 @@ def main(argv: list[str]) -> int:
                         help="skip the cases before this one (their draws are taken)")
     parser.add_argument("--only", nargs="*", default=[], choices=SINGLE,
                         help="single effects to hide (default: all nine in turn)")
+    parser.add_argument("--with", dest="holding", choices=SEVEN, default=None,
+                        help="with --pairs: only the pairs holding this effect (same draws)")
     args = parser.parse_args(argv)
     if args.hidden:
         return hidden(args.hidden, pairs=args.pairs, unknown=args.unknown, seed=args.seed,
-                      only=tuple(args.only), first=args.first)
+                      only=tuple(args.only), first=args.first, holding=args.holding)
     return speed(args.paths)
 
 
