@@ -21,6 +21,7 @@ from numpy.typing import NDArray
 from scipy.optimize import minimize_scalar
 from scipy.signal import bilinear, lfilter
 
+from hil.diagnose import ripple
 from hil.diagnose.lag import search_lag
 from hil.diagnose.model import Designer, Fit, IndexArray, Model, Term, friction_direction
 from hil.diagnose.signals import Signals
@@ -499,23 +500,28 @@ def _harmonic(ctx: Context, effect: str) -> Model | None:
     designer, signals, rows = ctx.designer, ctx.signals, ctx.rows
     prediction_fit = ctx.current
     weight: Callable[[Signals], FloatArray] | None = None
-    weight_rows: FloatArray | None = None
+    residual = signals.effort_filtered - designer.predict(ctx.current, signals)
+    weight_all = np.ones(len(signals))
     if effect == "kt_ripple":
+        # the drive's torque is what the lagged current makes of the load, (1 + τs)·T/(1 + r):
+        # the weight is the load T (the model without its lead); the term is lagged itself
+        load_fit = replace(prediction_fit, model=replace(prediction_fit.model, lag_s=0.0))
 
         def weight_fn(s: Signals) -> FloatArray:
-            return designer.predict(prediction_fit, s)
+            return designer.predict(load_fit, s)
 
         weight = weight_fn
-        weight_rows = weight_fn(signals)[rows]
-    residual = signals.effort_filtered[rows] - designer.predict(ctx.current, signals)[rows]
+        # searched below the quantisation noise of the inertia's column (ripple.band_hz)
+        weight_all = ripple.band_limit(signals, weight_fn(signals))
+        residual = ripple.band_limit(signals, residual)
+    residual = residual[rows]
     orders = order_range(signals.position[rows], ctx.counts_per_rev)
     # weighted least squares for the order search: where the model misses most (a chirp,
     # large torque at one angle) every order's column is a constant that soaks up the
     # misfit and lifts the whole periodogram; each row counts by its block's misfit
     scale = local_scale(residual, rows, signals.fs_hz)
     segment = Segment(residual=residual / scale, position_rad=signals.position[rows],
-                      weight=(np.ones_like(residual) if weight_rows is None else weight_rows)
-                      / scale)
+                      weight=weight_all[rows] / scale)
     found = matching_pursuit([segment], orders=orders, limits=ORDER_LIMITS,
                              independence=min(1.0, signals.independence * signals.decimation))
     if not found:
@@ -546,16 +552,31 @@ def _refine_orders(ctx: Context, effect: str, found: tuple[int, ...],
     pursuit's threshold) is dropped.
     """
     model = ctx.current.model
-    independent = min(1.0, ctx.signals.independence * ctx.signals.decimation)
-    n_eff = ctx.rows.size * independent
-    q, residual = ctx.basis()
+    designer, signals = ctx.designer, ctx.signals
+
+    def design(candidate: Model) -> FloatArray:
+        return designer.design(candidate, signals, ctx.rows)
+
+    if effect == "kt_ripple":  # where its coefficients are estimated (ripple.py)
+        lowest = max(1, min(found) - ORDER_REFINE_SPAN)
+        rows, band = ripple.estimation_rows(signals, ctx.rows,
+                                            (lowest, max(found) + ORDER_REFINE_SPAN))
+        n_eff = float(rows.size)
+        matrix, target = designer.band_limited(model, signals, rows, band)
+        q, _ = np.linalg.qr(matrix)
+        residual = target - q @ (q.T @ target)
+
+        def design(candidate: Model) -> FloatArray:
+            return designer.band_limited(candidate, signals, rows, band)[0]
+    else:
+        n_eff = ctx.rows.size * min(1.0, signals.independence * signals.decimation)
+        q, residual = ctx.basis()
     projected: dict[int, FloatArray] = {}
 
     def block(k: int) -> FloatArray:
-        """Order ``k``'s two columns on the training rows, the current design projected out."""
+        """Order ``k``'s two columns on the fitted rows, the current design projected out."""
         if k not in projected:
-            single = replace(model, terms=(harmonic_term(effect, (k,), weight, key),))
-            columns = ctx.designer.design(single, ctx.signals, ctx.rows)
+            columns = design(replace(model, terms=(harmonic_term(effect, (k,), weight, key),)))
             projected[k] = columns - q @ (q.T @ columns)
         return projected[k]
 
@@ -604,8 +625,9 @@ def _refine_orders(ctx: Context, effect: str, found: tuple[int, ...],
             if bic(trial, trial_rss) <= bic(orders, value):
                 orders, value, changed = trial, trial_rss, True
                 break
-    fit = ctx.designer.fit(_extend(model, harmonic_term(effect, orders, weight, key)),
-                           ctx.signals, ctx.rows)
+    extended = _extend(model, harmonic_term(effect, orders, weight, key))
+    fit = (ripple.fit_on_sweep(designer, extended, signals, ctx.rows) if effect == "kt_ripple"
+           else designer.fit(extended, signals, ctx.rows))
     prefix = "cog" if effect == "cogging" else "kt"
     kept = []
     for k in orders:

@@ -75,7 +75,8 @@ def _cause(rank: int, candidate: Candidate, diagnosis: Diagnosis,
                                              candidate.fit.model, intervals.JACKKNIFE_GROUPS)
         fitted = replace(candidate.fit, model=model)
     if candidate.effect == "kt_ripple":  # stage one: the sweeping rows, band-limited
-        matrix, target, kept = ripple.estimation_data(diagnosis.designer, joint, signals, rows)
+        matrix, target, kept = ripple.estimation_data(diagnosis.designer, joint.model, signals,
+                                                      rows)
         fit = intervals.jackknife_solve(
             solve(joint.model, matrix, target, n_effective=float(kept.size)), matrix, target)
     else:

@@ -20,8 +20,9 @@ from dataclasses import replace
 import numpy as np
 from numpy.typing import NDArray
 
-from hil.diagnose.model import Designer, Fit, IndexArray, solve
+from hil.diagnose.model import Designer, Fit, IndexArray, Model, solve
 from hil.diagnose.signals import Signals
+from hil.identify.kinematics import zero_phase_lowpass
 
 FloatArray = NDArray[np.float64]
 
@@ -67,19 +68,19 @@ def sweep_rows(signals: Signals, rows: IndexArray, lowest_order: int) -> IndexAr
     return rows[sweeps]
 
 
-def orders_of(fit: Fit) -> tuple[int, ...]:
-    """The orders of ``fit``'s ``kt_ripple`` term (empty without one).
+def orders_of(model: Model) -> tuple[int, ...]:
+    """The orders of ``model``'s ``kt_ripple`` term (empty without one).
 
     Parameters
     ----------
-    fit : Fit
+    model : Model
 
     Returns
     -------
     tuple of int
         Periods per revolution, in the term's column order.
     """
-    term = fit.model.term("kt_ripple")
+    term = model.term("kt_ripple")
     if term is None:
         return ()
     return tuple(int(label.removeprefix("kt_sin")) for label in term.labels[::2])
@@ -101,7 +102,7 @@ def sweep_rows_of(fit: Fit, signals: Signals, rows: IndexArray) -> IndexArray:
     ndarray of intp
         The rows from which the ripple's parameters are estimated.
     """
-    orders = orders_of(fit)
+    orders = orders_of(fit.model)
     if not orders:
         return rows
     return sweep_rows(signals, rows, min(orders))
@@ -135,15 +136,60 @@ def band_hz(signals: Signals, rows: IndexArray, orders: tuple[int, ...]) -> floa
     return min(signals.cutoff_hz, max(BAND_FRACTION * signals.cutoff_hz, BAND_MARGIN * highest))
 
 
-def estimation_data(designer: Designer, fit: Fit, signals: Signals,
+def band_limit(signals: Signals, values: FloatArray) -> FloatArray:
+    """``values`` low-passed at :data:`BAND_FRACTION` of the cutoff (the order search's band).
+
+    Parameters
+    ----------
+    signals : Signals
+    values : ndarray
+        A column over the whole recording.
+
+    Returns
+    -------
+    ndarray
+        See :func:`hil.identify.kinematics.zero_phase_lowpass`.
+    """
+    return zero_phase_lowpass(values, fs_hz=signals.fs_hz,
+                              cutoff_hz=BAND_FRACTION * signals.cutoff_hz,
+                              segments=signals.segments)
+
+
+def estimation_rows(signals: Signals, rows: IndexArray,
+                    orders: tuple[int, ...]) -> tuple[IndexArray, float]:
+    """The sweeping rows of ``orders``, thinned for their band (:func:`band_hz`).
+
+    Parameters
+    ----------
+    signals : Signals
+    rows : ndarray of intp
+        The rows available.
+    orders : tuple of int
+        The ripple's orders (not empty).
+
+    Returns
+    -------
+    rows : ndarray of intp
+        :func:`sweep_rows` of the lowest order, thinned to about 2.5 rows per cycle of the
+        band (the rows of a band-limited residual are otherwise correlated, and its
+        least-squares covariance too small).
+    band_hz : float
+        :func:`band_hz` on the sweeping rows.
+    """
+    sweeping = sweep_rows(signals, rows, min(orders))
+    cutoff = band_hz(signals, sweeping, orders)
+    return sweeping[:: max(1, int(signals.cutoff_hz / cutoff))], cutoff
+
+
+def estimation_data(designer: Designer, model: Model, signals: Signals,
                     rows: IndexArray) -> tuple[FloatArray, FloatArray, IndexArray]:
     """Where the ripple's coefficients are estimated: the sweeping rows, band-limited.
 
     Parameters
     ----------
     designer : Designer
-    fit : Fit
-        A model with a ``kt_ripple`` term (otherwise every row, not filtered again).
+    model : Model
+        A model with a ``kt_ripple`` term (otherwise ``rows``, not filtered again).
     signals : Signals
     rows : ndarray of intp
         The rows available (training, or every usable row).
@@ -151,28 +197,26 @@ def estimation_data(designer: Designer, fit: Fit, signals: Signals,
     Returns
     -------
     matrix, target : ndarray
-        ``fit``'s design and the effort, both low-passed at :func:`band_hz`, on the
+        ``model``'s design and the effort, both low-passed at :func:`band_hz`, on the
         rows returned.
     rows : ndarray of intp
-        :func:`sweep_rows_of`, thinned to about 2.5 rows per cycle of :func:`band_hz`
-        (the rows of a band-limited residual are otherwise correlated, and its
-        least-squares covariance too small).
+        :func:`estimation_rows`.
     """
-    orders = orders_of(fit)
-    sweeping = sweep_rows_of(fit, signals, rows)
-    cutoff = band_hz(signals, sweeping, orders) if orders else signals.cutoff_hz
-    kept = sweeping[:: max(1, int(signals.cutoff_hz / cutoff))]
-    matrix, target = designer.band_limited(fit.model, signals, kept, cutoff)
+    orders = orders_of(model)
+    if not orders:
+        return designer.design(model, signals, rows), signals.effort_filtered[rows], rows
+    kept, cutoff = estimation_rows(signals, rows, orders)
+    matrix, target = designer.band_limited(model, signals, kept, cutoff)
     return matrix, target, kept
 
 
-def fit_on_sweep(designer: Designer, fit: Fit, signals: Signals, rows: IndexArray) -> Fit:
-    """``fit``'s model fitted on :func:`estimation_data` of ``rows``.
+def fit_on_sweep(designer: Designer, model: Model, signals: Signals, rows: IndexArray) -> Fit:
+    """``model`` fitted on :func:`estimation_data` of ``rows``.
 
     Parameters
     ----------
     designer : Designer
-    fit : Fit
+    model : Model
     signals : Signals
     rows : ndarray of intp
 
@@ -181,8 +225,8 @@ def fit_on_sweep(designer: Designer, fit: Fit, signals: Signals, rows: IndexArra
     Fit
         Least squares (``σ²(ΦᵀΦ)⁻¹``, the rows taken as independent).
     """
-    matrix, target, kept = estimation_data(designer, fit, signals, rows)
-    return solve(fit.model, matrix, target, n_effective=float(kept.size))
+    matrix, target, kept = estimation_data(designer, model, signals, rows)
+    return solve(model, matrix, target, n_effective=float(kept.size))
 
 
 def two_stage(designer: Designer, fit: Fit, signals: Signals, rows: IndexArray) -> Fit:
@@ -208,7 +252,7 @@ def two_stage(designer: Designer, fit: Fit, signals: Signals, rows: IndexArray) 
     term = fit.model.term("kt_ripple")
     if term is None:
         return fit
-    stage_one = fit_on_sweep(designer, fit, signals, rows)
+    stage_one = fit_on_sweep(designer, fit.model, signals, rows)
     labels = fit.model.labels
     ripple = np.isin(labels, term.labels)
     matrix = designer.design(fit.model, signals, rows)

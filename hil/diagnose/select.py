@@ -336,7 +336,7 @@ class Evaluator:
         if not labels:
             return True
         if effect == "kt_ripple":  # the rows its coefficients come from (ripple.py)
-            matrix, target, rows = estimation_data(self.designer, fit, signals, rows)
+            matrix, target, rows = estimation_data(self.designer, fit.model, signals, rows)
         else:
             matrix = self.designer.design(fit.model, signals, rows)
             target = signals.effort_filtered[rows]
