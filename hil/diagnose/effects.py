@@ -511,9 +511,7 @@ def _harmonic(ctx: Context, effect: str) -> Model | None:
             return designer.predict(load_fit, s)
 
         weight = weight_fn
-        # searched below the quantisation noise of the inertia's column (ripple.band_hz)
-        weight_all = ripple.band_limit(signals, weight_fn(signals))
-        residual = ripple.band_limit(signals, residual)
+        weight_all = weight_fn(signals)
     residual = residual[rows]
     orders = order_range(signals.position[rows], ctx.counts_per_rev)
     # weighted least squares for the order search: where the model misses most (a chirp,

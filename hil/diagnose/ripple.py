@@ -22,7 +22,6 @@ from numpy.typing import NDArray
 
 from hil.diagnose.model import Designer, Fit, IndexArray, Model, solve
 from hil.diagnose.signals import Signals
-from hil.identify.kinematics import zero_phase_lowpass
 
 FloatArray = NDArray[np.float64]
 
@@ -134,25 +133,6 @@ def band_hz(signals: Signals, rows: IndexArray, orders: tuple[int, ...]) -> floa
     speed = float(np.percentile(np.abs(signals.velocity[rows]), 99)) if rows.size else 0.0
     highest = max(orders, default=0) * speed / (2.0 * math.pi)
     return min(signals.cutoff_hz, max(BAND_FRACTION * signals.cutoff_hz, BAND_MARGIN * highest))
-
-
-def band_limit(signals: Signals, values: FloatArray) -> FloatArray:
-    """``values`` low-passed at :data:`BAND_FRACTION` of the cutoff (the order search's band).
-
-    Parameters
-    ----------
-    signals : Signals
-    values : ndarray
-        A column over the whole recording.
-
-    Returns
-    -------
-    ndarray
-        See :func:`hil.identify.kinematics.zero_phase_lowpass`.
-    """
-    return zero_phase_lowpass(values, fs_hz=signals.fs_hz,
-                              cutoff_hz=BAND_FRACTION * signals.cutoff_hz,
-                              segments=signals.segments)
 
 
 def estimation_rows(signals: Signals, rows: IndexArray,
