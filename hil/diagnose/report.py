@@ -75,10 +75,10 @@ def _cause(rank: int, candidate: Candidate, diagnosis: Diagnosis,
                                              candidate.fit.model, intervals.JACKKNIFE_GROUPS)
         fitted = replace(candidate.fit, model=model)
     if candidate.effect == "kt_ripple":  # stage one: the sweeping rows, band-limited
-        matrix, target, kept = ripple.estimation_data(diagnosis.designer, joint.model, signals,
-                                                      rows)
+        model = diagnosis.final.model  # its weight the joint model's load (effects.reweighted)
+        matrix, target, kept = ripple.estimation_data(diagnosis.designer, model, signals, rows)
         fit = intervals.jackknife_solve(
-            solve(joint.model, matrix, target, n_effective=float(kept.size)), matrix, target)
+            solve(model, matrix, target, n_effective=float(kept.size)), matrix, target)
     else:
         fit = intervals.jackknife_fit(diagnosis.designer, fitted, signals, rows)
     named = interpret.effect_parameters(candidate.effect, fit, lag_std_s=lag_std_s,
