@@ -604,7 +604,8 @@ def _refine_orders(ctx: Context, effect: str, found: tuple[int, ...],
         return designer.design(candidate, signals, ctx.rows)
 
     if effect == "kt_ripple":  # where its coefficients are estimated (ripple.py)
-        lowest = max(1, min(found) - ORDER_REFINE_SPAN)
+        # the rows of the strongest order (a weak low one would take every row)
+        lowest = max(1, found[0] - ORDER_REFINE_SPAN)
         rows, band = ripple.estimation_rows(signals, ctx.rows,
                                             (lowest, max(found) + ORDER_REFINE_SPAN))
         n_eff = float(rows.size)

@@ -152,11 +152,15 @@ def estimation_rows(signals: Signals, rows: IndexArray,
     rows : ndarray of intp
         :func:`sweep_rows` of the lowest order, thinned to about 2.5 rows per cycle of the
         band (the rows of a band-limited residual are otherwise correlated, and its
-        least-squares covariance too small).
+        least-squares covariance too small); every row when too few sweep (band-limited
+        and thinned, every row let a spurious order-9 ripple pass beside a Stribeck
+        friction and a lag, which the whole band rejects).
     band_hz : float
-        :func:`band_hz` on the sweeping rows.
+        :func:`band_hz` on the sweeping rows (the cutoff when every row is kept).
     """
     sweeping = sweep_rows(signals, rows, min(orders))
+    if sweeping.size == rows.size:  # too few sweep: every row, the whole band, as before
+        return rows, signals.cutoff_hz
     cutoff = band_hz(signals, sweeping, orders)
     return sweeping[:: max(1, int(signals.cutoff_hz / cutoff))], cutoff
 
