@@ -10,6 +10,11 @@ ripple's parameters, their intervals and its halves test use only the rows over 
 angle sweeps at least a quarter period of the ripple's lowest order within a block; the
 rest of the extended model is fitted on every training row with the ripple subtracted
 (:func:`two_stage`), and the selection judges the jointly fitted model as before.
+
+On those rows the effort and every column are low-passed once more, well below the
+analysis cutoff (:func:`band_hz`, :func:`estimation_data`): the encoder's quantisation,
+differentiated twice, is as large as the ripple in the inertia's column there, and as
+errors in the regressors it biased the depth low and split the halves of the travel.
 """
 
 from __future__ import annotations
