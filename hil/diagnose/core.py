@@ -19,6 +19,7 @@ import numpy as np
 
 from hil.diagnose import data_issues, interpret
 from hil.diagnose.data_issues import DataIssue
+from hil.diagnose.effects import reweighted
 from hil.diagnose.model import Designer, Fit, IndexArray, Model, base_terms, fit_percent, rms
 from hil.diagnose.residual import analyse
 from hil.diagnose.ripple import two_stage
@@ -215,7 +216,9 @@ def diagnose(
     return Diagnosis(recording=recording, signals=signals, heldout=test, train=train,
                      selection=selection, issues=tuple(issues), residual=residual,
                      split=split, designer=designer,
-                     final=two_stage(designer, selection.final, train.signals, train.rows))
+                     final=two_stage(designer, reweighted(designer, selection.final,
+                                                          train.signals, train.rows),
+                                     train.signals, train.rows))
 
 
 def summary_metrics(diagnosis: Diagnosis, fit: Fit) -> dict[str, float]:

@@ -128,6 +128,22 @@ def base_parameters(fit: Fit) -> dict[str, FittedParameter]:
     }
 
 
+def ripple_slope(coefficient: float) -> float:
+    """``dA/dc`` of ``A = c/(1 + c²/4)`` (see :func:`_harmonics`).
+
+    Parameters
+    ----------
+    coefficient : float
+        The ripple column's fitted amplitude ``c``.
+
+    Returns
+    -------
+    float
+        ``(1 − c²/4)/(1 + c²/4)²``.
+    """
+    return (1 - coefficient**2 / 4) / (1 + coefficient**2 / 4) ** 2
+
+
 def _harmonics(fit: Fit, effect: str) -> list[dict[str, float]]:
     term = fit.model.term(effect)
     if term is None:
@@ -137,10 +153,14 @@ def _harmonics(fit: Fit, effect: str) -> list[dict[str, float]]:
     for label in term.labels[::2]:
         order = int(label.removeprefix(f"{prefix}_sin"))
         amplitude, phase = _amplitude(fit, f"{prefix}_sin{order}", f"{prefix}_cos{order}")
+        value, std = amplitude.value, amplitude.std
         if effect == "kt_ripple":  # the drive reports T/(1 + r(θ)) ≈ T·(1 − r(θ))
             phase = math.remainder(phase + math.pi, 2 * math.pi)
-        rows.append({"order": order, "amplitude": amplitude.value,
-                     "amplitude_std": amplitude.std, "phase_rad": phase})
+            # exactly, 1/(1 + A·sin x) has the first harmonic c = 2(1 − √(1 − A²))/A of its
+            # mean (which the load's coefficients take): A = c/(1 + c²/4) (+1 % at 0.2)
+            value, std = value / (1 + value**2 / 4), std * ripple_slope(value)
+        rows.append({"order": order, "amplitude": value, "amplitude_std": std,
+                     "phase_rad": phase})
     rows.sort(key=lambda row: -row["amplitude"])
     return rows
 

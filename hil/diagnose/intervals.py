@@ -27,7 +27,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy import stats
 
-from hil.diagnose.model import Designer, Fit, IndexArray, Model, Term
+from hil.diagnose.model import Designer, Fit, IndexArray, Model, Term, solve
 from hil.diagnose.signals import Signals
 from hil.identify.estimate import coverage_factor
 
@@ -132,13 +132,35 @@ def jackknife_fit(designer: Designer, fit: Fit, signals: Signals, rows: IndexArr
     Fit
         Fitted on ``rows``; the covariance stays infinite when that fit's is.
     """
-    full = designer.fit(fit.model, signals, rows)
+    return jackknife_solve(designer.fit(fit.model, signals, rows),
+                           designer.design(fit.model, signals, rows),
+                           signals.effort_filtered[rows], groups)
+
+
+def jackknife_solve(full: Fit, matrix: FloatArray, target: FloatArray,
+                    groups: int = JACKKNIFE_GROUPS) -> Fit:
+    """``full`` with the delete-a-group jackknife covariance of :func:`jackknife_fit`.
+
+    Parameters
+    ----------
+    full : Fit
+        Least squares of ``target`` on ``matrix`` (every row).
+    matrix, target : ndarray
+        The design and the effort on the rows, in time order.
+    groups : int
+        Number of contiguous groups.
+
+    Returns
+    -------
+    Fit
+        ``full`` with the jackknife covariance (unchanged when ``full``'s is infinite).
+    """
     if not np.all(np.isfinite(full.covariance)):
         return full
-    parts = np.array_split(rows, groups)
+    parts = np.array_split(np.arange(len(target)), groups)
     estimates = np.array([
-        designer.fit(fit.model, signals, np.concatenate(parts[:g] + parts[g + 1 :])).coefficients
-        for g in range(groups)
+        solve(full.model, matrix[keep], target[keep], n_effective=full.n_effective).coefficients
+        for keep in (np.concatenate(parts[:g] + parts[g + 1 :]) for g in range(groups))
     ])
     centred = estimates - estimates.mean(axis=0)
     return replace(full, covariance=(groups - 1) / groups * (centred.T @ centred))

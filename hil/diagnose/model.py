@@ -247,6 +247,7 @@ class Designer:
         self._lag_cache: dict[tuple[int, str], FloatArray] = {}
         self._shift_cache: dict[tuple[int, str, bool, float], FloatArray] = {}
         self._delayed: dict[tuple[int, float], Signals] = {}
+        self._band_cache: dict[tuple[int, str, bool, float, float], FloatArray] = {}
 
     def _source(self, term: Term, signals: Signals, delay: float) -> tuple[Signals, str]:
         """The signals ``term`` is built from and its cache key (a friction term with
@@ -398,6 +399,55 @@ class Designer:
                                                             lead=True, delay=delay)[index]
             blocks.append(block)
         return np.hstack(blocks)
+
+    def band_limited(self, model: Model, signals: Signals, rows: IndexArray,
+                     cutoff_hz: float) -> tuple[FloatArray, FloatArray]:
+        """Design and effort low-passed once more at ``cutoff_hz``, on ``rows``.
+
+        The same zero-phase filter on the effort and on every column ("parallel
+        filtering") keeps the model exact while it drops what lies above ``cutoff_hz``.
+
+        Parameters
+        ----------
+        model : Model
+        signals : Signals
+        rows : ndarray of intp
+        cutoff_hz : float
+            Below :attr:`Signals.cutoff_hz` (at or above it the filter is skipped).
+
+        Returns
+        -------
+        matrix, target : ndarray
+            Shapes ``(len(rows), len(model.labels))`` and ``(len(rows),)``.
+        """
+        def band(values: FloatArray) -> FloatArray:
+            if cutoff_hz >= signals.cutoff_hz:
+                return values
+            return np.column_stack([
+                zero_phase_lowpass(values[:, j], fs_hz=signals.fs_hz, cutoff_hz=cutoff_hz,
+                                   segments=signals.segments) for j in range(values.shape[1])])
+
+        delay = model.friction_delay
+
+        def block(term: Term, lead: bool) -> FloatArray:
+            source_key = self._source(term, signals, delay)[1]
+            key = (id(signals), source_key, lead, model.shift_s, cutoff_hz)
+            if key not in self._band_cache:
+                self._band_cache[key] = band(self._shifted(term, signals, model.shift_s, lead,
+                                                           delay=delay))
+            return self._band_cache[key]
+
+        blocks = []
+        for term in model.terms:
+            columns = block(term, False)[rows]
+            if model.lag_s > 0 and term.lagged:
+                columns = columns + model.lag_s * block(term, True)[rows]
+            blocks.append(columns)
+        target_key = (id(signals), "effort", False, 0.0, cutoff_hz)
+        if target_key not in self._band_cache:
+            self._band_cache[target_key] = band(signals.effort_filtered[:, None])[:, 0]
+        matrix = np.hstack(blocks) if blocks else np.zeros((len(rows), 0))
+        return matrix, self._band_cache[target_key][rows]
 
     def fit(self, model: Model, signals: Signals, rows: IndexArray) -> Fit:
         """Least squares on ``rows`` with covariance ``σ²(ΦᵀΦ)⁻¹``.

@@ -9,7 +9,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from hil.diagnose import alias, constant, interpret, intervals, lag, ripple, unexplained
-from hil.diagnose.model import Fit
+from hil.diagnose.model import Fit, solve
 from hil.diagnose.profile_out import extended_firmware, extended_plant
 from hil.diagnose.select import DECISION_RULE, Candidate
 
@@ -67,8 +67,6 @@ def _cause(rank: int, candidate: Candidate, diagnosis: Diagnosis,
     # ranked up to this one leaves the others' torque to it (a first-ranked cogging carried
     # the gravity it was searched beside, 0.011 for 0.0069 N·m)
     joint = diagnosis.selection.final
-    if candidate.effect == "kt_ripple":  # stage one: the rows where the angle sweeps
-        rows = ripple.sweep_rows_of(joint, signals, rows)
     fitted = joint
     lag_std_s = candidate.lag_std_s
     if candidate.effect == "current_lag":  # (τ, δ) searched again without each group
@@ -76,7 +74,13 @@ def _cause(rank: int, candidate: Candidate, diagnosis: Diagnosis,
         model, lag_std_s = lag.jackknife_lag(diagnosis.designer, signals, rows,
                                              candidate.fit.model, intervals.JACKKNIFE_GROUPS)
         fitted = replace(candidate.fit, model=model)
-    fit = intervals.jackknife_fit(diagnosis.designer, fitted, signals, rows)
+    if candidate.effect == "kt_ripple":  # stage one: the sweeping rows, band-limited
+        model = diagnosis.final.model  # its weight the joint model's load (effects.reweighted)
+        matrix, target, kept = ripple.estimation_data(diagnosis.designer, model, signals, rows)
+        fit = intervals.jackknife_solve(
+            solve(model, matrix, target, n_effective=float(kept.size)), matrix, target)
+    else:
+        fit = intervals.jackknife_fit(diagnosis.designer, fitted, signals, rows)
     named = interpret.effect_parameters(candidate.effect, fit, lag_std_s=lag_std_s,
                                         coverage=intervals.JACKKNIFE_COVERAGE,
                                         coverage99=intervals.JACKKNIFE_COVERAGE_99)

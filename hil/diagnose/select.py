@@ -45,7 +45,7 @@ from hil.diagnose.effects import (
     search_shift,
 )
 from hil.diagnose.model import Designer, Fit, IndexArray, Model, Term, fit_percent, rms, solve
-from hil.diagnose.ripple import sweep_rows_of
+from hil.diagnose.ripple import estimation_data
 from hil.diagnose.signals import Signals
 
 log = logging.getLogger(__name__)
@@ -329,17 +329,18 @@ class Evaluator:
             True when consistent, or when a half has too few rows to tell.
         """
         signals, rows = self.train.signals, self.train.rows
-        if effect == "kt_ripple":
-            rows = sweep_rows_of(fit, signals, rows)
         labels = tuple(label for term in fit.model.terms if term.effect == effect
                        for label in term.labels)
         if effect in ("cogging", "kt_ripple"):  # the strongest order (taken first) carries it
             labels = labels[:2]
         if not labels:
             return True
+        if effect == "kt_ripple":  # the rows its coefficients come from (ripple.py)
+            matrix, target, rows = estimation_data(self.designer, fit.model, signals, rows)
+        else:
+            matrix = self.designer.design(fit.model, signals, rows)
+            target = signals.effort_filtered[rows]
         position = signals.position[rows]
-        matrix = self.designer.design(fit.model, signals, rows)
-        target = signals.effort_filtered[rows]
         # weighted by each block's misfit: where the model misses most (a chirp, large
         # torque at one angle) the columns of any angle-dependent effect are constants that
         # soak up that misfit, in whichever half the chirp lies
