@@ -86,7 +86,7 @@ class Alias:
 
 
 def _key_std(effect: str, fit: Any) -> float:
-    named = interpret.effect_parameters(effect, fit)
+    named = interpret.effect_parameters(effect, fit, method=False)
     entry = named["uncertainty"].get(KEY_PARAMETER[effect])
     return math.nan if entry is None or entry["std"] is None else float(entry["std"])
 
@@ -209,14 +209,15 @@ def declared(diagnosis: Diagnosis, found: tuple[Alias, ...], cause: str) -> dict
                             (*named, alias.other))
         fit = intervals.jackknife_fit(diagnosis.designer, diagnosis.designer.fit(
             model, signals, rows), signals, rows)
-        options = {"coverage": intervals.JACKKNIFE_COVERAGE,
-                   "coverage99": intervals.JACKKNIFE_COVERAGE_99}
-        mine_named = interpret.effect_parameters(cause, fit, **options)
+        coverage = intervals.JACKKNIFE_COVERAGE, intervals.JACKKNIFE_COVERAGE_99
+        mine_named = interpret.effect_parameters(cause, fit, coverage=coverage[0],
+                                                 coverage99=coverage[1])
         interval = mine_named["uncertainty"][key]["ci95"]
         if interval is None:
             interval = [-math.inf, math.inf]
         low, high = min(low, interval[0]), max(high, interval[1])
-        theirs = interpret.effect_parameters(alias.other, fit, **options)
+        theirs = interpret.effect_parameters(alias.other, fit, coverage=coverage[0],
+                                             coverage99=coverage[1])
         other_key = KEY_PARAMETER[alias.other]
         others[alias.other] = {
             "parameters": {other_key: theirs["parameters"][other_key]},

@@ -20,6 +20,12 @@ from hil.diagnose.model import Fit
 from hil.recording import AxisKind
 
 Z99 = 2.5758293035489004
+#: K_t ripple's depth carries a method uncertainty of this fraction of itself beside the
+#: jackknife's: on 29 simulated single ripples (``bench_diagnose.py --only kt_ripple
+#: --hidden 30 --seed 11``) the depth's error RMS was 2.2 % against a jackknife u of 0.9 %
+#: (median; a +1.5 % mean error near reversals, docs/diagnose.md, cause 4 of the ripple's
+#: bias), so √(2.2² − 0.9²) ≈ 2 %.
+KT_RIPPLE_METHOD_FRACTION = 0.02
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -166,7 +172,8 @@ def _harmonics(fit: Fit, effect: str) -> list[dict[str, float]]:
 
 
 def effect_parameters(effect: str, fit: Fit, *, lag_std_s: float = math.nan,
-                      coverage: float = 2.0, coverage99: float = Z99) -> dict[str, Any]:
+                      coverage: float = 2.0, coverage99: float = Z99,
+                      method: bool = True) -> dict[str, Any]:
     """Named parameters of ``effect`` in ``fit``: values and :class:`FittedParameter` s.
 
     Parameters
@@ -181,6 +188,9 @@ def effect_parameters(effect: str, fit: Fit, *, lag_std_s: float = math.nan,
     coverage, coverage99 : float
         Coverage factors of the 95 % and 99 % intervals (from ``fit``'s covariance, and
         for the current-loop time constant from ``lag_std_s``).
+    method : bool
+        Add K_t ripple's method uncertainty (:data:`KT_RIPPLE_METHOD_FRACTION`) to its
+        depth's; False: the fit's alone (for comparing fits).
 
     Returns
     -------
@@ -224,6 +234,10 @@ def effect_parameters(effect: str, fit: Fit, *, lag_std_s: float = math.nan,
         extra["periods_per_rev"] = rows[0]["order"] if rows else 0
         estimates[name] = (FittedParameter(value=rows[0]["amplitude"], std=rows[0]["amplitude_std"])
                            if rows else FittedParameter(value=0.0, std=math.nan))
+        if effect == "kt_ripple" and method and rows:
+            depth = estimates[name]
+            estimates[name] = replace(depth, std=math.hypot(
+                depth.std, KT_RIPPLE_METHOD_FRACTION * depth.value))
         extra["orders"] = [
             {"periods_per_rev": r["order"], name: r["amplitude"], "phase_rad": r["phase_rad"]}
             for r in rows
