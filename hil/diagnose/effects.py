@@ -573,7 +573,7 @@ def reweighted(designer: Designer, fit: Fit, signals: Signals, rows: IndexArray)
     def weight(s: Signals) -> FloatArray:
         return designer.predict(load, s)
 
-    orders = tuple(int(label.removeprefix("kt_sin")) for label in term.labels[::2])
+    orders = ripple.orders_of(fit.model)
     model = replace(fit.model, terms=tuple(
         harmonic_term("kt_ripple", orders, weight, f"load:{key}") if t is term else t
         for t in fit.model.terms))

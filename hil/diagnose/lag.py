@@ -41,7 +41,7 @@ from hil.diagnose.model import (
     fractional_shift,
     friction_direction,
 )
-from hil.diagnose.signals import Signals, derivatives
+from hil.diagnose.signals import Signals, derivatives, dilate, runs
 from hil.identify.quantisation import quantisation_step
 
 FloatArray = NDArray[np.float64]
@@ -170,10 +170,14 @@ class LagProblem:
         block ``b`` in group ``b mod groups``.
     shift_grid : tuple of float
         The alignments tried, sample periods, evenly spaced.
+    noise : (Designer, tuple of Signals), optional
+        :func:`quantisation_noise` of ``signals`` and the designer of its columns, shared
+        by the problems of one search (default: computed here).
     """
 
     def __init__(self, designer: Designer, signals: Signals, rows: IndexArray, model: Model,
-                 groups: int = 1, shift_grid: tuple[float, ...] = SHIFT_GRID) -> None:
+                 groups: int = 1, shift_grid: tuple[float, ...] = SHIFT_GRID,
+                 noise: tuple[Designer, tuple[Signals, ...]] | None = None) -> None:
         self.designer = designer
         self.shift_grid = shift_grid
         self.signals = signals
@@ -181,9 +185,8 @@ class LagProblem:
         self.model = replace(model, lag_s=0.0, shift_s=0.0)
         block = (rows // max(1, round(BLOCK_S * signals.fs_hz))) % groups
         self.parts = [np.flatnonzero(block == g) for g in range(groups)]
-        noise_designer = Designer()
+        noise_designer, quantised = noise or (Designer(), quantisation_noise(signals))
         noise_model = replace(self.model, terms=tuple(_noise_term(t) for t in model.terms))
-        quantised = quantisation_noise(signals)
         self.noise: list[tuple[Designer, Model, Signals, float]] = [
             (noise_designer, noise_model, n, 1.0 / len(quantised)) for n in quantised]
         self._cache: dict[float, list[_Grams]] = {}
@@ -308,14 +311,12 @@ def moving_rows(signals: Signals, rows: IndexArray) -> IndexArray:
     ndarray of intp
     """
     still = friction_direction(signals) == 0
-    edges = np.diff(np.concatenate(([0], still.astype(np.int8), [0])))
-    starts, stops = np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)
-    sticking = np.zeros(len(still))
-    for start, stop in zip(starts, stops, strict=True):
+    sticking = np.zeros(len(still), dtype=bool)
+    for start, stop in runs(still):
         if stop - start >= MIN_STICKING_SAMPLES:
-            sticking[start:stop] = 1.0
+            sticking[start:stop] = True
     margin = max(3, math.ceil(2.0 * signals.fs_hz / signals.cutoff_hz))
-    near = np.convolve(sticking, np.ones(2 * margin + 1), mode="same") > 0
+    near = dilate(sticking, margin)
     moving = rows[~near[rows]]
     return moving if moving.size >= MIN_MOVING_SHARE * rows.size else rows
 
@@ -347,10 +348,12 @@ def search_lag(designer: Designer, signals: Signals, rows: IndexArray, model: Mo
         RSS.
     """
     rows = moving_rows(signals, rows)
+    noise = (Designer(), quantisation_noise(signals))  # the same for every delay
     results = []
     for delay in FRICTION_DELAYS:
         delayed = replace(model, friction_delay=delay)
-        results.append((*LagProblem(designer, signals, rows, delayed).estimate_rss(), delay))
+        problem = LagProblem(designer, signals, rows, delayed, noise=noise)
+        results.append((*problem.estimate_rss(), delay))
     _, lag_s, shift, delay = min(results)
     return replace(model, lag_s=lag_s, shift_s=shift / signals.fs_hz, friction_delay=delay)
 

@@ -239,6 +239,19 @@ def bic(rss: float, n: float, k: int) -> float:
     return n * math.log(max(rss, 1e-300) / n) + k * math.log(n)
 
 
+def _assemble(model: Model, index: IndexArray,
+              block: Callable[[Term, bool], FloatArray]) -> FloatArray:
+    """The design on ``index``: each term's ``block(term, False)``, plus ``τ·block(term,
+    True)`` (its lead) where the term passes through the current-loop lag."""
+    blocks = []
+    for term in model.terms:
+        columns = block(term, False)[index]
+        if model.lag_s > 0 and term.lagged:
+            columns = columns + model.lag_s * block(term, True)[index]
+        blocks.append(columns)
+    return np.hstack(blocks) if blocks else np.zeros((len(index), 0))
+
+
 class Designer:
     """Builds (and caches) design matrices of models on one or more recordings."""
 
@@ -388,17 +401,11 @@ class Designer:
             Shape ``(len(rows), len(model.labels))``.
         """
         index = np.arange(len(signals)) if rows is None else rows
-        if not model.terms:
-            return np.zeros((len(index), 0))
-        blocks = []
-        delay = model.friction_delay
-        for term in model.terms:
-            block = self._shifted(term, signals, model.shift_s, lead=False, delay=delay)[index]
-            if model.lag_s > 0 and term.lagged:
-                block = block + model.lag_s * self._shifted(term, signals, model.shift_s,
-                                                            lead=True, delay=delay)[index]
-            blocks.append(block)
-        return np.hstack(blocks)
+
+        def block(term: Term, lead: bool) -> FloatArray:
+            return self._shifted(term, signals, model.shift_s, lead, delay=model.friction_delay)
+
+        return _assemble(model, index, block)
 
     def band_limited(self, model: Model, signals: Signals, rows: IndexArray,
                      cutoff_hz: float) -> tuple[FloatArray, FloatArray]:
@@ -437,17 +444,10 @@ class Designer:
                                                            delay=delay))
             return self._band_cache[key]
 
-        blocks = []
-        for term in model.terms:
-            columns = block(term, False)[rows]
-            if model.lag_s > 0 and term.lagged:
-                columns = columns + model.lag_s * block(term, True)[rows]
-            blocks.append(columns)
         target_key = (id(signals), "effort", False, 0.0, cutoff_hz)
         if target_key not in self._band_cache:
             self._band_cache[target_key] = band(signals.effort_filtered[:, None])[:, 0]
-        matrix = np.hstack(blocks) if blocks else np.zeros((len(rows), 0))
-        return matrix, self._band_cache[target_key][rows]
+        return _assemble(model, rows, block), self._band_cache[target_key][rows]
 
     def fit(self, model: Model, signals: Signals, rows: IndexArray) -> Fit:
         """Least squares on ``rows`` with covariance ``σ²(ΦᵀΦ)⁻¹``.

@@ -271,7 +271,7 @@ def prepare(recording: Recording, *, cutoff_hz: float | None = None) -> Signals:
     velocity, acceleration = derivatives(smooth, step_s=period_s, segments=segments)
 
     margin = max(3, math.ceil(2.0 * fs_hz / cutoff_hz))
-    valid = ~in_gap & ~_dilate(saturated, 2)
+    valid = ~in_gap & ~dilate(saturated, 2)
     for start, stop in segments:
         valid[start : min(stop, start + margin)] = False
         valid[max(start, stop - margin) : stop] = False
@@ -312,7 +312,8 @@ def _segments(in_gap: BoolArray) -> tuple[tuple[int, int], ...]:
     return tuple((int(a), int(b)) for a, b in zip(starts, stops, strict=True))
 
 
-def _dilate(mask: BoolArray, width: int) -> BoolArray:
+def dilate(mask: BoolArray, width: int) -> BoolArray:
+    """``mask`` widened by ``width`` samples on each side."""
     if not mask.any():
         return mask
     kernel = np.ones(2 * width + 1)
@@ -339,9 +340,9 @@ def _saturation_mask(effort: FloatArray) -> BoolArray:
         if level <= 0.0:
             continue
         near = values >= level - 3.0 * noise
-        runs = sorted((r for r in _runs(near) if r[1] - r[0] >= 5), key=lambda r: r[0] - r[1])
+        long = sorted((r for r in runs(near) if r[1] - r[0] >= 5), key=lambda r: r[0] - r[1])
         plateaus.extend(
-            (start, stop) for start, stop in runs[:20] if _is_plateau(values[start:stop], noise)
+            (start, stop) for start, stop in long[:20] if _is_plateau(values[start:stop], noise)
         )
     if len(plateaus) >= 2:  # a clip value is hit repeatedly; one flat peak is not a clip
         for start, stop in plateaus:
@@ -359,7 +360,8 @@ def _is_plateau(values: FloatArray, noise: float) -> bool:
     return spread == 0.0 or float(np.sum((values - fitted) ** 2)) > 0.5 * spread
 
 
-def _runs(mask: BoolArray) -> list[tuple[int, int]]:
+def runs(mask: BoolArray) -> list[tuple[int, int]]:
+    """``(start, stop)`` of every run of True in ``mask``."""
     edges = np.diff(np.concatenate(([0], mask.astype(np.int8), [0])))
     return list(zip(np.flatnonzero(edges == 1).tolist(), np.flatnonzero(edges == -1).tolist(),
                     strict=True))
