@@ -52,8 +52,10 @@ ORDER_LIMITS = PursuitLimits(
 )
 #: Effects whose searched parameters are kept from the round they were first searched in
 #: (the harmonic orders are searched again: the weight of K_t ripple is the current model;
-#: so are the lag and its lead, which an effect missing from the model biases).
-REUSABLE = frozenset({"stribeck", "cable_spring", "two_mass"})
+#: so are the lag and its lead, which an effect missing from the model biases, and the
+#: spring's hysteresis loop: one kept from a round before the lag, there soaking up the
+#: friction's switching, went negative beside it and the spring was rejected as implausible).
+REUSABLE = frozenset({"stribeck", "two_mass"})
 ROTARY_ONLY = frozenset({"cogging", "kt_ripple", "gravity"})
 #: BIC margin a Dahl loop must win by over the spring alone ("very strong", Kass–Raftery):
 #: the loop state is close to sgn(ω) and otherwise soaks up friction misfit.
