@@ -44,6 +44,7 @@ from hil.diagnose.effects import (
     propose,
     search_shift,
 )
+from hil.diagnose.lag import moving_rows
 from hil.diagnose.model import Designer, Fit, IndexArray, Model, Term, fit_percent, rms, solve
 from hil.diagnose.ripple import estimation_data
 from hil.diagnose.signals import Signals
@@ -315,7 +316,10 @@ class Evaluator:
         fits them differently on the two sides of a cut. The coefficients are inconsistent
         when, on some cut, their difference is significant (χ² on the effect's
         coefficients, at :data:`PERIODIC_ALPHA` over the number of cuts) and at least
-        :data:`PERIODIC_MISMATCH` of their mean size.
+        :data:`PERIODIC_MISMATCH` of their mean size. Cogging and K_t ripple are compared
+        on the rows away from sticking (:func:`~hil.diagnose.lag.moving_rows`): while the
+        axis sticks friction holds them with the rest, and the sticking misfit, which
+        recurs at the same angles (a sine's turning points), splits their halves.
 
         Parameters
         ----------
@@ -335,6 +339,8 @@ class Evaluator:
             labels = labels[:2]
         if not labels:
             return True
+        if effect in ("cogging", "kt_ripple"):  # stuck, friction holds them: misfit only
+            rows = moving_rows(signals, rows)
         if effect == "kt_ripple":  # the rows its coefficients come from (ripple.py)
             matrix, target, rows = estimation_data(self.designer, fit.model, signals, rows)
         else:
