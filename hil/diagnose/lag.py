@@ -14,9 +14,9 @@ regressors' noise covariance ``Σ`` is taken off the normal matrix, ``θ = (Φ�
 ``RSS = yᵀy − θᵀΦᵀy``). ``Σ`` comes from re-quantising the position, drawn through its
 changes of level and low-passed, with the recording's own step at :data:`QUANT_PHASES`
 offsets of the grid: the same slow-motion correlation and fast-motion whiteness as the
-encoder's error, through the same filters and derivatives as the regressors. Only the columns linear in the motion (inertia,
-viscous friction, a two-mass load) carry it. Without a quantisation step (continuous or
-resampled positions) the RSS is the plain one.
+encoder's error, through the same filters and derivatives as the regressors. Only the
+columns linear in the motion (inertia, viscous friction, a two-mass load) carry it.
+Without a quantisation step (continuous or resampled positions) the RSS is the plain one.
 
 Every evaluation uses Gram matrices (``AᵀA``, ``AᵀB``, ``BᵀB`` of the columns ``A`` and
 their leads ``B`` at one ``δ``), summed per group of interleaved blocks so that the
