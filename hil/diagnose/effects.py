@@ -602,10 +602,6 @@ def _refine_orders(ctx: Context, effect: str, found: tuple[int, ...],
     """
     model = ctx.current.model
     designer, signals = ctx.designer, ctx.signals
-
-    def design(candidate: Model) -> FloatArray:
-        return designer.design(candidate, signals, ctx.rows)
-
     if effect == "kt_ripple":  # where its coefficients are estimated (ripple.py)
         # the rows of the strongest order (a weak low one would take every row)
         lowest = max(1, found[0] - ORDER_REFINE_SPAN)
@@ -621,6 +617,9 @@ def _refine_orders(ctx: Context, effect: str, found: tuple[int, ...],
     else:
         n_eff = ctx.rows.size * min(1.0, signals.independence * signals.decimation)
         q, residual = ctx.basis()
+
+        def design(candidate: Model) -> FloatArray:
+            return designer.design(candidate, signals, ctx.rows)
     projected: dict[int, FloatArray] = {}
 
     def block(k: int) -> FloatArray:

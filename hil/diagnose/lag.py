@@ -39,9 +39,9 @@ from hil.diagnose.model import (
     Model,
     Term,
     fractional_shift,
-    friction_direction,
+    moving_rows,
 )
-from hil.diagnose.signals import Signals, derivatives, dilate, runs
+from hil.diagnose.signals import Signals, derivatives
 from hil.identify.quantisation import quantisation_step
 
 FloatArray = NDArray[np.float64]
@@ -311,45 +311,6 @@ class LagProblem:
 
 #: Friction delays tried with the lag, sample periods (:attr:`Model.friction_delay`).
 FRICTION_DELAYS = (0.0, 0.25, 0.5, 0.75, 1.0)
-#: A standstill (velocity in the standstill band) lasting at least this many samples is
-#: sticking; shorter ones are a reversal passing through the band.
-MIN_STICKING_SAMPLES = 3
-#: The lag is searched on rows at least this part of the rows (else on every row).
-MIN_MOVING_SHARE = 0.5
-
-
-def moving_rows(signals: Signals, rows: IndexArray) -> IndexArray:
-    """``rows`` away from where the axis sticks: the rows the lag is searched on.
-
-    While the axis sticks, friction holds whatever torque is applied, which no friction
-    column expresses (the direction is 0 there): in a recording of this project's
-    simulator with Stribeck friction the stuck rows held 96 % of the residual's sum of
-    squares (the top of the chirp, where the lag's information lies, sticks for over half
-    its samples). Left out: every standstill of at least :data:`MIN_STICKING_SAMPLES`
-    samples and the low-pass's spread of it (the margin around a gap,
-    ``max(3, ⌈2·fs/f_c⌉)`` samples). When fewer than :data:`MIN_MOVING_SHARE` of the rows
-    are left, every row.
-
-    Parameters
-    ----------
-    signals : Signals
-    rows : ndarray of intp
-
-    Returns
-    -------
-    ndarray of intp
-    """
-    still = friction_direction(signals) == 0
-    sticking = np.zeros(len(still), dtype=bool)
-    for start, stop in runs(still):
-        if stop - start >= MIN_STICKING_SAMPLES:
-            sticking[start:stop] = True
-    margin = max(3, math.ceil(2.0 * signals.fs_hz / signals.cutoff_hz))
-    near = dilate(sticking, margin)
-    moving = rows[~near[rows]]
-    return moving if moving.size >= MIN_MOVING_SHARE * rows.size else rows
-
-
 def search_lag(designer: Designer, signals: Signals, rows: IndexArray, model: Model) -> Model:
     """``model`` with the current-loop lag, effort lead and friction delay that fit best.
 

@@ -17,7 +17,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 from numpy.typing import NDArray
 
-from hil.diagnose.signals import Signals
+from hil.diagnose.signals import Signals, dilate, runs
 from hil.errors import IdentificationError
 from hil.identify.kinematics import zero_phase_lowpass
 
@@ -625,6 +625,46 @@ def friction_direction(signals: Signals) -> FloatArray:
     out = np.sign(velocity)
     out[np.abs(velocity) <= band] = 0.0
     return out
+
+
+#: A standstill (velocity in the standstill band) lasting at least this many samples is
+#: sticking; shorter ones are a reversal passing through the band.
+MIN_STICKING_SAMPLES = 3
+#: :func:`moving_rows` keeps at least this part of the rows (else every row).
+MIN_MOVING_SHARE = 0.5
+
+
+def moving_rows(signals: Signals, rows: IndexArray) -> IndexArray:
+    """``rows`` away from where the axis sticks (the lag's search, the halves test of
+    cogging and K_t ripple).
+
+    While the axis sticks, friction holds whatever torque is applied, which no friction
+    column expresses (the direction is 0 there): in a recording of this project's
+    simulator with Stribeck friction the stuck rows held 96 % of the residual's sum of
+    squares (the top of the chirp, where the lag's information lies, sticks for over half
+    its samples). Left out: every standstill of at least :data:`MIN_STICKING_SAMPLES`
+    samples and the low-pass's spread of it (the margin around a gap,
+    ``max(3, ⌈2·fs/f_c⌉)`` samples). When fewer than :data:`MIN_MOVING_SHARE` of the rows
+    are left, every row.
+
+    Parameters
+    ----------
+    signals : Signals
+    rows : ndarray of intp
+
+    Returns
+    -------
+    ndarray of intp
+    """
+    still = friction_direction(signals) == 0
+    sticking = np.zeros(len(still), dtype=bool)
+    for start, stop in runs(still):
+        if stop - start >= MIN_STICKING_SAMPLES:
+            sticking[start:stop] = True
+    margin = max(3, math.ceil(2.0 * signals.fs_hz / signals.cutoff_hz))
+    near = dilate(sticking, margin)
+    moving = rows[~near[rows]]
+    return moving if moving.size >= MIN_MOVING_SHARE * rows.size else rows
 
 
 def base_terms() -> tuple[Term, ...]:

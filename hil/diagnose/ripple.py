@@ -90,28 +90,6 @@ def orders_of(model: Model) -> tuple[int, ...]:
     return tuple(int(label.removeprefix("kt_sin")) for label in term.labels[::2])
 
 
-def sweep_rows_of(fit: Fit, signals: Signals, rows: IndexArray) -> IndexArray:
-    """:func:`sweep_rows` for the ``kt_ripple`` term of ``fit``.
-
-    Parameters
-    ----------
-    fit : Fit
-        A model that holds a ``kt_ripple`` term (otherwise ``rows`` is returned).
-    signals : Signals
-    rows : ndarray of intp
-        The training rows ``fit`` was fitted on.
-
-    Returns
-    -------
-    ndarray of intp
-        The rows from which the ripple's parameters are estimated.
-    """
-    orders = orders_of(fit.model)
-    if not orders:
-        return rows
-    return sweep_rows(signals, rows, min(orders))
-
-
 def band_hz(signals: Signals, rows: IndexArray, orders: tuple[int, ...]) -> float:
     """Cutoff of the second low-pass of the ripple's rows.
 

@@ -44,8 +44,17 @@ from hil.diagnose.effects import (
     propose,
     search_shift,
 )
-from hil.diagnose.lag import moving_rows
-from hil.diagnose.model import Designer, Fit, IndexArray, Model, Term, fit_percent, rms, solve
+from hil.diagnose.model import (
+    Designer,
+    Fit,
+    IndexArray,
+    Model,
+    Term,
+    fit_percent,
+    moving_rows,
+    rms,
+    solve,
+)
 from hil.diagnose.ripple import estimation_data
 from hil.diagnose.signals import Signals
 
@@ -317,7 +326,7 @@ class Evaluator:
         when, on some cut, their difference is significant (χ² on the effect's
         coefficients, at :data:`PERIODIC_ALPHA` over the number of cuts) and at least
         :data:`PERIODIC_MISMATCH` of their mean size. Cogging and K_t ripple are compared
-        on the rows away from sticking (:func:`~hil.diagnose.lag.moving_rows`): while the
+        on the rows away from sticking (:func:`~hil.diagnose.model.moving_rows`): while the
         axis sticks friction holds them with the rest, and the sticking misfit, which
         recurs at the same angles (a sine's turning points), splits their halves.
 
@@ -335,12 +344,11 @@ class Evaluator:
         signals, rows = self.train.signals, self.train.rows
         labels = tuple(label for term in fit.model.terms if term.effect == effect
                        for label in term.labels)
-        if effect in ("cogging", "kt_ripple"):  # the strongest order (taken first) carries it
-            labels = labels[:2]
+        if effect in ("cogging", "kt_ripple"):
+            labels = labels[:2]  # the strongest order (taken first) carries it
+            rows = moving_rows(signals, rows)  # stuck, friction holds them: misfit only
         if not labels:
             return True
-        if effect in ("cogging", "kt_ripple"):  # stuck, friction holds them: misfit only
-            rows = moving_rows(signals, rows)
         if effect == "kt_ripple":  # the rows its coefficients come from (ripple.py)
             matrix, target, rows = estimation_data(self.designer, fit.model, signals, rows)
         else:

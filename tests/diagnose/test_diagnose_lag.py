@@ -7,13 +7,14 @@ from dataclasses import replace
 
 import numpy as np
 
-from hil.diagnose.lag import moving_rows, quantisation_noise, through_level_changes
+from hil.diagnose.lag import quantisation_noise, through_level_changes
 from hil.diagnose.model import (
     Designer,
     Model,
     base_terms,
     fractional_shift,
     friction_direction,
+    moving_rows,
 )
 from hil.diagnose.signals import prepare
 from hil.recording import Recording
