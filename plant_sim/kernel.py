@@ -144,7 +144,10 @@ def run_kernel(
     fc = params[P_VEL_FILTER_HZ]
     filter_gain = 1.0 if fc <= 0.0 else 1.0 - math.exp(-2.0 * math.pi * fc * dt_s)
     hyst_nm = params[P_HYST_NM]
-    hyst_rate = hyst_nm / params[P_HYST_ANGLE]
+    # the loop's relaxation rate per radian (no division by hyst_nm: a subnormal half
+    # width under fastmath's reciprocal overflowed to inf and froze the axis)
+    inv_hyst_angle = 1.0 / params[P_HYST_ANGLE]
+    hyst_rate = hyst_nm * inv_hyst_angle
     ts = max(params[P_TS], params[P_TC_POS], params[P_TC_NEG])
     inv_vs = 1.0 / params[P_VS]
     inv_j_m = 1.0 / j_m
@@ -228,7 +231,7 @@ def run_kernel(
                 t_load += mge * math.cos(theta_out + grav_phase)
             t_load += params[P_K_CABLE] * (theta_out - params[P_CABLE_ZERO])
             if hyst_nm > 0.0:
-                hyst += h * hyst_rate * (omega_out - abs(omega_out) * hyst / hyst_nm)
+                hyst += h * (hyst_rate * omega_out - abs(omega_out) * hyst * inv_hyst_angle)
                 t_load += hyst
             if two_mass:
                 t_shaft = k_s * (theta_m - theta_l) + c_s * (omega_m - omega_l)

@@ -171,3 +171,21 @@ def test_at_constant_speed_the_encoder_moves_at_the_speed_friction_sees(
         Mode.VELOCITY, np.full(40000, speed_rad_s))
     rate = (trace.position_rad[-1] - trace.position_rad[20000]) / (19999 / 4000.0)
     assert rate == pytest.approx(speed_rad_s, rel=1e-3)
+
+
+@pytest.mark.parametrize("hysteresis_nm", [5e-324, 2.2e-309, 1e-300])
+def test_a_vanishing_cable_hysteresis_moves_the_axis_as_none_does(
+    hysteresis_nm: float,
+) -> None:
+    """The Dahl update divided by the loop's half width; under fastmath a subnormal width's
+    reciprocal overflowed to inf, the hysteresis torque became NaN and the axis stood still
+    (found by Hypothesis drawing h = 2.2e-309 in the gravity/cable test)."""
+    profile = load_profile()
+    assert profile.plant is not None
+    command = np.concatenate((np.full(2000, 0.3), np.full(2000, -0.3)))
+    traces = [
+        Plant(dataclasses.replace(profile.plant, cable_hysteresis_nm=h),
+              firmware=profile.firmware, fs_hz=2000.0, seed=1).run(Mode.VELOCITY, command)
+        for h in (0.0, hysteresis_nm)
+    ]
+    np.testing.assert_allclose(traces[1].position_rad, traces[0].position_rad, atol=1e-9)
