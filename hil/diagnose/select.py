@@ -55,7 +55,7 @@ from hil.diagnose.model import (
     rms,
     solve,
 )
-from hil.diagnose.ripple import estimation_data
+from hil.diagnose.ripple import estimation_data, two_stage
 from hil.diagnose.signals import Signals
 
 log = logging.getLogger(__name__)
@@ -266,8 +266,10 @@ class Evaluator:
         """
         key = (part, *model_key(model))
         if key not in self._fits:
-            self._fits[key] = self.designer.fit(
-                model, self.train.signals, self.train.rows if rows is None else rows)
+            rows = self.train.rows if rows is None else rows
+            self._fits[key] = two_stage(self.designer,
+                                        self.designer.fit(model, self.train.signals, rows),
+                                        self.train.signals, rows)
         return self._fits[key]
 
     def heldout(self, fit: Fit) -> tuple[float, float]:

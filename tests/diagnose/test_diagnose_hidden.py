@@ -55,7 +55,8 @@ def test_hidden_effect_is_named_and_recovered(effect: str, inertia: float, visco
                                               order: int, seed: int) -> None:
     hidden = plant(inertia, viscous, coulomb, effect, size, detail, order)
     data = report(diagnose(record(hidden.params, seed=seed)))
-    names = [cause["name"] for cause in data["causes"]]
+    # a part of the cause before it (an asymmetric friction's constant) is not a cause
+    names = [cause["name"] for cause in data["causes"] if "part_of" not in cause]
     assert names == [effect], names
     cause = data["causes"][0]
     assert hidden.key is not None
@@ -126,6 +127,35 @@ def test_hidden_lag_is_recovered_inside_its_interval(inertia: float, viscous: fl
     assert math.isclose(lag, hidden.truth, rel_tol=0.15), (lag, hidden.truth)
     low, high = cause["uncertainty"]["time_constant_s"]["ci95"]
     assert low <= hidden.truth <= high, (low, high, hidden.truth)
+
+
+def test_no_ripple_is_named_beside_a_strong_asymmetric_friction() -> None:
+    """Was a 0.17 % K_t ripple (orders 41 and 16, held-out gain 1.2 %) beside a viscous
+    friction 4.5 × stronger moving negative: the selection judged the ripple on the joint fit,
+    where its columns, constants wherever the angle stands still (the chirp), took up the
+    chirp's misfit (the encoder's quantisation in the inertia column). Now judged in two
+    stages, the ripple from the rows where the angle sweeps (hil/diagnose/ripple.py)."""
+    # Hypothesis's draw to the last digit: rounded to 5 digits the ripple is not named
+    hidden = plant(0.0047748791596803584, 0.0035776002529962366, 0.017344883015344034,
+                   "asymmetric_friction", 0.9901311281201386, 0.02768748407926403, 28)
+    data = report(diagnose(record(hidden.params, seed=342)))
+    causes = [cause for cause in data["causes"] if "part_of" not in cause]
+    assert [cause["name"] for cause in causes] == ["asymmetric_friction"]
+    parameters = causes[0]["parameters"]
+    assert math.isclose(parameters["viscous_neg"], hidden.truth, rel_tol=0.15)
+    assert math.isclose(parameters["viscous_pos"], 0.0035776002529962366, rel_tol=0.15)
+
+
+@pytest.mark.xfail(strict=True, reason="sticking is not modelled (docs/diagnose.md, Limits)")
+def test_no_resonance_is_named_beside_the_strongest_stribeck_friction() -> None:
+    """A known limit. T_s = 2·T_c with v_s = 0.04 rad/s and a large inertia: the axis
+    stick-slips through the slow steps and most of the chirp (70–99 % of its rows stuck),
+    the Stribeck model leaves 12 mN·m RMS, and a 108 Hz resonance (ζ 0.1, load 11 %) takes
+    1.7 % of it (0.7 % with an ideal encoder: under the 1 % the rule asks)."""
+    hidden = plant(0.005120582598536086, 0.005404522172518298, 0.029761375156968424,
+                   "stribeck", 0.99999, 0.9333236470186563, 33)
+    data = report(diagnose(record(hidden.params, seed=3552)))
+    assert [cause["name"] for cause in data["causes"]] == ["stribeck"]
 
 
 #: Lag pairs of ``bench_diagnose --pairs --seed 7`` the lag came out low in, and why:
