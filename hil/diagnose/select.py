@@ -22,7 +22,10 @@ rounds met the effects; the causes come out ranked by the held-out RMS their rem
 each gain measured against the model with the causes ranked before it.
 
 A fourth condition guards against effects outside the library: a known effect has one set
-of parameters over the whole travel (:meth:`Evaluator.consistent`).
+of parameters over the whole travel (:meth:`Evaluator.consistent`). Cogging and K_t ripple
+must also gain 1 % on the held-out rows where the axis moves, fitted on the training rows
+where it moves (:meth:`Evaluator.moving_gain`): while it sticks, friction holds any torque
+of the angle. Every fit with K_t ripple is made in two stages (:func:`two_stage`).
 """
 
 from __future__ import annotations
@@ -84,6 +87,10 @@ PERIODIC_MISMATCH = 0.5
 #: row its halves differ on true ripple (example_07: by 57 %), its column being largest
 #: where the torque is, in the chirp, at one angle in one half (docs/diagnose.md).
 NOT_HALVED = frozenset({"current_lag"})
+#: Effects whose held-out gain must also hold away from sticking (:meth:`Evaluator.moving_gain`):
+#: while the axis sticks friction holds any torque of the angle, and the sticking misfit,
+#: which recurs at the same angles, is what their columns took up beside Stribeck friction.
+MOVING_GAIN = frozenset({"cogging", "kt_ripple"})
 
 KEY_LABELS = {
     "offset": ("offset",),
@@ -102,7 +109,9 @@ DECISION_RULE = {
         "BIC(model) <= -10 on the training data, the held-out residual RMS drops by >= 1 %, "
         "the 99 % confidence region of its new parameters excludes zero, it is physically "
         "plausible and its coefficients agree on both halves of the travel (offset, gravity, "
-        "spring and Stribeck friction also in its middle and at its ends); the causes are "
+        "spring and Stribeck friction also in its middle and at its ends); cogging and K_t "
+        "ripple also gain >= 1 % fitted and judged on the rows where the axis moves (not "
+        "sticking); the causes are "
         "the combination of screened effects in which each is significant against the "
         "others, with the least held-out RMS (within 1 %: the fewest parameters); ranked by "
         "the held-out RMS their removal adds, each gain against the causes ranked before it"
@@ -272,12 +281,14 @@ class Evaluator:
                                         self.train.signals, rows)
         return self._fits[key]
 
-    def heldout(self, fit: Fit) -> tuple[float, float]:
+    def heldout(self, fit: Fit, rows: IndexArray | None = None) -> tuple[float, float]:
         """Residual RMS and fit % on the held-out rows.
 
         Parameters
         ----------
         fit : Fit
+        rows : ndarray of intp, optional
+            A part of the held-out rows (default: all of them).
 
         Returns
         -------
@@ -285,8 +296,9 @@ class Evaluator:
             RMS of filtered effort minus prediction (N·m, or N on a linear axis) and
             :func:`hil.diagnose.model.fit_percent` (%).
         """
-        target = self.test.signals.effort_filtered[self.test.rows]
-        prediction = self.designer.predict(fit, self.test.signals)[self.test.rows]
+        rows = self.test.rows if rows is None else rows
+        target = self.test.signals.effort_filtered[rows]
+        prediction = self.designer.predict(fit, self.test.signals)[rows]
         return rms(target - prediction), fit_percent(target, prediction)
 
     def lag_std(self, fit: Fit) -> float:
@@ -370,6 +382,31 @@ class Evaluator:
                 return False
         return True
 
+    def moving_gain(self, model: Model, current: Model) -> float:
+        """The held-out RMS reduction of ``model`` over ``current`` away from sticking.
+
+        Both are fitted on the training rows where the axis moves and judged on the
+        held-out rows where it moves (:func:`~hil.diagnose.model.moving_rows`).
+
+        Parameters
+        ----------
+        model : Model
+            ``current`` extended with an effect.
+        current : Model
+
+        Returns
+        -------
+        float
+            ``1 − rms_after / rms_before`` (0 when too few rows move to fit).
+        """
+        train = moving_rows(self.train.signals, self.train.rows)
+        test = moving_rows(self.test.signals, self.test.rows)
+        if train.size <= 4 * len(model.labels) or test.size == 0:
+            return 0.0
+        before, _ = self.heldout(self.fit(current, train, "moving"), test)
+        after, _ = self.heldout(self.fit(model, train, "moving"), test)
+        return 1.0 - after / before if before > 0 else 0.0
+
     @staticmethod
     def _same_on_both_sides(fit: Fit, labels: tuple[str, ...], matrix: FloatArray,
                             target: FloatArray, part: BoolArray, tests: int) -> bool:
@@ -437,6 +474,10 @@ class Evaluator:
         plausible_fit = plausible(effect, fit, self.train.signals.fs_hz, self.band_hz)
         if plausible_fit and effect not in NOT_HALVED:
             plausible_fit = self.consistent(effect, fit)
+        if plausible_fit and effect in MOVING_GAIN:
+            moving = self.moving_gain(model, current.model)
+            log.debug("%s away from sticking: held-out gain %.4f", effect, moving)
+            plausible_fit = moving >= MIN_HELDOUT_RMS_REDUCTION
         gain = Gain(
             rms_before_nm=rms_before,
             rms_after_nm=rms_after,
