@@ -31,6 +31,7 @@ from hil.identify.quantisation import quantisation_step
 FloatArray = NDArray[np.float64]
 BLOCKS = 8  # sub-windows per matched range, for the Type A scatter
 STALL_FRACTION = 0.25  # a velocity window below this fraction of the command has stuck
+MIN_STEPS_PER_BLOCK = 10  # encoder steps a sub-window spans at least (its speed to ~10 %)
 JUMP_CV = 0.5  # coefficient of variation of window velocities above which motion is jerky
 RESOLVED_FRACTION = 0.6  # a clean speed at or below this fraction of v_s is required
 
@@ -156,8 +157,9 @@ class SpeedPoint:
         Width of the position range both passes covered after settling (rad).
     stick_slip : bool
         Flagged as stick-slip and left out of the fit: a velocity window stalled, the
-        velocity's coefficient of variation reached ``JUMP_CV``, or fewer than half the
-        sub-windows hold samples of both passes.
+        velocity's coefficient of variation reached ``JUMP_CV``, fewer than half the
+        sub-windows hold samples of both passes, or the passes' common range spans fewer
+        than ``MIN_STEPS_PER_BLOCK`` encoder steps per sub-window (its speed unresolved).
     velocity_cv : float
         Coefficient of variation of the short-window velocities, the larger of the two
         passes (``inf`` where a window stalled or none fit).
@@ -262,7 +264,8 @@ def speed_point(
     -------
     SpeedPoint
         Flagged as stick-slip, with NaN friction, when too little of a step settled or no
-        sub-window holds samples of both passes.
+        sub-window holds samples of both passes; flagged (friction kept) when the common
+        range is too short to resolve the speed (see :class:`SpeedPoint`).
     """
     window_s = max(0.02, counts_per_window * resolution_rad / speed_rad_s)
     ranges, cvs = [], []
@@ -295,7 +298,10 @@ def speed_point(
             sums.append((means[0] + means[1]) / 2)
             speeds += rates
     cv = max(cvs)
-    stick = not (high > low and len(diffs) >= BLOCKS // 2 and cv < JUMP_CV)
+    # each block's speed is its span over its time: a block inside one encoder step has none
+    # (passes overlapping by 10 steps, a weak loop at 0.02 rad/s, measured 0 rad/s)
+    resolved = high - low >= MIN_STEPS_PER_BLOCK * BLOCKS * resolution_rad
+    stick = not (resolved and len(diffs) >= BLOCKS // 2 and cv < JUMP_CV)
     if not diffs:
         return SpeedPoint(speed_rad_s=speed_rad_s, friction_nm=math.nan, friction_u_nm=math.inf,
                           load_nm=math.nan, matched_rad=0.0, stick_slip=True, velocity_cv=cv)
@@ -367,8 +373,8 @@ def fit_stribeck(points: Sequence[SpeedPoint]) -> StribeckResult:
     Raises
     ------
     IdentificationError
-        Fewer than six clean speeds, or the lowest clean speed above
-        ``RESOLVED_FRACTION`` × the fitted ``v_s``.
+        Fewer than six clean speeds, a clean speed not above zero, or the lowest clean
+        speed above ``RESOLVED_FRACTION`` × the fitted ``v_s``.
     """
     clean = [p for p in points if not p.stick_slip and math.isfinite(p.friction_nm)]
     if len(clean) < 6:
@@ -377,6 +383,9 @@ def fit_stribeck(points: Sequence[SpeedPoint]) -> StribeckResult:
             "need six to fit T_c, T_s, v_s and B"
         )
     v = np.array([p.speed_rad_s for p in clean])
+    if not np.all(v > 0):
+        raise IdentificationError(
+            f"staircase speeds must be > 0 rad/s, got {[round(float(x), 6) for x in v]}")
     f = np.array([p.friction_nm for p in clean])
     u = np.array([p.friction_u_nm for p in clean])
     u = np.maximum(u, 0.1 * float(np.median(u)))  # no single point may dominate

@@ -220,3 +220,25 @@ def test_cross_check_adds_the_cable_loop_to_the_sines_coulomb(tmp_path: Path) ->
     assert with_loop["coulomb_nm"]["normalised_error"] < 0.2  # type: ignore[index]
     assert without["coulomb_nm"]["sine"] == pytest.approx(0.0200)  # type: ignore[index]
     assert without["coulomb_nm"]["normalised_error"] > 0.4  # type: ignore[index]
+
+
+def test_passes_overlapping_by_a_few_encoder_steps_are_not_a_clean_point() -> None:
+    """A weak velocity loop (half the demo's gains, Hypothesis's firmware draw) left the
+    forward and backward 0.02 rad/s steps sharing 10 encoder steps: each sub-window then lay
+    inside one step, its speed came out 0 rad/s, and the fit's log(0) raised ValueError."""
+    fs, v, n, step = 4000.0, 0.02, 4000, 1e-5
+    load = lambda p: 0.0 * p  # noqa: E731
+    fwd = _ramp(v, 1.0, 0.3, n, fs, load, 0.025)
+    bwd = _ramp(v, -1.0, 0.3 + 0.2 * v + 10 * step, n, fs, load, 0.025)  # settled: 10 steps
+    fwd, bwd = ((t, np.round(p / step) * step, q) for t, p, q in (fwd, bwd))
+    point = speed_point(fwd, bwd, speed_rad_s=v, settle_s=0.1, counts_per_window=20,
+                        resolution_rad=step)
+    assert point.stick_slip
+
+
+def test_fit_refuses_a_clean_speed_of_zero_with_a_clear_error() -> None:
+    points = _points(np.array(SETTINGS["speeds_rad_s"]), 0.0, 0)
+    points[0] = SpeedPoint(**{**{f: getattr(points[0], f) for f in SpeedPoint.__slots__},
+                              "speed_rad_s": 0.0})
+    with pytest.raises(IdentificationError, match="speeds must be > 0"):
+        fit_stribeck(points)
