@@ -62,7 +62,10 @@ ROTARY_ONLY = frozenset({"cogging", "kt_ripple", "gravity"})
 LOOP_EVIDENCE_BIC = 10.0
 #: Dahl hysteresis: angle over which the cable's friction loop saturates (rad).
 HYSTERESIS_ANGLES_RAD = (0.005, 0.02, 0.08)
-TWO_MASS_DAMPING = (0.02, 0.05, 0.1)
+#: Damping ratios searched for a shaft: up to well-damped filters, which a resonance is not
+#: (see :data:`hil.diagnose.select.MAX_RESONANCE_DAMPING`), so that a smooth fall of the
+#: effective inertia with frequency is fitted as one, not as the broadest resonance offered.
+TWO_MASS_DAMPING = (0.02, 0.05, 0.1, 0.2, 0.4, 0.7)
 #: A resonance is resolved when it lies below this fraction of the analysis bandwidth.
 TWO_MASS_BAND = 0.6
 #: Lowest antiresonance searched, as a fraction of the analysis bandwidth (10 Hz at the

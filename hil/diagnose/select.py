@@ -75,6 +75,11 @@ MAX_CAUSES = 5
 MIN_LAG_SAMPLES = 1.0
 #: A structural resonance is named only when the load is at least this part of the inertia.
 MIN_LOAD_FRACTION = 0.05
+#: ...and its damping ratio at most this (a peak of Q ≥ 2.5): a better-damped shaft filter
+#: is a smooth fall of the effective inertia over a decade of frequency, which sticking and
+#: the encoder's quantisation make too (beside Stribeck friction, offered ζ up to 0.7, the
+#: spurious resonances took 0.7; a gimbal's structural modes have ζ of 0.01-0.1).
+MAX_RESONANCE_DAMPING = 0.2
 
 #: An effect's coefficients fitted on the two halves of the travel differ significantly
 #: at this level...
@@ -577,7 +582,7 @@ def plausible(effect: str, fit: Fit, fs_hz: float, band_hz: float) -> bool:
         term = fit.model.term("two_mass")
         if term is None or not (
             MIN_LOAD_FRACTION * values["inertia"] < values["load_inertia"] < values["inertia"]
-        ):
+        ) or term.nonlinear["damping_ratio"] > MAX_RESONANCE_DAMPING:
             return False
         ratio = values["load_inertia"] / (values["inertia"] - values["load_inertia"])
         resonance = term.nonlinear["antiresonance_hz"] * math.sqrt(1 + ratio)
