@@ -463,7 +463,13 @@ def _two_mass(ctx: Context) -> Model | None:
         for f in grid
     ]
     damping = min(costs)[1]
-    _, best = _search(ctx, lambda f: _extend(model, two_mass_term(f, damping)), grid)
+    frequency, _ = _search(ctx, lambda f: _extend(model, two_mass_term(f, damping)), grid)
+    # ζ refined between its grid neighbours at that frequency: beside a 4 ms lag and a load
+    # of 85 % a true ζ of 0.03 fitted at the grid's 0.05 put τ −24 % (its interval missing)
+    damping, _ = _search(ctx, lambda d: _extend(model, two_mass_term(frequency, d)),
+                         np.array(TWO_MASS_DAMPING))
+    _, best = _search(ctx, lambda f: _extend(model, two_mass_term(f, damping)),
+                      np.geomspace(frequency / 1.2, frequency * 1.2, 5))
     return best
 
 
