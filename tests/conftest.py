@@ -1,11 +1,14 @@
 """Hypothesis profiles for the project's tests: ``ci`` (default: deterministic, no deadline)
-and ``dev`` (fewer examples), chosen with ``HYPOTHESIS_PROFILE``."""
+and ``dev`` (fewer examples), chosen with ``HYPOTHESIS_PROFILE``; and draws that do not
+depend on which of the project's modules a run has imported."""
 
 from __future__ import annotations
 
 import os
 
 from hypothesis import HealthCheck, settings
+from hypothesis.internal.conjecture import providers
+from hypothesis.internal.constants_ast import Constants
 
 settings.register_profile(
     "ci",
@@ -15,3 +18,11 @@ settings.register_profile(
 )
 settings.register_profile("dev", deadline=None, max_examples=10)
 settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "ci"))
+
+# Hypothesis mixes numbers found in the local modules loaded so far (hil/, plant_sim/, ...)
+# into its draws (hypothesis.internal.conjecture.providers), a pool that grows with every
+# module imported: a test file run alone and the same file in the whole suite drew
+# different units, and a number edited anywhere in the project could move every test's
+# draws. Off: derandomized draws depend on the test's own source and the pinned release.
+_NO_LOCAL_CONSTANTS = Constants()
+providers._get_local_constants = lambda: _NO_LOCAL_CONSTANTS
