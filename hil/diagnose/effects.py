@@ -464,7 +464,7 @@ def _two_mass(ctx: Context) -> Model | None:
     ]
     damping = min(costs)[1]
     frequency, _ = _search(ctx, lambda f: _extend(model, two_mass_term(f, damping)), grid)
-    # ζ refined between its grid neighbours at that frequency: beside a 4 ms lag and a load
+    # ζ refined between its grid neighbours at that frequency: beside a 3.7 ms lag and a load
     # of 85 % a true ζ of 0.03 fitted at the grid's 0.05 put τ −24 % (its interval missing)
     damping, _ = _search(ctx, lambda d: _extend(model, two_mass_term(frequency, d)),
                          np.array(TWO_MASS_DAMPING))

@@ -263,7 +263,8 @@ class Evaluator:
         self._candidates: dict[tuple[object, ...], Candidate] = {}
 
     def fit(self, model: Model, rows: IndexArray | None = None, part: str = "train") -> Fit:
-        """``model`` fitted on the training rows (see :meth:`Designer.fit`), cached.
+        """``model`` fitted on the training rows (see :meth:`Designer.fit`; with K_t ripple in
+        two stages, :func:`~hil.diagnose.ripple.two_stage`), cached.
 
         Parameters
         ----------
