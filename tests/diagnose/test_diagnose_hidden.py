@@ -135,7 +135,7 @@ def test_no_ripple_is_named_beside_a_strong_asymmetric_friction() -> None:
     where its columns, constants wherever the angle stands still (the chirp), took up the
     chirp's misfit (the encoder's quantisation in the inertia column). Now judged in two
     stages, the ripple from the rows where the angle sweeps (hil/diagnose/ripple.py)."""
-    # Hypothesis's draw to the last digit: rounded to 5 digits the ripple is not named
+    # Hypothesis's draw to the last digit: rounded to 5 digits, the old code names no ripple
     hidden = plant(0.0047748791596803584, 0.0035776002529962366, 0.017344883015344034,
                    "asymmetric_friction", 0.9901311281201386, 0.02768748407926403, 28)
     data = report(diagnose(record(hidden.params, seed=342)))

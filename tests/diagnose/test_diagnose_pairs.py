@@ -27,8 +27,8 @@ the eleven that fail at some of this test's draws:
 - cogging + gravity (9/10) with the smallest gravity (0.011 N·m): an asymmetric friction
   and an offset named beside both; cogging + spring (8/10) with the smallest of both: the
   cogging unnamed;
-- K_t ripple beside gravity or a spring (8/10 each): the ripple unnamed, the gravity
-  declared as a spring;
+- K_t ripple beside gravity or a spring (8/10 each): the ripple unnamed (beside gravity,
+  the gravity named as a spring, declared not separable from it);
 - gravity + spring (10/10) with a strong gravity (0.049 N·m) and a large inertia (J
   0.0059): gravity +36 %, declared not separable from an offset only; gravity + lag
   (10/10) with a strong gravity at phase 0.025 rad (its maximum at the middle of the
