@@ -144,11 +144,12 @@ def units(store: Store) -> list[RunSummary]:
 
 
 def history(store: Store, serial: str) -> list[RunSummary]:
-    """Every run of one unit, oldest first."""
+    """Every run of one unit, oldest first (runs started in the same second, which the
+    certificate's start time cannot tell apart, by their attempt number)."""
     query = (
         select(*_summary_columns())
         .where(runs.c.serial == serial)
-        .order_by(runs.c.started_at, runs.c.run_id)
+        .order_by(runs.c.started_at, runs.c.attempt, runs.c.run_id)
     )
     with store.engine.connect() as connection:
         found = [_summary(row) for row in connection.execute(query)]

@@ -104,6 +104,24 @@ def test_the_same_certificate_twice_is_one_run(store_url: str, calibrated: Path)
     store.close()
 
 
+def test_two_runs_started_in_the_same_second_keep_their_order(store_url: str,
+                                                               calibrated: Path) -> None:
+    """The certificate's start time has whole seconds: two simulated runs of one unit
+    started in the same second tied, and the random run ids put the second run first
+    (the outbox test, once in a CI dry run)."""
+    text = (calibrated / SERIAL / "certificate.json").read_text(encoding="utf-8")
+    first = variant(text, serial="TIE-1", index=0, attempt=1,
+                    id="ffffffff-ffff-4fff-bfff-ffffffffffff")
+    second = variant(text, serial="TIE-1", index=0, attempt=2,
+                     id="00000000-0000-4000-8000-000000000000")
+    store = open_store(store_url)
+    for name, certificate in (("first", first), ("second", second)):
+        ingest_text(store, certificate, source=name)
+    order = [run.attempt for run in history(store, "TIE-1")]
+    store.close()
+    assert order == [1, 2]
+
+
 def test_old_certificate_folders_are_ingested_with_their_history(
     store_url: str, calibrated: Path, tmp_path: Path
 ) -> None:
