@@ -635,8 +635,8 @@ MIN_MOVING_SHARE = 0.5
 
 
 def moving_rows(signals: Signals, rows: IndexArray) -> IndexArray:
-    """``rows`` away from where the axis sticks (the lag's search, the halves test of
-    cogging and K_t ripple).
+    """``rows`` away from where the axis sticks (the lag's search; the halves test and the
+    moving-rows gain of cogging and K_t ripple).
 
     While the axis sticks, friction holds whatever torque is applied, which no friction
     column expresses (the direction is 0 there): in a recording of this project's

@@ -261,6 +261,10 @@ class Evaluator:
         self.band_hz = TWO_MASS_BAND * train.signals.cutoff_hz
         self._fits: dict[tuple[object, ...], Fit] = {}
         self._candidates: dict[tuple[object, ...], Candidate] = {}
+        # the rows away from sticking (the halves test and the moving gain of cogging and
+        # K_t ripple); every row when fewer than half move
+        self.train_moving = moving_rows(train.signals, train.rows)
+        self.test_moving = moving_rows(test.signals, test.rows)
 
     def fit(self, model: Model, rows: IndexArray | None = None, part: str = "train") -> Fit:
         """``model`` fitted on the training rows (see :meth:`Designer.fit`; with K_t ripple in
@@ -366,7 +370,7 @@ class Evaluator:
                        for label in term.labels)
         if effect in ("cogging", "kt_ripple"):
             labels = labels[:2]  # the strongest order (taken first) carries it
-            rows = moving_rows(signals, rows)  # stuck, friction holds them: misfit only
+            rows = self.train_moving  # stuck, friction holds them: misfit only
         if not labels:
             return True
         if effect == "kt_ripple":  # the rows its coefficients come from (ripple.py)
@@ -403,14 +407,11 @@ class Evaluator:
         Returns
         -------
         float
-            ``1 − rms_after / rms_before`` (0 when too few rows move to fit).
+            ``1 − rms_after / rms_before``: the held-out gain itself when fewer than half
+            the rows move (:func:`~hil.diagnose.model.moving_rows` keeps them all).
         """
-        train = moving_rows(self.train.signals, self.train.rows)
-        test = moving_rows(self.test.signals, self.test.rows)
-        if train.size <= 4 * len(model.labels) or test.size == 0:
-            return 0.0
-        before, _ = self.heldout(self.fit(current, train, "moving"), test)
-        after, _ = self.heldout(self.fit(model, train, "moving"), test)
+        before, _ = self.heldout(self.fit(current, self.train_moving, "moving"), self.test_moving)
+        after, _ = self.heldout(self.fit(model, self.train_moving, "moving"), self.test_moving)
         return 1.0 - after / before if before > 0 else 0.0
 
     @staticmethod

@@ -136,14 +136,15 @@ def test_no_ripple_is_named_beside_a_strong_asymmetric_friction() -> None:
     chirp's misfit (the encoder's quantisation in the inertia column). Now judged in two
     stages, the ripple from the rows where the angle sweeps (hil/diagnose/ripple.py)."""
     # Hypothesis's draw to the last digit: rounded to 5 digits, the old code names no ripple
-    hidden = plant(0.0047748791596803584, 0.0035776002529962366, 0.017344883015344034,
+    viscous = 0.0035776002529962366
+    hidden = plant(0.0047748791596803584, viscous, 0.017344883015344034,
                    "asymmetric_friction", 0.9901311281201386, 0.02768748407926403, 28)
     data = report(diagnose(record(hidden.params, seed=342)))
     causes = [cause for cause in data["causes"] if "part_of" not in cause]
     assert [cause["name"] for cause in causes] == ["asymmetric_friction"]
     parameters = causes[0]["parameters"]
     assert math.isclose(parameters["viscous_neg"], hidden.truth, rel_tol=0.15)
-    assert math.isclose(parameters["viscous_pos"], 0.0035776002529962366, rel_tol=0.15)
+    assert math.isclose(parameters["viscous_pos"], viscous, rel_tol=0.15)
 
 
 def test_no_resonance_is_named_beside_the_strongest_stribeck_friction() -> None:
