@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import logging
+import os
 import sys
 from collections.abc import Sequence
 from pathlib import Path
@@ -141,11 +142,20 @@ def _calibrate(args: argparse.Namespace) -> int:
     options += ["--store", args.store] if args.store else []
     options += ["--operator", args.operator] if args.operator else []
     options += ["--reference"] if args.reference else []
+    return int(pytest.main([*suite_arguments(), *options, *args.pytest_args]))
+
+
+def suite_arguments() -> list[str]:
+    """pytest's arguments for the installed suite, whatever folder the operator stands in:
+    no configuration file, ``conftest.py`` or cache of the current folder is read or written
+    (a repository's own tests, say, and the test extras they need)."""
+    from hil.plugin import protocols_dir
+
+    suite = str(protocols_dir())
     # the command has imported hil already: pytest cannot rewrite the asserts of the
     # package its plugin comes from (the protocols' asserts carry their own messages)
-    suite = ["-p", "no:cacheprovider", "--pyargs", "gimbal_hil_protocols", "-q",
-             "-W", "ignore::pytest.PytestAssertRewriteWarning"]
-    return int(pytest.main([*suite, *options, *args.pytest_args]))
+    return [suite, "-c", os.devnull, "--rootdir", suite, "--confcutdir", suite,
+            "-p", "no:cacheprovider", "-q", "-W", "ignore::pytest.PytestAssertRewriteWarning"]
 
 
 def _render(args: argparse.Namespace) -> int:

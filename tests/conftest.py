@@ -1,11 +1,14 @@
 """Hypothesis profiles for the project's tests: ``ci`` (default: deterministic, no deadline)
-and ``dev`` (fewer examples), chosen with ``HYPOTHESIS_PROFILE``; and draws that do not
-depend on which of the project's modules a run has imported."""
+and ``dev`` (fewer examples), chosen with ``HYPOTHESIS_PROFILE``; draws that do not
+depend on which of the project's modules a run has imported; and a test run that writes
+nowhere a user keeps results."""
 
 from __future__ import annotations
 
 import os
+import tempfile
 
+import pytest
 from hypothesis import HealthCheck, settings
 from hypothesis.internal.conjecture import providers
 from hypothesis.internal.constants_ast import Constants
@@ -26,3 +29,17 @@ settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "ci"))
 # draws. Off: derandomized draws depend on the test's own source and the pinned release.
 _NO_LOCAL_CONSTANTS = Constants()
 providers._get_local_constants = lambda: _NO_LOCAL_CONSTANTS
+
+
+# The project's own tests decide where they write from nothing of the user's: not the
+# results store or operator their environment names (a station's line database), not the
+# ``certificates`` folder the README's first command fills. The suite's simulated unit
+# goes to a folder of its own, with its own SQLite store, unless --out names one.
+for _name in ("GIMBAL_HIL_STORE", "GIMBAL_HIL_OPERATOR"):
+    os.environ.pop(_name, None)
+
+
+@pytest.hookimpl(tryfirst=True)
+def pytest_configure(config: pytest.Config) -> None:
+    if config.getoption("--out", default=None) == "certificates":  # the option's default
+        config.option.out = tempfile.mkdtemp(prefix="gimbal-hil-tests-")
