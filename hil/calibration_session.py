@@ -44,6 +44,7 @@ CERTIFICATE_KEY = pytest.StashKey[Path]()
 DOCUMENTS_KEY = pytest.StashKey[list[str]]()
 STORE_MESSAGE_KEY = pytest.StashKey[str]()
 STATION_KEY = pytest.StashKey[StationIdentity]()
+REFUSALS_KEY = pytest.StashKey[list[HilError]]()
 PROTOCOL_MARK = "protocol"
 
 
@@ -284,6 +285,8 @@ def pytest_runtest_makereport(
     run = item.config.stash.get(RUN_KEY, None)
     if name is None or run is None:
         return report
+    if report.failed and call.excinfo is not None and isinstance(call.excinfo.value, HilError):
+        return _refused(item, name, call.excinfo.value, report, run)
     if report.failed:
         outcome = Outcome.FAIL if report.when == "call" else Outcome.ERROR
         if call.excinfo is not None and not isinstance(call.excinfo.value, AssertionError):
@@ -295,6 +298,24 @@ def pytest_runtest_makereport(
         run.report_skip(name, f"{item.name}: {reason}")
     elif report.when == "call" and report.passed:
         run.report_protocol(name, Outcome.PASS)
+    return report
+
+
+def _refused(item: pytest.Item, name: str, error: HilError, report: pytest.TestReport,
+             run: CalibrationRun) -> pytest.TestReport:
+    """A protocol the drive, the link or the analysis refused (a :class:`HilError`) says
+    so once, in one line: the first of its tests errors with the message (no traceback, it
+    is no bug) and the certificate records it; the protocol's other results, stopped by the
+    same error, are reported as not measured instead of repeating it."""
+    refusals = item.config.stash.setdefault(REFUSALS_KEY, [])
+    if any(error is seen for seen in refusals):
+        report.outcome = "skipped"
+        report.longrepr = (str(item.path), (item.location[1] or 0) + 1,
+                           f"not measured: protocol {name} stopped (its error is above)")
+        return report
+    refusals.append(error)
+    report.longrepr = f"{name}: {error}"
+    run.report_protocol(name, Outcome.ERROR, str(error))
     return report
 
 
