@@ -319,7 +319,7 @@ def test_a_master_behind_its_setpoint_lead_is_refused_in_one_line() -> None:
     assert "\n" not in message
     assert "held for 60 ms of 5 s" in message
     assert "lead (3 periods)" in message
-    assert "setpoint_lead_periods in bench.toml" in message
+    assert "setpoint_lead_periods in bench.toml (to 8 for pauses like this one)" in message
 
 
 def test_an_emulator_takes_the_station_files_settings(tmp_path: Path,

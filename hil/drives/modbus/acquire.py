@@ -14,6 +14,7 @@ drive only through its :class:`ModbusLink` and a :class:`Feedback` reader.
 
 from __future__ import annotations
 
+import math
 import time
 from dataclasses import dataclass, field
 
@@ -210,12 +211,15 @@ def setpoint_holds(
     if run.setpoint_held_s <= MAX_HELD_FRACTION * excitation.duration_s:
         return None
     lead = station.setpoint_lead_periods
+    # a lead that bridges the longest pause seen would have left no hold
+    bridging = max(lead + 1, math.ceil(round(run.longest_pause_s * excitation.fs_hz, 6)) + 1)
     return DriveCommunicationError(
         f"{where}: '{excitation.name}': the host fell behind the setpoint lead "
         f"({lead} period{'s' if lead > 1 else ''}) and the drive's setpoint held for "
         f"{1000 * run.setpoint_held_s:.0f} ms of {excitation.duration_s:g} s (longest pause "
         f"{run.longest_pause_s:.3f} s): the recording is not the planned excitation; raise "
-        f"setpoint_lead_periods in {station.source} or unload the machine"
+        f"setpoint_lead_periods in {station.source} (to {bridging} for pauses like this one) "
+        f"or unload the machine"
     )
 
 
