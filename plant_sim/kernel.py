@@ -44,8 +44,9 @@ from numba import njit
     P_DELAY,  # firmware: extra control periods between the torque command and the current loop
     P_FEEDFORWARD,  # firmware: 1 adds the torque offset input to the command
     P_COMPENSATION,  # firmware: 1 applies the loaded cogging / K_t ripple table
+    P_LF_DECAY,  # low-frequency shaft disturbance: its first-order filter's decay per period
     N_PARAMS,
-) = range(32)
+) = range(33)
 
 # state vector layout
 (
@@ -59,8 +60,18 @@ from numba import njit
     S_POS_MEAS_PREV,
     S_HYST,
     S_DELAY_INDEX,  # next slot of the command delay line
+    S_DISTURBANCE_LF,  # low-frequency shaft disturbance (N·m), a filtered random walk's state
     N_STATE,
-) = range(11)
+) = range(12)
+
+# rows of the in-loop noise array (one column per control period, drawn by the caller)
+(
+    L_SHAFT_NM,  # broadband torque disturbance on the shaft, held over the period
+    L_SHAFT_LF_DRIVE_NM,  # white input of the low-frequency disturbance's filter
+    L_CURRENT_SENSOR_NM,  # current-sensor noise in torque units (K_t·A): the loop follows it
+    L_ENCODER_RAD,  # encoder jitter before quantisation
+    N_LOOP_NOISE,
+) = range(5)
 
 MODE_TORQUE, MODE_VELOCITY, MODE_POSITION = 0, 1, 2
 
@@ -101,6 +112,7 @@ def run_kernel(
     comp_ripple: np.ndarray,
     delay_line: np.ndarray,
     torque_noise: np.ndarray,
+    loop_noise: np.ndarray,
     dt_s: float,
     substeps: int,
     out_position: np.ndarray,
@@ -118,6 +130,13 @@ def run_kernel(
     ``comp_cogging(θ̂)`` added and is divided by ``1 + comp_ripple(θ̂)`` (θ̂ the encoder);
     the reported torque is that command; ``delay_line`` (``P_DELAY`` slots, state across
     calls) holds it back that many control periods before the current loop.
+
+    ``loop_noise`` (``N_LOOP_NOISE`` rows, one column per period, or zero columns: none) is
+    the noise a real axis feeds back: a shaft torque disturbance (broadband + a first-order
+    low-pass of ``L_SHAFT_LF_DRIVE_NM``), current-sensor noise (the current loop regulates
+    the measured current, so the torque it makes is the demand minus that noise; the
+    reported current is the measured one) and encoder jitter ahead of the quantiser, which
+    the velocity estimate differentiates and the velocity loop feeds back.
     """
     j_m = params[P_J_MOTOR]
     j_l = params[P_J_LOAD]
@@ -167,10 +186,21 @@ def run_kernel(
     pos_prev = state[S_POS_MEAS_PREV]
     hyst = state[S_HYST]
     slot = int(state[S_DELAY_INDEX])
+    noisy = loop_noise.shape[1] > 0
+    lf_decay = params[P_LF_DECAY]
+    disturbance_lf = state[S_DISTURBANCE_LF]
+    disturbance = 0.0
+    sensor_nm = 0.0
+    encoder_rad = 0.0
 
     for k in range(command.shape[0]):
+        if noisy:
+            disturbance_lf = lf_decay * disturbance_lf + loop_noise[L_SHAFT_LF_DRIVE_NM, k]
+            disturbance = loop_noise[L_SHAFT_NM, k] + disturbance_lf
+            sensor_nm = loop_noise[L_CURRENT_SENSOR_NM, k]
+            encoder_rad = loop_noise[L_ENCODER_RAD, k]
         # --- sensing and the drive's loops, once per control period ---
-        pos_meas = _quantise(theta_m, counts)
+        pos_meas = _quantise(theta_m + encoder_rad, counts)
         vel_est += filter_gain * ((pos_meas - pos_prev) / dt_s - vel_est)
         pos_prev = pos_meas
         if mode == MODE_TORQUE:
@@ -193,18 +223,20 @@ def run_kernel(
         out_position[k] = pos_meas
         out_velocity[k] = vel_est
         out_torque[k] = torque_cmd + torque_noise[k]
-        out_current[k] = torque_act / kt
+        out_current[k] = (torque_act + sensor_nm) / kt  # the drive's measured current
         out_torque_actual[k] = torque_act
         if delay > 0:  # the current loop gets the command of `delay` periods ago
             held_cmd = delay_line[slot]
             delay_line[slot] = torque_cmd
             slot = slot + 1 if slot + 1 < delay else 0
             torque_cmd = held_cmd
+        # the current loop drives the measured current (true + sensor noise) to the demand
+        torque_cmd -= sensor_nm
         if locked:
             # the clamp's torque sensor holds everything acting on the (still) rotor
             held = kt_scale * torque_act * (1.0 + _periodic(theta_m, kt_ripple))
             held -= _periodic(theta_m, cogging) + params[P_OFFSET] + hyst
-            held -= mge * math.cos(theta_m + grav_phase)
+            held -= mge * math.cos(theta_m + grav_phase) + disturbance
             held -= params[P_K_CABLE] * (theta_m - params[P_CABLE_ZERO])
             out_load_torque[k] = held
             torque_act = torque_cmd + decay**substeps * (torque_act - torque_cmd)
@@ -226,7 +258,7 @@ def run_kernel(
             t_motor -= _periodic(theta_m, cogging)
             theta_out = theta_l if two_mass else theta_m
             omega_out = omega_l if two_mass else omega_m
-            t_load = params[P_OFFSET]
+            t_load = params[P_OFFSET] + disturbance
             if mge != 0.0:
                 t_load += mge * math.cos(theta_out + grav_phase)
             t_load += params[P_K_CABLE] * (theta_out - params[P_CABLE_ZERO])
@@ -277,3 +309,4 @@ def run_kernel(
     state[S_POS_MEAS_PREV] = pos_prev
     state[S_HYST] = hyst
     state[S_DELAY_INDEX] = slot
+    state[S_DISTURBANCE_LF] = disturbance_lf

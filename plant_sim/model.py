@@ -98,6 +98,42 @@ def pack_params(params: PlantParams, firmware: Firmware) -> FloatArray:
     return vector
 
 
+LOOP_NOISE_STREAM = 0x100B  # the in-loop noise's own stream of the seed (the reported
+# torque's noise keeps the stream it always had, so a seed's measurement noise is unchanged)
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class LoopNoiseScale:
+    """Per-period standard deviations of the kernel's in-loop noise rows, and the
+    low-frequency disturbance filter's decay per control period."""
+
+    shaft_nm: float
+    shaft_lf_drive_nm: float
+    lf_decay: float
+    current_sensor_nm: float
+    encoder_rad: float
+
+    @property
+    def active(self) -> bool:
+        return any(v > 0.0 for v in (self.shaft_nm, self.shaft_lf_drive_nm,
+                                     self.current_sensor_nm, self.encoder_rad))
+
+
+def loop_noise_scale(params: PlantParams, fs_hz: float) -> LoopNoiseScale:
+    """The kernel's in-loop noise sizes for ``params`` at the control rate ``fs_hz``."""
+    lf_decay = math.exp(-2.0 * math.pi * params.shaft_disturbance_lf_hz / fs_hz)
+    # white drive of x[k] = a·x[k−1] + w[k] whose stationary RMS is the one asked for
+    lf_drive = params.shaft_disturbance_lf_rms_nm * math.sqrt(1.0 - lf_decay**2)
+    current_range_a = params.torque_limit_nm / params.torque_constant_nm_a
+    sensor_nm = (params.current_sensor_noise_rms_rel * current_range_a
+                 * params.torque_constant_nm_a if math.isfinite(current_range_a) else 0.0)
+    counts = params.encoder_counts_per_rev
+    encoder_rad = params.encoder_noise_rms_counts * 2 * math.pi / counts if counts > 0 else 0.0
+    return LoopNoiseScale(shaft_nm=params.shaft_disturbance_rms_nm, shaft_lf_drive_nm=lf_drive,
+                          lf_decay=lf_decay, current_sensor_nm=sensor_nm,
+                          encoder_rad=encoder_rad)
+
+
 def substeps_for(params: PlantParams, fs_hz: float) -> int:
     """Physics steps per control period: enough for the shaft resonance (ω·h ≤ 0.2)."""
     if params.substeps > 0:
@@ -137,6 +173,8 @@ class Plant:
         self._kt_ripple = periodic_table(params.kt_ripple)
         self._substeps = substeps_for(params, self.fs_hz)
         self._rng = np.random.default_rng(seed)
+        self._loop_rng = np.random.default_rng((seed, LOOP_NOISE_STREAM))
+        self._set_loop_noise()
         self._state = np.zeros(kernel.N_STATE)
         self._state[kernel.S_THETA_M] = initial_position_rad
         self._state[kernel.S_THETA_L] = initial_position_rad
@@ -172,6 +210,26 @@ class Plant:
         self.params = self.params.with_changes(elevation_rad=elevation_rad)
         self._packed = pack_params(self.params, self.firmware)
         self._substeps = substeps_for(self.params, self.fs_hz)
+        self._set_loop_noise()
+
+    def _set_loop_noise(self) -> None:
+        self._loop_noise = loop_noise_scale(self.params, self.fs_hz)
+        self._packed[kernel.P_LF_DECAY] = self._loop_noise.lf_decay
+
+    def _draw_loop_noise(self, n: int) -> FloatArray:
+        """The kernel's in-loop noise rows for ``n`` periods (no columns when all are off)."""
+        scale = self._loop_noise
+        if not scale.active:
+            return np.zeros((kernel.N_LOOP_NOISE, 0))
+        noise = np.zeros((kernel.N_LOOP_NOISE, n))
+        for row, size in ((kernel.L_SHAFT_NM, scale.shaft_nm),
+                          (kernel.L_SHAFT_LF_DRIVE_NM, scale.shaft_lf_drive_nm),
+                          (kernel.L_CURRENT_SENSOR_NM, scale.current_sensor_nm),
+                          (kernel.L_ENCODER_RAD, scale.encoder_rad)):
+            if size > 0.0:  # only the rows that are on (drawing is a third of the run's time)
+                self._loop_rng.standard_normal(n, out=noise[row])
+                noise[row] *= size
+        return noise
 
     def load_compensation(
         self, cogging: tuple[Harmonic, ...], kt_ripple: tuple[Harmonic, ...] = ()
@@ -212,6 +270,7 @@ class Plant:
             self._comp_ripple,
             self._delay_line,
             noise,
+            self._draw_loop_noise(n),
             1.0 / self.fs_hz,
             self._substeps,
             *outputs,

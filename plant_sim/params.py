@@ -1,11 +1,17 @@
-"""Physical and drive parameters of one simulated gimbal axis. Every effect is off by default."""
+"""Physical and drive parameters of one simulated gimbal axis.
+
+Every effect is off by default in :class:`PlantParams` (an ideal axis for the numerics'
+tests). A unit profile's ``[plant]`` table describes hardware, and hardware has noise inside
+its loops: a key of :data:`LOOP_NOISE_DEFAULTS` the table leaves out takes the size given
+there (each with its reason); write it as 0 in the profile to simulate an ideal axis.
+"""
 
 from __future__ import annotations
 
 import math
 from collections.abc import Mapping
 from dataclasses import MISSING, dataclass, fields, replace
-from typing import Any, get_type_hints
+from typing import Any, Final, get_type_hints
 
 from hil.config import ConfigTable
 from hil.errors import ProfileError
@@ -19,6 +25,24 @@ class Harmonic:
     order: int
     amplitude: float
     phase_rad: float = 0.0
+
+
+LOOP_NOISE_DEFAULTS: Final[dict[str, float]] = {
+    # 0.2 mN·m: bearing and seal running-torque ripple and the base's vibration, about 1 %
+    # of a small gimbal axis' Coulomb friction (the demo's is 20 mN·m)
+    "shaft_disturbance_rms_nm": 2e-4,
+    # 0: optional (a drifting load such as wind or a cable that relaxes); off unless a
+    # profile names it, as it moves the mechanics results of a run as a whole
+    "shaft_disturbance_lf_rms_nm": 0.0,
+    # 0.2 % of the current range: a 12-bit converter spanning ± the range adds 0.014 % RMS;
+    # shunt-amplifier noise and PWM pick-up put a servo drive's current noise at 0.1–0.3 %
+    # (the demo: 10 mA of 5 A, 1 mN·m at K_t 0.1 N·m/A, under its torque noise of 1.5 mN·m)
+    "current_sensor_noise_rms_rel": 0.002,
+    # 0.3 counts: a high-resolution absolute or interpolated encoder's jitter is a fraction
+    # of a count (datasheets: about ±1 count peak); the demo's 19 bits make it 3.6 µrad
+    "encoder_noise_rms_counts": 0.3,
+}
+"""The in-loop noise a ``[plant]`` table gets for keys it leaves out (:func:`plant_from_table`)."""
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -70,6 +94,19 @@ class PlantParams:
     # J + inertia_elevation_kg_m2·cos²(elevation_rad) (on the load of a two-mass axis)
     inertia_elevation_kg_m2: float = 0.0
     elevation_rad: float = 0.0  # the other axis' angle (station state)
+    # --- noise inside the loops (what makes two runs of one unit differ), drawn from the
+    # run's seed; sizes a real unit has are LOOP_NOISE_DEFAULTS ---
+    # broadband torque disturbance on the shaft, white and held over each control period
+    shaft_disturbance_rms_nm: float = 0.0
+    # low-frequency shaft disturbance: first-order low-passed white noise of this RMS
+    shaft_disturbance_lf_rms_nm: float = 0.0
+    shaft_disturbance_lf_hz: float = 0.5  # its corner frequency
+    # current-sensor noise RMS as a fraction of the drive's current range
+    # (torque_limit_nm / torque_constant_nm_a; none with an unlimited torque): the current
+    # loop follows it, so the torque made differs from the demand by it
+    current_sensor_noise_rms_rel: float = 0.0
+    # encoder jitter ahead of the quantiser, in counts (none with an ideal encoder)
+    encoder_noise_rms_counts: float = 0.0
 
     def __post_init__(self) -> None:
         if not self.inertia_kg_m2 > 0:
@@ -85,10 +122,13 @@ class PlantParams:
             "cable_hysteresis_nm",
             "torque_noise_nm",
             "load_torque_noise_nm",
+            *LOOP_NOISE_DEFAULTS,
         ):
             value = getattr(self, name)
             if not (math.isfinite(value) and value >= 0):
                 raise ProfileError(f"{name} must be finite and >= 0, got {value}")
+        if not self.shaft_disturbance_lf_hz > 0:
+            raise ProfileError("shaft_disturbance_lf_hz must be > 0")
         if self.stribeck_velocity_rad_s <= 0:
             raise ProfileError("stribeck_velocity_rad_s must be > 0")
         if self.cable_hysteresis_angle_rad <= 0:
@@ -165,7 +205,7 @@ def plant_from_table(table: ConfigTable) -> PlantParams:
     """
     refuse_moved_keys(table)
     hints = get_type_hints(PlantParams)
-    kwargs: dict[str, Any] = {}
+    kwargs: dict[str, Any] = dict(LOOP_NOISE_DEFAULTS)  # hardware has it unless said otherwise
     for f in fields(PlantParams):
         if f.name not in table and f.default is not MISSING:
             continue  # required fields fall through and are reported missing
@@ -196,15 +236,15 @@ def _harmonic(item: ConfigTable) -> Harmonic:
 
 
 def plant_to_mapping(params: PlantParams) -> dict[str, Any]:
-    """Inverse of :func:`plant_from_table` (only non-default values, TOML-ready)."""
+    """Inverse of :func:`plant_from_table` (non-default values and the loop noise, TOML-ready)."""
     out: dict[str, Any] = {}
     for f in fields(PlantParams):
         value = getattr(params, f.name)
         if value is None:
             continue
         default = f.default
-        if value == default:
-            continue
+        if value == default and f.name not in LOOP_NOISE_DEFAULTS:
+            continue  # the loop noise is always written: a table without it gets the defaults
         if f.name in _HARMONIC_FIELDS:
             out[f.name] = [
                 {"order": h.order, "amplitude": h.amplitude, "phase_rad": h.phase_rad}
