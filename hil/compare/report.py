@@ -7,9 +7,11 @@ from typing import Any
 
 from hil.compare.budget import Sharing
 from hil.compare.certificates import Result
-from hil.compare.verdict import Comparison, Row
+from hil.compare.verdict import Comparison, Row, Verdict
 from hil.gum import format_result, rounded_pair
 
+VERDICT_SEVERITY = (Verdict.WORSE, Verdict.CHANGED, Verdict.MISSING, Verdict.INCONCLUSIVE,
+                    Verdict.NEW, Verdict.BETTER, Verdict.SAME)
 HEADER = ("unit", "result", "baseline ± U", "candidate ± U", "Δ ± U(Δ)", "Δ %", "E", "p",
           "p Holm", "verdict")
 
@@ -26,13 +28,15 @@ def render_text(comparison: Comparison) -> str:
     lines = ["  ".join(c.ljust(w) for c, w in zip(line, widths, strict=True)).rstrip()
              for line in cells]
     lines.insert(1, "  ".join("-" * w for w in widths))
-    lines += ["", summary(comparison)]
-    lines += [f"warning: {w}" for w in comparison.warnings]
-    lines += [f"note: {n}" for n in comparison.notes]
+    remarks = [*(f"warning: {w}" for w in comparison.warnings),
+               *(f"note: {n}" for n in comparison.notes)]
+    lines += ["", *remarks] if remarks else []
     lines += ["", "Budget of the difference (contributions in the result's unit; shared lines "
               "enter as the difference of their two contributions):"]
     lines += [f"  {_budget_line(row)}" for row in comparison.rows if row.budget is not None]
     lines += ["", *comparison.rules]
+    # the verdict last: what a person (or a log's tail) reads first
+    lines += ["", f"VERDICT: {overall_verdict(comparison)}. {summary(comparison)}"]
     return "\n".join(lines) + "\n"
 
 
@@ -47,6 +51,13 @@ def render_markdown(comparison: Comparison) -> str:
     out += [f"- {_budget_line(row)}" for row in comparison.rows if row.budget is not None]
     out += ["", *(f"{rule}\n" for rule in comparison.rules), "</details>", ""]
     return "\n".join(out)
+
+
+def overall_verdict(comparison: Comparison) -> str:
+    """The comparison in one word: its most serious result verdict (WORSE before CHANGED,
+    MISSING, INCONCLUSIVE, NEW, BETTER, SAME)."""
+    found = {row.verdict for row in comparison.rows}
+    return next((v.value for v in VERDICT_SEVERITY if v in found), Verdict.SAME.value)
 
 
 def summary(comparison: Comparison) -> str:
