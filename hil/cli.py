@@ -1,4 +1,9 @@
-"""The ``gimbal-hil`` command: simulate, calibrate, diagnose, compare."""
+"""The ``gimbal-hil`` command: simulate, calibrate, render, diagnose, results, compare.
+
+Only argparse and the subcommands' argument definitions load at start (``--help`` stays
+fast); a subcommand imports what it needs (numpy, numba, scipy, SQLAlchemy, pytest…) when it
+runs.
+"""
 
 from __future__ import annotations
 
@@ -8,66 +13,120 @@ import os
 import sys
 from collections.abc import Sequence
 from pathlib import Path
+from typing import TYPE_CHECKING
 
-import numpy as np
-
+from hil import __version__
 from hil.compare.cli import add_arguments as add_compare_arguments
-from hil.compare.cli import run as run_compare
 from hil.diagnose.cli import add_arguments as add_diagnose_arguments
-from hil.diagnose.cli import run as run_diagnose
-from hil.drives.kinds import DRIVE_KINDS
+from hil.drives.kinds import DRIVE_KINDS, SIMULATED_KINDS
 from hil.errors import HilError, InputError
-from hil.motion import MODE_OF_COLUMN, Excitation, Mode
-from hil.profile import load_profile
-from hil.recording import FloatArray, read_command_csv, write_recording
 from hil.store.cli import add_arguments as add_results_arguments
-from hil.store.cli import run as run_results
+
+if TYPE_CHECKING:
+    from hil.motion import Mode
+    from hil.recording import FloatArray
 
 log = logging.getLogger("gimbal-hil")
 
+DESCRIPTION = "gimbal-hil: hardware-in-the-loop calibration of gimbal servo axes."
+SIMULATOR_SERIAL = "SIM-0001"  # the plugin's serial for a simulated unit given none
 
-def main(argv: Sequence[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="gimbal-hil", description=__doc__)
-    parser.add_argument("-v", "--verbose", action="store_true", help="log at INFO level")
-    commands = parser.add_subparsers(dest="subcommand", required=True)
+# (name, one line for the command list and the top of its own help)
+COMMANDS = (
+    ("simulate", "simulate a unit and write its recording (CSV)"),
+    ("calibrate", "run the calibration suite (pytest), write the certificate"),
+    ("render", "rewrite certificate.html and .pdf of written certificates"),
+    ("diagnose", "what does the model get wrong on a recording?"),
+    ("results", "the results store: ingest, units, history, trend, spc…"),
+    ("compare", "a baseline calibration against a candidate (regression)"),
+)
 
-    sim = commands.add_parser("simulate", help="simulate a unit and write a recording")
-    sim.add_argument("--profile", default=None, help="unit profile TOML or built-in name")
+
+class HelpFormatter(argparse.HelpFormatter):
+    """Every option's default shown after its help, unless the help already says it (a
+    default of ``None`` or ``False`` means "not given": its help says what happens then)."""
+
+    def _get_help_string(self, action: argparse.Action) -> str | None:
+        text = action.help or ""
+        default = action.default
+        # identity, not ==: a default of 0 is shown, a flag's False is not
+        unset = default is None or default is False or default == argparse.SUPPRESS
+        takes_default = bool(action.option_strings) or action.nargs in (argparse.OPTIONAL,
+                                                                        argparse.ZERO_OR_MORE)
+        if "default" in text or unset or default == [] or not takes_default:
+            return text
+        return f"{text} (default: %(default)s)"
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The whole command line's parser (cheap: no subcommand's dependencies load)."""
+    parser = argparse.ArgumentParser(prog="gimbal-hil", description=DESCRIPTION,
+                                     formatter_class=HelpFormatter)
+    parser.add_argument("-v", "--verbose", action="store_true",
+                        help="log at INFO level (default: warnings only)")
+    parser.add_argument("--version", action="version", version=f"gimbal-hil {__version__}",
+                        help="print gimbal-hil's version and exit")
+    commands = parser.add_subparsers(
+        dest="subcommand", required=True, title="commands", metavar="COMMAND",
+        help="'gimbal-hil COMMAND --help' shows a command's options")
+    subs = {name: commands.add_parser(name, help=line, description=line,
+                                      formatter_class=HelpFormatter)
+            for name, line in COMMANDS}
+
+    sim = subs["simulate"]
+    sim.add_argument("--profile", default=None,
+                     help="unit profile TOML or built-in name (default: the demo unit)")
     source = sim.add_mutually_exclusive_group(required=True)
     source.add_argument(
         "--command",
         type=Path,
         help="CSV with time_s and one command column "
-        "(velocity_cmd_rad_s, torque_cmd_nm or position_cmd_rad)",
+        "(velocity_cmd_rad_s, torque_cmd_nm or position_cmd_rad); "
+        "this or --duration is required",
     )
-    source.add_argument("--duration", type=float, help="seconds of the built-in excitation")
+    source.add_argument("--duration", type=float, metavar="SECONDS",
+                        help="seconds of the built-in excitation; this or --command is required")
     sim.add_argument("--out", type=Path, required=True, help="recording to write (.csv[.gz])")
-    sim.add_argument("--seed", type=int, default=0)
+    sim.add_argument("--seed", type=int, default=0, help="the simulator's noise seed")
 
-    cal = commands.add_parser("calibrate", help="run the calibration suite through pytest")
-    cal.add_argument("--drive", default="sim", choices=DRIVE_KINDS)
-    cal.add_argument("--profile", default=None)
-    cal.add_argument("--unit-serial", default=None)
-    cal.add_argument("--out", type=Path, default=Path("certificates"))
-    cal.add_argument("--station", type=Path, default=None)
-    cal.add_argument("--seed", type=int, default=0)
-    cal.add_argument("--store", default=None, help="results store URL, or 'off'")
-    cal.add_argument("--operator", default=None)
-    cal.add_argument("--reference", action="store_true", help="a reference (golden) unit")
-    cal.add_argument("pytest_args", nargs="*", help="extra pytest arguments (after --)")
+    cal = subs["calibrate"]
+    cal.add_argument("--drive", default="sim", choices=DRIVE_KINDS, metavar="KIND",
+                     help="the drive to calibrate through: " + ", ".join(DRIVE_KINDS))
+    cal.add_argument("--profile", default=None,
+                     help="unit profile TOML or built-in name (default: the demo unit)")
+    cal.add_argument("--unit-serial", default=None, metavar="SERIAL",
+                     help="serial number of the unit; required with a real drive ("
+                          + ", ".join(k for k in DRIVE_KINDS if k not in SIMULATED_KINDS)
+                          + f"); default: {SIMULATOR_SERIAL}, for the simulator and the "
+                          "emulators only")
+    cal.add_argument("--out", type=Path, default=Path("certificates"),
+                     help="folder of the certificates (SERIAL/certificate.json)")
+    cal.add_argument("--station", type=Path, default=None,
+                     help="station file (TOML; default: none, a simulated station)")
+    cal.add_argument("--seed", type=int, default=0, help="the simulator's noise seed")
+    cal.add_argument("--store", default=None,
+                     help="results store URL, or 'off' (default: $GIMBAL_HIL_STORE, the "
+                          "station file's store, else OUT/results.sqlite)")
+    cal.add_argument("--operator", default=None,
+                     help="who runs the calibration (default: $GIMBAL_HIL_OPERATOR, else "
+                          "the login name)")
+    cal.add_argument("--reference", action="store_true",
+                     help="a reference (golden) unit (default: a production unit)")
+    cal.add_argument("pytest_args", nargs="*", metavar="PYTEST_ARG",
+                     help="extra pytest arguments (after --; default: none)")
 
-    render = commands.add_parser(
-        "render", help="(re)write certificate.html and certificate.pdf of written certificates")
-    render.add_argument("certificates", nargs="+", type=Path,
-                        help="certificate.json files, or the unit directories holding them")
+    subs["render"].add_argument(
+        "certificates", nargs="+", type=Path,
+        help="certificate.json files, or the unit directories holding them")
 
-    diag = commands.add_parser("diagnose", help="what does the model get wrong on a recording?")
-    add_diagnose_arguments(diag)
-    add_results_arguments(commands.add_parser("results", help="the results store"))
+    add_diagnose_arguments(subs["diagnose"])
+    add_results_arguments(subs["results"])
+    add_compare_arguments(subs["compare"])
+    return parser
 
-    comp = commands.add_parser("compare", help="baseline calibration against a candidate")
-    add_compare_arguments(comp)
 
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = build_parser()
     args = parser.parse_args(argv)
     logging.basicConfig(
         level=logging.INFO if args.verbose else logging.WARNING,
@@ -77,21 +136,41 @@ def main(argv: Sequence[str] | None = None) -> int:
         if args.subcommand == "simulate":
             return _simulate(args)
         if args.subcommand == "calibrate":
+            _check_unit_serial(args.drive, args.unit_serial)
             return _calibrate(args)
         if args.subcommand == "render":
             return _render(args)
         if args.subcommand == "results":
+            from hil.store.cli import run as run_results
+
             return run_results(args)
         if args.subcommand == "compare":
+            from hil.compare.cli import run as run_compare
+
             return run_compare(args)
+        from hil.diagnose.cli import run as run_diagnose
+
         return run_diagnose(args)
     except HilError as exc:
         print(f"gimbal-hil: error: {exc}", file=sys.stderr)
         return 2
 
 
+def _check_unit_serial(drive: str, serial: str | None) -> None:
+    """A real unit needs its serial (the default one is the simulator's); a blank one is
+    never a serial. Checked before pytest starts."""
+    if serial is not None and not serial.strip():
+        raise InputError("a unit serial cannot be blank", source="--unit-serial")
+    if serial is None and drive not in SIMULATED_KINDS:
+        raise InputError(f"--drive {drive} calibrates a real unit: give its --unit-serial "
+                         f"SERIAL (the default {SIMULATOR_SERIAL} is for the simulator only)")
+
+
 def _simulate(args: argparse.Namespace) -> int:
     from hil.drives.sim import SimDrive
+    from hil.motion import Excitation, Mode
+    from hil.profile import load_profile
+    from hil.recording import write_recording
     from plant_sim.excitations import identification_sequence
 
     profile = load_profile(args.profile)
@@ -104,9 +183,12 @@ def _simulate(args: argparse.Namespace) -> int:
     else:
         limits = profile.limits
         travel = min(-limits.travel_min_rad, limits.travel_max_rad)
-        command = identification_sequence(
-            args.duration, fs_hz, travel_rad=travel, max_velocity_rad_s=limits.velocity_rad_s
-        )
+        try:
+            command = identification_sequence(
+                args.duration, fs_hz, travel_rad=travel, max_velocity_rad_s=limits.velocity_rad_s
+            )
+        except ValueError as exc:  # too short for the built-in excitation
+            raise InputError(str(exc), source="--duration") from None
         mode, name = Mode.VELOCITY, f"builtin_{args.duration:g}s"
     drive = SimDrive(profile.plant, firmware=profile.firmware, limits=profile.limits,
                      fs_hz=fs_hz, seed=args.seed)
@@ -118,10 +200,13 @@ def _simulate(args: argparse.Namespace) -> int:
     return 0
 
 
-
-
 def _command_from_csv(path: Path, fs_hz: float) -> tuple[Mode, FloatArray]:
     """Read a command file and resample it (linear) onto the drive's sample grid."""
+    import numpy as np
+
+    from hil.motion import MODE_OF_COLUMN
+    from hil.recording import read_command_csv
+
     columns = read_command_csv(path, allowed=tuple(MODE_OF_COLUMN))
     ((name, values),) = ((k, v) for k, v in columns.items() if k != "time_s")
     time_s = columns["time_s"]

@@ -12,10 +12,6 @@ import json
 import sys
 from pathlib import Path
 
-from hil.compare.certificates import load_side
-from hil.compare.repeatability import NO_MAP, load_repeatability
-from hil.compare.report import as_json, render_markdown, render_text
-from hil.compare.verdict import compare_sides
 from hil.errors import InputError
 
 
@@ -32,13 +28,15 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="certificate.json, or a directory of SERIAL/certificate.json")
     parser.add_argument("candidate", type=Path, help="the same, after the change")
     parser.add_argument("--json", metavar="OUT.json", type=Path,
-                        help="write the comparison here (full precision)")
+                        help="write the comparison here, full precision (default: not written)")
     parser.add_argument("--markdown", metavar="OUT.md", type=Path,
-                        help="write a table for a pull-request comment")
+                        help="write a table for a pull-request comment (default: not written)")
     parser.add_argument("--allow-different-units", action="store_true",
-                        help="compare different serials, unit types or profiles")
+                        help="compare different serials, unit types or profiles (default: "
+                             "refused)")
     parser.add_argument("--alpha", type=float, default=0.05,
-                        help="family-wise error rate of the Holm procedure (default 0.05)")
+                        help="family-wise error rate of the Holm procedure "
+                             "(default: %(default)s)")
     parser.add_argument("--repeatability", metavar="MAP.toml|off", default=None,
                         help="run-to-run scatter beyond the budgets (default: the shipped "
                              "fixtures/compare_repeatability.toml; 'off': none)")
@@ -58,6 +56,12 @@ def run(args: argparse.Namespace) -> int:
         0 nothing worse, 1 something WORSE, CHANGED or MISSING. Bad input raises
         :class:`~hil.errors.InputError` (the command line prints it and returns 2).
     """
+    # imported here, not at the top: `gimbal-hil --help` must not load scipy.stats
+    from hil.compare.certificates import load_side
+    from hil.compare.repeatability import NO_MAP, load_repeatability
+    from hil.compare.report import as_json, render_markdown, render_text
+    from hil.compare.verdict import compare_sides
+
     repeatability = (NO_MAP if args.repeatability == "off"
                      else load_repeatability(None if args.repeatability is None
                                              else Path(args.repeatability)))

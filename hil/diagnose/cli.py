@@ -27,12 +27,15 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     """
     parser.add_argument("recording", help="recording to explain (.csv or .csv.gz)")
     parser.add_argument("--validate", metavar="OTHER",
-                        help="second recording of the same axis: judge every gain on it")
+                        help="second recording of the same axis: judge every gain on it "
+                             "(default: the recording's own held-out part)")
     parser.add_argument("--json", metavar="OUT.json", required=True,
                         help="write the report here")
-    parser.add_argument("--plots", metavar="DIR", help="write PNG plots into this directory")
+    parser.add_argument("--plots", metavar="DIR",
+                        help="write PNG plots into this directory (default: no plots)")
     parser.add_argument("--profile-out", metavar="OUT.toml",
-                        help="write the extended model as a unit profile (TOML)")
+                        help="write the extended model as a unit profile, TOML (default: "
+                             "not written)")
     parser.add_argument("--cutoff-hz", type=float, default=None,
                         help="analysis bandwidth (default: sample rate / 8)")
 

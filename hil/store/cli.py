@@ -14,21 +14,19 @@ import statistics
 from collections.abc import Sequence
 from datetime import UTC, datetime
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-from sqlalchemy import select
-
-from hil.drives.station import load_station_identity
 from hil.errors import InputError
 from hil.gum import rounded_pair
 from hil.store import fleet_cli
-from hil.store.engine import Store, open_store, resolve_store_url
-from hil.store.ingest import Ingested, ingest_tree
-from hil.store.outbox import sync_outbox
-from hil.store.query import RunSummary, StoredResult, history, result_series, run_results, units
-from hil.store.schema import results
+
+if TYPE_CHECKING:  # the store's modules load when a command runs (SQLAlchemy is slow to)
+    from hil.store.engine import Store
+    from hil.store.ingest import Ingested
+    from hil.store.query import RunSummary, StoredResult
 
 TIME_FORMAT = "%Y-%m-%d %H:%M"
+WRITING_COMMANDS = ("ingest", "sync")  # the only ones that may create a store
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -40,36 +38,55 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     common.add_argument("--out", type=Path, default=Path("certificates"),
                         help="the calibrations' --out (embedded store and outbox)")
     common.add_argument("--station-file", type=Path, default=None,
-                        help="station TOML whose [station] store to use")
-    common.add_argument("--json", action="store_true", help="print JSON (full precision)")
-    commands = parser.add_subparsers(dest="results_command", required=True)
-    ingest = commands.add_parser("ingest", parents=[common],
-                                 help="store certificates written before the store existed")
+                        help="station TOML whose [station] store to use (default: none)")
+    common.add_argument("--json", action="store_true",
+                        help="print JSON, full precision (default: a table)")
+    # the sub-subcommands format their help as the parent does (defaults shown)
+    commands = parser.add_subparsers(
+        dest="results_command", required=True, title="commands", metavar="COMMAND",
+        help="'gimbal-hil results COMMAND --help' shows a command's options")
+
+    def add(name: str, text: str) -> argparse.ArgumentParser:
+        return commands.add_parser(name, parents=[common], help=text, description=text,
+                                   formatter_class=parser.formatter_class)
+
+    ingest = add("ingest", "store certificates written before the store existed")
     ingest.add_argument("directories", type=Path, nargs="+", metavar="DIR",
                         help="a folder of serials or one serial's folder (history included)")
-    commands.add_parser("sync", parents=[common], help="upload the runs waiting in the outbox")
-    commands.add_parser("units", parents=[common], help="every unit: its last run and outcome")
-    hist = commands.add_parser("history", parents=[common],
-                               help="every run of one unit; as-found / as-left")
-    hist.add_argument("serial")
-    trend = commands.add_parser("trend", parents=[common], help="one result over the runs")
-    trend.add_argument("parameter", metavar="PARAM")
-    trend.add_argument("--station", default=None, help="only this station id")
-    trend.add_argument("--since", default=None, help="only runs from this date (YYYY-MM-DD)")
-    trend.add_argument("--include-aborted", action="store_true")
-    trend.add_argument("--include-reference", action="store_true")
-    fleet_cli.add_arguments(commands, common)
+    add("sync", "upload the runs waiting in the outbox")
+    add("units", "every unit: its last run and outcome")
+    hist = add("history", "every run of one unit; as-found / as-left")
+    hist.add_argument("serial", metavar="SERIAL", help="the unit's serial number")
+    trend = add("trend", "one result over the runs")
+    trend.add_argument("parameter", metavar="PARAM", help="the result's name")
+    trend.add_argument("--station", default=None,
+                       help="only this station id (default: every station)")
+    trend.add_argument("--since", default=None,
+                       help="only runs from this date, YYYY-MM-DD (default: every run)")
+    trend.add_argument("--include-aborted", action="store_true",
+                       help="also aborted runs (default: left out)")
+    trend.add_argument("--include-reference", action="store_true",
+                       help="also reference (golden) units' runs (default: left out)")
+    fleet_cli.add_arguments(commands, common, formatter_class=parser.formatter_class)
 
 
 def run(args: argparse.Namespace) -> int:
     """Run one ``results`` subcommand; its exit code."""
+    from hil.drives.station import load_station_identity
+    from hil.store.engine import open_store, resolve_store_url
+    from hil.store.ingest import ingest_tree
+    from hil.store.outbox import sync_outbox
+    from hil.store.query import units
+
     station_store = (load_station_identity(args.station_file).store
                      if args.station_file is not None else None)
     url = resolve_store_url(args.store, out_dir=args.out, station_store=station_store)
+    command = args.results_command
+    if command not in WRITING_COMMANDS:
+        _require_existing_store(url)
     store = open_store(url)
     try:
-        command = args.results_command
-        if command in ("ingest", "sync"):
+        if command in WRITING_COMMANDS:
             done = (sync_outbox(store, args.out) if command == "sync" else
                     [i for d in args.directories for i in ingest_tree(store, d)])
             _emit(args, _ingested_json(done, store), _ingested_text(done, store, command))
@@ -85,6 +102,25 @@ def run(args: argparse.Namespace) -> int:
         return fleet_cli.run(args, store)
     finally:
         store.close()
+
+
+def _require_existing_store(url: str) -> None:
+    """A reading command never creates a store: an embedded (SQLite) store must exist.
+
+    Raises
+    ------
+    InputError
+        The SQLite file is not there (a PostgreSQL database cannot be told from here).
+    """
+    from hil.store.engine import parse_store_url
+
+    parsed = parse_store_url(url)
+    if parsed.get_backend_name() != "sqlite" or parsed.database in (None, "", ":memory:"):
+        return
+    path = Path(str(parsed.database))
+    if not path.is_file():
+        raise InputError(f"no results store in {path.parent} (no {path.name}; calibrate, "
+                         "'results ingest' or 'results sync' create one)")
 
 
 def _emit(args: argparse.Namespace, data: Any, text: str) -> None:
@@ -123,6 +159,8 @@ def _units_text(found: Sequence[RunSummary]) -> str:
 
 
 def _history(args: argparse.Namespace, store: Store) -> int:
+    from hil.store.query import history, run_results
+
     runs = history(store, args.serial)
     if not runs:
         raise InputError(f"no runs of unit '{args.serial}' in {store.url}")
@@ -168,6 +206,8 @@ def _change_row(change: dict[str, Any]) -> tuple[str, ...]:
 
 
 def _trend(args: argparse.Namespace, store: Store) -> int:
+    from hil.store.query import result_series
+
     since = _date(args.since) if args.since else None
     series = result_series(store, args.parameter, station=args.station, since=since,
                            include_aborted=args.include_aborted,
@@ -209,6 +249,10 @@ def _point_json(p: StoredResult) -> dict[str, Any]:
 
 
 def _known_parameter(store: Store, name: str) -> None:
+    from sqlalchemy import select
+
+    from hil.store.schema import results
+
     with store.engine.connect() as connection:
         known = sorted(connection.execute(select(results.c.name).distinct()).scalars())
     if known and name not in known:

@@ -13,45 +13,55 @@ import argparse
 import json
 from datetime import UTC, datetime
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from hil.errors import InputError
-from hil.fleet.baseline import freeze_baseline
-from hil.fleet.charts import EwmaSettings
-from hil.fleet.commands import export_rows, fleet_report_html, has_signal, spc_report, yield_table
-from hil.store.engine import Store
-from hil.store.query import load_baseline, result_series, run_summaries, save_baseline
+
+if TYPE_CHECKING:  # loaded when a command runs: `gimbal-hil --help` stays fast
+    from argparse import _FormatterClass  # typeshed's only
+
+    from hil.store.engine import Store
 
 BASELINE_PREFIX = "spc:"
+EXPORT_FORMATS = ("csv", "parquet")
+YIELD_GROUPS = ("station", "day", "station_day")
 
 
 def add_arguments(commands: argparse._SubParsersAction[argparse.ArgumentParser],
-                  common: argparse.ArgumentParser) -> None:
-    """Add ``spc``, ``export``, ``yield`` and ``report`` to the ``results`` subcommands."""
+                  common: argparse.ArgumentParser, *,
+                  formatter_class: _FormatterClass = argparse.HelpFormatter) -> None:
+    """Add ``spc``, ``export``, ``yield`` and ``report`` to the ``results`` subcommands
+    (their help formatted by ``formatter_class``)."""
     selection = argparse.ArgumentParser(add_help=False)
-    selection.add_argument("--station", default=None, help="only this station id")
-    selection.add_argument("--since", default=None, help="only runs from this date (YYYY-MM-DD)")
-    spc = commands.add_parser(
-        "spc", parents=[common, selection],
-        help="capability, I-MR chart, Nelson rules, EWMA of one result (exit 1 on a signal); "
-             "'spc baseline freeze PARAM' freezes the limits")
+    selection.add_argument("--station", default=None,
+                           help="only this station id (default: every station)")
+    selection.add_argument("--since", default=None,
+                           help="only runs from this date, YYYY-MM-DD (default: every run)")
+
+    def add(name: str, text: str) -> argparse.ArgumentParser:
+        return commands.add_parser(name, parents=[common, selection], help=text,
+                                   description=text, formatter_class=formatter_class)
+
+    spc = add("spc", "capability, I-MR chart, Nelson rules, EWMA of one result (exit 1 on a "
+                     "signal); 'spc baseline freeze PARAM' freezes the limits")
     spc.add_argument("words", nargs="+", metavar="PARAM",
                      help="the result's name, or: baseline freeze PARAM")
     spc.add_argument("--rules", default="1,2,5,6", help="Nelson rules (comma list or 'all')")
-    spc.add_argument("--ewma-lambda", type=float, default=0.2)
-    spc.add_argument("--ewma-l", type=float, default=3.0)
+    spc.add_argument("--ewma-lambda", type=float, default=0.2,
+                     help="the EWMA's weight of the newest run")
+    spc.add_argument("--ewma-l", type=float, default=3.0,
+                     help="the EWMA's limits, in its standard deviations")
     spc.add_argument("--gate-last", type=int, default=1,
                      help="exit 1 on a signal among the newest N runs (0: any run)")
-    export = commands.add_parser("export", parents=[common, selection],
-                                 help="one result's stored values as CSV or parquet")
-    export.add_argument("parameter", metavar="PARAM")
-    export.add_argument("--format", choices=("csv", "parquet"), default="csv")
+    export = add("export", "one result's stored values as CSV or parquet")
+    export.add_argument("parameter", metavar="PARAM", help="the result's name")
+    export.add_argument("--format", choices=EXPORT_FORMATS, default="csv", metavar="FORMAT",
+                        help=" or ".join(EXPORT_FORMATS))
     export.add_argument("--output", type=Path, required=True, help="file to write")
-    fpy = commands.add_parser("yield", parents=[common, selection],
-                              help="first-pass yield per station and/or day")
-    fpy.add_argument("--by", choices=("station", "day", "station_day"), default="station")
-    report = commands.add_parser("report", parents=[common, selection],
-                                 help="HTML fleet report: histograms, charts, Cpk, yield")
+    fpy = add("yield", "first-pass yield per station and/or day")
+    fpy.add_argument("--by", choices=YIELD_GROUPS, default="station", metavar="GROUP",
+                     help="group the runs by " + ", ".join(YIELD_GROUPS))
+    report = add("report", "HTML fleet report: histograms, charts, Cpk, yield")
     report.add_argument("--html", type=Path, required=True, help="file to write")
     report.add_argument("--parameters", default=None,
                         help="comma list of results (default: every stored result)")
@@ -59,6 +69,9 @@ def add_arguments(commands: argparse._SubParsersAction[argparse.ArgumentParser],
 
 def run(args: argparse.Namespace, store: Store) -> int:
     """Run one of this module's subcommands; its exit code."""
+    from hil.fleet.commands import export_rows, fleet_report_html, yield_table
+    from hil.store.query import load_baseline, result_series, run_summaries
+
     since = _since(args.since)
     command = args.results_command
     if command == "spc":
@@ -87,6 +100,11 @@ def run(args: argparse.Namespace, store: Store) -> int:
 
 
 def _spc(args: argparse.Namespace, store: Store, since: datetime | None) -> int:
+    from hil.fleet.baseline import freeze_baseline
+    from hil.fleet.charts import EwmaSettings
+    from hil.fleet.commands import has_signal, spc_report
+    from hil.store.query import load_baseline, result_series, save_baseline
+
     words: list[str] = args.words
     if words[:2] == ["baseline", "freeze"] and len(words) == 3:
         name = words[2]
