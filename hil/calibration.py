@@ -16,9 +16,11 @@ from datetime import UTC, datetime
 from pathlib import Path
 
 from hil.drives.base import Drive, DriveInfo
+from hil.drives.station import StationIdentity
 from hil.errors import DriveError
 from hil.identify.estimate import Estimate
 from hil.measurement import (
+    Declared,
     Measurement,
     MethodBiasMap,
     Outcome,
@@ -78,6 +80,7 @@ class CalibrationRun:
         station_id: str = "",
         operator: str = "",
         reference: bool = False,
+        identity: StationIdentity | None = None,
     ) -> None:
         if not re.fullmatch(r"[A-Za-z0-9][A-Za-z0-9._-]{0,63}", unit_serial):
             raise ValueError(
@@ -91,6 +94,8 @@ class CalibrationRun:
         self.unit_dir = out_dir / unit_serial
         self.run_id = str(uuid.uuid4())
         self.station_id, self.operator, self.reference = station_id, operator, reference
+        # the station file's [station] table: laboratory, customer, authoriser, conditions
+        self.identity = identity or StationIdentity()
         self.started = datetime.now(UTC)
         self.drive_info: DriveInfo | None = None
         self.raw_files: list[RawFile] = []
@@ -158,12 +163,13 @@ class CalibrationRun:
         found = [self.result(name) for name in names]
         return None if any(e is None for e in found) else tuple(e for e in found if e)
 
-    def record(self, protocol: str, estimate: Estimate, *,
-               method_of: str | None = None) -> Measurement:
+    def record(self, protocol: str, estimate: Estimate, *, method_of: str | None = None,
+               declared: Declared | None = None) -> Measurement:
         """Judge ``estimate`` against the profile's declared measurement of the same name,
         after the method's known bias is corrected and its budget completed
         (:func:`hil.measurement.with_method_terms`); ``method_of``: take the method terms
-        of that (relative) result, which this one is proportional to."""
+        of that (relative) result, which this one is proportional to; ``declared``: the
+        protocol's title and description of it, for the certificate."""
         spec = self.profile.measurement(estimate.name)
         bias = self.method_bias.entries.get(method_of or spec.name)
         if bias is not None and method_of is not None and not bias.relative:
@@ -172,6 +178,7 @@ class CalibrationRun:
         measurement = Measurement(
             protocol=protocol, spec=spec, estimate=estimate, outcome=judge(estimate, spec),
             validation=None if bias is None or method_of else bias.validation(),
+            declared=declared,
         )
         self.measurements = [m for m in self.measurements if m.spec.name != spec.name]
         self.measurements.append(measurement)

@@ -108,6 +108,7 @@ def calibration(pytestconfig: pytest.Config, profile: UnitProfile) -> Calibratio
             station_id=station_id,
             operator=operator,
             reference=reference,
+            identity=pytestconfig.stash[STATION_KEY],
         )
     return pytestconfig.stash[RUN_KEY]
 

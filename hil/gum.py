@@ -49,3 +49,32 @@ def _plain(number: Decimal, place: int) -> str:
     """Fixed-point text with ``max(-place, 0)`` decimals (no exponent notation)."""
     decimals = max(-place, 0)
     return f"{number:.{decimals}f}"
+
+
+def significant(number: float, digits: int = 2) -> str:
+    """``number`` to ``digits`` significant digits, trailing zeros kept, never a trailing
+    decimal point (``18`` not ``18.``; ``0.0050``; ``180``; ``2.8e-05`` below 10⁻⁴).
+
+    Parameters
+    ----------
+    number : float
+        Any number (a standard uncertainty, a contribution).
+    digits : int
+        Significant digits.
+
+    Returns
+    -------
+    str
+        Fixed-point text between 10⁻⁴ and 10⁶, else mantissa and exponent.
+    """
+    if not math.isfinite(number):
+        return f"{number}"
+    if number == 0:
+        return "0"
+    rounded = Decimal(repr(number)).quantize(
+        Decimal(1).scaleb(Decimal(repr(number)).adjusted() - digits + 1),
+        rounding=ROUND_HALF_EVEN)
+    exponent = rounded.adjusted()  # 9.96 → 10: one more digit before the point
+    if not -4 <= exponent < 6:
+        return f"{float(rounded):.{digits - 1}e}"
+    return _plain(rounded, exponent - digits + 1)

@@ -35,6 +35,37 @@ class Outcome(StrEnum):
     ERROR = "ERROR"  # the protocol did not complete: no conformity statement possible
 
 
+@dataclass(frozen=True, slots=True)
+class Declared:
+    """A protocol's declared measurement as a customer reads it (``protocols/test_*.py``).
+
+    Attributes
+    ----------
+    name : str
+        The code name, as the profile's ``[measurements.NAME]`` and the JSON have it.
+    title : str
+        What it is called on the certificate ("Moment of inertia").
+    description : str
+        One line: what it is and how it was measured.
+    non_negative : bool
+        A size by nature (amplitude, RMS, peak, time): with a lower limit at or below zero
+        its limits read one-sided, ``≤ upper``.
+    """
+
+    name: str
+    title: str
+    description: str
+    non_negative: bool = False
+
+
+def declare(*measurements: Declared) -> dict[str, Declared]:
+    """A protocol's declarations by code name (each name once)."""
+    found = {m.name: m for m in measurements}
+    if len(found) != len(measurements):
+        raise ValueError("a measurement is declared twice")
+    return found
+
+
 @dataclass(frozen=True, slots=True, kw_only=True)
 class Measurement:
     protocol: str
@@ -42,6 +73,7 @@ class Measurement:
     estimate: Estimate
     outcome: Outcome
     validation: dict[str, object] | None = None  # the method-bias map's out-of-sample check
+    declared: Declared | None = None  # title and description (None: the code name stands)
 
     @property
     def conforms(self) -> bool:
@@ -57,9 +89,12 @@ class Measurement:
         )
 
     def as_dict(self) -> dict[str, object]:
-        e = self.estimate
+        e, declared = self.estimate, self.declared
         return {
             "parameter": self.spec.name,
+            "title": declared.title if declared else self.spec.name,
+            "description": declared.description if declared else "",
+            "non_negative": declared.non_negative if declared else False,
             "protocol": self.protocol,
             "value": e.value,
             "unit": self.spec.unit or e.unit,

@@ -20,6 +20,7 @@ from hil.calibration import CalibrationRun
 from hil.drives.base import Drive
 from hil.identify.cogging import CoggingResult, compensation_table
 from hil.identify.estimate import Estimate
+from hil.measurement import Declared, declare
 from hil.profile import UnitProfile
 from hil.suite.cogging import (
     COMPENSATION_FILE,
@@ -37,6 +38,16 @@ from hil.suite.travel import on_command_grid
 
 MEASUREMENTS = ("cogging_peak_nm", "kt_ripple_peak_pct")
 pytestmark = pytest.mark.protocol(NAME)
+
+# what the certificate calls each result, and one line on what it is
+DECLARED = declare(
+    Declared("cogging_peak_nm", "Cogging torque",
+             "Largest harmonic amplitude of the motor's cogging torque over a revolution, from "
+             "constant-velocity passes up and down", non_negative=True),
+    Declared("kt_ripple_peak_pct", "Torque-constant ripple",
+             "Largest harmonic of the torque constant's variation with rotor angle, in % of K_t",
+             non_negative=True),
+)
 
 
 @pytest.fixture(scope="module")
@@ -111,5 +122,6 @@ def result(drive: Drive, calibration: CalibrationRun, profile: UnitProfile
 @pytest.mark.parametrize("parameter", MEASUREMENTS)
 def test_cogging(parameter: str, result: dict[str, Estimate],
                  calibration: CalibrationRun) -> None:
-    measurement = calibration.record(NAME, result[parameter])
+    measurement = calibration.record(NAME, result[parameter],
+                                     declared=DECLARED[parameter])
     assert measurement.conforms, measurement.verdict()

@@ -17,6 +17,7 @@ from hil.calibration import CalibrationRun
 from hil.drives.base import Drive
 from hil.errors import DriveStateError
 from hil.identify.estimate import Estimate
+from hil.measurement import Declared, declare
 from hil.profile import UnitProfile
 from hil.suite.cogging_compensation import (
     MEASUREMENTS,
@@ -33,6 +34,18 @@ from hil.suite.rate import sample_rate_shortfall
 from hil.suite.stop_rule import run_repeated
 
 pytestmark = pytest.mark.protocol(NAME)
+
+# what the certificate calls each result, and one line on what it is
+DECLARED = declare(
+    Declared("cogging_ripple_uncompensated_urad", "Cogging ripple, table off",
+             "Largest position ripple at the cogging orders in a constant-velocity pass, the "
+             "drive's compensation table cleared", non_negative=True),
+    Declared("cogging_ripple_compensated_urad", "Cogging ripple, table on",
+             "The same with this calibration's compensation table loaded into the drive",
+             non_negative=True),
+    Declared("cogging_compensation_removed_pct", "Cogging removed by the table",
+             "Share of the position ripple the compensation table removes, in %"),
+)
 
 
 @pytest.fixture(scope="module")
@@ -97,5 +110,6 @@ def result(cleared: Drive, calibration: CalibrationRun, profile: UnitProfile
 @pytest.mark.parametrize("parameter", MEASUREMENTS)
 def test_cogging_compensation(parameter: str, result: dict[str, Estimate],
                               calibration: CalibrationRun) -> None:
-    measurement = calibration.record(NAME, result[parameter])
+    measurement = calibration.record(NAME, result[parameter],
+                                     declared=DECLARED[parameter])
     assert measurement.conforms, measurement.verdict()

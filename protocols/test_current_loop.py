@@ -19,6 +19,7 @@ from hil.identify.current_loop import (
     torque_hold_s,
 )
 from hil.identify.estimate import Estimate
+from hil.measurement import Declared, declare
 from hil.profile import UnitProfile
 from hil.recording import Recording
 from hil.suite.current_loop import NAME, Spec, analyse, excitation
@@ -27,6 +28,13 @@ from hil.suite.stop_rule import run_repeated
 
 MEASUREMENTS = ("current_loop_time_constant_ms",)
 pytestmark = pytest.mark.protocol(NAME)
+
+# what the certificate calls each result, and one line on what it is
+DECLARED = declare(
+    Declared("current_loop_time_constant_ms", "Current-loop time constant",
+             "Lag τ of the drive's current (torque) loop, from the phase of velocity sines at "
+             "20–150 Hz against the reported torque", non_negative=True),
+)
 
 
 @pytest.fixture(scope="module")
@@ -74,5 +82,6 @@ def result(drive: Drive, calibration: CalibrationRun, profile: UnitProfile
 def test_current_loop(
     parameter: str, result: dict[str, Estimate], calibration: CalibrationRun
 ) -> None:
-    measurement = calibration.record(NAME, result[parameter])
+    measurement = calibration.record(NAME, result[parameter],
+                                     declared=DECLARED[parameter])
     assert measurement.conforms, measurement.verdict()

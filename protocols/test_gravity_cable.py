@@ -20,6 +20,7 @@ from hil.identify.gravity_cable import (
     GravityCableResult,
     eccentricity_mm,
 )
+from hil.measurement import Declared, declare
 from hil.profile import UnitProfile
 from hil.suite.gravity_cable import NAME, Spec, analyse, excitation
 from hil.suite.stop_rule import run_repeated
@@ -33,6 +34,24 @@ MEASUREMENTS = (
     "cable_hysteresis_nm",
 )
 pytestmark = pytest.mark.protocol(NAME)
+
+# what the certificate calls each result, and one line on what it is
+DECLARED = declare(
+    Declared("gravity_mge_nm", "Gravity unbalance torque",
+             "m·g·e: the largest torque gravity exerts on the load's off-axis centre of mass, from"
+             " a slow two-way sweep of the travel", non_negative=True),
+    Declared("gravity_phase_rad", "Gravity unbalance angle",
+             "φ in m·g·e·cos(θ + φ): where the unbalance torque peaks, relative to the axis zero"),
+    Declared("eccentricity_mm", "Centre-of-mass offset",
+             "e: distance of the load's centre of mass from the axis, m·g·e over the declared load"
+             " mass and g", non_negative=True),
+    Declared("cable_stiffness_nm_rad", "Cable stiffness",
+             "k: torque per radian the cable harness adds across the travel, from the same sweep's"
+             " joint fit"),
+    Declared("cable_hysteresis_nm", "Cable hysteresis",
+             "h: half width of the cable's torque loop between the up and down passes, from its "
+             "turn-over after a reversal", non_negative=True),
+)
 
 
 @pytest.fixture(scope="module")
@@ -82,5 +101,6 @@ def test_gravity_cable(
         if spec.mass_kg is None:
             pytest.skip("the profile's [unit] gives no mass_kg: e cannot be derived from m·g·e")
         estimates[parameter] = eccentricity_mm(result["gravity_mge_nm"], mass_kg=spec.mass_kg)
-    measurement = calibration.record(NAME, estimates[parameter])
+    measurement = calibration.record(NAME, estimates[parameter],
+                                     declared=DECLARED[parameter])
     assert measurement.conforms, measurement.verdict()

@@ -21,6 +21,7 @@ from hil.calibration import CalibrationRun
 from hil.drives.base import Drive
 from hil.identify.estimate import Estimate
 from hil.identify.inertia_elevation import InertiaElevationResult, fit_inertia_elevation
+from hil.measurement import Declared, declare
 from hil.profile import UnitProfile
 from hil.suite import inertia_friction as sine
 from hil.suite.inertia_elevation import NAME, Spec, inertia_at_elevation, reported_torque_gain
@@ -32,6 +33,19 @@ MEASUREMENTS = (
     "azimuth_inertia_ratio",
 )
 pytestmark = pytest.mark.protocol(NAME)
+
+# what the certificate calls each result, and one line on what it is
+DECLARED = declare(
+    Declared("azimuth_inertia_level_kg_m2", "Azimuth inertia, elevation level",
+             "Azimuth J with the elevation axis level, from the inertia sine at several elevations"
+             " and a cos² fit", non_negative=True),
+    Declared("azimuth_inertia_zenith_kg_m2", "Azimuth inertia, elevation at zenith",
+             "Azimuth J with the payload pointing at the zenith, from the same fit",
+             non_negative=True),
+    Declared("azimuth_inertia_ratio", "Azimuth inertia ratio",
+             "J level over J zenith: how much the azimuth inertia changes with elevation (does a "
+             "fixed gain hold?)", non_negative=True),
+)
 
 
 @pytest.fixture(scope="module")
@@ -97,5 +111,6 @@ def result(
 def test_inertia_elevation(
     parameter: str, result: dict[str, Estimate], calibration: CalibrationRun
 ) -> None:
-    measurement = calibration.record(NAME, result[parameter])
+    measurement = calibration.record(NAME, result[parameter],
+                                     declared=DECLARED[parameter])
     assert measurement.conforms, measurement.verdict()

@@ -15,6 +15,7 @@ from hil.calibration import CalibrationRun
 from hil.drives.base import Drive
 from hil.identify.estimate import Estimate
 from hil.identify.inertia_friction import InertiaFrictionResult
+from hil.measurement import Declared, declare
 from hil.profile import UnitProfile
 from hil.suite.inertia_friction import (
     NAME,
@@ -27,6 +28,21 @@ from hil.suite.stop_rule import run_repeated
 
 MEASUREMENTS = ("inertia_kg_m2", "viscous_nm_s_rad", "coulomb_nm", "inertia_amplitude_spread_pct")
 pytestmark = pytest.mark.protocol(NAME)
+
+# what the certificate calls each result, and one line on what it is
+DECLARED = declare(
+    Declared("inertia_kg_m2", "Moment of inertia",
+             "Rotor and load inertia about the axis, from the sinusoidal-velocity runs",
+             non_negative=True),
+    Declared("viscous_nm_s_rad", "Viscous friction",
+             "B: friction torque per unit speed, from the same sines' torque in phase with the "
+             "speed"),
+    Declared("coulomb_nm", "Coulomb friction",
+             "T_c: the friction torque that does not depend on speed, from the same sines"),
+    Declared("inertia_amplitude_spread_pct", "Inertia agreement between amplitudes",
+             "Largest minus smallest J of the sine runs at different amplitudes, in % of J: J must"
+             " not depend on the amplitude", non_negative=True),
+)
 
 
 @pytest.fixture(scope="module")
@@ -69,5 +85,6 @@ def result(
 def test_inertia_friction(
     parameter: str, result: dict[str, Estimate], calibration: CalibrationRun
 ) -> None:
-    measurement = calibration.record(NAME, result[parameter])
+    measurement = calibration.record(NAME, result[parameter],
+                                     declared=DECLARED[parameter])
     assert measurement.conforms, measurement.verdict()

@@ -19,6 +19,7 @@ from hil.calibration import CalibrationRun
 from hil.drives.base import Drive
 from hil.identify.estimate import Estimate
 from hil.identify.resonance import ResonanceResult
+from hil.measurement import Declared, declare
 from hil.profile import UnitProfile
 from hil.suite.rate import sample_rate_shortfall
 from hil.suite.resonance import (
@@ -37,6 +38,20 @@ MEASUREMENTS = (
     "resonance_to_bandwidth_ratio",
 )
 pytestmark = pytest.mark.protocol(NAME)
+
+# what the certificate calls each result, and one line on what it is
+DECLARED = declare(
+    Declared("resonance_frequency_hz", "Resonance frequency",
+             "f_r: the load's two-mass resonance, from the frequency response to a multisine "
+             "(two-mass fit)"),
+    Declared("antiresonance_frequency_hz", "Anti-resonance frequency",
+             "f_a: the dip below the resonance, where the load absorbs the motor's motion"),
+    Declared("resonance_damping_ratio", "Resonance damping ratio",
+             "ζ of the two-mass mode fitted to the frequency response", non_negative=True),
+    Declared("resonance_to_bandwidth_ratio", "Resonance over loop bandwidth",
+             "f_r over the velocity loop's bandwidth: 5 or more keeps the mode clear of the loop",
+             non_negative=True),
+)
 
 
 @pytest.fixture(scope="module")
@@ -91,5 +106,6 @@ def test_resonance(parameter: str, result: ResonanceResult, calibration: Calibra
     }
     # the ratio is f_r over a bandwidth read off the same FRF: f_r's method terms are its own
     method_of = "resonance_frequency_hz" if parameter == "resonance_to_bandwidth_ratio" else None
-    measurement = calibration.record(NAME, found[parameter], method_of=method_of)
+    measurement = calibration.record(NAME, found[parameter], method_of=method_of,
+                                     declared=DECLARED[parameter])
     assert measurement.conforms, measurement.verdict()

@@ -11,12 +11,23 @@ from hil.calibration import CalibrationRun
 from hil.closed_loop.standstill import Standstill
 from hil.drives.base import Drive
 from hil.identify.estimate import Estimate
+from hil.measurement import Declared, declare
 from hil.motion import Excitation
 from hil.profile import UnitProfile
 from hil.suite.standstill import MEASUREMENTS, NAME, Spec, analyse, excitation
 from hil.suite.stop_rule import run_repeated
 
 pytestmark = pytest.mark.protocol(NAME)
+
+# what the certificate calls each result, and one line on what it is
+DECLARED = declare(
+    Declared("standstill_torque_ripple_mnm", "Standstill torque ripple",
+             "RMS of the reported torque about its mean while the drive holds a position",
+             non_negative=True),
+    Declared("standstill_jitter_urad", "Standstill position jitter",
+             "RMS of the encoder position about its mean while the drive holds a position",
+             non_negative=True),
+)
 
 
 @pytest.fixture(scope="module")
@@ -43,5 +54,6 @@ def result(drive: Drive, calibration: CalibrationRun, profile: UnitProfile
 @pytest.mark.parametrize("parameter", MEASUREMENTS)
 def test_standstill(parameter: str, result: dict[str, Estimate],
                     calibration: CalibrationRun) -> None:
-    measurement = calibration.record(NAME, result[parameter])
+    measurement = calibration.record(NAME, result[parameter],
+                                     declared=DECLARED[parameter])
     assert measurement.conforms, measurement.verdict()

@@ -12,6 +12,7 @@ from hil.calibration import CalibrationRun
 from hil.drives.base import Drive
 from hil.identify.estimate import Estimate
 from hil.identify.stribeck import StribeckResult
+from hil.measurement import Declared, declare
 from hil.profile import UnitProfile
 from hil.suite.stop_rule import run_repeated
 from hil.suite.stribeck import NAME, Spec, analyse, cross_check, excitation, finite_or_none
@@ -20,6 +21,15 @@ from hil.suite.travel import on_command_grid
 
 MEASUREMENTS = ("static_friction_nm", "stribeck_velocity_rad_s")
 pytestmark = pytest.mark.protocol(NAME)
+
+# what the certificate calls each result, and one line on what it is
+DECLARED = declare(
+    Declared("static_friction_nm", "Static (breakaway) friction",
+             "T_s: the friction torque as sliding starts, from a slow velocity staircase in both "
+             "directions"),
+    Declared("stribeck_velocity_rad_s", "Stribeck velocity",
+             "v_s: the speed over which friction falls from T_s to the Coulomb level"),
+)
 
 
 @pytest.fixture(scope="module")
@@ -68,5 +78,6 @@ def result(drive: Drive, calibration: CalibrationRun, profile: UnitProfile
 @pytest.mark.parametrize("parameter", MEASUREMENTS)
 def test_stribeck(parameter: str, result: dict[str, Estimate],
                   calibration: CalibrationRun) -> None:
-    measurement = calibration.record(NAME, result[parameter])
+    measurement = calibration.record(NAME, result[parameter],
+                                     declared=DECLARED[parameter])
     assert measurement.conforms, measurement.verdict()

@@ -24,6 +24,7 @@ from hil.identify.torque_constant import (
     datasheet_torque_constant_nm_a,
     identify_torque_constant,
 )
+from hil.measurement import Declared, declare
 from hil.profile import UnitProfile
 from hil.suite.stop_rule import run_repeated
 from hil.suite.torque_constant import (
@@ -43,6 +44,20 @@ MEASUREMENTS = (
     "torque_constant_vs_datasheet_pct",
 )
 pytestmark = pytest.mark.protocol(NAME)
+
+# what the certificate calls each result, and one line on what it is
+DECLARED = declare(
+    Declared("torque_constant_nm_a", "Torque constant",
+             "K_t: shaft torque per ampere, rotor locked, current swept up and down at several "
+             "angles against a shaft torque sensor"),
+    Declared("torque_linearity_pct", "Torque linearity error",
+             "Largest deviation of the shaft torque from its straight line against current, in % "
+             "of full scale", non_negative=True),
+    Declared("reported_torque_gain_error_pct", "Reported-torque gain error",
+             "The torque the drive reports against the shaft sensor's: slope − 1, in %"),
+    Declared("torque_constant_vs_datasheet_pct", "Torque constant against datasheet",
+             "Measured K_t against the motor datasheet's 9.5493/KV, in %"),
+)
 
 
 @pytest.fixture(scope="module")
@@ -102,5 +117,6 @@ def test_torque_constant(
 ) -> None:
     if parameter not in result:
         pytest.skip("the profile's [unit] has no kv_rpm_per_v (datasheet KV)")
-    measurement = calibration.record(NAME, result[parameter])
+    measurement = calibration.record(NAME, result[parameter],
+                                     declared=DECLARED[parameter])
     assert measurement.conforms, measurement.verdict()

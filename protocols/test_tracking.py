@@ -13,6 +13,7 @@ from hil.calibration import CalibrationRun
 from hil.closed_loop.tracking import Following
 from hil.drives.base import Drive
 from hil.identify.estimate import Estimate
+from hil.measurement import Declared, declare
 from hil.profile import UnitProfile
 from hil.suite.rate import sample_rate_shortfall
 from hil.suite.stop_rule import run_repeated
@@ -28,6 +29,20 @@ from hil.suite.tracking import (
 )
 
 pytestmark = pytest.mark.protocol(NAME)
+
+# what the certificate calls each result, and one line on what it is
+DECLARED = declare(
+    Declared("tracking_rms_error_urad", "Following error (RMS), feedforward on",
+             "RMS position error over the standard gimbal move (slew, track, reversal) with this "
+             "certificate's friction feedforward", non_negative=True),
+    Declared("tracking_peak_error_urad", "Following error (peak), feedforward on",
+             "Largest position error over the same move with the feedforward", non_negative=True),
+    Declared("tracking_rms_error_no_ff_urad", "Following error (RMS), feedforward off",
+             "RMS position error over the same move without feedforward", non_negative=True),
+    Declared("tracking_ff_reduction", "Feedforward improvement",
+             "RMS following error without feedforward over that with it (2: halved)",
+             non_negative=True),
+)
 
 
 @pytest.fixture(scope="module")
@@ -72,5 +87,6 @@ def result(drive: Drive, calibration: CalibrationRun, profile: UnitProfile
 @pytest.mark.parametrize("parameter", MEASUREMENTS)
 def test_tracking(parameter: str, result: dict[str, Estimate],
                   calibration: CalibrationRun) -> None:
-    measurement = calibration.record(NAME, result[parameter])
+    measurement = calibration.record(NAME, result[parameter],
+                                     declared=DECLARED[parameter])
     assert measurement.conforms, measurement.verdict()

@@ -16,12 +16,30 @@ from hil.calibration import CalibrationRun
 from hil.closed_loop.frf import FrfResult
 from hil.drives.base import Drive
 from hil.identify.estimate import Estimate
+from hil.measurement import Declared, declare
 from hil.profile import UnitProfile
 from hil.suite.rate import sample_rate_shortfall
 from hil.suite.stop_rule import run_repeated
 from hil.suite.velocity_loop_frf import MEASUREMENTS, NAME, Spec, analyse, excitation
 
 pytestmark = pytest.mark.protocol(NAME)
+
+# what the certificate calls each result, and one line on what it is
+DECLARED = declare(
+    Declared("velocity_bandwidth_hz", "Velocity-loop bandwidth",
+             "−3 dB frequency of the closed velocity loop (command to speed), from a multisine's "
+             "frequency response", non_negative=True),
+    Declared("velocity_peak_gain_db", "Closed-loop peak gain",
+             "Largest gain of the closed velocity loop over frequency, in dB (0 dB: no peaking)"),
+    Declared("velocity_gain_margin_db", "Gain margin",
+             "How far the loop gain could rise before the velocity loop turns unstable, from the "
+             "measured loop gain"),
+    Declared("velocity_phase_margin_deg", "Phase margin",
+             "Phase left at the loop gain's crossover before the velocity loop turns unstable"),
+    Declared("velocity_sensitivity_peak_db", "Sensitivity peak",
+             "Largest gain from a disturbance to the speed error (|S|), in dB: how much the loop "
+             "can amplify a disturbance", non_negative=True),
+)
 
 
 @pytest.fixture(scope="module")
@@ -66,5 +84,6 @@ def result(drive: Drive, calibration: CalibrationRun, profile: UnitProfile
 @pytest.mark.parametrize("parameter", MEASUREMENTS)
 def test_velocity_loop_frf(parameter: str, result: dict[str, Estimate],
                            calibration: CalibrationRun) -> None:
-    measurement = calibration.record(NAME, result[parameter])
+    measurement = calibration.record(NAME, result[parameter],
+                                     declared=DECLARED[parameter])
     assert measurement.conforms, measurement.verdict()

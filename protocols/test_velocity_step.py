@@ -15,12 +15,36 @@ from hil.calibration import CalibrationRun
 from hil.closed_loop.step import StepFigures
 from hil.drives.base import Drive
 from hil.identify.estimate import Estimate
+from hil.measurement import Declared, declare
 from hil.profile import UnitProfile
 from hil.suite.rate import sample_rate_shortfall
 from hil.suite.stop_rule import run_repeated
 from hil.suite.velocity_step import MEASUREMENTS, NAME, Spec, analyse, excitation
 
 pytestmark = pytest.mark.protocol(NAME)
+
+# what the certificate calls each result, and one line on what it is
+DECLARED = declare(
+    Declared("step_rise_time_small_ms", "Rise time, small step",
+             "10–90 % rise time of the speed after the velocity staircase's small steps",
+             non_negative=True),
+    Declared("step_rise_time_large_ms", "Rise time, large step",
+             "10–90 % rise time of the speed after the staircase's large steps", non_negative=True),
+    Declared("step_overshoot_small_pct", "Overshoot, small step",
+             "How far the speed overshoots its new setpoint after a small step, in % of the step",
+             non_negative=True),
+    Declared("step_overshoot_large_pct", "Overshoot, large step",
+             "How far the speed overshoots its new setpoint after a large step, in % of the step",
+             non_negative=True),
+    Declared("step_settling_time_small_ms", "Settling time, small step",
+             "Time until the speed stays within 2 % of the step around its setpoint, small steps",
+             non_negative=True),
+    Declared("step_settling_time_large_ms", "Settling time, large step",
+             "Time until the speed stays within 2 % of the step around its setpoint, large steps",
+             non_negative=True),
+    Declared("step_steady_state_error_pct", "Steady-state speed error",
+             "Mean speed error once settled, in % of the setpoint"),
+)
 
 
 @pytest.fixture(scope="module")
@@ -54,5 +78,6 @@ def result(drive: Drive, calibration: CalibrationRun, profile: UnitProfile
 @pytest.mark.parametrize("parameter", MEASUREMENTS)
 def test_velocity_step(parameter: str, result: dict[str, Estimate],
                        calibration: CalibrationRun) -> None:
-    measurement = calibration.record(NAME, result[parameter])
+    measurement = calibration.record(NAME, result[parameter],
+                                     declared=DECLARED[parameter])
     assert measurement.conforms, measurement.verdict()

@@ -57,11 +57,17 @@ def build_certificate(
     issued = issued or datetime.now(UTC)
     outcome = run.overall_outcome(aborted=aborted)
     info = run.drive_info
+    identity = run.identity
     return {
         "schema": SCHEMA,
         "certificate_id": f"{run.unit_serial}-{issued:%Y%m%dT%H%M%SZ}-{uuid.uuid4().hex[:8]}",
         "title": "Calibration certificate: gimbal axis mechanical parameters",
         "accreditation": "none claimed; structure follows ISO/IEC 17025:2017 clause 7.8",
+        # from the station file's [station] table (None: the file does not state it)
+        "laboratory": {"name": identity.laboratory, "address": identity.laboratory_address},
+        "customer": identity.customer,
+        "authorised_by": identity.authorised_by,
+        "environment": _environment(run),
         "unit": {
             "serial": run.unit_serial,
             "type": run.profile.unit_type,
@@ -79,7 +85,8 @@ def build_certificate(
             "issued": issued.isoformat(timespec="seconds"),
         },
         "method": {
-            "profile": run.profile.source,
+            # the file's name: its SHA-256 is the record, not where it lay on this machine
+            "profile": Path(run.profile.source).name,
             "profile_sha256": run.profile.sha256,
             "profile_sha256_without_firmware": profile_sha256_without_firmware(run.profile.raw),
             "protocols": {
@@ -95,7 +102,8 @@ def build_certificate(
                 }
                 for name, record in run.protocols.items()
             },
-            "method_bias": {"file": run.method_bias.source, "sha256": run.method_bias.sha256},
+            "method_bias": {"file": Path(run.method_bias.source).name,
+                            "sha256": run.method_bias.sha256},
             "details": run.details,
         },
         "machine_time": {
@@ -136,6 +144,14 @@ def build_certificate(
         "aborted": aborted,
         "conformity": _statement(outcome.value),
     }
+
+
+def _environment(run: CalibrationRun) -> dict[str, Any]:
+    """The environmental conditions the station file declares (not measured by the run)."""
+    identity = run.identity
+    found = {"temperature_c": identity.temperature_c, "humidity_pct": identity.humidity_pct,
+             "note": identity.conditions}
+    return {key: value for key, value in found.items() if value is not None}
 
 
 def _drive_info(info: Any) -> dict[str, Any]:

@@ -1,46 +1,198 @@
-"""Human-readable rendering of a certificate dictionary."""
+"""Human-readable rendering of a certificate dictionary, and the wording every reading of it
+shares (``certificate.txt`` here, the HTML and PDF through :mod:`hil.report.view`): every
+line labelled, no Python literals, no paths of the machine that ran it, limits one-sided
+where the quantity is, each skipped protocol once with its reason."""
 
 from __future__ import annotations
 
+import math
+import re
+from collections.abc import Mapping, Sequence
+from datetime import datetime
+from pathlib import PureWindowsPath
 from typing import Any
 
-from hil.gum import rounded_pair
+from hil.gum import rounded_pair, significant
+
+NOT_AUTHORISED = "not authorised"
+NOT_STATED = "not stated"
+#: What each protocol is, for a reader (the code name stays beside it).
+PROTOCOL_TITLES: dict[str, str] = {
+    "current_loop": "Current loop",
+    "gravity_cable": "Gravity unbalance and cable",
+    "inertia_friction": "Inertia and friction",
+    "cogging": "Cogging and torque-constant ripple",
+    "stribeck": "Low-speed (Stribeck) friction",
+    "torque_constant": "Torque constant",
+    "resonance": "Resonance",
+    "inertia_elevation": "Azimuth inertia across elevation",
+    "velocity_loop_frf": "Velocity-loop frequency response",
+    "velocity_step": "Velocity steps",
+    "tracking": "Tracking a standard move",
+    "standstill": "Standstill",
+    "cogging_compensation": "Cogging compensation",
+}
+# "skipped: test_x[param]: Skipped: reason" (pytest's words) → "reason"
+_SKIP_PREFIX = re.compile(r"^skipped: (?:[\w.]+(?:\[[^\]]*\])?: )?(?:Skipped: )?")
+
+
+def file_name(path: str) -> str:
+    """The base name of a path as a certificate stores it (an old certificate kept the
+    absolute path of the machine that ran it: POSIX or Windows)."""
+    return PureWindowsPath(path).name if path else ""
+
+
+def yes_no(flag: object) -> str:
+    """A flag as words, never ``True``/``False``."""
+    return "yes" if flag else "no"
+
+
+def when(stamp: str) -> str:
+    """``2026-11-27T08:55:29+00:00`` → ``2026-11-27 08:55:29 UTC`` (else as written)."""
+    try:
+        moment = datetime.fromisoformat(stamp)
+    except (TypeError, ValueError):
+        return str(stamp)
+    offset = moment.utcoffset()
+    zone = "UTC" if offset is not None and not offset else moment.strftime("%z") or ""
+    return f"{moment:%Y-%m-%d %H:%M:%S} {zone}".strip()
+
+
+def title_of(result: Mapping[str, Any]) -> str:
+    """A result's title; a certificate written before titles existed has its code name."""
+    return str(result.get("title") or result["parameter"])
+
+
+def limits_text(result: Mapping[str, Any]) -> str:
+    """The acceptance limits as a reader expects them: ``0.21 to 0.39``; one-sided
+    (``≤ 20``) for a size by nature (``non_negative``) with a lower limit at or below zero,
+    or when one limit is infinite."""
+    lower, upper = float(result["lower_limit"]), float(result["upper_limit"])
+    if result.get("non_negative") and lower <= 0:
+        lower = -math.inf
+    if not math.isfinite(lower) and not math.isfinite(upper):
+        return "none"
+    if not math.isfinite(lower):
+        return f"≤ {upper:.4g}"
+    if not math.isfinite(upper):
+        return f"≥ {lower:.4g}"
+    return f"{lower:.4g} to {upper:.4g}"
+
+
+def protocol_messages(messages: Sequence[str]) -> list[str]:
+    """A protocol's messages, each once: a skip says its reason once, not once per result
+    with pytest's test id."""
+    seen: list[str] = []
+    for message in messages:
+        text = str(message)
+        if text.startswith("skipped: "):
+            text = "skipped: " + _SKIP_PREFIX.sub("", text)
+        if text not in seen:
+            seen.append(text)
+    return seen
+
+
+def environment_text(cert: Mapping[str, Any]) -> str:
+    """The environmental conditions the station declares, or that it records none."""
+    env = cert.get("environment") or {}
+    if not isinstance(env, Mapping):
+        return str(env)
+    parts = []
+    if env.get("temperature_c") is not None:
+        parts.append(f"temperature {env['temperature_c']:g} °C")
+    if env.get("humidity_pct") is not None:
+        parts.append(f"relative humidity {env['humidity_pct']:g} %")
+    if env.get("note"):
+        parts.append(str(env["note"]))
+    if not parts:
+        return "not recorded by the station"
+    return ", ".join(parts) + " (declared by the station, not measured in this run)"
+
+
+def certificate_fields(cert: Mapping[str, Any]) -> list[tuple[str, str]]:
+    """The ISO/IEC 17025 7.8 items of a certificate as (label, text) pairs, in reading order.
+
+    Parameters
+    ----------
+    cert : mapping
+        ``certificate.json`` as read (old ones without the laboratory fields too).
+
+    Returns
+    -------
+    list of (str, str)
+    """
+    unit, dates, drive = cert["unit"], cert["dates"], cert["drive"]
+    software, method, run = cert["software"], cert["method"], cert.get("run") or {}
+    lab = cert.get("laboratory") or {}
+    ran = [n for n, p in method["protocols"].items() if p["outcome"] != "SKIPPED"]
+    unit_type = str(unit.get("type", ""))
+    axis = str(unit.get("axis", ""))
+    kind = "" if not axis or axis in unit_type.lower() else f", {axis} axis"
+    simulated = (cert.get("conditions") or {}).get("simulated")
+    drive_text = (" ".join(str(drive.get(k) or "") for k in ("kind", "vendor", "model")).strip()
+                  + f", firmware {drive.get('firmware_version') or NOT_STATED}")
+    for key in ("serial", "transport"):
+        if drive.get(key):
+            drive_text += f", {key} {drive[key]}"
+    if simulated is not None:
+        drive_text += f"; simulated: {yes_no(simulated)}"
+    bias = method.get("method_bias") or {}
+    station = run.get("station") or NOT_STATED
+    fields = [
+        ("Certificate id", str(cert["certificate_id"])),
+        ("Laboratory", ", ".join(str(v) for v in (lab.get("name"), lab.get("address")) if v)
+         or f"{NOT_STATED} (the station file's [station] laboratory)"),
+        ("Customer", str(cert.get("customer") or NOT_STATED)),
+        ("Unit", f"serial {unit['serial']}, type {unit_type}{kind}"),
+        ("Calibration started", when(dates["calibration_started"])),
+        ("Issued", when(dates["issued"])),
+        ("Authorised by", str(cert.get("authorised_by") or NOT_AUTHORISED)),
+        ("Station and operator", f"station {station}, operator {run.get('operator') or NOT_STATED}"
+         + ("; a reference (golden) unit" if run.get("reference") else "")),
+        ("Environment", environment_text(cert)),
+        ("Method", "gimbal-hil calibration suite: " + (", ".join(ran) or "no protocol ran")),
+        ("Unit profile", f"{file_name(method['profile'])} (SHA-256 {method['profile_sha256']})"),
+        ("Method-bias map", f"{file_name(str(bias.get('file') or ''))} "
+                            f"(SHA-256 {bias.get('sha256') or NOT_STATED})"),
+        ("Software", f"gimbal-hil {software['version']}, revision "
+                     f"{software.get('git_revision') or 'unknown'}, Python "
+                     f"{software.get('python') or 'unknown'}"),
+        ("Drive", drive_text),
+        ("Machine time", f"{cert['machine_time']['motion_time_s']:.1f} s of motion, "
+                         f"{cert['machine_time']['wall_time_s']:.1f} s wall"),
+        ("Accreditation", str(cert["accreditation"])),
+    ]
+    return fields
 
 
 def render_text(cert: dict[str, Any]) -> str:
-    unit, dates = cert["unit"], cert["dates"]
+    fields = certificate_fields(cert)
+    width = max(len(label) for label, _ in fields)
+    authorised = cert.get("authorised_by")
     lines = [
         cert["title"],
         "=" * len(cert["title"]),
-        f"Certificate id : {cert['certificate_id']}",
-        f"Unit           : {unit['serial']} ({unit['type']}, {unit['axis']} axis)",
-        f"Calibrated     : {dates['calibration_started']}   issued {dates['issued']}",
-        f"Drive          : {cert['drive'].get('kind')} {cert['drive'].get('vendor', '')} "
-        f"{cert['drive'].get('model', '')} fw {cert['drive'].get('firmware_version', '?')}",
-        f"Software       : gimbal-hil {cert['software']['version']} "
-        f"({cert['software']['git_revision'] or 'no git revision'})",
-        f"Profile        : {cert['method']['profile']} "
-        f"(sha256 {cert['method']['profile_sha256'][:12]}…)",
-        f"Machine time   : {cert['machine_time']['motion_time_s']:.1f} s of motion, "
-        f"{cert['machine_time']['wall_time_s']:.1f} s wall",
+        f"OUTCOME: {cert['outcome']}" + ("" if authorised else f" ({NOT_AUTHORISED})"),
+        "",
+        *(f"{label:<{width}} : {text}" for label, text in fields),
         "",
         "Values as GUM 7.2.6 asks: U (k ≈ 2, ~95 %) to two significant digits, the value to",
         "the same decimal place; certificate.json keeps full precision.",
         "",
-        f"{'parameter':<32}{'value':>13}{'U':>11} {'(k)':<7}{'unit':<11}{'limits':<25}outcome",
+        f"{'result':<40}{'value':>13}{'U':>11} {'(k)':<7}{'unit':<11}{'limits':<22}"
+        f"{'outcome':<10}code name",
     ]
     for r in cert["results"]:
-        limits = f"[{r['lower_limit']:.4g}, {r['upper_limit']:.4g}]"
         value, expanded = rounded_pair(r["value"], r["expanded_uncertainty"])
         lines.append(
-            f"{r['parameter']:<32}{value:>13}{expanded:>11} ({r['coverage_factor']:.2f}) "
-            f"{r['unit']:<11}{limits:<25}{r['outcome']}"
+            f"{title_of(r):<40}{value:>13}{expanded:>11} ({r['coverage_factor']:.2f}) "
+            f"{r['unit']:<11}{limits_text(r):<22}{r['outcome']:<10}{r['parameter']}"
         )
     lines += _budgets(cert["results"])
     lines += ["", "Protocols:"]
     for name, p in cert["method"]["protocols"].items():
         lines.append(f"  {name:<24}{p['outcome']:<14}motion {p['motion_time_s']:.1f} s")
-        lines += [f"      {message}" for message in p["messages"]]
+        lines += [f"      {message}" for message in protocol_messages(p["messages"])]
     lines += ["", "Raw data (SHA-256):"]
     lines += [f"  {f['file']}  {f['sha256']}" for f in cert["raw_data"]]
     if cert["artifacts"]:
@@ -51,9 +203,15 @@ def render_text(cert: dict[str, Any]) -> str:
         f"Decision rule: {cert['decision_rule']}",
         "",
         f"OUTCOME: {cert['outcome']}. {cert['conformity']}",
+        f"Authorised by: {authorised or NOT_AUTHORISED}",
         "",
     ]
     return "\n".join(lines)
+
+
+def with_unit(text: str, unit: str) -> str:
+    """``text unit``, without a dangling space for a result with no unit (a ratio)."""
+    return f"{text} {unit}" if unit else text
 
 
 def _budgets(results: list[dict[str, Any]]) -> list[str]:
@@ -62,14 +220,20 @@ def _budgets(results: list[dict[str, Any]]) -> list[str]:
     lines = ["", "Uncertainty budgets (standard uncertainties, k = 1; share of u²):"]
     for r in results:
         u = r["standard_uncertainty"]
-        lines.append(f"  {r['parameter']} (u = {u:#.2g} {r['unit']}, "
-                     f"U = {r['expanded_uncertainty']:#.2g}, k = {r['coverage_factor']:.2f})")
+        value, expanded = rounded_pair(r["value"], r["expanded_uncertainty"])
+        lines.append(f"  {title_of(r)} ({r['parameter']}): "
+                     f"{with_unit(f'{value} ± {expanded}', r['unit'])} "
+                     f"(k = {r['coverage_factor']:.2f}), "
+                     f"u = {with_unit(significant(u), r['unit'])}")
+        if r.get("description"):
+            lines.append(f"    {r['description']}")
         for line in r.get("budget", []):
             share = (line["contribution"] / u) ** 2 if u else 0.0
             lines.append(
-                f"    {line['type']}  u(x) = {line['standard_uncertainty']:<#9.2g}"
+                f"    {line['type']}  u(x) = {significant(line['standard_uncertainty']):<9}"
                 f"{line['unit']:<11} c = {line['sensitivity']:<9.3g} "
-                f"→ {line['contribution']:<#9.2g}{100 * share:>4.0f} %  {line['component']}"
+                f"→ {significant(line['contribution']):<9}{100 * share:>4.0f} %  "
+                f"{line['component']}"
             )
         validation = r.get("validation")
         if validation:

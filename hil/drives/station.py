@@ -107,11 +107,25 @@ Station = CanOpenStation | ModbusStation
 class StationIdentity:
     """The optional ``[station]`` table: which bench this is (``id``), the results store
     its runs go to (``store``, a database URL) and whether it calibrates reference (golden)
-    units (``reference``). Any drive kind reads it, the simulator too."""
+    units (``reference``). Any drive kind reads it, the simulator too.
+
+    The certificate's ISO/IEC 17025 7.8 fields come from it too: the laboratory
+    (``laboratory``, ``laboratory_address``), the ``customer``, who authorises the
+    certificates (``authorised_by``; absent: each says "not authorised") and the
+    environmental conditions the bench declares (``temperature_c``, ``humidity_pct``,
+    ``conditions``: a free-text note, e.g. "air-conditioned, 23 ± 2 °C").
+    """
 
     station_id: str | None = None
     store: str | None = None
     reference: bool = False
+    laboratory: str | None = None
+    laboratory_address: str | None = None
+    customer: str | None = None
+    authorised_by: str | None = None
+    temperature_c: float | None = None
+    humidity_pct: float | None = None
+    conditions: str | None = None
 
 
 def load_station_identity(path: str | Path) -> StationIdentity:
@@ -130,10 +144,20 @@ def load_station_identity(path: str | Path) -> StationIdentity:
 
 
 def _identity(table: ConfigTable) -> StationIdentity:
+    humidity = table.number("humidity_pct", None) if "humidity_pct" in table else None
+    if humidity is not None and not 0 <= humidity <= 100:
+        raise table.error("humidity_pct", f"is a relative humidity in % (0..100), got {humidity}")
     identity = StationIdentity(
         station_id=table.string("id", "") or None,
         store=table.string("store", "") or None,
         reference=table.boolean("reference", False),
+        laboratory=table.string("laboratory", "") or None,
+        laboratory_address=table.string("laboratory_address", "") or None,
+        customer=table.string("customer", "") or None,
+        authorised_by=table.string("authorised_by", "") or None,
+        temperature_c=table.number("temperature_c", None) if "temperature_c" in table else None,
+        humidity_pct=humidity,
+        conditions=table.string("conditions", "") or None,
     )
     table.done()
     return identity

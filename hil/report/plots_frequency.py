@@ -59,7 +59,7 @@ def current_loop(data: ProtocolData) -> Figure | None:
     ax.plot(grid, phase_deg(0.0), color=MEASURED, lw=0.8, ls=":", label="no current-loop lag")
     ax.set(xlabel="frequency (Hz)", ylabel="phase after the rigid model (°)",
            title="current loop: phase of the motion against the reported torque")
-    ax.legend(loc="lower left")
+    fig.legend(loc="outside lower center", ncols=3)  # legends below the axes, off the data
     return fig
 
 
@@ -102,7 +102,7 @@ def resonance(data: ProtocolData) -> Figure | None:
     for ax in (top, bottom):
         for f in (f_r, f_a):
             ax.axvline(f, color=MEASURED, lw=0.7, ls=":")
-        ax.legend(loc="lower left")
+    fig.legend(*bottom.get_legend_handles_labels(), loc="outside lower center", ncols=2)
     return fig
 
 
@@ -142,7 +142,7 @@ def cogging(data: ProtocolData) -> Figure | None:
               label="orders found: " + ", ".join(str(o) for o in orders))
     left.set(xlabel="order (periods per revolution)", ylabel="amplitude (mN·m)",
              title="torque spectrum against angle (both passes)")
-    left.legend(loc="upper left")
+    fig.legend(*left.get_legend_handles_labels(), loc="outside lower left")
     period_rad = 2 * math.pi / reduce(math.gcd, orders)
     grid = np.linspace(0.0, period_rad, 300)
     levels_detail = data.details.get("torque_levels_nm") or levels
@@ -160,7 +160,8 @@ def cogging(data: ProtocolData) -> Figure | None:
                    label=f"table, pass {label}")
     right.set(xlabel=f"position within {math.degrees(period_rad):.3g}° (°)",
               ylabel="torque ripple (mN·m)", title="cogging and K_t ripple map")
-    right.legend(loc="upper right", ncols=2, markerscale=3)
+    fig.legend(*right.get_legend_handles_labels(), loc="outside lower right", ncols=2,
+               markerscale=3)
     return fig
 
 

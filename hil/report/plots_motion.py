@@ -60,8 +60,9 @@ def inertia_friction(data: ProtocolData) -> Figure | None:
              title="J·α + B·ω + T_c·sgn ω + static load against the torque")
     right.set(xlabel="velocity ω (rad/s)", ylabel="τ − J·α − static load (N·m)",
               title="what is left: the friction")
-    left.legend(loc="lower left", ncols=2, fontsize=6)
-    right.legend(loc="upper left", markerscale=6)
+    # legends below the axes, off the data
+    fig.legend(*left.get_legend_handles_labels(), loc="outside lower left", ncols=2)
+    fig.legend(*right.get_legend_handles_labels(), loc="outside lower right", markerscale=6)
     return fig
 
 
@@ -92,7 +93,7 @@ def stribeck(data: ProtocolData) -> Figure | None:
     ax.set(xlabel="speed v (rad/s)", ylabel="steady friction (N·m)",
            title=f"Stribeck curve: T_s = {static:.4g} N·m, v_s = {vs:.3g} rad/s, "
                  f"T_c = {coulomb:.4g} N·m")
-    ax.legend(loc="upper right")
+    fig.legend(loc="outside lower center", ncols=3)
     return fig
 
 
@@ -127,7 +128,8 @@ def gravity_cable(data: ProtocolData) -> Figure | None:
     left.set_ylim(low - margin, high + margin)
     left.set(xlabel="position θ (rad)", ylabel="torque (N·m)",
              title="two-way sweep: the hysteresis loop")
-    left.legend(loc="upper right", markerscale=8)
+    fig.legend(*left.get_legend_handles_labels(), loc="outside lower left", ncols=2,
+               markerscale=8)
     bins = np.asarray(data.details.get("load_nm_by_elevation_rad") or [], dtype=float)
     if bins.size:
         right.plot(bins[:, 0], bins[:, 1], "o", ms=2.5, color=COLOURS[2],
@@ -136,7 +138,7 @@ def gravity_cable(data: ProtocolData) -> Figure | None:
                label="m·g·e·cos(θ + φ) + k·θ + c" if mge else "k·θ + c")
     right.set(xlabel="position θ (rad)", ylabel="load torque (N·m)",
               title="load (gravity + cable) and its fit")
-    right.legend(loc="lower center")
+    fig.legend(*right.get_legend_handles_labels(), loc="outside lower right")
     return fig
 
 
@@ -157,7 +159,7 @@ def inertia_elevation(data: ProtocolData) -> Figure | None:
             label="J_zenith + ΔJ·cos²(el)")
     ax.set(xlabel="elevation (rad)", ylabel="azimuth inertia (kg·m²)",
            title=f"azimuth inertia across elevation: ratio {level / zenith:.4g}")
-    ax.legend(loc="lower center")
+    fig.legend(loc="outside lower center", ncols=3)
     return fig
 
 
@@ -192,5 +194,6 @@ def torque_constant(data: ProtocolData) -> Figure | None:
              title=f"locked rotor: K_t = {kt:.6g} N·m/A")
     right.set(xlabel="current (A)", ylabel="level mean − line (mN·m)",
               title="what each angle's line leaves (± 2 s.e.)")
-    left.legend(loc="upper left", title="locked at")
+    fig.legend(*left.get_legend_handles_labels(), loc="outside lower left", ncols=5,
+               title="locked at")
     return fig

@@ -7,7 +7,16 @@ from __future__ import annotations
 from collections.abc import Mapping
 from typing import Any
 
-from hil.gum import rounded_pair
+from hil.certificate.render import (
+    NOT_AUTHORISED,
+    PROTOCOL_TITLES,
+    certificate_fields,
+    limits_text,
+    protocol_messages,
+    title_of,
+    with_unit,
+)
+from hil.gum import rounded_pair, significant
 
 #: What the banner says for each overall outcome: the word, and a line under it.
 BANNER: dict[str, tuple[str, str]] = {
@@ -29,23 +38,28 @@ def certificate_view(cert: Mapping[str, Any]) -> dict[str, Any]:
     Returns
     -------
     dict
-        ``id``, ``title``, ``outcome``, ``banner`` (word, line), ``fields`` (label, text
-        pairs: the ISO/IEC 17025 7.8 items), ``results``, ``budgets``, ``protocols``,
-        ``raw_data``, ``artifacts``, ``decision_rule``, ``conformity``, ``accreditation``;
-        all text.
+        ``id``, ``title``, ``outcome``, ``banner`` (word, line), ``authorised_by`` (a name
+        or "not authorised"), ``fields`` (label, text pairs: the ISO/IEC 17025 7.8 items),
+        ``results``, ``groups`` (the results by protocol, in run order), ``budgets``,
+        ``protocols``, ``raw_data``, ``artifacts``, ``decision_rule``, ``conformity``,
+        ``accreditation``; all text.
     """
     outcome = str(cert["outcome"])
     word, line = BANNER.get(outcome, (outcome, ""))
     if cert.get("aborted"):
         line = "the run was ABORTED: " + line
+    results = [_result(r) for r in cert["results"]]
     return {
         "id": cert["certificate_id"],
         "title": cert["title"],
         "outcome": outcome,
         "passed": outcome in ("PASS", "MARGINAL"),
         "banner": {"word": word, "line": line},
-        "fields": _fields(cert),
-        "results": [_result(r) for r in cert["results"]],
+        "authorised": bool(cert.get("authorised_by")),
+        "authorised_by": str(cert.get("authorised_by") or NOT_AUTHORISED),
+        "fields": [list(pair) for pair in certificate_fields(cert)],
+        "results": results,
+        "groups": _groups(results, cert["method"]["protocols"]),
         "budgets": [_budget(r) for r in cert["results"]],
         "protocols": [_protocol(name, p) for name, p in cert["method"]["protocols"].items()],
         "raw_data": [{"file": f["file"], "sha256": f["sha256"]} for f in cert["raw_data"]],
@@ -57,56 +71,35 @@ def certificate_view(cert: Mapping[str, Any]) -> dict[str, Any]:
     }
 
 
-def _fields(cert: Mapping[str, Any]) -> list[tuple[str, str]]:
-    unit, dates, drive = cert["unit"], cert["dates"], cert["drive"]
-    software, method = cert["software"], cert["method"]
-    ran = [n for n, p in method["protocols"].items() if p["outcome"] != "SKIPPED"]
-    fields = [
-        ("Certificate id", cert["certificate_id"]),
-        ("Unit", f"serial {unit['serial']}, {unit['type']}, {unit['axis']} axis"),
-        ("Calibration started", dates["calibration_started"]),
-        ("Issued", dates["issued"]),
-        ("Method", "gimbal-hil calibration suite: " + ", ".join(ran)),
-        ("Unit profile", method["profile"]),
-        ("Profile SHA-256", method["profile_sha256"]),
-        ("Method-bias map", f"{method['method_bias']['file']} "
-                            f"(SHA-256 {method['method_bias']['sha256'] or '—'})"),
-        ("Software", f"gimbal-hil {software['version']}, revision "
-                     f"{software.get('git_revision') or 'unknown'}, Python "
-                     f"{software.get('python', '?')}"),
-        ("Drive", " ".join(str(drive.get(k, "")) for k in ("kind", "vendor", "model")).strip()
-         + f", firmware {drive.get('firmware_version', '?')}, serial "
-           f"{drive.get('serial', '?')}, transport {drive.get('transport', '?')}"),
-        ("Station and conditions", _pairs(cert.get("conditions", {}))),
-    ]
-    if cert.get("station"):
-        fields.append(("Station", _pairs(cert["station"]) if isinstance(cert["station"], dict)
-                       else str(cert["station"])))
-    if cert.get("environment"):
-        fields.append(("Environment", _pairs(cert["environment"])
-                       if isinstance(cert["environment"], dict) else str(cert["environment"])))
-    machine = cert["machine_time"]
-    fields.append(("Machine time", f"{machine['motion_time_s']:.1f} s of motion, "
-                                   f"{machine['wall_time_s']:.1f} s wall"))
-    return fields
-
-
-def _pairs(mapping: Mapping[str, Any]) -> str:
-    return ", ".join(f"{k.replace('_', ' ')}: {v}" for k, v in mapping.items())
-
-
 def _result(r: Mapping[str, Any]) -> dict[str, str]:
     value, expanded = rounded_pair(r["value"], r["expanded_uncertainty"])
     return {
         "parameter": r["parameter"],
+        "title": title_of(r),
+        "description": str(r.get("description") or ""),
+        "protocol": str(r.get("protocol") or ""),
         "value": value,
         "U": expanded,
         "k": f"{r['coverage_factor']:.2f}",
         "unit": r["unit"],
         "nominal": f"{r['nominal']:.4g}" if r.get("nominal") is not None else "—",
-        "limits": f"[{r['lower_limit']:.4g}, {r['upper_limit']:.4g}]",
+        "limits": limits_text(r),
         "outcome": r["outcome"],
     }
+
+
+def _groups(results: list[dict[str, str]], protocols: Mapping[str, Any]) -> list[dict[str, Any]]:
+    """The results by protocol, in the order the protocols ran."""
+    order = list(protocols)
+    names = order + sorted({r["protocol"] for r in results} - set(order))
+    groups = []
+    for name in names:
+        rows = [r for r in results if r["protocol"] == name]
+        if rows:
+            groups.append({"name": name, "title": PROTOCOL_TITLES.get(name, name),
+                           "outcome": str((protocols.get(name) or {}).get("outcome", "")),
+                           "results": rows})
+    return groups
 
 
 def _budget(r: Mapping[str, Any]) -> dict[str, Any]:
@@ -118,15 +111,17 @@ def _budget(r: Mapping[str, Any]) -> dict[str, Any]:
         lines.append({
             "component": line["component"],
             "type": line["type"],
-            "u": f"{line['standard_uncertainty']:#.2g} {line['unit']}",
+            "u": with_unit(significant(line["standard_uncertainty"]), line["unit"]),
             "c": f"{line['sensitivity']:.3g}",
-            "contribution": f"{line['contribution']:#.2g}",
+            "contribution": significant(line["contribution"]),
             "share": f"{100 * share:.0f} %",
         })
     return {
         "parameter": r["parameter"],
-        "summary": f"{value} ± {expanded} {r['unit']} (k = {r['coverage_factor']:.2f}); "
-                   f"u = {u:#.2g} {r['unit']}",
+        "title": title_of(r),
+        "description": str(r.get("description") or ""),
+        "summary": f"{with_unit(f'{value} ± {expanded}', r['unit'])} "
+                   f"(k = {r['coverage_factor']:.2f}); u = {with_unit(significant(u), r['unit'])}",
         "lines": lines,
     }
 
@@ -134,7 +129,8 @@ def _budget(r: Mapping[str, Any]) -> dict[str, Any]:
 def _protocol(name: str, p: Mapping[str, Any]) -> dict[str, Any]:
     return {
         "name": name,
+        "title": PROTOCOL_TITLES.get(name, name),
         "outcome": p["outcome"],
         "motion": f"{p['motion_time_s']:.1f} s",
-        "messages": list(p["messages"]),
+        "messages": protocol_messages(p["messages"]),
     }
