@@ -38,12 +38,14 @@ def add_arguments(commands: argparse._SubParsersAction[argparse.ArgumentParser],
     selection.add_argument("--since", default=None,
                            help="only runs from this date, YYYY-MM-DD (default: every run)")
 
-    def add(name: str, text: str) -> argparse.ArgumentParser:
+    def add(name: str, text: str, description: str | None = None) -> argparse.ArgumentParser:
         return commands.add_parser(name, parents=[common, selection], help=text,
-                                   description=text, formatter_class=formatter_class)
+                                   description=description or text,
+                                   formatter_class=formatter_class)
 
-    spc = add("spc", "capability, I-MR chart, Nelson rules, EWMA of one result (exit 1 on a "
-                     "signal); 'spc baseline freeze PARAM' freezes the limits")
+    spc = add("spc", "one result's capability, I-MR chart, Nelson rules, EWMA",
+              "capability, I-MR chart, Nelson rules, EWMA of one result (exit 1 on a "
+              "signal); 'spc baseline freeze PARAM' freezes the limits")
     spc.add_argument("words", nargs="+", metavar="PARAM",
                      help="the result's name, or: baseline freeze PARAM")
     spc.add_argument("--rules", default="1,2,5,6", help="Nelson rules (comma list or 'all')")
