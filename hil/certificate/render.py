@@ -141,7 +141,7 @@ def certificate_fields(cert: Mapping[str, Any]) -> list[tuple[str, str]]:
     fields = [
         ("Certificate id", str(cert["certificate_id"])),
         ("Laboratory", ", ".join(str(v) for v in (lab.get("name"), lab.get("address")) if v)
-         or f"{NOT_STATED} (the station file's [station] laboratory)"),
+         or NOT_STATED),
         ("Customer", str(cert.get("customer") or NOT_STATED)),
         ("Unit", f"serial {unit['serial']}, type {unit_type}{kind}"),
         ("Calibration started", when(dates["calibration_started"])),
@@ -150,7 +150,9 @@ def certificate_fields(cert: Mapping[str, Any]) -> list[tuple[str, str]]:
         ("Station and operator", f"station {station}, operator {run.get('operator') or NOT_STATED}"
          + ("; a reference (golden) unit" if run.get("reference") else "")),
         ("Environment", environment_text(cert)),
-        ("Method", "gimbal-hil calibration suite: " + (", ".join(ran) or "no protocol ran")),
+        ("Method", "gimbal-hil calibration suite: "
+                   + (", ".join(PROTOCOL_TITLES.get(n, n).lower() for n in ran)
+                      or "no protocol ran")),
         ("Unit profile", f"{file_name(method['profile'])} (SHA-256 {method['profile_sha256']})"),
         ("Method-bias map", f"{file_name(str(bias.get('file') or ''))} "
                             f"(SHA-256 {bias.get('sha256') or NOT_STATED})"),
