@@ -9,7 +9,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from hil.diagnose import alias, constant, interpret, intervals, lag, ripple, unexplained
-from hil.diagnose.model import Fit, solve
+from hil.diagnose.model import Fit, fit_percent, solve
 from hil.diagnose.profile_out import extended_firmware, extended_plant
 from hil.diagnose.select import DECISION_RULE, Candidate
 
@@ -240,6 +240,11 @@ def final_structure(diagnosis: Diagnosis) -> dict[str, Any]:
         independence=min(1.0, signals.independence * signals.decimation),
         rotary=signals.axis_kind == "rotary",
         travel=unexplained.travel_since_reversal(signals.position, signals.velocity)[rows])
+    poor_fit = unexplained.misfit(fit_percent(measured, predicted))
+    judged["misfit"] = {"min_fit_pct": unexplained.MIN_FIT_PCT, "found": poor_fit is not None}
+    if poor_fit is not None:
+        judged["where"].append(poor_fit)
+        judged["unexplained"] = True
     whiteness = residual_tests(residual, signals.velocity[rows], input_name="velocity")
     judged["ljung_box"] = whiteness["ljung_box"]
     judged["cross_correlation_independent"] = whiteness["cross_correlation"]["independent"]
