@@ -103,6 +103,8 @@ def result(cleared: Drive, calibration: CalibrationRun, profile: UnitProfile
         "orders": orders(table),
         "table_relative_uncertainty": {str(n): u for n, u in relative_u.items()},
         "largest_order": {"cleared": largest[0], "loaded": largest[1]},
+        # for the plot: the analysed stretch of each pass, from its first sample
+        "analysed_s": [spec.ramp_s + spec.skip_s, spec.ramp_s + spec.pass_s],
     }
     return runs.estimates
 

@@ -45,6 +45,7 @@ def result(drive: Drive, calibration: CalibrationRun, profile: UnitProfile
     calibration.details[NAME] = {
         **runs.details(),
         "position_rad": float(hold.command[-1]),
+        "hold_s": spec.hold_s,  # for the plot: the analysed end of the hold
         "block_torque_rms_mnm": [float(v) * 1e3 for v in blocks.torque_rms_nm],
         "block_position_rms_urad": [float(v) * 1e6 for v in blocks.position_rms_rad],
     }

@@ -71,6 +71,7 @@ def result(drive: Drive, calibration: CalibrationRun, profile: UnitProfile
         "velocity": f"encoder position, central difference, {spec.smooth_s * 1e3:g} ms "
                     "zero-phase moving average",
         "steps": [{"size": size, **dataclasses.asdict(f)} for size, f in steps],
+        "smooth_s": spec.smooth_s,  # for the plot: the velocity as analysed
     }
     return runs.estimates
 

@@ -1,5 +1,6 @@
 """One figure per protocol that ran, made from its raw recordings and details with the
-project's own identification functions (:mod:`hil.identify`)."""
+project's own identification functions (:mod:`hil.identify`, :mod:`hil.closed_loop`), and
+its caption."""
 
 from __future__ import annotations
 
@@ -8,7 +9,7 @@ from collections.abc import Callable
 
 from matplotlib.figure import Figure
 
-from hil.report import plots_frequency, plots_motion
+from hil.report import plots_closed_loop, plots_frequency, plots_motion
 from hil.report.data import ProtocolData
 from hil.report.figures import png_bytes, styled, svg_bytes
 
@@ -23,6 +24,33 @@ PLOTTERS: dict[str, Callable[[ProtocolData], Figure | None]] = {
     "resonance": plots_frequency.resonance,
     "torque_constant": plots_motion.torque_constant,
     "inertia_elevation": plots_motion.inertia_elevation,
+    "velocity_loop_frf": plots_closed_loop.velocity_loop_frf,
+    "velocity_step": plots_closed_loop.velocity_step,
+    "tracking": plots_closed_loop.tracking,
+    "standstill": plots_closed_loop.standstill,
+    "cogging_compensation": plots_closed_loop.cogging_compensation,
+}
+#: What each plot shows, under it on the certificate (``hil.report.documents``).
+CAPTIONS = {
+    "inertia_friction": "the J/B/T_c sine fit against the recorded torque, and the friction "
+                        "it leaves",
+    "stribeck": "steady friction per staircase speed and the fitted Stribeck curve",
+    "gravity_cable": "the sweep's hysteresis loop, and the load per position with its fit",
+    "cogging": "order spectrum against angle, and the ripple map against the compensation table",
+    "current_loop": "lag phase per frequency and the sampled-data model with the fitted τ",
+    "resonance": "frequency response (Bode) and the two-mass fit",
+    "torque_constant": "shaft torque against current at each locked angle, and its linearity",
+    "inertia_elevation": "azimuth inertia per elevation and the cos² fit",
+    "velocity_loop_frf": "closed loop and sensitivity with the −3 dB bandwidth, and the loop "
+                         "gain with its gain and phase margins (Bode)",
+    "velocity_step": "every step normalised to its size, small and large, with the 10–90 % "
+                     "rise, the overshoot and the 2 % settling",
+    "tracking": "following error over the standard move without and with the friction "
+                "feedforward",
+    "standstill": "held position and reported torque about each block's line, with each "
+                  "block's RMS (jitter, torque ripple)",
+    "cogging_compensation": "position ripple against angle with the compensation table "
+                            "cleared and loaded, and its amplitude per order",
 }
 
 
