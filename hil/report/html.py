@@ -25,6 +25,7 @@ figure img{max-width:100%}figcaption{font-weight:600}.small{font-size:12px;color
 .code{font-family:ui-monospace,monospace;font-size:10px;color:#57606a;margin-left:.5em}
 .desc{font-size:12px;color:#57606a}tr.group td{background:#f6f8fa;font-weight:600}
 .authorised{margin-top:.3em;font-weight:600}
+table.results td+td{white-space:nowrap}
 .watermark{position:fixed;top:40%;left:0;right:0;text-align:center;font-size:120px;
 font-weight:900;opacity:.08;transform:rotate(-30deg);pointer-events:none}
 """
@@ -115,7 +116,8 @@ def _results(groups: list[dict[str, Any]]) -> str:
     """The results table, a row per protocol ahead of its results: title, code name and
     description in the first column."""
     header = ("result", "value", "U", "k", "unit", "limits", "outcome")
-    rows = ["<table><tr>" + "".join(f"<th>{h}</th>" for h in header) + "</tr>"]
+    rows = ['<table class="results"><tr>' + "".join(f"<th>{h}</th>" for h in header)
+            + "</tr>"]
     for group in groups:
         rows.append(f'<tr class="group"><td colspan="7">{escape(group["title"])}'
                     f'{_code(group["name"])}</td></tr>')
