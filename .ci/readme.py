@@ -1,0 +1,138 @@
+"""The README's command blocks, run as written from the repository root (CI's check that
+the README tells the truth).
+
+Every ```bash block runs in one bash process (its `export`s hold for its later lines), in
+the order of the README; a line ending in ``# exit N`` must exit N, every other line 0, and
+the block stops at the first that does not. A block the README marks with an HTML comment
+``<!-- not run in CI: REASON -->`` on the line before it is left out, and said so. A plain
+``` block right after a run block is that block's output excerpt: each of its lines,
+numbers and dates masked, must appear in what the block printed (same words, columns,
+units and verdicts; values may differ from seed to seed); ``<word>`` in an excerpt stands
+for any one word (the station's host name).
+
+    python .ci/readme.py list            the blocks, numbered, and which run
+    python .ci/readme.py run N [N ...]   run these blocks (1-based)
+    python .ci/readme.py run --rest      every run block but the first two (the set-up)
+"""
+
+from __future__ import annotations
+
+import re
+import subprocess
+import sys
+from dataclasses import dataclass
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+SKIP = re.compile(r"<!--\s*not run in CI:\s*(?P<reason>.+?)\s*-->")
+EXIT = re.compile(r"#\s*exit (?P<code>\d+)\b")
+NUMBER = re.compile(r"[-+]?\d[\d:.\-T]*(?:e[-+]?\d+)?")
+SETUP_BLOCKS = 2
+
+
+@dataclass(frozen=True)
+class Block:
+    number: int
+    line: int
+    commands: tuple[str, ...]
+    skip_reason: str | None
+    excerpt: tuple[str, ...]
+
+
+def blocks(text: str) -> list[Block]:
+    lines = text.splitlines()
+    found: list[Block] = []
+    i = 0
+    while i < len(lines):
+        if lines[i].strip() != "```bash":
+            i += 1
+            continue
+        start = i
+        end = lines.index("```", i + 1)
+        commands = tuple(x for x in lines[i + 1:end]
+                         if x.strip() and not x.lstrip().startswith("#"))
+        previous = next((x for x in reversed(lines[:start]) if x.strip()), "")
+        skip = SKIP.search(previous)
+        excerpt: tuple[str, ...] = ()
+        after = end + 1
+        while after < len(lines) and not lines[after].strip():
+            after += 1
+        if after < len(lines) and lines[after].strip() == "```":
+            close = lines.index("```", after + 1)
+            excerpt = tuple(x for x in lines[after + 1:close] if x.strip())
+            end = close
+        found.append(Block(len(found) + 1, start + 1, commands,
+                           skip.group("reason") if skip else None, excerpt))
+        i = end + 1
+    return found
+
+
+def skeleton(line: str) -> str:
+    """A line with its numbers and dates masked and its spacing folded."""
+    return " ".join(NUMBER.sub("#", line).split())
+
+
+def excerpt_pattern(line: str) -> re.Pattern[str]:
+    """An excerpt line's skeleton as a pattern; ``<word>`` matches any one word."""
+    return re.compile("^" + re.sub(r"<\w+>", lambda _: r"\S+", re.escape(skeleton(line))) + "$")
+
+
+def script(block: Block) -> str:
+    """The block as one bash script that checks each line's exit status."""
+    parts = []
+    for command in block.commands:
+        match = EXIT.search(command)
+        expected = int(match.group("code")) if match else 0
+        quoted = command.replace("'", "'\\''")
+        parts.append(f"printf '%s\\n' '$ {quoted}'\n{command}\n__rc=$?\n"
+                     f"if [ $__rc -ne {expected} ]; then echo \"README.md:{block.line}: "
+                     f"exited $__rc, expected {expected}\" >&2; exit 1; fi")
+    return "\n".join(parts) + "\n"
+
+
+def run(block: Block) -> list[str]:
+    result = subprocess.run(["bash", "-o", "pipefail", "-c", script(block)], cwd=ROOT,
+                            capture_output=True, text=True, check=False)
+    sys.stdout.write(result.stdout[-6000:])
+    sys.stderr.write(result.stderr[-6000:])
+    problems = [] if result.returncode == 0 else [
+        line for line in result.stderr.splitlines() if line.startswith("README.md:")
+    ] or [f"README.md:{block.line}: block exited {result.returncode}"]
+    shown = [skeleton(x) for x in result.stdout.splitlines()]
+    for line in block.excerpt:
+        if line.strip() in ("…", "...") or line.lstrip().startswith("… ("):
+            continue
+        pattern = excerpt_pattern(line)
+        if not any(pattern.match(x) for x in shown):
+            problems.append(f"README.md:{block.line}: output excerpt line not printed "
+                            f"(numbers masked): {line.strip()[:120]}")
+    return problems
+
+
+def main(argv: list[str]) -> int:
+    found = blocks((ROOT / "README.md").read_text(encoding="utf-8"))
+    if not argv or argv[0] == "list":
+        for block in found:
+            state = f"not run: {block.skip_reason}" if block.skip_reason else "run"
+            print(f"{block.number:>2}  README.md:{block.line:<4} {state}  "
+                  f"{len(block.commands)} command(s), {len(block.excerpt)} excerpt line(s)")
+        return 0
+    if argv[0] != "run" or len(argv) < 2:
+        print(__doc__, file=sys.stderr)
+        return 2
+    if argv[1:] == ["--rest"]:
+        chosen = [b for b in found[SETUP_BLOCKS:] if b.skip_reason is None]
+        for block in found[SETUP_BLOCKS:]:
+            if block.skip_reason:
+                print(f"README.md:{block.line}: not run in CI: {block.skip_reason}")
+    else:
+        chosen = [found[int(n) - 1] for n in argv[1:]]
+    problems = [p for block in chosen for p in run(block)]
+    for problem in problems:
+        print(problem, file=sys.stderr)
+    print(f"README blocks: {len(chosen)} run, {len(problems)} problem(s)")
+    return 1 if problems else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main(sys.argv[1:]))
