@@ -32,6 +32,8 @@ from hil.motion import Mode
 from hil.profile import UnitProfile, load_profile
 from hil.report import write_documents
 from hil.report.console import outcome_banner, protocol_start
+from hil.report.junit import PYTEST_DEFAULT_SUITE_NAME, measurement_properties, suite_name
+from hil.report.junit import suite_properties as junit_suite_properties
 from hil.report.plan import planned_motion_s
 from hil.store.engine import resolve_store_url
 from hil.store.record import record_run
@@ -320,6 +322,20 @@ def _refused(item: pytest.Item, name: str, error: HilError, report: pytest.TestR
     return report
 
 
+@pytest.hookimpl(wrapper=True)
+def pytest_runtest_call(item: pytest.Item) -> Generator[None, None, None]:
+    """Each measurement a protocol's test judged, as properties of its JUnit test case."""
+    run = item.config.stash.get(RUN_KEY, None)
+    before = len(run.measurements) if run is not None else 0
+    try:
+        return (yield)
+    finally:
+        run = item.config.stash.get(RUN_KEY, None)
+        for measurement in run.measurements[before:] if run is not None else []:
+            item.user_properties.extend(measurement_properties(measurement.as_dict()))
+
+
+@pytest.hookimpl(tryfirst=True)  # before junitxml's own sessionfinish writes its file
 def pytest_sessionfinish(session: pytest.Session, exitstatus: int) -> None:
     run = session.config.stash.get(RUN_KEY, None)
     if run is None or not run.active:
@@ -327,6 +343,7 @@ def pytest_sessionfinish(session: pytest.Session, exitstatus: int) -> None:
     aborted = exitstatus == pytest.ExitCode.INTERRUPTED or session.shouldstop is not False
     path = write_certificate(run, aborted=bool(aborted))
     session.config.stash[CERTIFICATE_KEY] = path
+    _junit_suite(session.config, path)
     if not session.config.getoption("--no-documents"):
         session.config.stash[DOCUMENTS_KEY] = write_documents(path)
     option = session.config.getoption("--store")
@@ -338,6 +355,21 @@ def pytest_sessionfinish(session: pytest.Session, exitstatus: int) -> None:
         message = record_run(path, out_dir=out_dir, url=url)
         log.info("%s", message)
         session.config.stash[STORE_MESSAGE_KEY] = message
+
+
+def _junit_suite(config: pytest.Config, certificate: Path) -> None:
+    """With ``--junitxml``: the suite named after the unit (unless ``junit_suite_name`` was
+    set) and the certificate's identity as its properties."""
+    from _pytest.junitxml import xml_key  # the key record_testsuite_property uses
+
+    xml = config.stash.get(xml_key, None)
+    if xml is None:
+        return
+    cert = json.loads(certificate.read_text(encoding="utf-8"))
+    if config.getini("junit_suite_name") == PYTEST_DEFAULT_SUITE_NAME:
+        xml.suite_name = suite_name(cert["unit"]["serial"])
+    for name, value in junit_suite_properties(cert):
+        xml.add_global_property(name, value)
 
 
 def pytest_terminal_summary(terminalreporter: pytest.TerminalReporter) -> None:
