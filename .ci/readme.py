@@ -91,14 +91,20 @@ def script(block: Block) -> str:
 
 
 def run(block: Block) -> list[str]:
-    result = subprocess.run(["bash", "-o", "pipefail", "-c", script(block)], cwd=ROOT,
-                            capture_output=True, text=True, check=False)
-    sys.stdout.write(result.stdout[-6000:])
-    sys.stderr.write(result.stderr[-6000:])
-    problems = [] if result.returncode == 0 else [
-        line for line in result.stderr.splitlines() if line.startswith("README.md:")
-    ] or [f"README.md:{block.line}: block exited {result.returncode}"]
-    shown = [skeleton(x) for x in result.stdout.splitlines()]
+    """Run ``block``, its output streamed as it comes; the problems found."""
+    process = subprocess.Popen(["bash", "-o", "pipefail", "-c", script(block)], cwd=ROOT,
+                               stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    assert process.stdout is not None
+    printed = []
+    for line in process.stdout:
+        sys.stdout.write(line)
+        sys.stdout.flush()
+        printed.append(line.rstrip("\n"))
+    returncode = process.wait()
+    problems = [] if returncode == 0 else [
+        line for line in printed if line.startswith(f"README.md:{block.line}: exited")
+    ] or [f"README.md:{block.line}: block exited {returncode}"]
+    shown = [skeleton(x) for x in printed]
     for line in block.excerpt:
         if line.strip() in ("…", "...") or line.lstrip().startswith("… ("):
             continue
