@@ -15,23 +15,12 @@ from hil.report.data import from_certificate
 from hil.report.figures import png_bytes, styled
 from hil.report.html import render_html
 from hil.report.pdf import render_pdf
-from hil.report.plots import protocol_figure
+from hil.report.plots import CAPTIONS, protocol_figure
 from hil.report.view import certificate_view
 
 log = logging.getLogger(__name__)
 
 PLOT_DPI = 160.0  # sharp in print at the text width (7.4 in), small enough for e-mail
-CAPTIONS = {
-    "inertia_friction": "the J/B/T_c sine fit against the recorded torque, and the friction "
-                        "it leaves",
-    "stribeck": "steady friction per staircase speed and the fitted Stribeck curve",
-    "gravity_cable": "the sweep's hysteresis loop, and the load per position with its fit",
-    "cogging": "order spectrum against angle, and the ripple map against the compensation table",
-    "current_loop": "lag phase per frequency and the sampled-data model with the fitted τ",
-    "resonance": "frequency response (Bode) and the two-mass fit",
-    "torque_constant": "shaft torque against current at each locked angle, and its linearity",
-    "inertia_elevation": "azimuth inertia per elevation and the cos² fit",
-}
 
 
 def certificate_file(target: Path) -> Path:

@@ -49,7 +49,9 @@ def test_html_is_self_contained_with_a_plot_per_protocol(elevation_run: Run) -> 
     assert not re.search(r'(src|href)="(?!data:)', html), "an external reference"
     captions = set(re.findall(r"<figcaption>(\w+) \(", html))
     assert captions == plotted(cert) == {"current_loop", "gravity_cable", "inertia_friction",
-                                         "stribeck", "cogging", "torque_constant"}
+                                         "stribeck", "cogging", "torque_constant",
+                                         "velocity_loop_frf", "velocity_step", "tracking",
+                                         "standstill", "cogging_compensation"}
     assert html.count('src="data:image/png;base64,') == len(captions)
     for r in cert["results"]:
         value, expanded = rounded_pair(r["value"], r["expanded_uncertainty"])
