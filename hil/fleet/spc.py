@@ -45,11 +45,17 @@ class SpcResult:
     mr_hits: list[int]
     ewma: EwmaChart | None
     typical_u: float = field(default=0.0)
+    no_spread: str = ""  # the sentence shown instead of charts and rules when σ = 0
 
     @property
     def n(self) -> int:
         """Number of runs in the series."""
         return len(self.points)
+
+    @property
+    def charted(self) -> bool:
+        """Whether the series has a spread to chart and judge (σ > 0)."""
+        return not self.no_spread
 
     def table(self) -> str:
         """The readable report (values at the decimal place their typical U allows)."""
@@ -62,6 +68,10 @@ class SpcResult:
                     if self.excluded_reference else "")]
         lines.append(f"Specification   lower {at_u(self.lower_limit, u)}   nominal "
                      f"{at_u(self.nominal, u)}   upper {at_u(self.upper_limit, u)}{unit}")
+        if self.no_spread:
+            lines.append(self.no_spread[0].upper() + self.no_spread[1:] + ".")
+            lines.append("No signal.")
+            return "\n".join(lines)
         if self.capability is None:
             lines.append(f"Capability      {self.capability_note}")
         else:
@@ -112,6 +122,7 @@ class SpcResult:
                               "nominal": self.nominal},
             "capability": self.capability.to_dict() if self.capability else None,
             "capability_note": self.capability_note,
+            "no_spread": self.no_spread or None,
             "limits": self.limits.to_dict(),
             "baseline": self.baseline.to_dict() if self.baseline else None,
             "rules": {str(r): {"description": DESCRIPTIONS[r], "indices": self.rule_hits[r],
@@ -214,6 +225,15 @@ def spc_report(
     else:
         raise InputError(f"limits_from '{limits_from}' is not 'data' or 'baseline'")
     lower, upper = spec_limits(runs)
+    typical = typical_u([p.expanded_uncertainty for p in runs])
+    flat = no_spread_sentence(x, unit=unit, expanded_uncertainty=typical)
+    if flat:  # σ = 0: nothing to chart, no rule or index is defined; said in words
+        return SpcResult(
+            parameter=parameter, unit=unit, points=runs, values=x, excluded_reference=excluded,
+            lower_limit=lower, upper_limit=upper, nominal=runs[-1].nominal, capability=None,
+            capability_note=flat, limits=limits, baseline=frozen if limits_from == "baseline"
+            else None, rules=selected, rule_hits={r: [] for r in selected}, mr_hits=[],
+            ewma=None, typical_u=typical, no_spread=flat)
     cap, note = None, ""
     if lower is None and upper is None:
         note = "no specification limits on these results"
@@ -232,8 +252,27 @@ def spc_report(
         lower_limit=lower, upper_limit=upper, nominal=runs[-1].nominal, capability=cap,
         capability_note=note, limits=limits, baseline=frozen if limits_from == "baseline"
         else None, rules=selected, rule_hits=hits, mr_hits=mr_hits, ewma=chart,
-        typical_u=typical_u([p.expanded_uncertainty for p in runs]),
+        typical_u=typical,
     )
+
+
+def no_spread_sentence(values: NDArray[np.float64], *, unit: str,
+                       expanded_uncertainty: float) -> str:
+    """The plain sentence for a series whose values are all equal (σ = 0), else "" (a frozen
+    baseline always has a spread: freezing refuses a series that does not vary).
+
+    ``all 5 values equal 27.24 Hz: no spread to chart or judge capability on``
+    """
+    if values.size == 0 or np.ptp(values) > 0:
+        return ""
+    unit_text = f" {unit}" if unit else ""
+    return (f"all {values.size} values equal {value_text(float(values[0]), expanded_uncertainty)}"
+            f"{unit_text}: no spread to chart or judge capability on")
+
+
+def value_text(value: float, expanded_uncertainty: float) -> str:
+    """A value at the decimal place its typical U allows (4 significant digits without U)."""
+    return at_u(value, expanded_uncertainty) if expanded_uncertainty > 0 else f"{value:.4g}"
 
 
 def _baseline(frozen: Baseline | None, parameter: str, unit: str) -> Baseline | None:

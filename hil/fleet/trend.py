@@ -7,8 +7,9 @@ from dataclasses import dataclass
 from datetime import datetime
 
 from hil.errors import InputError
-from hil.fleet.fmt import at_u
-from hil.fleet.series import SeriesPoint, ordered, single_unit
+from hil.fleet.fmt import at_u, typical_u
+from hil.fleet.series import SeriesPoint, ordered, single_unit, values_of
+from hil.fleet.spc import no_spread_sentence
 from hil.gum import rounded_pair
 
 
@@ -34,11 +35,23 @@ class TrendResult:
                          + f"{p.serial:<14}{p.station:<12}{value:>14}{u:>10}  "
                          f"{p.outcome:<10}[{low}, {high}]"
                          + ("  reference" if p.is_reference else ""))
+        if self.no_spread:
+            lines.append(self.no_spread[0].upper() + self.no_spread[1:] + ".")
         return "\n".join(lines)
+
+    @property
+    def no_spread(self) -> str:
+        """The sentence for a series of two or more runs whose values are all equal, else ""."""
+        values = values_of(self.points)
+        if values.size < 2:
+            return ""
+        u = typical_u([p.expanded_uncertainty for p in self.points])
+        return no_spread_sentence(values, unit=self.unit, expanded_uncertainty=u)
 
     def to_json(self) -> dict[str, object]:
         """Full precision."""
         return {"parameter": self.parameter, "unit": self.unit,
+                "no_spread": self.no_spread or None,
                 "points": [point_dict(p) for p in self.points]}
 
 
