@@ -10,6 +10,7 @@ from pathlib import Path
 
 from hil.errors import InputError
 from hil.fleet.baseline import Baseline
+from hil.fleet.capability import IndexEstimate
 from hil.fleet.charts import EwmaSettings
 from hil.fleet.fmt import index_text
 from hil.fleet.fpy import YieldRow, first_pass_yield
@@ -23,8 +24,9 @@ body { font-family: system-ui, sans-serif; margin: 1.5em auto; max-width: 1100px
 h1 { font-size: 1.5em; margin-bottom: 0.2em; } h2 { font-size: 1.2em; margin-top: 1.6em;
      border-bottom: 1px solid #ccc; }
 table { border-collapse: collapse; margin: 0.6em 0; font-size: 0.92em; }
-th, td { border: 1px solid #ccc; padding: 3px 8px; text-align: right; }
+th, td { border: 1px solid #ccc; padding: 3px 8px; text-align: right; white-space: nowrap; }
 th { background: #f2f2f2; } td.l, th.l { text-align: left; }
+td.wrap { white-space: normal; max-width: 24em; }
 .signal { color: #b00020; font-weight: 600; } .ok { color: #2e7d32; }
 .note { color: #555; font-size: 0.9em; } img { max-width: 100%; }
 pre { white-space: pre-wrap; font-size: 0.85em; background: #fafafa; padding: 0.5em; }
@@ -81,16 +83,24 @@ def fleet_report_html(
     body = [f"<h1>{html.escape(title)}</h1>",
             f"<p class='note'>Generated {html.escape(when)}. {len(results)} parameters, "
             f"{len(runs)} runs. Reference (golden) units and aborted runs are left out. "
-            "Capability intervals: Cp/Pp χ², Cpk/Ppk Bissell (1990), 95 %; within σ = "
-            "MR̄/1.128. Methods: docs/fleet.md.</p>",
-            "<h2>Capability, weakest first</h2>", _cpk_table(results)]
-    for name, message in problems:
-        body.append(f"<p class='note'>{html.escape(name)}: {html.escape(message)}</p>")
+            "Capability intervals (95 %): Cpk/Ppk Bissell (1990) in the table, Cp/Pp χ² in "
+            "each result's section; within σ = MR̄/1.128. Methods: docs/fleet.md.</p>",
+            "<h2>Capability, weakest first</h2>",
+            _cpk_table([r for r in results if r.charted])]
+    flat = [r for r in results if not r.charted]
+    if flat:  # σ = 0: said in words, not charted (a flat line and one bar show nothing)
+        body.append("<h2>Results with no spread</h2><ul>" + "".join(
+            f"<li id='{html.escape(r.parameter)}'>{html.escape(r.parameter)}: "
+            f"{html.escape(r.no_spread)}.</li>" for r in flat) + "</ul>")
+    if problems:
+        body.append("<h2>Results not analysed</h2><ul>" + "".join(
+            f"<li>{html.escape(name)}: {html.escape(message)}</li>"
+            for name, message in problems) + "</ul>")
     body += ["<h2>First-pass yield per station</h2>",
              _yield_table(first_pass_yield(runs, by="station"), "station"),
              "<h2>First-pass yield per day</h2>",
              _yield_table(first_pass_yield(runs, by="day"), "day")]
-    for result in sorted(results, key=_weakness):
+    for result in sorted((r for r in results if r.charted), key=_weakness):
         body.append(f"<h2 id='{html.escape(result.parameter)}'>"
                     f"{html.escape(result.parameter)} ({html.escape(result.unit)})</h2>")
         body.append(f"<pre>{html.escape(result.table())}</pre>")
@@ -120,15 +130,20 @@ def _cpk_table(results: Sequence[SpcResult]) -> str:
             fired.append(f"EWMA: {len(r.ewma.signals)}")
         signal = (f"<span class='signal'>{html.escape('; '.join(fired))}</span>"
                   if has_signal(r) else "<span class='ok'>none</span>")
-        cells = ([index_text(c.cpk), index_text(c.ppk), index_text(c.cp), index_text(c.pp)]
-                 if c else [html.escape(r.capability_note), "—", "—", "—"])
+        cells = ("".join(f"<td>{index_text(e)}</td>" for e in (c.cpk, c.ppk))
+                 + "".join(f"<td>{value_text(e)}</td>" for e in (c.cp, c.pp))
+                 if c else f"<td colspan='4' class='l wrap'>{html.escape(r.capability_note)}</td>")
         rows.append(f"<tr><td class='l'><a href='#{html.escape(r.parameter)}'>"
-                    f"{html.escape(r.parameter)}</a></td><td>{r.n}</td>"
-                    + "".join(f"<td>{cell}</td>" for cell in cells)
-                    + f"<td class='l'>{signal}</td></tr>")
+                    f"{html.escape(r.parameter)}</a></td><td>{r.n}</td>" + cells
+                    + f"<td class='l wrap'>{signal}</td></tr>")
     rows.append("</table>")
     legend = "; ".join(f"{k}: {v}" for k, v in DESCRIPTIONS.items())
     return "".join(rows) + f"<p class='note'>Nelson rules — {html.escape(legend)}.</p>"
+
+
+def value_text(estimate: IndexEstimate) -> str:
+    """An index without its interval (``1.41``), ``—`` when undefined."""
+    return "—" if estimate.value is None else f"{estimate.value:.2f}"
 
 
 def _yield_table(rows: Sequence[YieldRow], by: str) -> str:
