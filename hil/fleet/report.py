@@ -26,7 +26,7 @@ h1 { font-size: 1.5em; margin-bottom: 0.2em; } h2 { font-size: 1.2em; margin-top
 table { border-collapse: collapse; margin: 0.6em 0; font-size: 0.92em; }
 th, td { border: 1px solid #ccc; padding: 3px 8px; text-align: right; white-space: nowrap; }
 th { background: #f2f2f2; } td.l, th.l { text-align: left; }
-td.wrap { white-space: normal; max-width: 24em; }
+td.wrap { white-space: normal; max-width: 24em; } .item { white-space: nowrap; }
 .signal { color: #b00020; font-weight: 600; } .ok { color: #2e7d32; }
 .note { color: #555; font-size: 0.9em; } img { max-width: 100%; }
 pre { white-space: pre-wrap; font-size: 0.85em; background: #fafafa; padding: 0.5em; }
@@ -128,7 +128,8 @@ def _cpk_table(results: Sequence[SpcResult]) -> str:
             fired.append(f"MR: {len(r.mr_hits)} (not gated)")
         if r.ewma is not None and r.ewma.signals:
             fired.append(f"EWMA: {len(r.ewma.signals)}")
-        signal = (f"<span class='signal'>{html.escape('; '.join(fired))}</span>"
+        items = "; ".join(f"<span class='item'>{html.escape(f)}</span>" for f in fired)
+        signal = (f"<span class='signal'>{items}</span>"
                   if has_signal(r) else "<span class='ok'>none</span>")
         cells = ("".join(f"<td>{index_text(e)}</td>" for e in (c.cpk, c.ppk))
                  + "".join(f"<td>{value_text(e)}</td>" for e in (c.cp, c.pp))
