@@ -19,7 +19,8 @@
 Every firmware edit goes through ``tests/compare/firmware_variants.py`` (the settings
 move from ``[plant]`` to ``[firmware]`` with issue 11's firmware work). Prints a markdown
 table for ``benchmarks/RESULTS.md``; ``--reuse`` re-reads certificates already under
-``--out`` instead of calibrating.
+``--out`` instead of calibrating; ``--jobs N`` runs N calibrations at once (each is one
+process; on a shared machine leave a core free).
 """
 
 from __future__ import annotations
@@ -33,6 +34,7 @@ import subprocess
 import sys
 import time
 from collections import Counter
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 from typing import Any
 
@@ -68,16 +70,54 @@ def calibrate(changes: dict[str, float], out: Path, *, seed: int, reuse: bool) -
     if reuse and path.is_file():
         return out
     profile = write_profile(with_firmware(PROFILE, **changes), out / "profile.toml")
-    subprocess.run(
+    done = subprocess.run(  # no results store, no PDF/HTML: compare reads the JSON only
         [sys.executable, "-m", "hil.cli", "calibrate", "--drive", "sim", "--profile",
-         str(profile), "--unit-serial", SERIAL, "--seed", str(seed), "--out", str(out)],
+         str(profile), "--unit-serial", SERIAL, "--seed", str(seed), "--out", str(out),
+         "--", "--store", "off", "--no-documents"],
         capture_output=True, check=False, env={**os.environ, "PYTHONHASHSEED": "0"},
+        text=True,
     )
     if not path.is_file():
-        raise SystemExit(f"{out}: calibration wrote no certificate")
+        (out / "calibrate.log").write_text(done.stdout + done.stderr, encoding="utf-8")
+        raise SystemExit(f"{out}: calibration wrote no certificate (see calibrate.log)")
     if json.loads(path.read_text(encoding="utf-8"))["aborted"]:
         raise SystemExit(f"{path}: an aborted calibration (delete it and run again)")
     return out
+
+
+Planned = tuple[dict[str, float], Path, int]
+
+
+def planned(args: argparse.Namespace) -> list[Planned]:
+    """Every calibration :func:`main` makes: (firmware changes, folder, seed)."""
+    jobs: list[Planned] = []
+    firsts = ([1000] if args.write_map is not None else []) + [3000]
+    for first, count in zip(firsts, ([args.map_pairs] if args.write_map is not None else [])
+                            + [args.pairs], strict=True):
+        jobs += [({}, args.out / f"same-{s}", s)
+                 for i in range(count) for s in (first + 2 * i, first + 2 * i + 1)]
+    for keys, factor in power_changes(args):
+        for r in range(args.reps):
+            seed = power_seed(r, factor)
+            jobs.append((scaled(keys, factor), args.out / f"{keys[0]}-{factor:g}-{seed}", seed))
+    return jobs
+
+
+def calibrate_all(plan: list[Planned], *, jobs: int, reuse: bool) -> None:
+    """Make every planned calibration, ``jobs`` at a time."""
+    with ThreadPoolExecutor(max_workers=jobs) as pool:
+        list(pool.map(lambda job: calibrate(job[0], job[1], seed=job[2], reuse=reuse), plan))
+
+
+def power_changes(args: argparse.Namespace) -> list[tuple[tuple[str, ...], float]]:
+    """(firmware keys scaled together, factor) of each detection-power row."""
+    return ([(("velocity_kp_nm_s_rad", "velocity_ki_nm_rad"), f) for f in args.gain_factors]
+            + [(("current_loop_time_constant_s",), f) for f in args.tau_factors])
+
+
+def power_seed(rep: int, factor: float) -> int:
+    """The candidate's noise seed for repetition ``rep`` of a change by ``factor``."""
+    return 5000 + 100 * rep + round(100 * factor)
 
 
 def scaled(keys: tuple[str, ...], factor: float) -> dict[str, float]:
@@ -145,8 +185,12 @@ def main() -> int:
     parser.add_argument("--tau-factors", type=float, nargs="+", default=[1.02, 1.03, 1.05])
     parser.add_argument("--out", type=Path, default=Path("compare-run"))
     parser.add_argument("--reuse", action="store_true")
+    parser.add_argument("--jobs", type=int, default=1, help="calibrations at once")
     args = parser.parse_args()
     started = time.perf_counter()
+    if args.jobs > 1:  # every calibration first, N at a time; the steps below re-read them
+        calibrate_all(planned(args), jobs=args.jobs, reuse=args.reuse)
+        args.reuse = True
     repeatability, map_entries = load_repeatability(), {}
     if args.write_map is not None:
         map_entries = write_map(pair_dirs(args.out, 1000, args.map_pairs, reuse=args.reuse),
@@ -161,15 +205,14 @@ def main() -> int:
         quiet += comparison.exit_code == 0
         flagged_by.update(r.parameter for r in comparison.flagged())
     power: list[dict[str, Any]] = []
-    changes = [("velocity gain (Kp, Ki)", ("velocity_kp_nm_s_rad", "velocity_ki_nm_rad"), f)
-               for f in args.gain_factors]
-    changes += [("current-loop time constant", ("current_loop_time_constant_s",), f)
-                for f in args.tau_factors]
-    for label, keys, factor in changes:
+    labels = {"velocity_kp_nm_s_rad": "velocity gain (Kp, Ki)",
+              "current_loop_time_constant_s": "current-loop time constant"}
+    for keys, factor in power_changes(args):
+        label = labels[keys[0]]
         found = 0
         which: Counter[str] = Counter()
         for r in range(args.reps):
-            seed = 5000 + 100 * r + round(100 * factor)
+            seed = power_seed(r, factor)
             name = f"{keys[0]}-{factor:g}-{seed}"
             candidate = calibrate(scaled(keys, factor), args.out / name, seed=seed,
                                   reuse=args.reuse)
