@@ -68,7 +68,9 @@ class DriveStateError(DriveError):
 
 
 class LimitViolationError(DriveError):
-    """A command would leave the unit's velocity, torque or travel limits; nothing moved."""
+    """A command would leave the unit's velocity, torque or travel limits (nothing moved), or
+    the measured motion left them while moving (the axis quick-stopped; what was recorded
+    up to then on ``partial_recording``)."""
 
 
 class IdentificationError(HilError):

@@ -75,6 +75,9 @@ from numba import njit
 
 MODE_TORQUE, MODE_VELOCITY, MODE_POSITION = 0, 1, 2
 
+# the motion monitor's bounds (``guard``): measured position (rad), |velocity| (rad/s)
+G_POSITION_MIN, G_POSITION_MAX, G_VELOCITY_MAX, G_SIZE = 0, 1, 2, 3
+
 
 @njit(cache=True, fastmath=True)
 def _quantise(theta: float, counts: float) -> float:
@@ -121,8 +124,14 @@ def run_kernel(
     out_current: np.ndarray,
     out_torque_actual: np.ndarray,
     out_load_torque: np.ndarray,
-) -> None:
+    guard: np.ndarray,
+) -> int:
     """Advance ``len(command)`` control periods. Outputs are sampled at each period start.
+
+    ``guard`` (``G_SIZE`` values, or empty: none) is the drive's motion monitor: the first
+    period whose encoder position leaves ``[G_POSITION_MIN, G_POSITION_MAX]`` or whose
+    velocity estimate exceeds ``G_VELOCITY_MAX`` in size is the last one run (its outputs
+    written, no mechanics after it). Returns the number of periods run.
 
     ``out_load_torque`` is the shaft torque sensor of a locked rotor (0 when not locked).
     Firmware: ``torque_offset`` (one per command sample, or empty) is added to the torque
@@ -192,6 +201,8 @@ def run_kernel(
     disturbance = 0.0
     sensor_nm = 0.0
     encoder_rad = 0.0
+    guarded = guard.shape[0] >= G_SIZE
+    done = command.shape[0]
 
     for k in range(command.shape[0]):
         if noisy:
@@ -225,6 +236,11 @@ def run_kernel(
         out_torque[k] = torque_cmd + torque_noise[k]
         out_current[k] = (torque_act + sensor_nm) / kt  # the drive's measured current
         out_torque_actual[k] = torque_act
+        if guarded and (pos_meas < guard[G_POSITION_MIN] or pos_meas > guard[G_POSITION_MAX]
+                        or abs(vel_est) > guard[G_VELOCITY_MAX]):
+            out_load_torque[k] = 0.0  # the monitor trips: this period is the last one run
+            done = k + 1
+            break
         if delay > 0:  # the current loop gets the command of `delay` periods ago
             held_cmd = delay_line[slot]
             delay_line[slot] = torque_cmd
@@ -310,3 +326,4 @@ def run_kernel(
     state[S_HYST] = hyst
     state[S_DELAY_INDEX] = slot
     state[S_DISTURBANCE_LF] = disturbance_lf
+    return int(done)

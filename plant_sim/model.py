@@ -38,6 +38,24 @@ class PlantTrace:
     load_torque_nm: FloatArray | None = None  # locked rotor: shaft torque sensor
 
 
+@dataclass(frozen=True, slots=True, kw_only=True)
+class MotionGuard:
+    """A drive's motion monitor inside the kernel: the measured (encoder) position must stay
+    in ``[position_min_rad, position_max_rad]`` and the velocity estimate within
+    ``±velocity_max_rad_s``; the first period that leaves them is the last one run."""
+
+    position_min_rad: float
+    position_max_rad: float
+    velocity_max_rad_s: float
+
+    def packed(self) -> FloatArray:
+        guard = np.zeros(kernel.G_SIZE)
+        guard[kernel.G_POSITION_MIN] = self.position_min_rad
+        guard[kernel.G_POSITION_MAX] = self.position_max_rad
+        guard[kernel.G_VELOCITY_MAX] = self.velocity_max_rad_s
+        return guard
+
+
 PERIODIC_TABLE_SIZE = 1 << 16  # points per revolution for cogging and K_t ripple
 
 
@@ -244,11 +262,17 @@ class Plant:
         self._state[kernel.S_INTEGRATOR] = 0.0
 
     def run(
-        self, mode: Mode, command: FloatArray, torque_offset: FloatArray | None = None
+        self,
+        mode: Mode,
+        command: FloatArray,
+        torque_offset: FloatArray | None = None,
+        *,
+        guard: MotionGuard | None = None,
     ) -> PlantTrace:
         """Advance one control period per command sample; ``torque_offset`` (N·m, one per
         sample) is the master's torque offset, which the firmware adds when it has
-        ``feedforward``."""
+        ``feedforward``. With ``guard`` the run stops after the first period whose measured
+        position or velocity leaves it: the trace is then shorter than ``command``."""
         command = np.ascontiguousarray(command, dtype=np.float64)
         n = command.shape[0]
         offset = (np.zeros(0) if torque_offset is None
@@ -257,8 +281,8 @@ class Plant:
             raise ValueError(f"torque_offset has {offset.shape[0]} samples, command {n}")
         noise = self._rng.normal(0.0, 1.0, n) * self.params.torque_noise_nm
         outputs = [np.empty(n) for _ in range(6)]
-        run_kernel: Callable[..., None] = kernel.run_kernel
-        run_kernel(
+        run_kernel: Callable[..., int] = kernel.run_kernel
+        done = run_kernel(
             self._packed,
             self._cogging,
             self._kt_ripple,
@@ -274,7 +298,10 @@ class Plant:
             1.0 / self.fs_hz,
             self._substeps,
             *outputs,
+            np.zeros(0) if guard is None else guard.packed(),
         )
+        if done < n:  # the guard stopped the run: what was run, no more
+            n, outputs = done, [out[:done] for out in outputs]
         time_s = (self._samples_done + np.arange(n)) / self.fs_hz
         self._samples_done += n
         position, velocity, torque, current, actual, sensor = outputs

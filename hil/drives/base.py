@@ -87,6 +87,53 @@ class DriveStatus:
     fault_code: int | None = None
 
 
+MONITOR_TRAVEL_MARGIN_RAD = 0.05  # beyond the travel limits before the monitor trips
+MONITOR_VELOCITY_MARGIN = 0.25  # relative, beyond the velocity limit (loop overshoot, noise)
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class MotionEnvelope:
+    """What the motion monitor allows while the axis moves: the unit's travel and velocity
+    limits widened by a stated margin (:data:`MONITOR_TRAVEL_MARGIN_RAD`,
+    :data:`MONITOR_VELOCITY_MARGIN`), so a command inside the limits never trips it while
+    one that runs away (a torque command, a loop gone wrong) is stopped."""
+
+    limits: Limits
+    position_min_rad: float
+    position_max_rad: float
+    velocity_rad_s: float
+
+    @classmethod
+    def of(cls, limits: Limits) -> MotionEnvelope:
+        """The envelope the monitor enforces for ``limits``."""
+        return cls(
+            limits=limits,
+            position_min_rad=limits.travel_min_rad - MONITOR_TRAVEL_MARGIN_RAD,
+            position_max_rad=limits.travel_max_rad + MONITOR_TRAVEL_MARGIN_RAD,
+            velocity_rad_s=limits.velocity_rad_s * (1 + MONITOR_VELOCITY_MARGIN),
+        )
+
+    def violation(
+        self, *, position_rad: float, velocity_rad_s: float, time_s: float, excitation: str
+    ) -> LimitViolationError | None:
+        """The error for a measured sample outside the envelope (``None`` inside): one line
+        naming the limit, the value and the time into the excitation."""
+        lim = self.limits
+        if not self.position_min_rad <= position_rad <= self.position_max_rad:
+            what = (f"position {position_rad:.4g} rad left the travel limits "
+                    f"[{lim.travel_min_rad:.4g}, {lim.travel_max_rad:.4g}] rad "
+                    f"(+{MONITOR_TRAVEL_MARGIN_RAD:g} rad margin)")
+        elif not abs(velocity_rad_s) <= self.velocity_rad_s:
+            what = (f"velocity {velocity_rad_s:.4g} rad/s exceeds the limit "
+                    f"{lim.velocity_rad_s:.4g} rad/s (+{MONITOR_VELOCITY_MARGIN:.0%} margin)")
+        else:
+            return None
+        return LimitViolationError(
+            f"excitation '{excitation}': measured {what} at t = {time_s:.3f} s; "
+            "the axis was quick-stopped"
+        )
+
+
 def check_limits(excitation: Excitation, limits: Limits, *, start_position_rad: float) -> None:
     """Refuse an excitation that would leave the envelope (before any motion).
 
@@ -231,7 +278,9 @@ class Drive(abc.ABC):
         Raises
         ------
         LimitViolationError
-            The command leaves the unit's limits; nothing moved.
+            The command leaves the unit's limits (nothing moved), or the measured position
+            or velocity left the :class:`MotionEnvelope` while moving (the axis
+            quick-stopped, the recording up to then on ``exc.partial_recording``).
         DriveError
             A fault or communication loss; the drive is already safe. The partial
             recording, if any, is attached as ``exc.partial_recording``.

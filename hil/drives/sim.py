@@ -4,17 +4,30 @@ from __future__ import annotations
 
 import contextlib
 import logging
+import math
 from collections.abc import Iterator
 
-from hil.drives.base import Drive, DriveInfo, DriveState, DriveStatus, check_limits
+import numpy as np
+
+from hil.drives.base import (
+    Drive,
+    DriveInfo,
+    DriveState,
+    DriveStatus,
+    MotionEnvelope,
+    check_limits,
+)
 from hil.errors import DriveStateError
 from hil.motion import CompensationTable, Excitation, Limits, Mode, PositionHarmonic
 from hil.recording import Recording
 from plant_sim.firmware import Firmware
-from plant_sim.model import Plant, trace_to_recording
+from plant_sim.model import MotionGuard, Plant, trace_to_recording
 from plant_sim.params import Harmonic, PlantParams
 
 log = logging.getLogger(__name__)
+
+QUICK_STOP_DECEL_RAD_S2 = 20.0  # the simulated drive's quick-stop ramp (as the emulators')
+QUICK_STOP_HOLD_S = 0.05  # held at zero velocity after the ramp
 
 
 class SimDrive(Drive):
@@ -38,6 +51,7 @@ class SimDrive(Drive):
         firmware = firmware or Firmware()
         self._plant = Plant(plant, fs_hz=fs_hz, seed=seed, firmware=firmware)
         self._state = DriveState.DISABLED
+        self._envelope = MotionEnvelope.of(limits)
         self._info = DriveInfo(
             vendor="gimbal-hil",
             model="plant_sim",
@@ -87,11 +101,16 @@ class SimDrive(Drive):
         self._state = DriveState.ENABLED
 
     def disable(self) -> None:
+        if self._state is not DriveState.DISABLED:
+            log.info("sim: drive disabled (was %s)", self._state.value)
         self._state = DriveState.DISABLED
 
     def quick_stop(self) -> None:
+        """Quick stop: the plant moves only inside :meth:`run` (which ramps it to rest when
+        its monitor trips), so between runs the axis already stands."""
         if self._state is DriveState.ENABLED:
             self._state = DriveState.QUICK_STOPPED
+            log.info("sim: quick stop, axis at %.3g rad/s", self._plant.velocity_rad_s)
 
     def status(self) -> DriveStatus:
         return DriveStatus(
@@ -110,7 +129,12 @@ class SimDrive(Drive):
             )
         check_limits(excitation, self._info.limits, start_position_rad=self._plant.position_rad)
         log.info("sim: running %s (%.2f s)", excitation.name, excitation.duration_s)
-        trace = self._plant.run(excitation.mode, excitation.command, excitation.torque_offset_nm)
+        envelope = self._envelope
+        guard = MotionGuard(position_min_rad=envelope.position_min_rad,
+                            position_max_rad=envelope.position_max_rad,
+                            velocity_max_rad_s=envelope.velocity_rad_s)
+        trace = self._plant.run(excitation.mode, excitation.command, excitation.torque_offset_nm,
+                                guard=guard)
         metadata = {
             "drive": "plant_sim",
             "excitation": excitation.name,
@@ -118,9 +142,35 @@ class SimDrive(Drive):
             "serial": self._info.serial,
             **excitation.metadata,
         }
-        return trace_to_recording(
-            trace, mode=excitation.mode, command=excitation.command, metadata=metadata
+        done = len(trace.time_s)
+        recording = trace_to_recording(
+            trace, mode=excitation.mode, command=excitation.command[:done], metadata=metadata
         )
+        if done == len(excitation.command):
+            return recording
+        # the monitor tripped inside the kernel: the last row is the one that left the envelope
+        error = envelope.violation(
+            position_rad=float(trace.position_rad[-1]),
+            velocity_rad_s=float(trace.velocity_rad_s[-1]),
+            time_s=(done - 1) / excitation.fs_hz,
+            excitation=excitation.name,
+        )
+        assert error is not None
+        self._brake()
+        self._state = DriveState.QUICK_STOPPED
+        log.warning("sim: %s", error)
+        error.partial_recording = recording
+        raise error
+
+    def _brake(self) -> None:
+        """The quick-stop ramp: velocity mode from the axis' speed to rest at
+        :data:`QUICK_STOP_DECEL_RAD_S2`, then held (unguarded: the axis is already out)."""
+        fs = self._plant.fs_hz
+        start = self._plant.velocity_rad_s
+        ramp = max(1, math.ceil(abs(start) / QUICK_STOP_DECEL_RAD_S2 * fs))
+        hold = math.ceil(QUICK_STOP_HOLD_S * fs)
+        command = np.concatenate([start * (1.0 - np.arange(1, ramp + 1) / ramp), np.zeros(hold)])
+        self._plant.run(Mode.VELOCITY, command)
 
 
 def _harmonics(table: tuple[PositionHarmonic, ...]) -> tuple[Harmonic, ...]:

@@ -38,6 +38,11 @@ class CanOpenStation:
     the drive offers it, else 0x6077; ``"mean"`` requires 0x2077; ``"instantaneous"`` always
     0x6077. ``control_period_s``: the drive's control-loop period, for a drive that does not
     report it (the emulator's 0x2200:6); it goes into each recording's metadata.
+
+    A dead host stops the axis: the backend produces its own heartbeat (node
+    ``host_node_id``, every ``heartbeat_period_s``) and sets the drive's consumer heartbeat
+    time (0x1016) to ``host_heartbeat_timeout_s`` and its abort connection option code
+    (0x6007) to ``abort_connection_option_code`` (3: quick stop) at bring-up.
     """
 
     source: str
@@ -64,6 +69,9 @@ class CanOpenStation:
     velocity_units_per_rad_s: float | None = None
     quick_stop_option_code: int = 2
     quick_stop_decel_rad_s2: float = 20.0
+    host_node_id: int = 127
+    host_heartbeat_timeout_s: float = 1.0
+    abort_connection_option_code: int = 3  # 0x6007: 1 fault, 2 disable voltage, 3 quick stop
     can_options: Mapping[str, Any] = field(default_factory=dict)
 
 
@@ -239,13 +247,34 @@ def _canopen(table: ConfigTable, scaling: ConfigTable, base_dir: Path) -> CanOpe
         velocity_units_per_rad_s=scaling.optional_positive("velocity_units_per_rad_s"),
         quick_stop_option_code=scaling.integer("quick_stop_option_code", 2),
         quick_stop_decel_rad_s2=scaling.positive("quick_stop_decel_rad_s2", 20.0),
+        host_node_id=table.integer("host_node_id", 127),
+        host_heartbeat_timeout_s=table.positive("host_heartbeat_timeout_s", 1.0),
+        abort_connection_option_code=table.integer("abort_connection_option_code", 3),
         can_options=dict(table.table_at("options", required=False).values),  # python-can's
     )
     table.done()
     scaling.done()
     if station.max_bus_load > 1:
         raise table.error("max_bus_load", "is a fraction (0..1]")
+    _check_host_watch(table, station)
     return station
+
+
+def _check_host_watch(table: ConfigTable, station: CanOpenStation) -> None:
+    """The host's heartbeat and the drive's reaction to its loss must be what CiA 301/402
+    can express, and the drive must be allowed to miss a few heartbeats."""
+    if not 1 <= station.host_node_id <= 127 or station.host_node_id == station.node_id:
+        raise table.error("host_node_id", f"must be 1..127 and not the drive's node_id "
+                                          f"{station.node_id}, got {station.host_node_id}")
+    if station.abort_connection_option_code not in (1, 2, 3):
+        raise table.error("abort_connection_option_code", "must be 1 (fault), 2 (disable "
+                          "voltage) or 3 (quick stop): a drive whose host died must stop, got "
+                          f"{station.abort_connection_option_code}")
+    timeout_ms = station.host_heartbeat_timeout_s * 1e3
+    if not 2 * station.heartbeat_period_s < station.host_heartbeat_timeout_s or timeout_ms > 65535:
+        raise table.error("host_heartbeat_timeout_s", "must be more than two heartbeat periods "
+                          f"({2 * station.heartbeat_period_s:g} s) and at most 65.535 s "
+                          f"(0x1016, in ms), got {station.host_heartbeat_timeout_s:g} s")
 
 
 def _modbus(table: ConfigTable, base_dir: Path) -> ModbusStation:

@@ -16,6 +16,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from hil.drives.base import MotionEnvelope
 from hil.drives.cia402.link import CanLink
 from hil.drives.cia402.protocol import (
     CW_ENABLE_OPERATION,
@@ -26,13 +27,20 @@ from hil.drives.cia402.protocol import (
     Scaling,
     state_of,
 )
-from hil.errors import DriveCommunicationError, DriveError, DriveFaultError, DriveStateError
+from hil.errors import (
+    DriveCommunicationError,
+    DriveError,
+    DriveFaultError,
+    DriveStateError,
+    LimitViolationError,
+)
 from hil.motion import COMMAND_COLUMN, Excitation, Mode
 from hil.recording import Recording
 
 log = logging.getLogger(__name__)
 
 MAX_CONSECUTIVE_LOST = 25
+SW_INTERNAL_LIMIT = 0x0800  # statusword bit 11: the drive stopped at one of its own limits
 RECORDER_SAMPLE = np.dtype([("pos", "<i4"), ("vel", "<i4"), ("torque", "<i2"), ("current", "<i2")])
 _LIMITS = {"h": (-32768, 32767), "i": (-(2**31), 2**31 - 1)}
 
@@ -51,8 +59,9 @@ class RunSetup:
         Lost rows a streamed run may have before it is a communication error.
     scaling : Scaling
         Drive units <-> SI.
-    travel_rad : tuple of float
-        The unit's travel limits (a streamed run stops when the position leaves them).
+    envelope : MotionEnvelope
+        The motion monitor's bounds: a streamed run whose measured position or velocity
+        leaves them stops (a :class:`LimitViolationError`; the drive is then quick-stopped).
     torque_sample : str
         ``"mean"`` (0x2077, averaged over the SYNC period) or ``"instantaneous"`` (0x6077).
     command_interpolation : str
@@ -72,7 +81,7 @@ class RunSetup:
     sync_period_s: float
     lost_sample_fraction: float
     scaling: Scaling
-    travel_rad: tuple[float, float]
+    envelope: MotionEnvelope
     torque_sample: str
     command_interpolation: str
     control_period_s: float | None
@@ -162,16 +171,11 @@ def run_stream(link: CanLink, setup: RunSetup, excitation: Excitation) -> Acquir
         More than ``lost_sample_fraction`` of the rows were lost (the drive is left as it
         is, enabled; the recording attached).
     """
-    sc, mode = setup.scaling, excitation.mode
+    mode = excitation.mode
     raw = _raw_command(setup, excitation)
     cob, _ = link.rpdo_payload(mode, CW_ENABLE_OPERATION, 0)
     packer = struct.Struct(RPDO_FORMAT[mode])
     offset = _raw_offset(setup, excitation)
-    counts_margin = 0.05 * sc.counts_per_rad  # the drive's own 0x607D acts first
-    travel = (
-        setup.travel_rad[0] * sc.counts_per_rad - counts_margin,
-        setup.travel_rad[1] * sc.counts_per_rad + counts_margin,
-    )
     link.forget()
     first = link.sync_index + 1
     error: DriveError | None = None
@@ -184,7 +188,7 @@ def run_stream(link: CanLink, setup: RunSetup, excitation: Excitation) -> Acquir
     )
     try:
         with link.direct_receive():
-            done = _stream_loop(link, setup, excitation, raw, offset, cob, packer, travel)
+            done = _stream_loop(link, setup, excitation, raw, offset, cob, packer)
     except _FaultedError as fault:
         # 0x603F by SDO: only now that the Notifier receives again
         code = link.emcy[-1][0] if link.emcy else link.fault_code()
@@ -221,9 +225,9 @@ def _stream_loop(
     offset: np.ndarray | None,
     cob: int,
     packer: struct.Struct,
-    travel: tuple[float, float],
 ) -> int:
-    """The cyclic exchange; returns the number of SYNCs sent."""
+    """The cyclic exchange; returns the number of SYNCs sent. Every answered SYNC's
+    position and velocity go through the motion monitor (``setup.envelope``)."""
     sc = setup.scaling
     period_s = setup.sync_period_s
     lost_in_a_row = 0
@@ -244,17 +248,26 @@ def _stream_loop(
             continue
         lost_in_a_row = 0
         statusword, position, _ = struct.unpack("<Hib", link.rx1[link.sync_index])
+        velocity = struct.unpack_from("<i", link.rx2[link.sync_index])[0]
+        violation = setup.envelope.violation(
+            position_rad=position / sc.counts_per_rad,
+            velocity_rad_s=velocity / sc.velocity_units_per_rad_s,
+            time_s=k * period_s,
+            excitation=excitation.name,
+        )
+        if violation is not None:
+            raise violation
         if statusword & SW_FAULT or link.emcy:
             raise _FaultedError(k * period_s)
         if statusword & 0x6F != 0x27:
+            if statusword & SW_INTERNAL_LIMIT:
+                raise LimitViolationError(
+                    f"excitation '{excitation.name}': node {setup.node_id} stopped at its own "
+                    f"limit (0x607D/0x6080, statusword bit 11) at t = {k * period_s:.3f} s"
+                )
             raise DriveStateError(
                 f"node {setup.node_id} left OPERATION ENABLED ({state_of(statusword)}) at "
                 f"t = {k * period_s:.3f} s of '{excitation.name}'"
-            )
-        if not travel[0] <= position <= travel[1]:
-            raise DriveStateError(
-                f"position {position / sc.counts_per_rad:.3f} rad left the travel limits "
-                f"during '{excitation.name}'"
             )
     return done
 
@@ -358,6 +371,12 @@ def run_recorder(link: CanLink, setup: RunSetup, excitation: Excitation) -> Acqu
         for tick in range(ticks):
             link.tick()
             status = link.latest_status()
+            if status is not None and status[0] & SW_INTERNAL_LIMIT and status[0] & 0x6F != 0x27:
+                raise LimitViolationError(
+                    f"excitation '{excitation.name}': node {setup.node_id} stopped at its own "
+                    f"limit (0x607D/0x6080, statusword bit 11) at t = {tick * st_period_s:.3f} s "
+                    "(drive recorder)"
+                )
             if status is not None and (status[0] & SW_FAULT or link.emcy):
                 raise DriveFaultError(
                     f"node {setup.node_id} faulted at t = {tick * st_period_s:.3f} s of "

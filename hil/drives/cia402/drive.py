@@ -11,9 +11,17 @@ from __future__ import annotations
 
 import logging
 import math
+import struct
 from typing import Any
 
-from hil.drives.base import Drive, DriveInfo, DriveState, DriveStatus, check_limits
+from hil.drives.base import (
+    Drive,
+    DriveInfo,
+    DriveState,
+    DriveStatus,
+    MotionEnvelope,
+    check_limits,
+)
 from hil.drives.cia402.acquire import RunSetup, run_recorder, run_stream
 from hil.drives.cia402.link import CanLink
 from hil.drives.cia402.protocol import (
@@ -37,6 +45,11 @@ from hil.motion import CompensationTable, Excitation, Limits, Mode
 from hil.recording import Recording
 
 log = logging.getLogger(__name__)
+
+# CANopen integer types by struct code: (range, name) of what an object can hold
+_RANGES = {"H": (0, 0xFFFF, "UNSIGNED16"), "I": (0, 0xFFFFFFFF, "UNSIGNED32"),
+           "h": (-0x8000, 0x7FFF, "INTEGER16"), "i": (-0x80000000, 0x7FFFFFFF, "INTEGER32")}
+RPM_PER_RAD_S = 60 / (2 * math.pi)  # 0x6080 max motor speed is in rpm
 
 
 class CanOpenDrive(Drive):
@@ -90,6 +103,7 @@ class CanOpenDrive(Drive):
         self._write_period(self._period_us)
         link.write(0x1019, 0, 0)  # SYNC without counter
         self._write_limits()
+        self._watch_host()
         try:
             loop_us = int(link.read(0x2200, 6))
             self.control_period_s = loop_us * 1e-6
@@ -210,16 +224,58 @@ class CanOpenDrive(Drive):
         self._period_us = period_us
 
     def _write_limits(self) -> None:
+        """The unit's limits into the drive, so that it enforces them itself: 0x6072 max
+        torque, 0x607F max profile velocity; the motion monitor's envelope (the limits and
+        their stated margin, :class:`MotionEnvelope`) as 0x607D software position limits
+        and 0x6080 max motor speed; the quick stop (0x605A, 0x6085). A value the object
+        cannot hold is refused here, in one line, before any motion."""
         assert self.scaling is not None
-        sc, lim, link = self.scaling, self.limits, self.link
-        link.write(0x6072, 0, min(0xFFFF, round(lim.torque_nm / sc.rated_torque_nm * 1e3)))
-        link.write(0x607F, 0, round(lim.velocity_rad_s * sc.velocity_units_per_rad_s))
-        link.write(0x607D, 1, round(lim.travel_min_rad * sc.counts_per_rad))
-        link.write(0x607D, 2, round(lim.travel_max_rad * sc.counts_per_rad))
-        link.write(0x605A, 0, self.station.quick_stop_option_code)
-        link.write(
-            0x6085, 0, round(self.station.quick_stop_decel_rad_s2 * sc.velocity_units_per_rad_s)
-        )
+        sc, lim, st = self.scaling, self.limits, self.station
+        envelope = MotionEnvelope.of(lim)
+        for index, sub, code, value, what in (
+            (0x6072, 0, "H", round(lim.torque_nm / sc.rated_torque_nm * 1e3),
+             f"torque limit {lim.torque_nm:g} N·m (‰ of rated)"),
+            (0x607F, 0, "I", round(lim.velocity_rad_s * sc.velocity_units_per_rad_s),
+             f"velocity limit {lim.velocity_rad_s:g} rad/s"),
+            (0x607D, 1, "i", math.floor(envelope.position_min_rad * sc.counts_per_rad),
+             f"travel_min_rad {lim.travel_min_rad:g} rad (with the monitor's margin)"),
+            (0x607D, 2, "i", math.ceil(envelope.position_max_rad * sc.counts_per_rad),
+             f"travel_max_rad {lim.travel_max_rad:g} rad (with the monitor's margin)"),
+            (0x6080, 0, "I", math.ceil(envelope.velocity_rad_s * RPM_PER_RAD_S),
+             f"velocity limit {lim.velocity_rad_s:g} rad/s with the monitor's margin (rpm)"),
+            (0x605A, 0, "h", st.quick_stop_option_code, "quick_stop_option_code"),
+            (0x6085, 0, "I", round(st.quick_stop_decel_rad_s2 * sc.velocity_units_per_rad_s),
+             f"quick_stop_decel_rad_s2 {st.quick_stop_decel_rad_s2:g}"),
+        ):
+            self._write_object(index, sub, code, value, what)
+
+    def _watch_host(self) -> None:
+        """A dead host stops the axis: our heartbeat (node ``host_node_id``) starts, the
+        drive consumes it (0x1016:1 = node << 16 | time in ms) and reacts to its loss by
+        0x6007 (abort connection option code; the station's default 3 is quick stop)."""
+        st = self.station
+        self.link.start_host_heartbeat()
+        timeout_ms = round(st.host_heartbeat_timeout_s * 1e3)
+        self._write_object(0x1016, 1, "I", st.host_node_id << 16 | timeout_ms,
+                           f"consumer heartbeat time {st.host_heartbeat_timeout_s:g} s")
+        self._write_object(0x6007, 0, "h", st.abort_connection_option_code,
+                           "abort_connection_option_code")
+
+    def _write_object(self, index: int, sub: int, code: str, value: int, what: str) -> None:
+        """Write an integer object, refusing in one line a value it cannot hold; by raw SDO
+        with its standard type when the station's EDS does not declare it."""
+        low, high, kind = _RANGES[code]
+        st = self.station
+        if not low <= value <= high:
+            raise DriveStateError(
+                f"node {st.node_id}: {what} is {value} in 0x{index:04X}:{sub:02X} ({kind}, "
+                f"{low}..{high}): the drive cannot represent it; {st.source}"
+            )
+        od = self.node_od
+        if od is not None and index not in od:
+            self.link.download(index, sub, struct.pack("<" + code, value))
+        else:
+            self.link.write(index, sub, value)
 
     def _read_info(self, rate_hz: float) -> DriveInfo:
         link, st = self.link, self.station
@@ -301,12 +357,14 @@ class CanOpenDrive(Drive):
         self.link.write(COMPENSATION_TABLE, 2, pack_harmonics(ripple))
 
     def close(self) -> None:
-        """Disable, return the node to PRE-OPERATIONAL, release the bus."""
+        """Disable, return the node to PRE-OPERATIONAL, stop watching our heartbeat (a
+        clean end is no lost host), release the bus."""
         try:
             self.disable()
             if self.link.connected:
                 try:
                     self.link.nmt("PRE-OPERATIONAL", timeout_s=0.5)
+                    self._write_object(0x1016, 1, "I", 0, "consumer heartbeat off")
                 except DriveError as exc:
                     log.warning("node %d: %s", self.station.node_id, exc)
         finally:
@@ -377,7 +435,7 @@ class CanOpenDrive(Drive):
             sync_period_s=st.sync_period_s,
             lost_sample_fraction=st.lost_sample_fraction,
             scaling=self.scaling,
-            travel_rad=(self.limits.travel_min_rad, self.limits.travel_max_rad),
+            envelope=MotionEnvelope.of(self.limits),
             torque_sample=self.torque_sample,
             command_interpolation=self.command_interpolation,
             control_period_s=self.control_period_s,

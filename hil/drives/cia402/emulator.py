@@ -17,6 +17,13 @@ torque commanded over the control periods of the last SYNC period, i.e. over
 run over real CAN frames is therefore as fast as the frames go, not as fast as the wall
 clock.
 
+Safety objects: the consumer heartbeat time 0x1016 (the host's node and time) and the abort
+connection option code 0x6007 (what the drive does when that heartbeat stops: 1 fault, 2
+disable voltage, 3 quick stop), watched by a thread of its own on the wall clock; the
+software position limits 0x607D and the max motor speed 0x6080 (rpm), checked on the
+actual values latched at each SYNC: outside them the drive quick-stops and sets statusword
+bit 11 (internal limit active). An EDS that lacks these standard objects gets them here.
+
 It knows nothing about the backend that talks to it.
 """
 
@@ -27,13 +34,21 @@ import logging
 import math
 import struct
 import threading
+import time
 from pathlib import Path
 from typing import Any
 
 import can
 import canopen
 import numpy as np
-from canopen.objectdictionary import ODVariable
+from canopen.objectdictionary import (
+    INTEGER16,
+    UNSIGNED8,
+    UNSIGNED32,
+    ObjectDictionary,
+    ODArray,
+    ODVariable,
+)
 from canopen.sdo.exceptions import SdoAbortedError
 
 from hil.config import builtin_fixture
@@ -53,6 +68,11 @@ ABORT_NOT_NOW = 0x08000022  # data cannot be transferred because of the device s
 INTERPOLATION_LINEAR, INTERPOLATION_HOLD = 0, -1  # 0x60C0 (negative: manufacturer-specific)
 TORQUE_MEAN = 0x2077  # mean torque over the last SYNC period, 0.1 ‰ of 0x6076
 TORQUE_MEAN_PER_RATED = 1e4  # 0x2077 counts per rated torque
+HEARTBEAT_ERROR = 0x8130  # EMCY: life guard or heartbeat error (CiA 301)
+SW_INTERNAL_LIMIT = 0x0800  # statusword bit 11: internal limit active
+WATCH_TICK_S = 0.01  # the heartbeat consumer's check period
+STALL_S = 0.05  # a check this late: the emulator itself was not running (host overload)
+ABORT_FAULT, ABORT_DISABLE_VOLTAGE, ABORT_QUICK_STOP = 1, 2, 3  # 0x6007 option codes
 
 # CiA 402 states and the statusword bits the drive reports in each
 NOT_READY, SWITCH_ON_DISABLED, READY, SWITCHED_ON, ENABLED, QUICK_STOP, FAULT_REACTION, FAULT = (
@@ -160,6 +180,7 @@ class Cia402Emulator:
         self.rated_torque_nm = rated_torque_nm
         self.rated_current_a = rated_current_a or rated_torque_nm / plant.torque_constant_nm_a
         self._od = canopen.import_od(str(eds_path or default_eds_path()), node_id)
+        _add_safety_objects(self._od)
         self._serial = serial_number
         self._interpolation_code = interpolation
         self._lock = threading.RLock()
@@ -192,6 +213,12 @@ class Cia402Emulator:
         self._raw_cache: dict[tuple[int, int], int] = {}
         self._steps = 0
         self._compensation: dict[int, tuple[PositionHarmonic, ...]] = {1: (), 2: ()}
+        self.limit_active = False  # stopped at 0x607D/0x6080 (statusword bit 11)
+        self.host_lost = 0  # times the host's heartbeat stopped for the consumer time
+        self._host_cob: int | None = None  # the consumed heartbeat's COB-ID
+        self._host_seen: float | None = None  # monotonic time of its last heartbeat
+        self._watch_stop = threading.Event()
+        self._watcher: threading.Thread | None = None
         self.recorder = DriveRecorder(
             capacity=16384,
             loop_period_us=round(1e6 / fs_hz),
@@ -229,9 +256,17 @@ class Cia402Emulator:
             network.subscribe(0x200 + 0x100 * n + self.node_id, self._on_rpdo)
         node.nmt.send_command(0x81)  # reset: boot-up message
         node.nmt.send_command(0x80)  # PRE-OPERATIONAL, heartbeat starts (0x1017)
+        self._watch_stop.clear()
+        self._watcher = threading.Thread(target=self._watch_host, name="cia402-heartbeat-consumer",
+                                         daemon=True)
+        self._watcher.start()
         log.info("CiA 402 emulator node %d up on %s", self.node_id, self.channel)
 
     def stop(self) -> None:
+        self._watch_stop.set()
+        if self._watcher is not None:
+            self._watcher.join(1.0)
+            self._watcher = None
         if self._network is not None and self.node is not None:
             self.node.nmt.stop_heartbeat()  # type: ignore[no-untyped-call]
             self._network.disconnect()
@@ -251,6 +286,8 @@ class Cia402Emulator:
     @property
     def statusword(self) -> int:
         word = _STATUS_BITS[self.state] | 0x0200  # remote
+        if self.limit_active:
+            word |= SW_INTERNAL_LIMIT
         if self.state == ENABLED and self.mode_display in (8, 9, 10):
             word |= 0x1000  # drive follows the command value
         if self.state == SWITCH_ON_DISABLED:
@@ -306,6 +343,8 @@ class Cia402Emulator:
             self._check_period(index, subindex, int(value))
         elif index == 0x60C0 and value not in (INTERPOLATION_LINEAR, INTERPOLATION_HOLD):
             raise SdoAbortedError(ABORT_VALUE_RANGE)
+        elif index == 0x1016 and subindex == 1:
+            self._consume_heartbeat(int(value))
         elif index in (0x2100, 0x2200):
             self.recorder.write(index, subindex, value, running=self.state == ENABLED)
         elif index == COMPENSATION_TABLE and subindex in (1, 2):
@@ -400,6 +439,7 @@ class Cia402Emulator:
             return
         log.debug("emulator node %d: %s -> %s", self.node_id, self.state, state)
         if state == ENABLED:
+            self.limit_active = False
             self._previous_target = {}
             self.plant.hold()
             self._profile_velocity = self.plant.velocity_rad_s
@@ -430,6 +470,70 @@ class Cia402Emulator:
         if self.node is not None and self._network is not None:
             self.emcy_sent.append(code)
             self.node.emcy.send(code, self._error_register())
+
+    # -- safety: the host's heartbeat, the drive's own limits ----------------------------
+    def _consume_heartbeat(self, entry: int) -> None:
+        """0x1016:1 written: watch node ``entry >> 16``'s heartbeat (time ``entry & 0xFFFF``
+        ms; 0 is off). Monitoring starts with its first heartbeat (CiA 301)."""
+        if self._network is None:
+            return
+        if self._host_cob is not None:
+            self._network.unsubscribe(self._host_cob, self._on_host_heartbeat)
+            self._host_cob = None
+        self._host_seen = None
+        node, time_ms = (entry >> 16) & 0x7F, entry & 0xFFFF
+        if node and time_ms:
+            self._host_cob = 0x700 + node
+            self._network.subscribe(self._host_cob, self._on_host_heartbeat)
+
+    def _on_host_heartbeat(self, can_id: int, data: bytearray, timestamp: float) -> None:
+        with self._lock:
+            if can_id == self._host_cob:
+                self._host_seen = time.monotonic()
+
+    def _watch_host(self) -> None:
+        """The heartbeat consumer, on the wall clock (a thread of its own: a dead host sends
+        no SYNC either). Time the emulator itself was not scheduled is not host silence."""
+        last = time.monotonic()
+        while not self._watch_stop.wait(WATCH_TICK_S):
+            now = time.monotonic()
+            late, last = now - last - WATCH_TICK_S, now
+            with self._lock:
+                if self._host_seen is None or self._host_cob is None:
+                    continue
+                if late > STALL_S:
+                    self._host_seen += late
+                timeout_s = (self._raw(0x1016, 1) & 0xFFFF) * 1e-3
+                if now - self._host_seen > timeout_s:
+                    self._host_seen = None  # again armed by the next heartbeat
+                    self._host_lost(timeout_s)
+
+    def _host_lost(self, timeout_s: float) -> None:
+        """The host's heartbeat stopped: EMCY 0x8130, then the abort connection option."""
+        option = self._raw(0x6007)
+        self.host_lost += 1
+        log.warning("emulator node %d: no heartbeat from the host for %.3g s: 0x6007 = %d, "
+                    "state %s", self.node_id, timeout_s, option, self.state)
+        if option == ABORT_FAULT:
+            self._trip(HEARTBEAT_ERROR)
+            return
+        self._emcy(HEARTBEAT_ERROR)
+        if option == ABORT_DISABLE_VOLTAGE:
+            self._enter(SWITCH_ON_DISABLED)
+        elif option == ABORT_QUICK_STOP and self.state == ENABLED:
+            self._quick_stop()
+
+    def _check_own_limits(self) -> None:
+        """The latched actual values against 0x607D (counts) and 0x6080 (rpm): outside,
+        the drive quick-stops and reports internal limit active (statusword bit 11)."""
+        position, velocity = self._sample[0x6064], self._sample[0x606C]
+        rpm = abs(velocity) / self.counts_per_rev * 60.0
+        if self._raw(0x607D, 1) <= position <= self._raw(0x607D, 2) and rpm <= self._raw(0x6080):
+            return
+        log.warning("emulator node %d: at its own limit (position %d counts, %.1f rpm): "
+                    "quick stop", self.node_id, position, rpm)
+        self.limit_active = True
+        self._quick_stop()
 
     # -- NMT ---------------------------------------------------------------------------
     def _on_nmt(self, can_id: int, data: bytearray, timestamp: float) -> None:
@@ -547,6 +651,8 @@ class Cia402Emulator:
                 self._enable_countdown -= 1
             if self._enable_countdown == 0 and self.state == SWITCHED_ON:
                 self._enter(ENABLED)
+            if self.state == ENABLED:
+                self._check_own_limits()
             self._advance()
             if not operational:
                 return
@@ -665,6 +771,27 @@ class Cia402Emulator:
         )
         timer.daemon = True
         timer.start()
+
+
+def _add_safety_objects(od: ObjectDictionary) -> None:
+    """The standard objects the drive's safety needs, where the EDS lacks them: 0x1016
+    consumer heartbeat time (one entry), 0x6007 abort connection option code, 0x6080 max
+    motor speed (rpm)."""
+    def variable(name: str, index: int, sub: int, data_type: int, default: int,
+                 access: str = "rw") -> ODVariable:
+        var = ODVariable(name, index, sub)
+        var.data_type, var.access_type, var.default = data_type, access, default
+        return var
+
+    if 0x1016 not in od:
+        array = ODArray("Consumer heartbeat time", 0x1016)
+        array.add_member(variable("Highest sub-index supported", 0x1016, 0, UNSIGNED8, 1, "ro"))
+        array.add_member(variable("Consumer heartbeat time", 0x1016, 1, UNSIGNED32, 0))
+        od.add_object(array)
+    if 0x6007 not in od:
+        od.add_object(variable("Abort connection option code", 0x6007, 0, INTEGER16, 1))
+    if 0x6080 not in od:
+        od.add_object(variable("Max motor speed", 0x6080, 0, UNSIGNED32, 0xFFFFFFFF))
 
 
 def _harmonics(table: tuple[PositionHarmonic, ...]) -> tuple[Harmonic, ...]:

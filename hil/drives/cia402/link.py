@@ -86,6 +86,7 @@ class CanLink:
         self.target = 0
         self._answered = threading.Event()
         self._heartbeat_seen = threading.Event()
+        self._host_heartbeat: Any = None  # our own heartbeat (a periodic task)
         self._next_deadline = 0.0
         self._connected = False
         self._direct = False
@@ -120,8 +121,27 @@ class CanLink:
         self.network.subscribe(0x180 + base, self._on_tpdo1)
         self.network.subscribe(0x280 + base, self._on_tpdo2)
 
+    def start_host_heartbeat(self) -> None:
+        """Produce the host's heartbeat (node ``host_node_id``, state OPERATIONAL, every
+        ``heartbeat_period_s``): the drive's consumer (0x1016) stops the axis when it ends."""
+        if self._host_heartbeat is None:
+            st = self.station
+            self._host_heartbeat = self.network.send_periodic(
+                0x700 + st.host_node_id, bytes([0x05]), st.heartbeat_period_s
+            )
+
+    def stop_host_heartbeat(self) -> None:
+        """End the host's heartbeat (the drive's consumer then reacts after its time)."""
+        task, self._host_heartbeat = self._host_heartbeat, None
+        if task is not None:
+            try:
+                task.stop()
+            except Exception as exc:  # the bus may be gone already
+                log.warning("stopping the host heartbeat reported %r", exc)
+
     def close(self) -> None:
         """Disconnect from the bus (a receive thread that died is logged, not raised)."""
+        self.stop_host_heartbeat()
         if self._connected:
             self._connected = False
             try:
@@ -206,10 +226,20 @@ class CanLink:
 
         self._sdo(set_raw, index, subindex)
 
-    def _sdo(self, action: Callable[[Any], Any], index: int, subindex: int) -> Any:
+    def download(self, index: int, subindex: int, data: bytes) -> None:
+        """Raw bytes by SDO download, for a standard object the EDS does not declare
+        (errors as :meth:`read`)."""
+        assert self.node is not None
+        sdo = self.node.sdo
+        self._sdo(lambda _var: sdo.download(index, subindex, data), index, subindex, raw=True)
+
+    def _sdo(self, action: Callable[[Any], Any], index: int, subindex: int, *,
+             raw: bool = False) -> Any:
         assert self.node is not None
         what = f"node {self.node_id} object 0x{index:04X}:{subindex:02X}"
         try:
+            if raw:  # not in the EDS: no variable to look up
+                return action(None)
             obj = self.node.sdo[index]
             var = obj if subindex == 0 and not hasattr(obj, "values") else obj[subindex]
             return action(var)

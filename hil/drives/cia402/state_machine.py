@@ -205,10 +205,12 @@ class Cia402StateMachine:
         try:
             self.link.controlword = CW_SHUTDOWN
             self.link.check()
-            self.link.tick_until(
+            status = self.link.tick_until(
                 "disable",
                 lambda sw, m: state_of(sw) in ("READY TO SWITCH ON", "SWITCH ON DISABLED", "FAULT"),
             )
+            if self.state is not DriveState.DISABLED:
+                log.info("node %d disabled (%s)", self.node_id, state_of(status[0]))
         except DriveError as exc:
             log.error("node %d: disable not confirmed: %s", self.node_id, exc)
             self._best_effort(CW_DISABLE_VOLTAGE)
@@ -235,6 +237,7 @@ class Cia402StateMachine:
                     break
             else:
                 raise DriveStateError("axis not at rest after the quick-stop timeout")
+            log.info("node %d quick-stopped (%s)", self.node_id, state)
         except DriveError as exc:
             log.error("node %d: quick stop not confirmed: %s", self.node_id, exc)
             self._best_effort(CW_QUICK_STOP)

@@ -20,7 +20,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from hil.drives.base import DriveInfo
+from hil.drives.base import DriveInfo, MotionEnvelope
 from hil.drives.modbus.link import ModbusLink
 from hil.drives.modbus.regmap import (
     FEEDBACK,
@@ -109,7 +109,8 @@ class PolledRun:
     setpoint_held_s: float = 0.0  # time the drive's ramp had ended before the next write
 
 
-def poll(excitation: Excitation, run: PolledRun, feedback: Feedback) -> None:
+def poll(excitation: Excitation, run: PolledRun, feedback: Feedback,
+         envelope: MotionEnvelope | None = None) -> None:
     """Write the setpoint each sample period (see the module's docstring) and read the
     feedback half a period later, appending ``(host time, command sample due, values)`` rows
     to ``run`` (kept when this raises).
@@ -122,6 +123,9 @@ def poll(excitation: Excitation, run: PolledRun, feedback: Feedback) -> None:
         The drive disabled itself during the run.
     DriveCommunicationError
         A request failed.
+    LimitViolationError
+        A row's position or velocity left ``envelope`` (the motion monitor; the caller
+        quick-stops the drive).
     """
     command = np.asarray(excitation.command, dtype=np.float64)
     offset = excitation.torque_offset_nm
@@ -162,6 +166,11 @@ def poll(excitation: Excitation, run: PolledRun, feedback: Feedback) -> None:
         run.longest_pause_s = max(run.longest_pause_s, stamp - previous)
         previous = stamp
         run.rows.append((stamp - t0, float(command[index]), values))
+        violation = None if envelope is None else envelope.violation(
+            position_rad=values["position"], velocity_rad_s=values["velocity"],
+            time_s=stamp - t0, excitation=excitation.name)
+        if violation is not None:
+            raise violation
         if feedback.bit(values, "fault"):
             code = int(values["fault_code"])
             why = ""

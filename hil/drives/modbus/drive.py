@@ -25,7 +25,14 @@ import time
 
 import numpy as np
 
-from hil.drives.base import Drive, DriveInfo, DriveState, DriveStatus, check_limits
+from hil.drives.base import (
+    Drive,
+    DriveInfo,
+    DriveState,
+    DriveStatus,
+    MotionEnvelope,
+    check_limits,
+)
 from hil.drives.modbus.acquire import (
     Feedback,
     PolledRun,
@@ -202,7 +209,10 @@ class ModbusDrive(Drive):
             The command leaves the unit's limits; nothing moved.
         DriveError
             A fault, a lost link, or a run below ``MIN_RATE_FRACTION`` of its rate: the
-            drive made safe, the partial recording attached.
+            drive made safe, the partial recording attached. A
+            :class:`LimitViolationError` when the measured motion left the monitor's
+            :class:`MotionEnvelope` (the register map has no limits of its own: the
+            host's monitor quick-stops the drive).
         """
         states = self.states
         if states.state is not DriveState.ENABLED:
@@ -223,7 +233,7 @@ class ModbusDrive(Drive):
         run = PolledRun()
         error: DriveError | None = None
         try:
-            poll(excitation, run, self.feedback)
+            poll(excitation, run, self.feedback, MotionEnvelope.of(self.limits))
         except DriveError as exc:
             error = exc
         except BaseException:

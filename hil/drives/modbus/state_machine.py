@@ -149,6 +149,8 @@ class ModbusStateMachine:
         try:
             self._control()
             self._await("disable", lambda v: not self.feedback.bit(v, "enabled"))
+            if self.state is not DriveState.DISABLED:
+                log.info("%s: drive disabled", self.link.where)
         except DriveError as exc:
             log.error("%s: disable not confirmed: %s", self.link.where, exc)
         self.state = DriveState.DISABLED
@@ -165,6 +167,7 @@ class ModbusStateMachine:
                 lambda v: not self.feedback.bit(v, "enabled") and abs(v["velocity"]) < 1e-2,
                 timeout_s=QUICK_STOP_TIMEOUT_S,
             )
+            log.info("%s: quick-stopped, at rest", self.link.where)
         except DriveError as exc:
             log.error("%s: quick stop not confirmed: %s", self.link.where, exc)
         self.state = DriveState.QUICK_STOPPED
