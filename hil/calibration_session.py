@@ -11,11 +11,14 @@ import getpass
 import json
 import logging
 import os
+import signal
 import socket
+import threading
 import time
-from collections.abc import Generator, Iterator
+from collections.abc import Callable, Generator, Iterator
 from dataclasses import dataclass
 from pathlib import Path
+from types import FrameType
 
 import pytest
 
@@ -66,6 +69,7 @@ def start(config: pytest.Config) -> None:
     unit without a serial, or a profile that does not load, is one usage error (exit 4)."""
     config.addinivalue_line("markers", f"{PROTOCOL_MARK}: a calibration protocol")
     config.stash[CONSOLE_KEY] = _Console()
+    _stop_on_signals(config)
     kind = drive_kind(config)
     if config.getoption("--unit-serial") is None and kind not in SIMULATED_KINDS:
         raise pytest.UsageError(f"--drive {kind} (a real unit) needs --unit-serial SERIAL")
@@ -80,6 +84,40 @@ def start(config: pytest.Config) -> None:
                               station_store=config.stash[STATION_KEY].store)
     except HilError as exc:
         raise pytest.UsageError(str(exc)) from None
+
+
+STOP_SIGNALS = ("SIGTERM", "SIGHUP")  # handled as SIGINT is: quick stop, disable, aborted
+
+
+def _stop_on_signals(config: pytest.Config) -> None:
+    """SIGTERM and SIGHUP raise ``KeyboardInterrupt``, as SIGINT does: the run stops on
+    pytest's interrupted path (the drive quick-stopped and disabled, an aborted certificate).
+    A repeated signal while stopping is ignored; the previous handlers return at the end."""
+    if threading.current_thread() is not threading.main_thread():
+        return  # signal handlers can only be set from the main thread
+    stopping: list[str] = []
+
+    def interrupt(signum: int, _frame: FrameType | None) -> None:
+        name = signal.Signals(signum).name
+        if stopping:
+            log.warning("%s while stopping after %s: ignored", name, stopping[0])
+            return
+        stopping.append(name)
+        raise KeyboardInterrupt(f"{name}: the calibration stops")
+
+    for name in STOP_SIGNALS:
+        number = getattr(signal, name, None)
+        if number is None:  # no SIGHUP on Windows
+            continue
+        config.add_cleanup(_restorer(number, signal.signal(number, interrupt)))
+
+
+def _restorer(number: int, previous: signal.Handlers | Callable[[int, FrameType | None], object]
+              | int | None) -> Callable[[], None]:
+    """Puts back the handler a signal had before the calibration."""
+    def restore() -> None:
+        signal.signal(number, previous)
+    return restore
 
 
 def drive_kind(config: pytest.Config) -> str:
@@ -159,14 +197,15 @@ def drive_connection(
 @pytest.fixture(scope="module")
 def drive(request: pytest.FixtureRequest, drive_connection: Drive) -> Iterator[Drive]:
     """The drive, enabled for one protocol module; afterwards quick-stopped if anything in
-    the module failed, and always disabled."""
+    the module failed or the run was interrupted (SIGINT, SIGTERM, SIGHUP), always disabled."""
     failures_before = request.session.testsfailed
     drive_connection.enable()
     try:
         yield drive_connection
     finally:
         try:
-            if request.session.testsfailed != failures_before:
+            interrupted = request.session.exitstatus == pytest.ExitCode.INTERRUPTED
+            if request.session.testsfailed != failures_before or interrupted:
                 drive_connection.quick_stop()
         finally:
             drive_connection.disable()

@@ -1,0 +1,151 @@
+"""Issue 26, item 12: SIGTERM and SIGHUP stop a calibration as SIGINT does (quick stop,
+disable, an aborted certificate, never PASS), and a CANopen drive whose host stops its
+heartbeat stops the axis on its own (0x1016 consumer heartbeat, 0x6007 abort connection)."""
+
+from __future__ import annotations
+
+import json
+import os
+import re
+import signal
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from hil.drives.cia402.drive import CanOpenDrive
+from hil.drives.cia402.emulator import HEARTBEAT_ERROR, QUICK_STOP, SWITCH_ON_DISABLED
+from hil.drives.emulated import canopen_emulator
+from hil.motion import Mode
+from hil.profile import load_profile
+
+# each backend's log lines: a run moving the axis, quick stop, disabled
+STATE_LINES = {
+    "sim": (r"sim: running", r"sim: quick stop", r"sim: drive disabled"),
+    "canopen-emulator": (r"node 5: streaming", r"node 5 quick-stopped", r"node 5 disabled"),
+}
+
+
+def _wait_for_line(path: Path, offset: int, pattern: str, timeout_s: float) -> None:
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        with path.open("rb") as stream:
+            stream.seek(offset)
+            if re.search(pattern, stream.read().decode("utf-8", "replace")):
+                return
+        time.sleep(0.02)
+    raise AssertionError(f"no '{pattern}' in {path} after {timeout_s} s")
+
+
+def _calibrate_and_signal(tmp_path: Path, kind: str, signum: int, *, after_s: float
+                          ) -> tuple[int, str, list[str], dict[str, object]]:
+    """Start a calibration, send ``signum`` ``after_s`` after protocol 2 started moving the
+    axis; its exit code, console output, the log lines written after the signal, the
+    certificate."""
+    log_file = tmp_path / "calibrate.log"
+    command = [sys.executable, "-m", "hil.cli", "calibrate", "--drive", kind,
+               "--unit-serial", "SIG-1", "--out", str(tmp_path / "out"), "--",
+               "--store", "off", "--no-documents", "-p", "no:cacheprovider",
+               "--log-file", str(log_file), "--log-file-level", "INFO"]
+    env = {**os.environ, "PYTHONUNBUFFERED": "1"}
+    process = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
+                               text=True, env=env, cwd=tmp_path)
+    assert process.stdout is not None
+    lines: list[str] = []
+    started = threading.Event()
+
+    def read() -> None:
+        assert process.stdout is not None
+        for line in process.stdout:
+            lines.append(line)
+            if "▶ protocol 2" in line:
+                started.set()
+
+    reader = threading.Thread(target=read, daemon=True)
+    reader.start()
+    try:
+        assert started.wait(240), "".join(lines)
+        _wait_for_line(log_file, log_file.stat().st_size, STATE_LINES[kind][0], 60)
+        time.sleep(after_s)  # the protocol's motion under way
+        logged = log_file.stat().st_size
+        process.send_signal(signum)
+        code = process.wait(120)
+    finally:
+        if process.poll() is None:
+            process.kill()
+    reader.join(10)
+    with log_file.open("rb") as stream:
+        stream.seek(logged)
+        after = stream.read().decode("utf-8", "replace").splitlines()
+    certificate = tmp_path / "out" / "SIG-1" / "certificate.json"
+    assert certificate.is_file(), "".join(lines)
+    return code, "".join(lines), after, json.loads(certificate.read_text(encoding="utf-8"))
+
+
+@pytest.mark.parametrize(("kind", "signum", "after_s"), [
+    ("sim", signal.SIGTERM, 0.0),
+    ("sim", signal.SIGHUP, 0.0),
+    ("canopen-emulator", signal.SIGTERM, 0.3),
+])
+def test_a_signal_mid_motion_aborts_stops_and_disables(
+    tmp_path: Path, kind: str, signum: int, after_s: float
+) -> None:
+    code, console, after, cert = _calibrate_and_signal(tmp_path, kind, signum, after_s=after_s)
+    assert code != 0, console
+    assert "Traceback" not in console, console
+    assert cert["aborted"] is True
+    assert cert["outcome"] != "PASS"
+    assert "ABORTED" in console
+    _, quick, disabled = STATE_LINES[kind]
+    states = [line for line in after if re.search(f"{quick}|{disabled}", line)]
+    assert any(re.search(quick, line) for line in states), after  # the motion stopped
+    assert re.search(disabled, states[-1]), after  # and the drive was left disabled
+
+
+def test_the_previous_handlers_return_after_a_calibration(tmp_path: Path) -> None:
+    """In-process: the calibration's handlers are gone when pytest ends."""
+    before = signal.getsignal(signal.SIGTERM)
+    code = pytest.main(["--pyargs", "gimbal_hil_protocols", "--drive", "sim",
+                        "--unit-serial", "H-1", "--out", str(tmp_path), "--store", "off",
+                        "--no-documents", "-q", "-p", "no:cacheprovider", "-k", "current_loop"])
+    assert code is not None
+    assert signal.getsignal(signal.SIGTERM) is before
+
+
+def test_a_canopen_drive_stops_when_the_hosts_heartbeat_stops() -> None:
+    """The backend produces a heartbeat and configures the drive to consume it (0x1016)
+    and quick-stop on its loss (0x6007 = 3); the emulator does, with no SYNC coming (a
+    dead host sends none either), and ramps to rest once SYNCs run it again."""
+    profile = load_profile()
+    changes = {"host_heartbeat_timeout_s": 0.4}
+    with canopen_emulator(profile, seed=0, station_changes=changes) as (emulator, station):
+        drive = CanOpenDrive(station, limits=profile.limits)
+        try:
+            assert emulator._raw(0x1016, 1) == (127 << 16 | 400)
+            assert emulator._raw(0x6007) == 3
+            drive.enable(Mode.VELOCITY)
+            link = drive.link
+            assert drive.scaling is not None
+            link.target = drive.scaling.to_drive(Mode.VELOCITY, 0.1)  # rad/s: stays in travel
+            deadline = time.monotonic() + 0.8  # longer than the consumer time: no trip
+            while time.monotonic() < deadline:
+                link.tick()
+            assert emulator.host_lost == 0
+            assert emulator.state == "OPERATION ENABLED"
+            assert emulator.plant.velocity_rad_s > 0.05
+            link.stop_host_heartbeat()  # the host "dies": no heartbeat, no SYNC
+            time.sleep(0.8)
+            assert emulator.host_lost == 1
+            assert emulator.state == QUICK_STOP
+            assert HEARTBEAT_ERROR in emulator.emcy_sent
+            for _ in range(400):  # SYNCs again: the quick-stop ramp runs to rest
+                link.tick()
+            assert emulator.state in (QUICK_STOP, SWITCH_ON_DISABLED)
+            assert abs(emulator.plant.velocity_rad_s) < 0.05
+            assert np.isfinite(emulator.plant.position_rad)
+        finally:
+            drive.close()
