@@ -5,10 +5,14 @@ Independent of pytest: the plugin creates one per session and hands it to protoc
 
 from __future__ import annotations
 
+import fcntl
 import hashlib
+import json
 import logging
+import os
 import re
 import shutil
+import socket
 import time
 import uuid
 from dataclasses import dataclass, field
@@ -17,7 +21,7 @@ from pathlib import Path
 
 from hil.drives.base import Drive, DriveInfo
 from hil.drives.station import StationIdentity
-from hil.errors import DriveError
+from hil.errors import DriveError, InputError
 from hil.identify.estimate import Estimate
 from hil.measurement import (
     Declared,
@@ -30,9 +34,66 @@ from hil.measurement import (
 )
 from hil.motion import Excitation
 from hil.profile import UnitProfile
-from hil.recording import Recording, write_recording
+from hil.recording import Recording, write_atomic, write_recording
 
 log = logging.getLogger(__name__)
+SERIAL_PATTERN = r"[A-Za-z0-9][A-Za-z0-9._-]{0,63}"
+LOCK_NAME = ".gimbal-hil.lock"  # in the unit folder; never archived, never removed
+
+
+class UnitLock:
+    """One writer per unit folder: ``fcntl.flock`` on ``SERIAL/.gimbal-hil.lock``, held by
+    the calibration from before its first write to its end (the system drops it when the
+    process dies, however it dies). The file names its holder: pid, host, start."""
+
+    def __init__(self, path: Path, descriptor: int) -> None:
+        self.path, self._descriptor = path, descriptor
+
+    @classmethod
+    def acquire(cls, unit_dir: Path) -> UnitLock:
+        """Take the unit folder's lock, or refuse at once.
+
+        Raises
+        ------
+        InputError
+            Another process holds it (naming its pid, host and start), or the folder cannot
+            be made.
+        """
+        path = unit_dir / LOCK_NAME
+        try:
+            unit_dir.mkdir(parents=True, exist_ok=True)
+            descriptor = os.open(path, os.O_RDWR | os.O_CREAT, 0o666)
+        except OSError as exc:
+            raise InputError(f"cannot lock the unit folder: {exc.strerror or exc}",
+                             source=str(unit_dir)) from None
+        try:
+            fcntl.flock(descriptor, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError:
+            holder = _holder(descriptor)
+            os.close(descriptor)
+            raise InputError(f"another calibration is writing this unit folder ({holder}; "
+                             f"lock {LOCK_NAME}): wait for it to end or choose another --out",
+                             source=str(unit_dir)) from None
+        stamp = {"pid": os.getpid(), "host": socket.gethostname(),
+                 "started": datetime.now(UTC).isoformat(timespec="seconds")}
+        os.ftruncate(descriptor, 0)
+        os.pwrite(descriptor, (json.dumps(stamp) + "\n").encode("utf-8"), 0)
+        return cls(path, descriptor)
+
+    def release(self) -> None:
+        """Let the next calibration of this unit write (idempotent)."""
+        if self._descriptor >= 0:
+            os.close(self._descriptor)  # closing drops the flock
+            self._descriptor = -1
+
+
+def _holder(descriptor: int) -> str:
+    """Who holds a lock, as its file says."""
+    try:
+        stamp = json.loads(os.pread(descriptor, 4096, 0) or b"{}")
+        return (f"pid {stamp['pid']} on {stamp['host']}, started {stamp['started']}")
+    except (OSError, ValueError, KeyError, TypeError):
+        return "holder not yet named"
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -82,7 +143,7 @@ class CalibrationRun:
         reference: bool = False,
         identity: StationIdentity | None = None,
     ) -> None:
-        if not re.fullmatch(r"[A-Za-z0-9][A-Za-z0-9._-]{0,63}", unit_serial):
+        if not re.fullmatch(SERIAL_PATTERN, unit_serial):
             raise ValueError(
                 f"unit serial {unit_serial!r} must be 1-64 letters, digits, '.', '_' or '-'"
             )
@@ -198,7 +259,7 @@ class CalibrationRun:
         path = self.unit_dir / name
         path.parent.mkdir(parents=True, exist_ok=True)
         payload = text.encode("utf-8")
-        path.write_bytes(payload)
+        write_atomic(path, payload)
         self.artifacts = [a for a in self.artifacts if a.path != path]
         self.artifacts.append(
             Artifact(
@@ -293,9 +354,23 @@ class CalibrationRun:
         if not previous:
             return
         stamp = datetime.fromtimestamp(previous[0].stat().st_mtime, UTC).strftime("%Y%m%dT%H%M%SZ")
-        target = self.unit_dir / "history" / stamp
-        target.mkdir(parents=True, exist_ok=True)
+        # the second alone collides (two runs in one second, a clock stepped back): the
+        # earlier run's id (or a random one) makes the name unique; never an existing one
+        suffix = _run_id(self.unit_dir / "certificate.json") or uuid.uuid4().hex
+        target = self.unit_dir / "history" / f"{stamp}-{suffix[:8]}"
+        while target.exists():
+            target = self.unit_dir / "history" / f"{stamp}-{uuid.uuid4().hex[:8]}"
+        target.mkdir(parents=True)
         for item in self.unit_dir.iterdir():
-            if item.name != "history":
+            if item.name not in ("history", LOCK_NAME):
                 shutil.move(str(item), target / item.name)
         log.info("previous calibration of %s moved to %s", self.unit_serial, target)
+
+
+def _run_id(certificate: Path) -> str | None:
+    """The run id an earlier certificate states (``None``: none readable)."""
+    try:
+        found = json.loads(certificate.read_bytes())["run"]["id"]
+    except (OSError, ValueError, KeyError, TypeError):
+        return None
+    return re.sub(r"[^A-Za-z0-9]", "", str(found)) or None

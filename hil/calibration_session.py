@@ -11,6 +11,7 @@ import getpass
 import json
 import logging
 import os
+import re
 import signal
 import socket
 import threading
@@ -22,7 +23,7 @@ from types import FrameType
 
 import pytest
 
-from hil.calibration import CalibrationRun
+from hil.calibration import SERIAL_PATTERN, CalibrationRun, UnitLock
 from hil.certificate import write_certificate
 from hil.drives.base import Drive, DriveInfo
 from hil.drives.connect import open_drive
@@ -82,8 +83,20 @@ def start(config: pytest.Config) -> None:
         if config.getoption("--store") != "off":  # a bad URL stops here, before any motion
             resolve_store_url(config.getoption("--store"), out_dir=Path(),
                               station_store=config.stash[STATION_KEY].store)
+        _lock_unit_folder(config)
     except HilError as exc:
         raise pytest.UsageError(str(exc)) from None
+
+
+def _lock_unit_folder(config: pytest.Config) -> None:
+    """One writer per unit folder, from before the first write to the end of the run: a
+    second calibration of the serial into the same --out is refused here, before motion."""
+    serial = config.getoption("--unit-serial")
+    serial = "SIM-0001" if serial is None else serial  # as the calibration fixture has it
+    if config.option.collectonly or not re.fullmatch(SERIAL_PATTERN, serial):
+        return  # nothing written; a bad serial is refused where the run is made
+    lock = UnitLock.acquire(Path(config.getoption("--out")) / serial)
+    config.add_cleanup(lock.release)
 
 
 STOP_SIGNALS = ("SIGTERM", "SIGHUP")  # handled as SIGINT is: quick stop, disable, aborted
@@ -383,8 +396,7 @@ def pytest_sessionfinish(session: pytest.Session, exitstatus: int) -> None:
     path = write_certificate(run, aborted=bool(aborted))
     session.config.stash[CERTIFICATE_KEY] = path
     _junit_suite(session.config, path)
-    if not session.config.getoption("--no-documents"):
-        session.config.stash[DOCUMENTS_KEY] = write_documents(path)
+    # the store (or outbox) before the documents: a stop while they render loses no run
     option = session.config.getoption("--store")
     if option != "off":  # the certificate is written: a failing store only queues the run
         out_dir = Path(session.config.getoption("--out"))
@@ -394,6 +406,8 @@ def pytest_sessionfinish(session: pytest.Session, exitstatus: int) -> None:
         message = record_run(path, out_dir=out_dir, url=url)
         log.info("%s", message)
         session.config.stash[STORE_MESSAGE_KEY] = message
+    if not session.config.getoption("--no-documents"):
+        session.config.stash[DOCUMENTS_KEY] = write_documents(path)
 
 
 def _junit_suite(config: pytest.Config, certificate: Path) -> None:

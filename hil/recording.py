@@ -7,9 +7,12 @@ their SI unit (``torque_nm``, ``position_rad``...). Rotary and linear axes share
 
 from __future__ import annotations
 
+import functools
 import gzip
 import hashlib
 import logging
+import os
+import tempfile
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -360,8 +363,56 @@ def write_recording(recording: Recording, path: str | Path) -> str:
     payload = ("\n".join(lines) + "\n").encode("utf-8")
     if path.suffix == ".gz":
         payload = gzip.compress(payload, compresslevel=3, mtime=0)
-    path.write_bytes(payload)
+    write_atomic(path, payload)
     return hashlib.sha256(payload).hexdigest()
+
+
+def write_atomic(path: str | Path, payload: bytes) -> None:
+    """Write ``payload`` as ``path`` all at once or not at all: a temporary file in the same
+    folder, flushed to disk, renamed over ``path`` (a stop or a full disk leaves the old
+    file or none, never a truncated one).
+
+    Raises
+    ------
+    OSError
+        The folder is not writable, the disk is full (the temporary file is removed).
+    """
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    handle, temporary = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.",
+                                         suffix=".tmp")
+    try:
+        os.fchmod(handle, 0o666 & ~_umask())  # mkstemp's 0600 is not what a file gets
+        with os.fdopen(handle, "wb") as stream:
+            stream.write(payload)
+            stream.flush()
+            os.fsync(stream.fileno())
+        os.replace(temporary, path)
+    except BaseException:
+        Path(temporary).unlink(missing_ok=True)
+        raise
+    _fsync_folder(path.parent)
+
+
+@functools.cache
+def _umask() -> int:
+    mask = os.umask(0o022)
+    os.umask(mask)
+    return mask
+
+
+def _fsync_folder(folder: Path) -> None:
+    """Make a rename in ``folder`` durable (where the system allows opening a folder)."""
+    try:
+        descriptor = os.open(folder, os.O_RDONLY)
+    except OSError:
+        return
+    try:
+        os.fsync(descriptor)
+    except OSError:
+        pass
+    finally:
+        os.close(descriptor)
 
 
 def _ordered(columns: Iterable[str]) -> list[str]:
