@@ -39,6 +39,7 @@ COMMANDS = (
     ("diagnose", "what does the model get wrong on a recording?"),
     ("results", "the results store: ingest, units, history, trend, spc…"),
     ("compare", "a baseline calibration against a candidate (regression)"),
+    ("verify", "check certificates: digest, recordings' SHA-256, outcomes"),
 )
 
 
@@ -119,6 +120,11 @@ def build_parser() -> argparse.ArgumentParser:
         "certificates", nargs="+", type=Path,
         help="certificate.json files, or the unit directories holding them")
 
+    subs["verify"].add_argument(
+        "certificates", nargs="+", type=Path, metavar="CERT_OR_UNIT_DIR",
+        help="certificate.json files, or the unit directories holding them; exit 0 when "
+             "every one is VERIFIED, 1 when one is not, 2 when one cannot be read")
+
     add_diagnose_arguments(subs["diagnose"])
     add_results_arguments(subs["results"])
     add_compare_arguments(subs["compare"])
@@ -145,9 +151,14 @@ def main(argv: Sequence[str] | None = None) -> int:
 
             return run_results(args)
         if args.subcommand == "compare":
+            from hil.compare.certificates import same_certificates
             from hil.compare.cli import run as run_compare
 
+            for line in same_certificates(args.baseline, args.candidate):
+                print(f"gimbal-hil compare: warning: {line}", file=sys.stderr)
             return run_compare(args)
+        if args.subcommand == "verify":
+            return _verify(args)
         from hil.diagnose.cli import run as run_diagnose
 
         return run_diagnose(args)
@@ -215,6 +226,7 @@ def _command_from_csv(path: Path, fs_hz: float) -> tuple[Mode, FloatArray]:
 
 
 def _calibrate(args: argparse.Namespace) -> int:
+    _check_unit_folder(args.out, args.unit_serial or SIMULATOR_SERIAL)
     import pytest
 
     options = ["--drive", args.drive, "--out", str(args.out), "--seed", str(args.seed)]
@@ -228,6 +240,18 @@ def _calibrate(args: argparse.Namespace) -> int:
     options += ["--operator", args.operator] if args.operator else []
     options += ["--reference"] if args.reference else []
     return int(pytest.main([*suite_arguments(), *options, *args.pytest_args]))
+
+
+def _check_unit_folder(out: Path, serial: str) -> None:
+    """A unit folder another calibration is writing is refused here, in one line (exit 2);
+    the calibration then holds the folder's lock for its whole run (a usage error if it
+    lost a race for it, before any motion)."""
+    import re
+
+    from hil.calibration import SERIAL_PATTERN, UnitLock
+
+    if re.fullmatch(SERIAL_PATTERN, serial):  # a bad serial is refused by the run itself
+        UnitLock.acquire(out / serial).release()
 
 
 def suite_arguments() -> list[str]:
@@ -256,6 +280,36 @@ def _render(args: argparse.Namespace) -> int:
         if not problems:
             print(f"{path.parent}: certificate.html, certificate.pdf")
     return 1 if failed else 0
+
+
+def _verify(args: argparse.Namespace) -> int:
+    """Each certificate: one line per problem, then VERIFIED or NOT VERIFIED."""
+    from hil.certificate.integrity import (
+        NO_DIGEST,
+        certificate_path,
+        read_document,
+        verify_document,
+    )
+
+    worst = 0
+    for target in args.certificates:
+        path = certificate_path(target)
+        try:
+            document = read_document(path)
+            schema = str(document.get("schema", ""))
+            if not schema.startswith("gimbal-hil/certificate/"):
+                raise InputError(f"not a gimbal-hil certificate (schema {schema!r})",
+                                 source=str(path))
+        except InputError as exc:
+            print(f"gimbal-hil: error: {exc}", file=sys.stderr)
+            worst = 2
+            continue
+        found = verify_document(document, path=path, unit_dir=path.parent)
+        for line in (*([] if found.digest else [NO_DIGEST]), *found.problems):
+            print(f"{path}: {line}")
+        print(f"{path}: {'VERIFIED' if found.verified else 'NOT VERIFIED'}")
+        worst = max(worst, 0 if found.verified else 1)
+    return worst
 
 
 if __name__ == "__main__":

@@ -16,9 +16,11 @@ from typing import Any
 from hil import __version__
 from hil.calibration import CalibrationRun
 from hil.certificate.controller import controller_outputs
+from hil.certificate.integrity import seal
 from hil.certificate.procedure import profile_sha256_without_firmware
 from hil.certificate.render import render_text
 from hil.measurement import DECISION_RULE
+from hil.recording import write_atomic
 
 log = logging.getLogger(__name__)
 SCHEMA = "gimbal-hil/certificate/v1"
@@ -179,7 +181,7 @@ def write_certificate(run: CalibrationRun, *, aborted: bool) -> Path:
     outputs = controller_outputs(certificate)
     if outputs is not None:
         text = json.dumps(outputs, indent=2) + "\n"
-        (run.unit_dir / "controller.json").write_text(text, encoding="utf-8")
+        write_atomic(run.unit_dir / "controller.json", text.encode("utf-8"))
         certificate["artifacts"].append(
             {
                 "protocol": "certificate",
@@ -188,8 +190,10 @@ def write_certificate(run: CalibrationRun, *, aborted: bool) -> Path:
                 "description": "feedforward parameters (format: hil/certificate/controller.py)",
             }
         )
+    # the digest of its content last (integrity.py); each file whole or not at all
+    certificate = seal(certificate)
     path = run.unit_dir / "certificate.json"
-    path.write_text(json.dumps(certificate, indent=2, default=str) + "\n", encoding="utf-8")
-    (run.unit_dir / "certificate.txt").write_text(render_text(certificate), encoding="utf-8")
+    write_atomic(path, (json.dumps(certificate, indent=2) + "\n").encode("utf-8"))
+    write_atomic(run.unit_dir / "certificate.txt", render_text(certificate).encode("utf-8"))
     log.info("certificate %s written to %s", certificate["certificate_id"], path)
     return path

@@ -8,6 +8,7 @@ Each side is one ``certificate.json`` or a directory holding one per serial
 from __future__ import annotations
 
 import json
+import logging
 import math
 import re
 from collections.abc import Mapping
@@ -15,8 +16,10 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Literal
 
+from hil.certificate.integrity import verify_document
 from hil.errors import InputError
 
+log = logging.getLogger(__name__)
 SCHEMA = "gimbal-hil/certificate/v1"
 CERTIFICATE_FILE = "certificate.json"
 DIRECTIONS = ("higher", "lower")
@@ -76,6 +79,8 @@ class Certificate:
     method_bias_sha256: str | None
     outcome: str
     results: Mapping[str, Result]
+    certificate_id: str | None = None
+    warnings: tuple[str, ...] = ()  # believed with these (no digest: written before one)
 
 
 def load_side(path: Path) -> dict[str, Certificate]:
@@ -99,16 +104,10 @@ def load_side(path: Path) -> dict[str, Certificate]:
     """
     if not path.exists():
         raise InputError("no such file or directory", source=str(path))
-    if path.is_file():
-        files = [path]
-    elif (path / CERTIFICATE_FILE).is_file():
-        files = [path / CERTIFICATE_FILE]
-    else:
-        files = sorted(p / CERTIFICATE_FILE for p in path.iterdir()
-                       if (p / CERTIFICATE_FILE).is_file())
-        if not files:
-            raise InputError(f"no {CERTIFICATE_FILE} here nor in DIR/SERIAL/{CERTIFICATE_FILE}",
-                             source=str(path))
+    files = _files(path)
+    if not files:
+        raise InputError(f"no {CERTIFICATE_FILE} here nor in DIR/SERIAL/{CERTIFICATE_FILE}",
+                         source=str(path))
     side: dict[str, Certificate] = {}
     for file in files:
         certificate = read_certificate(file)
@@ -147,6 +146,12 @@ def read_certificate(path: Path) -> Certificate:
     if "station" in document:  # a station file's identity, when the certificate states one
         station["station"] = document["station"]
     revision = software.get("git_revision")
+    # verified before believed: digest, recordings' SHA-256, outcomes (integrity.py)
+    verification = verify_document(document, path=path, unit_dir=path.parent)
+    if verification.refusals:
+        raise InputError(verification.refusal(), source=str(path))
+    for warning in verification.warnings:
+        log.warning("%s: %s", path, warning)
     return Certificate(
         path=path,
         serial=at.string(unit, "serial", "unit.serial"),
@@ -166,7 +171,57 @@ def read_certificate(path: Path) -> Certificate:
         method_bias_sha256=(str(bias.get("sha256")) if isinstance(bias, dict) else None),
         outcome=at.string(document, "outcome", "outcome"),
         results=by_name,
+        certificate_id=verification.certificate_id,
+        warnings=verification.warnings,
     )
+
+
+def same_certificates(baseline: Path, candidate: Path) -> list[str]:
+    """One line per certificate that is on both sides (the same certificate id): a
+    comparison of a run with itself shows nothing, whatever changed since.
+
+    Parameters
+    ----------
+    baseline, candidate : Path
+        The two sides as :func:`load_side` takes them.
+
+    Returns
+    -------
+    list of str
+        Empty when no id is on both sides, or a side cannot be read or verified
+        (:func:`load_side` says why, in one line).
+    """
+    try:
+        ids = [_ids(side) for side in (baseline, candidate)]
+    except (OSError, ValueError, RecursionError):
+        return []
+    return [f"{ids[0][same]} and {ids[1][same]} are the same certificate ({same}): the "
+            "run is compared with itself" for same in sorted(set(ids[0]) & set(ids[1]))]
+
+
+def _files(path: Path) -> list[Path]:
+    """The certificates a side names: the file, the unit directory's, or each serial's."""
+    if path.is_file():
+        return [path]
+    if (path / CERTIFICATE_FILE).is_file():
+        return [path / CERTIFICATE_FILE]
+    return sorted(p / CERTIFICATE_FILE for p in path.iterdir()
+                  if (p / CERTIFICATE_FILE).is_file())
+
+
+def _ids(path: Path) -> dict[str, Path]:
+    """Certificate id → file, for the certificates :func:`load_side` would read."""
+    found: dict[str, Path] = {}
+    for file in _files(path):
+        document = json.loads(file.read_bytes())
+        if not isinstance(document, dict):
+            raise ValueError(f"{file}: not a certificate")
+        if verify_document(document, path=file, unit_dir=file.parent).refusals:
+            raise ValueError(f"{file}: not verified")
+        certificate_id = document.get("certificate_id")
+        if isinstance(certificate_id, str):
+            found[certificate_id] = file
+    return found
 
 
 def _stable_transport(transport: object) -> object:

@@ -10,7 +10,9 @@ from datetime import datetime
 from pathlib import Path
 from typing import Any
 
+from hil.certificate.integrity import verify_certificate
 from hil.errors import InputError
+from hil.recording import write_atomic
 from hil.report.data import from_certificate
 from hil.report.figures import png_bytes, styled
 from hil.report.html import render_html
@@ -34,12 +36,14 @@ def certificate_file(target: Path) -> Path:
     Returns
     -------
     Path
-        The certificate file, checked to be a gimbal-hil certificate.
+        The certificate file, checked to be a gimbal-hil certificate and verified
+        (:mod:`hil.certificate.integrity`: one written before digests with a warning).
 
     Raises
     ------
     InputError
-        No such file, not JSON, or not a gimbal-hil certificate.
+        No such file, not JSON, not a gimbal-hil certificate, or not verified: its content
+        edited, a recording changed or missing, an outcome its results do not give.
     """
     path = target / "certificate.json" if target.is_dir() else target
     if not path.is_file():
@@ -50,6 +54,11 @@ def certificate_file(target: Path) -> Path:
         raise InputError(f"not a JSON object ({exc})", source=str(path)) from None
     if not str(schema).startswith("gimbal-hil/certificate/"):
         raise InputError(f"not a gimbal-hil certificate (schema {schema!r})", source=str(path))
+    verification = verify_certificate(path)  # the plots are drawn from its recordings
+    if verification.refusals:
+        raise InputError(verification.refusal(), source=str(path))
+    for warning in verification.warnings:
+        log.warning("%s: %s", path, warning)
     return path
 
 
@@ -75,13 +84,13 @@ def write_documents(certificate_path: Path) -> list[str]:
     pngs = _plots(cert, unit_dir, view, problems)
     try:
         html = render_html(view, plots_png=pngs)
-        (unit_dir / "certificate.html").write_text(html, encoding="utf-8")
+        write_atomic(unit_dir / "certificate.html", html.encode("utf-8"))
     except Exception as exc:  # boundary: the JSON record must survive any rendering fault
         problems.append(f"certificate.html not written: {type(exc).__name__}: {exc}")
     try:
         issued = datetime.fromisoformat(cert["dates"]["issued"])
         pdf = render_pdf(view, certificate_json=record, plots=pngs, issued=issued)
-        (unit_dir / "certificate.pdf").write_bytes(pdf)
+        write_atomic(unit_dir / "certificate.pdf", pdf)
     except ImportError:
         problems.append("certificate.pdf not written: the typst package is not installed "
                         "(pip install typst)")

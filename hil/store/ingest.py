@@ -3,6 +3,7 @@ by certificate id: the same certificate twice is one run, also when two stations
 
 from __future__ import annotations
 
+import json
 import logging
 from dataclasses import dataclass
 from datetime import UTC, datetime
@@ -11,6 +12,7 @@ from pathlib import Path
 from sqlalchemy import Connection, func, insert, select
 from sqlalchemy.exc import IntegrityError, OperationalError
 
+from hil.certificate.integrity import verify_document
 from hil.errors import InputError
 from hil.store.engine import Store, StoreUnavailableError
 from hil.store.rows import CertificateRows, certificate_rows
@@ -55,7 +57,27 @@ def ingest_certificate(store: Store, path: Path) -> Ingested:
         text = path.read_text(encoding="utf-8")
     except OSError as exc:
         raise InputError(f"cannot read: {exc.strerror}", source=str(path)) from None
+    except UnicodeDecodeError as exc:
+        raise InputError(f"not valid JSON: {exc}", source=str(path)) from None
+    certificate_rows(text, source=str(path))  # its fields first: errors name the field
+    _verify(text, path)
     return ingest_text(store, text, source=str(path.resolve()))
+
+
+def _verify(text: str, path: Path) -> None:
+    """Believe a certificate only once verified (digest, recordings' SHA-256, outcomes);
+    one written before digests is stored with a warning.
+
+    Raises
+    ------
+    InputError
+        Naming the file and what is wrong.
+    """
+    verification = verify_document(json.loads(text), path=path, unit_dir=path.parent)
+    if verification.refusals:
+        raise InputError(verification.refusal(), source=str(path))
+    for warning in verification.warnings:
+        log.warning("%s: %s", path, warning)
 
 
 def ingest_text(store: Store, text: str, *, source: str) -> Ingested:
@@ -84,10 +106,13 @@ def ingest_tree(store: Store, directory: Path) -> list[Ingested]:
     folder, with its ``history/`` (older runs first, so attempts count up in time order),
     or one ``certificate.json``.
 
+    A certificate that cannot be read or verified (empty, edited, a recording changed or
+    missing) is not stored and is named in a warning, one line; the others are stored.
+
     Raises
     ------
     InputError
-        ``directory`` holds no certificate, or one of them is invalid (naming it).
+        ``directory`` holds no certificate, or none that could be stored.
     """
     if directory.is_file():  # one certificate.json named directly
         return [ingest_certificate(store, directory)]
@@ -96,14 +121,24 @@ def ingest_tree(store: Store, directory: Path) -> list[Ingested]:
     paths = sorted(directory.rglob(CERTIFICATE_NAME))
     if not paths:
         raise InputError(f"no {CERTIFICATE_NAME} found under it", source=str(directory))
-    texts = []
+    texts, refused = [], []
     for path in paths:
         try:
             text = path.read_text(encoding="utf-8")
-        except OSError as exc:
-            raise InputError(f"cannot read: {exc.strerror}", source=str(path)) from None
-        started = certificate_rows(text, source=str(path)).run["started_at"]
-        texts.append((started, str(path.resolve()), text))
+            started = certificate_rows(text, source=str(path)).run["started_at"]
+            _verify(text, path)
+        except (OSError, UnicodeDecodeError) as exc:
+            refused.append(f"{path}: cannot read: {exc}")
+        except InputError as exc:
+            refused.append(str(exc))
+        else:
+            texts.append((started, str(path.resolve()), text))
+            continue
+        log.warning("not stored: %s", refused[-1])
+    if not texts:
+        more = f" (and {len(refused) - 1} more)" if len(refused) > 1 else ""
+        raise InputError(f"no certificate under it could be stored: {refused[0]}{more}",
+                         source=str(directory))
     texts.sort(key=lambda item: (item[0], item[1]))
     return [ingest_text(store, text, source=source) for _, source, text in texts]
 
