@@ -13,6 +13,7 @@ import hashlib
 import math
 import tomllib
 from collections.abc import Callable, Mapping
+from dataclasses import dataclass
 from importlib import resources
 from pathlib import Path
 from typing import Any, Final, TypeVar
@@ -56,6 +57,32 @@ def read_toml(path: Path) -> tuple[dict[str, Any], bytes]:
 Entry = TypeVar("Entry")
 
 
+@dataclass(frozen=True, slots=True)
+class Plausible:
+    """A setting's physically plausible range: ``low`` (excluded with ``low_open``) to
+    ``high``, in ``unit``; a value outside is refused at load, naming file, table and key."""
+
+    low: float
+    high: float
+    unit: str = ""
+    low_open: bool = False
+
+    def problem(self, value: float) -> str | None:
+        """What is wrong with ``value`` (``None``: plausible)."""
+        unit = f" {self.unit}" if self.unit else ""
+        if self.low_open and not value > self.low:
+            return f"must be > {self.low:g}{unit}"
+        if not value >= self.low:
+            return f"must be ≥ {self.low:g}{unit}"
+        if not value <= self.high:
+            return f"must be ≤ {self.high:g}{unit}"
+        return None
+
+
+Ranges = Callable[[str], Plausible | None]
+"""A table's plausible ranges by key (``None``: the key has none)."""
+
+
 def read_results_by_axis(
     path: Path, entry: Callable[[str, ConfigTable], Entry]
 ) -> tuple[str, dict[str, dict[str, Entry]]]:
@@ -97,6 +124,20 @@ class ConfigTable:
         self.table = table
         self.source = source
         self._read: set[str] = set()
+        self.ranges: Ranges | None = None
+
+    def with_ranges(self, ranges: Ranges) -> ConfigTable:
+        """This table, its numbers checked against ``ranges`` as they are read."""
+        self.ranges = ranges
+        return self
+
+    def _plausible(self, key: str, value: float, item: int | None = None) -> None:
+        plausible = self.ranges(key) if self.ranges is not None else None
+        problem = plausible.problem(value) if plausible is not None else None
+        if problem is not None:
+            at = "" if item is None else f" (item {item + 1})"
+            raise ProfileError(f"{self.table} {key} = {value:g}{at}: {problem}",
+                               source=self.source)
 
     @classmethod
     def root(cls, document: Mapping[str, Any], *, source: str) -> ConfigTable:
@@ -140,6 +181,7 @@ class ConfigTable:
                             "a number")
         if not math.isfinite(value):
             raise self.error(key, f"must be finite, got {value!r}")
+        self._plausible(key, value)
         return float(value)
 
     def positive(self, key: str, default: float | _Required = REQUIRED) -> float:
@@ -165,6 +207,7 @@ class ConfigTable:
         """An integer (a float such as ``2.0`` is refused)."""
         value: int = self._typed(key, REQUIRED if default is None else default, int,
                                  "an integer")
+        self._plausible(key, value)
         return value
 
     def boolean(self, key: str, default: bool | _Required = REQUIRED) -> bool:
@@ -197,6 +240,8 @@ class ConfigTable:
             raise self.error(key, f"must be a non-empty list of finite numbers, got {value!r}")
         if count is not None and len(value) != count:
             raise self.error(key, f"must be a list of {count} numbers, got {len(value)}")
+        for item, number in enumerate(value):
+            self._plausible(key, number, item)
         return tuple(float(v) for v in value)
 
     def table_at(self, key: str, *, required: bool = True) -> ConfigTable:

@@ -3,12 +3,13 @@
 from __future__ import annotations
 
 import hashlib
+import math
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from hil.config import ConfigTable, builtin_fixture, read_toml
+from hil.config import ConfigTable, Plausible, builtin_fixture, read_toml
 from hil.errors import ProfileError
 from hil.motion import Limits
 from plant_sim.firmware import Firmware, firmware_from_table
@@ -17,6 +18,63 @@ from plant_sim.params import PlantParams, plant_from_table
 DEFAULT_PROFILE = "demo_gimbal_elevation"
 DIRECTIONS = ("higher", "lower")
 """A measurement's optional ``direction``: which way is better."""
+
+# -- physically plausible ranges, checked as each setting is read (issue 26, item 14) --
+TRAVEL_RAD = 20 * math.pi  # ten turns: beyond, no gimbal axis is calibrated
+LIMIT_RANGES = {
+    "velocity_rad_s": Plausible(0.0, 100.0, "rad/s", low_open=True),
+    "torque_nm": Plausible(0.0, 1000.0, "N·m", low_open=True),
+    "travel_min_rad": Plausible(-TRAVEL_RAD, TRAVEL_RAD, "rad"),
+    "travel_max_rad": Plausible(-TRAVEL_RAD, TRAVEL_RAD, "rad"),
+}
+DRIVE_RANGES = {"sample_rate_hz": Plausible(100.0, 100_000.0, "Hz")}
+PLANT_RANGES = {
+    "inertia_kg_m2": Plausible(0.0, 100.0, "kg·m²", low_open=True),
+    "encoder_counts_per_rev": Plausible(0, 2**31, "counts per revolution"),  # 0: ideal
+    "stribeck_velocity_rad_s": Plausible(0.0, 10.0, "rad/s", low_open=True),
+    "torque_limit_nm": Plausible(0.0, 1000.0, "N·m", low_open=True),
+    "torque_constant_nm_a": Plausible(0.0, 100.0, "N·m/A", low_open=True),
+}
+_NON_NEGATIVE_RAD = Plausible(0.0, TRAVEL_RAD, "rad")
+PROTOCOL_RANGES = {
+    # whole numbers of periods, blocks, bins, ...
+    "periods": Plausible(2, 100_000, "periods"),
+    "settle_periods": Plausible(0, 10_000, "periods"),
+    "min_periods": Plausible(1, 10_000, "periods"),
+    "blocks": Plausible(1, 1000, "blocks"),
+    "bins": Plausible(2, 100_000, "bins"),
+    "points": Plausible(2, 10_000, "points"),
+    "lines": Plausible(1, 10_000, "lines"),
+    "harmonics": Plausible(1, 1000, "harmonics"),
+    "levels": Plausible(2, 10_000, "levels"),
+    "min_order": Plausible(1, 100_000),
+    "max_order": Plausible(1, 100_000),
+    "min_samples_per_pass": Plausible(1, 100_000_000, "samples"),
+    "max_runs": Plausible(1, 1000, "runs"),
+    # fractions, rates, distances that cannot be negative
+    "peak_torque_fraction": Plausible(0.0, 1.0, "of the torque limit", low_open=True),
+    "stop_at_u_fraction": Plausible(0.0, 10.0, low_open=True),
+    "min_sample_rate_hz": Plausible(0.0, 100_000.0, "Hz", low_open=True),
+    "skip_rad": _NON_NEGATIVE_RAD,
+    "exclude_rad": _NON_NEGATIVE_RAD,
+    "margin_rad": _NON_NEGATIVE_RAD,
+    "turnaround_rad": _NON_NEGATIVE_RAD,
+    "probe_rad": Plausible(0.0, TRAVEL_RAD, "rad", low_open=True),
+    "step_travel_rad": Plausible(0.0, TRAVEL_RAD, "rad", low_open=True),
+}
+PROTOCOL_UNIT_RANGES = (  # any other protocol key, by its unit (longest suffix first)
+    ("_hz", Plausible(0.0, 5000.0, "Hz", low_open=True)),
+    ("_rad_s", Plausible(0.0, 100.0, "rad/s", low_open=True)),
+    ("_rad", Plausible(-TRAVEL_RAD, TRAVEL_RAD, "rad")),
+    ("_s", Plausible(0.0, 600.0, "s")),
+)
+
+
+def protocol_range(key: str) -> Plausible | None:
+    """The plausible range of a ``[protocols.*]`` setting: by its name, else by its unit."""
+    if key in PROTOCOL_RANGES:
+        return PROTOCOL_RANGES[key]
+    return next((r for suffix, r in PROTOCOL_UNIT_RANGES if key.endswith(suffix)), None)
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -68,7 +126,8 @@ class UnitProfile:
 
     def settings(self, name: str) -> ConfigTable:
         """Typed reader of one protocol's settings; its ``done()`` refuses unknown keys."""
-        return ConfigTable(self.protocol(name), table=f"[protocols.{name}]", source=self.source)
+        return ConfigTable(self.protocol(name), table=f"[protocols.{name}]",
+                           source=self.source).with_ranges(protocol_range)
 
     def measurement(self, name: str) -> MeasurementSpec:
         try:
@@ -124,11 +183,12 @@ def profile_from_mapping(data: Mapping[str, Any], *, source: str, sha256: str = 
         if key in unit:
             unit.positive(key)
     unit.done()
-    limits = _limits(document.table_at("limits"))
-    drive = document.table_at("drive")
+    limits = _limits(document.table_at("limits").with_ranges(LIMIT_RANGES.get))
+    drive = document.table_at("drive").with_ranges(DRIVE_RANGES.get)
     sample_rate_hz = drive.positive("sample_rate_hz")
     drive.done()
-    plant = plant_from_table(document.table_at("plant")) if "plant" in document else None
+    plant = (plant_from_table(document.table_at("plant").with_ranges(PLANT_RANGES.get))
+             if "plant" in document else None)
     firmware = firmware_from_table(document.table_at("firmware", required=False))
     protocols = {name: table.values for name, table in document.tables("protocols").items()}
     measurements = {
