@@ -12,6 +12,7 @@ import subprocess
 import sys
 import threading
 import time
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -106,13 +107,35 @@ def test_a_signal_mid_motion_aborts_stops_and_disables(
     assert re.search(disabled, states[-1]), after  # and the drive was left disabled
 
 
-def test_the_previous_handlers_return_after_a_calibration(tmp_path: Path) -> None:
-    """In-process: the calibration's handlers are gone when pytest ends."""
+def _signal_self(signum: int) -> None:
+    os.kill(os.getpid(), signum)
+    time.sleep(1.0)  # the handler runs at the next bytecode of the main thread
+
+
+def test_the_handlers_raise_once_and_are_restored_at_the_end() -> None:
+    """In-process: SIGTERM raises KeyboardInterrupt, a second one while stopping does not,
+    and the handler from before the calibration is back at its end (no calibration runs:
+    a second in-process one re-imports the numba kernel's typing registrations)."""
+    from hil.calibration_session import _stop_on_signals
+
+    class Config:
+        def __init__(self) -> None:
+            self.cleanups: list[Callable[[], None]] = []
+
+        def add_cleanup(self, cleanup: Callable[[], None]) -> None:
+            self.cleanups.append(cleanup)
+
     before = signal.getsignal(signal.SIGTERM)
-    code = pytest.main(["--pyargs", "gimbal_hil_protocols", "--drive", "sim",
-                        "--unit-serial", "H-1", "--out", str(tmp_path), "--store", "off",
-                        "--no-documents", "-q", "-p", "no:cacheprovider", "-k", "current_loop"])
-    assert code is not None
+    config = Config()
+    _stop_on_signals(config)  # type: ignore[arg-type]
+    try:
+        with pytest.raises(KeyboardInterrupt, match="SIGTERM"):
+            _signal_self(signal.SIGTERM)
+        os.kill(os.getpid(), signal.SIGTERM)  # while stopping: ignored
+        time.sleep(0.1)
+    finally:
+        for cleanup in config.cleanups:
+            cleanup()
     assert signal.getsignal(signal.SIGTERM) is before
 
 
