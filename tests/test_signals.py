@@ -28,6 +28,7 @@ from hil.profile import load_profile
 STATE_LINES = {
     "sim": (r"sim: running", r"sim: quick stop", r"sim: drive disabled"),
     "canopen-emulator": (r"node 5: streaming", r"node 5 quick-stopped", r"node 5 disabled"),
+    "modbus-emulator": (r"modbus .*: polling", r"quick-stopped, at rest", r"drive disabled"),
 }
 
 
@@ -91,6 +92,7 @@ def _calibrate_and_signal(tmp_path: Path, kind: str, signum: int, *, after_s: fl
     ("sim", signal.SIGTERM, 0.0),
     ("sim", signal.SIGHUP, 0.0),
     ("canopen-emulator", signal.SIGTERM, 0.3),
+    ("modbus-emulator", signal.SIGTERM, 0.3),
 ])
 def test_a_signal_mid_motion_aborts_stops_and_disables(
     tmp_path: Path, kind: str, signum: int, after_s: float

@@ -158,7 +158,7 @@ class SimDrive(Drive):
         assert error is not None
         self._brake()
         self._state = DriveState.QUICK_STOPPED
-        log.warning("sim: %s", error)
+        log.info("sim: %s", error)  # the caller reports the error itself
         error.partial_recording = recording
         raise error
 

@@ -232,6 +232,8 @@ class ModbusDrive(Drive):
         set_interpolation(self.link, self.link.station.setpoint_lead_periods / excitation.fs_hz)
         run = PolledRun()
         error: DriveError | None = None
+        log.info("%s: polling %s (%.2f s at %g Hz)", self.link.where, excitation.name,
+                 excitation.duration_s, excitation.fs_hz)
         try:
             poll(excitation, run, self.feedback, MotionEnvelope.of(self.limits))
         except DriveError as exc:
