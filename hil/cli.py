@@ -250,7 +250,9 @@ def _check_unit_folder(out: Path, serial: str) -> None:
 
     from hil.calibration import SERIAL_PATTERN, UnitLock
 
-    if re.fullmatch(SERIAL_PATTERN, serial):  # a bad serial is refused by the run itself
+    # a bad serial is refused by the run itself; a folder no run has made holds no writer
+    # (and a run refused before motion leaves nothing behind)
+    if re.fullmatch(SERIAL_PATTERN, serial) and (out / serial).is_dir():
         UnitLock.acquire(out / serial).release()
 
 
