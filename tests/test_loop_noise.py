@@ -6,6 +6,7 @@ torque only and every closed-loop result was the same under every seed."""
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -32,8 +33,7 @@ def _demo_velocity_run(seed: int) -> tuple[np.ndarray, np.ndarray]:
     """The demo unit (its profile's plant and firmware) following a speed step: the
     encoder's position and the drive's velocity estimate."""
     profile = load_profile()
-    assert profile.plant is not None
-    plant = Plant(profile.plant, firmware=profile.firmware, fs_hz=FS, seed=seed)
+    plant = Plant(_demo_plant(), firmware=profile.firmware, fs_hz=FS, seed=seed)
     command = np.concatenate([np.zeros(400), np.full(2000, 0.3)])
     trace = plant.run(Mode.VELOCITY, command)
     return trace.position_rad, trace.velocity_rad_s
@@ -51,11 +51,9 @@ def test_the_demo_unit_moves_differently_under_two_seeds_and_the_same_under_one(
 
 def test_the_velocity_bandwidth_differs_between_seeds_and_repeats_under_one() -> None:
     profile = load_profile()
-    assert profile.plant is not None
 
     def bandwidth_hz(seed: int) -> float:
-        assert profile.plant is not None
-        with SimDrive(profile.plant, firmware=profile.firmware, limits=profile.limits,
+        with SimDrive(_demo_plant(), firmware=profile.firmware, limits=profile.limits,
                       fs_hz=profile.sample_rate_hz, seed=seed) as drive:
             drive.enable()
             spec = velocity_loop_frf.Spec.from_profile(profile, drive.info)
@@ -73,22 +71,22 @@ def test_the_velocity_bandwidth_differs_between_seeds_and_repeats_under_one() ->
 
 
 def _demo_plant() -> PlantParams:
+    """The demo unit with a real unit's noise inside its loops (the documented sizes)."""
     plant = load_profile().plant
     assert plant is not None
-    return plant
+    return replace(plant, **LOOP_NOISE_DEFAULTS)
 
 
-def test_a_profile_gets_the_documented_loop_noise_and_code_built_plants_none() -> None:
-    plant = _demo_plant()
-    for key, size in LOOP_NOISE_DEFAULTS.items():
-        assert getattr(plant, key) == size, key
+def test_a_profile_names_its_loop_noise_and_none_is_applied_unnamed() -> None:
     ideal = PlantParams(inertia_kg_m2=0.003)
     assert all(getattr(ideal, key) == 0.0 for key in LOOP_NOISE_KEYS)
-    quiet = plant_from_table(ConfigTable({"inertia_kg_m2": 0.003,
-                                          "current_sensor_noise_rms_rel": 0.0},
+    unnamed = plant_from_table(ConfigTable({"inertia_kg_m2": 0.003}, table="[plant]",
+                                           source="test"))
+    assert all(getattr(unnamed, key) == 0.0 for key in LOOP_NOISE_KEYS)
+    named = plant_from_table(ConfigTable({"inertia_kg_m2": 0.003, **LOOP_NOISE_DEFAULTS},
                                          table="[plant]", source="test"))
-    assert quiet.current_sensor_noise_rms_rel == 0.0
-    assert quiet.shaft_disturbance_rms_nm == LOOP_NOISE_DEFAULTS["shaft_disturbance_rms_nm"]
+    for key, size in LOOP_NOISE_DEFAULTS.items():
+        assert getattr(named, key) == size, key
 
 
 def test_writing_a_plant_and_reading_it_back_keeps_its_loop_noise() -> None:
