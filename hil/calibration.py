@@ -127,6 +127,16 @@ class ProtocolRecord:
     messages: list[str] = field(default_factory=list)
 
 
+@dataclass(frozen=True, slots=True)
+class NotMeasured:
+    """A result the profile declares and the run did not measure."""
+
+    parameter: str
+    protocol: str
+    reason: str
+    required: bool
+
+
 class CalibrationRun:
     """Collects everything the certificate needs while protocols run."""
 
@@ -164,6 +174,9 @@ class CalibrationRun:
         self.measurements: list[Measurement] = []
         self.protocols: dict[str, ProtocolRecord] = {}
         self.details: dict[str, dict[str, object]] = {}
+        # every result the profile declares → the protocol that measures it (the suite's
+        # catalogue): what is missing at the end makes the run INCOMPLETE
+        self.expected: dict[str, str] = {}
         self._archived = False
 
     # -- used by protocols ----------------------------------------------------------------
@@ -286,17 +299,42 @@ class CalibrationRun:
         record.messages.append(f"skipped: {reason}")
 
     def overall_outcome(self, *, aborted: bool) -> Outcome:
-        """Never PASS when aborted, when a protocol failed or errored, or with no results."""
+        """Never PASS when aborted, when a protocol failed or errored, with no results, or
+        with a required declared result not measured (INCOMPLETE: deselected, skipped or
+        not collected); the worst of ERROR, FAIL, INCOMPLETE, MARGINAL, PASS."""
         if aborted or not self.measurements:
             return Outcome.ERROR
         outcomes = [m.outcome for m in self.measurements]
         outcomes += [p.outcome for p in self.protocols.values() if p.outcome is not None]
         if any(p.outcome is None and not p.skipped for p in self.protocols.values()):
             outcomes.append(Outcome.ERROR)
-        for worst in (Outcome.ERROR, Outcome.FAIL, Outcome.MARGINAL):
+        if any(missing.required for missing in self.not_measured()):
+            outcomes.append(Outcome.INCOMPLETE)
+        for worst in (Outcome.ERROR, Outcome.FAIL, Outcome.INCOMPLETE, Outcome.MARGINAL):
             if worst in outcomes:
                 return worst
         return Outcome.PASS
+
+    def not_measured(self) -> list[NotMeasured]:
+        """The declared results this run has no value of, each with why."""
+        measured = {m.spec.name for m in self.measurements}
+        missing = []
+        for name, protocol in self.expected.items():
+            if name in measured:
+                continue
+            record = self.protocols.get(protocol)
+            if record is None:
+                reason = "its protocol did not run (deselected or not collected)"
+            elif record.skipped:
+                reason = next((m for m in record.messages if m.startswith("skipped:")),
+                              "its protocol was skipped")
+            elif record.outcome == Outcome.ERROR:
+                reason = "its protocol stopped with an error"
+            else:
+                reason = "its protocol gave no value"
+            missing.append(NotMeasured(parameter=name, protocol=protocol, reason=reason,
+                                       required=self.profile.measurement(name).required))
+        return missing
 
     def attempt(self) -> int:
         """This run's number for the unit: 1 + the calibrations kept in ``history/``."""

@@ -38,9 +38,10 @@ from hil.report import write_documents
 from hil.report.console import outcome_banner, protocol_start
 from hil.report.junit import PYTEST_DEFAULT_SUITE_NAME, measurement_properties, suite_name
 from hil.report.junit import suite_properties as junit_suite_properties
-from hil.report.plan import planned_motion_s
+from hil.report.plan import check_protocol_settings, planned_motion_s
 from hil.store.engine import resolve_store_url
 from hil.store.record import record_run
+from hil.suite.catalogue import PROTOCOL_OF, check_profile
 
 log = logging.getLogger(__name__)
 
@@ -67,7 +68,8 @@ CONSOLE_KEY = pytest.StashKey[_Console]()
 
 def start(config: pytest.Config) -> None:
     """Check the calibration options and read the unit profile, before collection: a real
-    unit without a serial, or a profile that does not load, is one usage error (exit 4)."""
+    unit without a serial, or a profile that does not load (an unknown table, a protocol
+    setting its protocol refuses), is one usage error (exit 4)."""
     config.addinivalue_line("markers", f"{PROTOCOL_MARK}: a calibration protocol")
     config.stash[CONSOLE_KEY] = _Console()
     _stop_on_signals(config)
@@ -75,7 +77,10 @@ def start(config: pytest.Config) -> None:
     if config.getoption("--unit-serial") is None and kind not in SIMULATED_KINDS:
         raise pytest.UsageError(f"--drive {kind} (a real unit) needs --unit-serial SERIAL")
     try:
-        config.stash[PROFILE_KEY] = load_profile(config.getoption("--profile"))
+        profile = config.stash[PROFILE_KEY] = load_profile(config.getoption("--profile"))
+        # every table known and every protocol's settings read, before any motion
+        check_profile(profile)
+        check_protocol_settings(profile, _planning_info(profile))
         station = config.getoption("--station")
         config.stash[STATION_KEY] = (
             load_station_identity(station) if station is not None else StationIdentity()
@@ -163,6 +168,8 @@ def calibration(pytestconfig: pytest.Config, profile: UnitProfile) -> Calibratio
             reference=reference,
             identity=pytestconfig.stash[STATION_KEY],
         )
+        pytestconfig.stash[RUN_KEY].expected = {name: PROTOCOL_OF[name]
+                                                 for name in profile.measurements}
     return pytestconfig.stash[RUN_KEY]
 
 
@@ -395,6 +402,8 @@ def pytest_sessionfinish(session: pytest.Session, exitstatus: int) -> None:
     aborted = exitstatus == pytest.ExitCode.INTERRUPTED or session.shouldstop is not False
     path = write_certificate(run, aborted=bool(aborted))
     session.config.stash[CERTIFICATE_KEY] = path
+    if run.overall_outcome(aborted=bool(aborted)) == Outcome.INCOMPLETE and exitstatus == 0:
+        session.exitstatus = pytest.ExitCode.TESTS_FAILED  # every test passed, not every result
     _junit_suite(session.config, path)
     # the store (or outbox) before the documents: a stop while they render loses no run
     option = session.config.getoption("--store")

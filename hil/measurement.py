@@ -33,6 +33,7 @@ class Outcome(StrEnum):
     MARGINAL = "MARGINAL"
     FAIL = "FAIL"
     ERROR = "ERROR"  # the protocol did not complete: no conformity statement possible
+    INCOMPLETE = "INCOMPLETE"  # a required declared result was not measured: no statement
 
 
 @dataclass(frozen=True, slots=True)

@@ -100,6 +100,7 @@ class MeasurementSpec:
     allowance_rel: float | None = None
     description: str = ""
     direction: str | None = None
+    required: bool = True  # not measured (skipped, deselected) → the run is INCOMPLETE
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -253,6 +254,7 @@ def _measurement(name: str, table: ConfigTable) -> MeasurementSpec:
         allowance_rel=None if allowance is None else allowance / 100.0,
         description=table.string("description", ""),
         direction=table.choice("direction", DIRECTIONS) if "direction" in table else None,
+        required=table.boolean("required", True),
     )
     table.done()
     return spec

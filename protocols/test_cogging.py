@@ -24,6 +24,7 @@ from hil.measurement import Declared, declare
 from hil.profile import UnitProfile
 from hil.suite.cogging import (
     COMPENSATION_FILE,
+    MEASUREMENTS,
     NAME,
     SWEEP_PASSES,
     Spec,
@@ -36,7 +37,6 @@ from hil.suite.rate import sample_rate_shortfall
 from hil.suite.stop_rule import run_repeated
 from hil.suite.travel import on_command_grid
 
-MEASUREMENTS = ("cogging_peak_nm", "kt_ripple_peak_pct")
 pytestmark = pytest.mark.protocol(NAME)
 
 # what the certificate calls each result, and one line on what it is

@@ -22,11 +22,10 @@ from hil.identify.estimate import Estimate
 from hil.measurement import Declared, declare
 from hil.profile import UnitProfile
 from hil.recording import Recording
-from hil.suite.current_loop import NAME, Spec, analyse, excitation
+from hil.suite.current_loop import MEASUREMENTS, NAME, Spec, analyse, excitation
 from hil.suite.rate import sample_rate_shortfall
 from hil.suite.stop_rule import run_repeated
 
-MEASUREMENTS = ("current_loop_time_constant_ms",)
 pytestmark = pytest.mark.protocol(NAME)
 
 # what the certificate calls each result, and one line on what it is

@@ -22,17 +22,10 @@ from hil.identify.gravity_cable import (
 )
 from hil.measurement import Declared, declare
 from hil.profile import UnitProfile
-from hil.suite.gravity_cable import NAME, Spec, analyse, excitation
+from hil.suite.gravity_cable import MEASUREMENTS, NAME, Spec, analyse, excitation
 from hil.suite.stop_rule import run_repeated
 from hil.suite.travel import on_command_grid
 
-MEASUREMENTS = (
-    "gravity_mge_nm",
-    "gravity_phase_rad",
-    "eccentricity_mm",
-    "cable_stiffness_nm_rad",
-    "cable_hysteresis_nm",
-)
 pytestmark = pytest.mark.protocol(NAME)
 
 # what the certificate calls each result, and one line on what it is

@@ -24,14 +24,15 @@ from hil.identify.inertia_elevation import InertiaElevationResult, fit_inertia_e
 from hil.measurement import Declared, declare
 from hil.profile import UnitProfile
 from hil.suite import inertia_friction as sine
-from hil.suite.inertia_elevation import NAME, Spec, inertia_at_elevation, reported_torque_gain
+from hil.suite.inertia_elevation import (
+    MEASUREMENTS,
+    NAME,
+    Spec,
+    inertia_at_elevation,
+    reported_torque_gain,
+)
 from hil.suite.stop_rule import run_repeated
 
-MEASUREMENTS = (
-    "azimuth_inertia_level_kg_m2",
-    "azimuth_inertia_zenith_kg_m2",
-    "azimuth_inertia_ratio",
-)
 pytestmark = pytest.mark.protocol(NAME)
 
 # what the certificate calls each result, and one line on what it is

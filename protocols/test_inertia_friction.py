@@ -18,6 +18,7 @@ from hil.identify.inertia_friction import InertiaFrictionResult
 from hil.measurement import Declared, declare
 from hil.profile import UnitProfile
 from hil.suite.inertia_friction import (
+    MEASUREMENTS,
     NAME,
     Spec,
     analyse_in_calibration,
@@ -26,7 +27,6 @@ from hil.suite.inertia_friction import (
 )
 from hil.suite.stop_rule import run_repeated
 
-MEASUREMENTS = ("inertia_kg_m2", "viscous_nm_s_rad", "coulomb_nm", "inertia_amplitude_spread_pct")
 pytestmark = pytest.mark.protocol(NAME)
 
 # what the certificate calls each result, and one line on what it is

@@ -23,6 +23,7 @@ from hil.measurement import Declared, declare
 from hil.profile import UnitProfile
 from hil.suite.rate import sample_rate_shortfall
 from hil.suite.resonance import (
+    MEASUREMENTS,
     NAME,
     MultisineSpec,
     analyse,
@@ -31,12 +32,6 @@ from hil.suite.resonance import (
     spec_from_profile,
 )
 
-MEASUREMENTS = (
-    "resonance_frequency_hz",
-    "antiresonance_frequency_hz",
-    "resonance_damping_ratio",
-    "resonance_to_bandwidth_ratio",
-)
 pytestmark = pytest.mark.protocol(NAME)
 
 # what the certificate calls each result, and one line on what it is

@@ -15,11 +15,18 @@ from hil.identify.stribeck import StribeckResult
 from hil.measurement import Declared, declare
 from hil.profile import UnitProfile
 from hil.suite.stop_rule import run_repeated
-from hil.suite.stribeck import NAME, Spec, analyse, cross_check, excitation, finite_or_none
+from hil.suite.stribeck import (
+    MEASUREMENTS,
+    NAME,
+    Spec,
+    analyse,
+    cross_check,
+    excitation,
+    finite_or_none,
+)
 from hil.suite.torque_constant import kt_ripple_from_cogging
 from hil.suite.travel import on_command_grid
 
-MEASUREMENTS = ("static_friction_nm", "stribeck_velocity_rad_s")
 pytestmark = pytest.mark.protocol(NAME)
 
 # what the certificate calls each result, and one line on what it is

@@ -28,6 +28,7 @@ from hil.measurement import Declared, declare
 from hil.profile import UnitProfile
 from hil.suite.stop_rule import run_repeated
 from hil.suite.torque_constant import (
+    MEASUREMENTS,
     NAME,
     Spec,
     analyse_sweep,
@@ -37,12 +38,6 @@ from hil.suite.torque_constant import (
     sweep,
 )
 
-MEASUREMENTS = (
-    "torque_constant_nm_a",
-    "torque_linearity_pct",
-    "reported_torque_gain_error_pct",
-    "torque_constant_vs_datasheet_pct",
-)
 pytestmark = pytest.mark.protocol(NAME)
 
 # what the certificate calls each result, and one line on what it is

@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import math
+import re
+from pathlib import Path
 
 import numpy as np
 
@@ -53,3 +55,25 @@ def sine_model_recording(
         },
         source="synthetic",
     )
+
+
+def subset_profile(directory: Path, *protocols: str,
+                   base: str = "demo_gimbal_elevation") -> Path:
+    """A demo profile that configures only ``protocols`` and declares only their results:
+    a complete calibration of a smaller unit type, for tests that need a quick run that can
+    PASS (a ``-k`` subset of the full profile is INCOMPLETE)."""
+    from hil.profile import resolve_profile_path
+    from hil.suite.catalogue import PROTOCOL_OF
+
+    def keep(match: re.Match[str]) -> str:
+        kind, name = match.group(1), match.group(2)
+        wanted = name in protocols if kind == "protocols" else PROTOCOL_OF[name] in protocols
+        return match.group(0) if wanted else ""
+
+    text = resolve_profile_path(base).read_text(encoding="utf-8")
+    text = re.sub(r"^\[(protocols|measurements)\.(\w+)\]\n(?:(?!\[).*\n?)*", keep, text,
+                  flags=re.M)
+    path = directory / f"{base}-{'-'.join(protocols)}.toml"
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(text, encoding="utf-8")
+    return path

@@ -12,6 +12,7 @@ import pytest
 
 from hil.cli import main
 from hil.recording import read_recording
+from tests.helpers import subset_profile
 
 
 def test_simulate_builtin_excitation_writes_a_valid_recording(tmp_path: Path) -> None:
@@ -60,7 +61,8 @@ def test_bad_command_files_exit_2_with_one_line(
 def test_calibrate_runs_the_suite_and_writes_the_certificate(tmp_path: Path) -> None:
     done = subprocess.run(
         [sys.executable, "-m", "hil.cli", "calibrate", "--drive", "sim", "--unit-serial",
-         "CLI-7", "--out", str(tmp_path), "--", "-k", "inertia_friction"],
+         "CLI-7", "--out", str(tmp_path),
+         "--profile", str(subset_profile(tmp_path / "profiles", "inertia_friction"))],
         capture_output=True, text=True, timeout=300, check=False,
     )
     assert done.returncode == 0, done.stdout + done.stderr

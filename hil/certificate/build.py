@@ -141,6 +141,8 @@ def build_certificate(
             for a in run.artifacts
         ],
         "results": [{**m.as_dict(), "direction": m.spec.direction} for m in run.measurements],
+        # declared results without a value: a required one makes the run INCOMPLETE
+        "not_measured": [asdict(missing) for missing in run.not_measured()],
         "decision_rule": DECISION_RULE,
         "outcome": outcome.value,
         "aborted": aborted,
@@ -170,6 +172,8 @@ def _statement(outcome: str) -> str:
         "FAIL": "The unit does not conform: at least one result is outside its limits or a "
         "protocol failed.",
         "ERROR": "No conformity statement: the calibration did not complete.",
+        "INCOMPLETE": "No conformity statement: results the profile requires were not "
+        "measured (listed under 'not measured').",
     }[outcome]
 
 

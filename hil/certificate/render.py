@@ -190,6 +190,11 @@ def render_text(cert: dict[str, Any]) -> str:
             f"{title_of(r):<40}{value:>13}{expanded:>11} ({r['coverage_factor']:.2f}) "
             f"{r['unit']:<11}{limits_text(r):<22}{r['outcome']:<10}{r['parameter']}"
         )
+    missing = cert.get("not_measured", [])
+    if missing:
+        lines += ["", "Not measured (declared by the profile):"]
+        lines += [f"  {m['parameter']:<38}{'required' if m['required'] else 'optional':<10}"
+                  f"{m['protocol']}: {protocol_messages([m['reason']])[0]}" for m in missing]
     lines += _budgets(cert["results"])
     lines += ["", "Protocols:"]
     for name, p in cert["method"]["protocols"].items():

@@ -73,6 +73,10 @@ def render_html(view: Mapping[str, Any], *, plots_png: Mapping[str, bytes]) -> s
         "digits, the value to the same decimal place; certificate.json keeps full "
         "precision.</p>",
         _results(view["groups"]),
+        *(["<h3>Not measured</h3>", _table(
+            ("result", "protocol", "", "why"),
+            [[m["parameter"], m["protocol"], m["required"], m["reason"]]
+             for m in view["not_measured"]], numeric=set())] if view["not_measured"] else []),
         f"<p><b>Decision rule.</b> {escape(view['decision_rule'])}</p>",
         f'<p><b>Conformity statement.</b> <b style="color:{colour}">{word}:</b> '
         f"{escape(view['conformity'])}</p>",

@@ -9,7 +9,7 @@ from collections.abc import Callable
 from typing import Any
 
 from hil.drives.base import DriveInfo
-from hil.errors import HilError
+from hil.errors import HilError, ProfileError
 from hil.motion import Excitation
 from hil.profile import UnitProfile
 from hil.suite import (
@@ -125,3 +125,24 @@ def planned_motion_s(profile: UnitProfile, info: DriveInfo) -> dict[str, float]:
             excitations = []
         plan[name] = sum(e.duration_s for e in excitations)
     return plan
+
+
+def check_protocol_settings(profile: UnitProfile, info: DriveInfo) -> None:
+    """Read every configured protocol's settings and build its motion, as the run will, so
+    that a misspelt or impossible setting stops the run before the first motion.
+
+    Raises
+    ------
+    HilError
+        The protocol's own one-line error (file, table and key); a ``ValueError`` of an
+        excitation builder becomes a :class:`ProfileError` naming the protocol's table.
+    """
+    centre = (info.limits.travel_min_rad + info.limits.travel_max_rad) / 2
+    for name in profile.protocols:
+        planner = PLANNERS.get(name)
+        if planner is None:
+            continue
+        try:
+            planner(profile, info, centre)
+        except ValueError as exc:
+            raise ProfileError(f"[protocols.{name}]: {exc}", source=profile.source) from None

@@ -24,6 +24,7 @@ BANNER: dict[str, tuple[str, str]] = {
     "MARGINAL": ("MARGINAL", "conforms; a result is marginal or its U reaches a limit"),
     "FAIL": ("FAIL", "the unit does NOT conform"),
     "ERROR": ("NOT COMPLETED", "the calibration did not complete: NO conformity statement"),
+    "INCOMPLETE": ("INCOMPLETE", "required results were not measured: NO conformity statement"),
 }
 
 
@@ -40,7 +41,8 @@ def certificate_view(cert: Mapping[str, Any]) -> dict[str, Any]:
     dict
         ``id``, ``title``, ``outcome``, ``banner`` (word, line), ``authorised_by`` (a name
         or "not authorised"), ``fields`` (label, text pairs: the ISO/IEC 17025 7.8 items),
-        ``results``, ``groups`` (the results by protocol, in run order), ``budgets``,
+        ``results``, ``not_measured`` (declared results without a value, with why),
+        ``groups`` (the results by protocol, in run order), ``budgets``,
         ``protocols``, ``raw_data``, ``artifacts``, ``decision_rule``, ``conformity``,
         ``accreditation``; all text.
     """
@@ -59,6 +61,7 @@ def certificate_view(cert: Mapping[str, Any]) -> dict[str, Any]:
         "authorised_by": str(cert.get("authorised_by") or NOT_AUTHORISED),
         "fields": [list(pair) for pair in certificate_fields(cert)],
         "results": results,
+        "not_measured": not_measured(cert),
         "groups": _groups(results, cert["method"]["protocols"]),
         "budgets": [_budget(r) for r in cert["results"]],
         "protocols": [_protocol(name, p) for name, p in cert["method"]["protocols"].items()],
@@ -69,6 +72,16 @@ def certificate_view(cert: Mapping[str, Any]) -> dict[str, Any]:
         "conformity": cert["conformity"],
         "accreditation": cert["accreditation"],
     }
+
+
+def not_measured(cert: Mapping[str, Any]) -> list[dict[str, str]]:
+    """The declared results the run has no value of (``certificate.json``'s
+    ``not_measured``; none in certificates written before it)."""
+    return [{"parameter": m["parameter"],
+             "protocol": PROTOCOL_TITLES.get(m["protocol"], m["protocol"]),
+             "required": "required" if m["required"] else "optional",
+             "reason": protocol_messages([m["reason"]])[0]}
+            for m in cert.get("not_measured", [])]
 
 
 def _result(r: Mapping[str, Any]) -> dict[str, str]:

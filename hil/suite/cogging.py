@@ -34,6 +34,8 @@ from hil.suite.stop_rule import StopRule
 from hil.suite.travel import TravelSpec, on_command_grid
 
 NAME = "cogging"
+#: the results this protocol measures, in the certificate's order
+MEASUREMENTS = ("cogging_peak_nm", "kt_ripple_peak_pct")
 
 
 COMPENSATION_FILE = "cogging_compensation.json"

@@ -26,6 +26,8 @@ from hil.suite.stop_rule import StopRule
 from hil.suite.travel import SteppedSineSpec, TravelSpec
 
 NAME = "current_loop"
+#: the results this protocol measures, in the certificate's order
+MEASUREMENTS = ("current_loop_time_constant_ms",)
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)

@@ -33,6 +33,14 @@ log = logging.getLogger(__name__)
 
 
 NAME = "gravity_cable"
+#: the results this protocol measures, in the certificate's order
+MEASUREMENTS = (
+    "gravity_mge_nm",
+    "gravity_phase_rad",
+    "eccentricity_mm",
+    "cable_stiffness_nm_rad",
+    "cable_hysteresis_nm",
+)
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)

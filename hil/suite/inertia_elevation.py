@@ -30,6 +30,12 @@ from hil.suite.stop_rule import StopRule
 from hil.suite.travel import move_speed_rad_s
 
 NAME = "inertia_elevation"
+#: the results this protocol measures, in the certificate's order
+MEASUREMENTS = (
+    "azimuth_inertia_level_kg_m2",
+    "azimuth_inertia_zenith_kg_m2",
+    "azimuth_inertia_ratio",
+)
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)

@@ -32,6 +32,8 @@ from hil.suite.stop_rule import StopRule
 from hil.suite.travel import move_excitation, move_speed_rad_s
 
 NAME = "inertia_friction"
+#: the results this protocol measures, in the certificate's order
+MEASUREMENTS = ("inertia_kg_m2", "viscous_nm_s_rad", "coulomb_nm", "inertia_amplitude_spread_pct")
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)

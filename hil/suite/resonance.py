@@ -35,6 +35,13 @@ from hil.suite.travel import SteppedSineSpec, TravelSpec, speed_ramp
 from hil.suite.velocity_loop_frf import direction_from
 
 NAME = "resonance"
+#: the results this protocol measures, in the certificate's order
+MEASUREMENTS = (
+    "resonance_frequency_hz",
+    "antiresonance_frequency_hz",
+    "resonance_damping_ratio",
+    "resonance_to_bandwidth_ratio",
+)
 EXCITATIONS = ("multisine", "stepped_sine")
 
 

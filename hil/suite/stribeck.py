@@ -26,6 +26,8 @@ log = logging.getLogger(__name__)
 
 
 NAME = "stribeck"
+#: the results this protocol measures, in the certificate's order
+MEASUREMENTS = ("static_friction_nm", "stribeck_velocity_rad_s")
 
 
 # the sine protocol's results that this one cross-checks: (its name, ours)

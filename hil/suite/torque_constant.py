@@ -32,6 +32,13 @@ from hil.suite.stop_rule import StopRule
 from hil.suite.travel import move_excitation, move_speed_rad_s
 
 NAME = "torque_constant"
+#: the results this protocol measures, in the certificate's order
+MEASUREMENTS = (
+    "torque_constant_nm_a",
+    "torque_linearity_pct",
+    "reported_torque_gain_error_pct",
+    "torque_constant_vs_datasheet_pct",
+)
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)

@@ -27,6 +27,7 @@ from hil.report.data import from_certificate
 from hil.report.figures import styled
 from hil.report.plots import protocol_figure
 from hil.report.view import certificate_view
+from tests.helpers import subset_profile
 from tests.report.runs import Run, calibrate
 
 POPPLER = shutil.which("pdftotext") is not None
@@ -174,7 +175,8 @@ def station_run(tmp_path_factory: pytest.TempPathFactory) -> Run:
     out = tmp_path_factory.mktemp("station")
     (out / "bench.toml").write_text(STATION, encoding="utf-8")
     run = calibrate(out, "RPT-LAB", "--station", str(out / "bench.toml"), "--operator", "mia",
-                    "--", "-k", "current_loop", "--store", "off")
+                    "--profile", str(subset_profile(out / "profiles", "current_loop")),
+                    "--", "--store", "off")
     assert run.returncode == 0, run.stdout
     return run
 

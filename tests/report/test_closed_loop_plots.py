@@ -23,6 +23,7 @@ from hil.profile import builtin_profile_path
 from hil.report.data import ProtocolData, from_certificate
 from hil.report.figures import png_bytes
 from hil.report.plots import CAPTIONS, PLOTTERS, protocol_figure
+from tests.helpers import subset_profile
 from tests.report.runs import Run
 
 CLOSED_LOOP = ("velocity_loop_frf", "velocity_step", "tracking", "standstill",
@@ -153,7 +154,8 @@ def test_allure_gets_a_closed_loop_protocols_plot(tmp_path: Path) -> None:
     done = subprocess.run(
         [sys.executable, "-m", "pytest", "-p", "no:cacheprovider", "-q", "--pyargs",
          "gimbal_hil_protocols.test_standstill", "--out", str(tmp_path / "certs"),
-         "--store", "off", "--no-documents", "--alluredir", str(allure_dir)],
+         "--profile", str(subset_profile(tmp_path, "standstill")), "--store", "off",
+         "--no-documents", "--alluredir", str(allure_dir)],
         capture_output=True, text=True, timeout=600, check=False, cwd=tmp_path,
     )
     assert done.returncode == 0, done.stdout + done.stderr

@@ -14,6 +14,7 @@ from hil.profile import load_profile
 from hil.report.console import block_letters, outcome_banner, protocol_start
 from hil.report.plan import planned_motion_s
 from hil.suite.travel import MOVE_SPEED_FRACTION, move_excitation
+from tests.helpers import subset_profile
 from tests.report.runs import Run
 
 
@@ -66,6 +67,7 @@ def test_allure_gets_each_protocols_plot_and_raw_csv(tmp_path: Path) -> None:
     done = subprocess.run(
         [sys.executable, "-m", "pytest", "-p", "no:cacheprovider", "-q", "--pyargs",
          "gimbal_hil_protocols.test_inertia_friction", "--out", str(tmp_path / "certs"),
+         "--profile", str(subset_profile(tmp_path, "inertia_friction")),
          "--alluredir", str(allure_dir)],
         capture_output=True, text=True, timeout=600, check=False, cwd=tmp_path,
     )

@@ -16,6 +16,8 @@ import pytest
 from pg_server import NoServerError, PostgresServer, temporary_server
 from store_variants import SERIAL
 
+from tests.helpers import subset_profile
+
 
 @pytest.fixture(scope="session")
 def postgres() -> Iterator[PostgresServer]:
@@ -42,12 +44,13 @@ def calibrated(tmp_path_factory: pytest.TempPathFactory) -> Path:
     seeds 0 and 1): ``SERIAL/certificate.json`` and ``SERIAL/history/*/certificate.json``.
     The first went to the default store (``results.sqlite`` there), the second to none."""
     out = tmp_path_factory.mktemp("calibrated")
+    profile = subset_profile(tmp_path_factory.mktemp("profiles"), "inertia_friction")
     script = (
         "import sys; from hil.cli import main\n"
         "for seed, store in (('0', []), ('1', ['--store', 'off'])):\n"
         f"    code = main(['calibrate', '--drive', 'sim', '--unit-serial', '{SERIAL}',\n"
         f"                 '--out', r'{out}', '--seed', seed, *store,\n"
-        "                 '--operator', 'tester', '--', '-k', 'inertia_friction'])\n"
+        f"                 '--operator', 'tester', '--profile', r'{profile}'])\n"
         "    assert code == 0, code\n"
     )
     done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True,

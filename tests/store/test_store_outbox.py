@@ -16,6 +16,7 @@ from hil.cli import main
 from hil.store import open_store
 from hil.store.outbox import pending
 from hil.store.query import history
+from tests.helpers import subset_profile
 
 pytest_plugins = ["pytester"]
 
@@ -36,6 +37,7 @@ class StopServerAtFirstProtocol:
 def _calibrate(pytester: pytest.Pytester, out: Path, station: Path, *args: str,
                plugins: tuple[object, ...] = ()) -> pytest.RunResult:
     return pytester.runpytest_inprocess(
+        "--profile", str(subset_profile(pytester.path, "inertia_friction")),
         "--pyargs", "gimbal_hil_protocols.test_inertia_friction", "-p", "no:cacheprovider",
         "--out", str(out), "--unit-serial", "OUT-1", "--station", str(station), *args,
         plugins=list(plugins),

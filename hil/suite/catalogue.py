@@ -1,0 +1,75 @@
+"""Every protocol of the suite and the results it measures, from each protocol's own module:
+what a unit profile may configure (``[protocols.NAME]``) and declare
+(``[measurements.NAME]``). A table that names neither is a typo, refused when the profile
+is checked, before any motion."""
+
+from __future__ import annotations
+
+import difflib
+from collections.abc import Mapping
+
+from hil.errors import ProfileError
+from hil.profile import UnitProfile
+from hil.suite import (
+    cogging,
+    cogging_compensation,
+    current_loop,
+    gravity_cable,
+    inertia_elevation,
+    inertia_friction,
+    resonance,
+    standstill,
+    stribeck,
+    torque_constant,
+    tracking,
+    velocity_loop_frf,
+    velocity_step,
+)
+
+#: protocol → the results it measures
+PROTOCOLS: Mapping[str, tuple[str, ...]] = {
+    module.NAME: tuple(module.MEASUREMENTS)
+    for module in (current_loop, gravity_cable, inertia_friction, stribeck, cogging,
+                   torque_constant, resonance, inertia_elevation, velocity_loop_frf,
+                   velocity_step, tracking, standstill, cogging_compensation)
+}
+#: result → the protocol that measures it
+PROTOCOL_OF: Mapping[str, str] = {
+    result: protocol for protocol, results in PROTOCOLS.items() for result in results
+}
+
+
+def check_profile(profile: UnitProfile) -> None:
+    """Refuse a profile whose protocol or measurement tables the suite does not know, that
+    configures no protocol or declares no result, or that declares a result whose protocol
+    it does not configure (it could never be measured).
+
+    Raises
+    ------
+    ProfileError
+        One line naming the file and the table (with the nearest known name).
+    """
+    if not profile.protocols:
+        raise ProfileError("configures no protocol: no [protocols.NAME] table (known: "
+                           f"{', '.join(PROTOCOLS)})", source=profile.source)
+    if not profile.measurements:
+        raise ProfileError("declares no result: no [measurements.NAME] table",
+                           source=profile.source)
+    for name in profile.protocols:
+        if name not in PROTOCOLS:
+            raise ProfileError(f"[protocols.{name}]: no such protocol{_nearest(name, PROTOCOLS)}",
+                               source=profile.source)
+    for name in profile.measurements:
+        protocol = PROTOCOL_OF.get(name)
+        if protocol is None:
+            raise ProfileError(f"[measurements.{name}]: no protocol measures "
+                               f"'{name}'{_nearest(name, PROTOCOL_OF)}", source=profile.source)
+        if protocol not in profile.protocols:
+            raise ProfileError(f"[measurements.{name}]: measured by protocol '{protocol}', "
+                               f"which the profile does not configure ([protocols.{protocol}])",
+                               source=profile.source)
+
+
+def _nearest(name: str, known: Mapping[str, object]) -> str:
+    close = difflib.get_close_matches(name, list(known), n=1)
+    return f" (did you mean '{close[0]}'?)" if close else ""
