@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import argparse
 import logging
+import math
 import os
 import sys
 from collections.abc import Sequence
@@ -18,7 +19,7 @@ from typing import TYPE_CHECKING
 from hil import __version__
 from hil.compare.cli import add_arguments as add_compare_arguments
 from hil.diagnose.cli import add_arguments as add_diagnose_arguments
-from hil.drives.kinds import DRIVE_KINDS, SIMULATED_KINDS
+from hil.drives.kinds import DRIVE_KINDS, KINDS
 from hil.errors import HilError, InputError
 from hil.store.cli import add_arguments as add_results_arguments
 
@@ -88,7 +89,7 @@ def build_parser() -> argparse.ArgumentParser:
     source.add_argument("--duration", type=float, metavar="SECONDS",
                         help="seconds of the built-in excitation; this or --command is required")
     sim.add_argument("--out", type=Path, required=True, help="recording to write (.csv[.gz])")
-    sim.add_argument("--seed", type=int, default=0, help="the simulator's noise seed")
+    sim.add_argument("--seed", type=_seed, default=0, help="the simulator's noise seed")
 
     cal = subs["calibrate"]
     cal.add_argument("--drive", default="sim", choices=DRIVE_KINDS, metavar="KIND",
@@ -97,14 +98,14 @@ def build_parser() -> argparse.ArgumentParser:
                      help="unit profile TOML or built-in name (default: the demo unit)")
     cal.add_argument("--unit-serial", default=None, metavar="SERIAL",
                      help="serial number of the unit; required with a real drive ("
-                          + ", ".join(k for k in DRIVE_KINDS if k not in SIMULATED_KINDS)
+                          + ", ".join(k.name for k in KINDS.values() if not k.simulated)
                           + f"); default: {SIMULATOR_SERIAL}, for the simulator and the "
                           "emulators only")
     cal.add_argument("--out", type=Path, default=Path("certificates"),
                      help="folder of the certificates (SERIAL/certificate.json)")
     cal.add_argument("--station", type=Path, default=None,
                      help="station file (TOML; default: none, a simulated station)")
-    cal.add_argument("--seed", type=int, default=0, help="the simulator's noise seed")
+    cal.add_argument("--seed", type=_seed, default=0, help="the simulator's noise seed")
     cal.add_argument("--store", default=None,
                      help="results store URL, or 'off' (default: $GIMBAL_HIL_STORE, the "
                           "station file's store, else OUT/results.sqlite)")
@@ -172,9 +173,25 @@ def _check_unit_serial(drive: str, serial: str | None) -> None:
     never a serial. Checked before pytest starts."""
     if serial is not None and not serial.strip():
         raise InputError("a unit serial cannot be blank", source="--unit-serial")
-    if serial is None and drive not in SIMULATED_KINDS:
+    if serial is None and not KINDS[drive].simulated:
         raise InputError(f"--drive {drive} calibrates a real unit: give its --unit-serial "
                          f"SERIAL (the default {SIMULATOR_SERIAL} is for the simulator only)")
+
+
+#: the longest built-in excitation `simulate` plans: two hours at the demo's 4 kHz keep a
+#: run's arrays (~30 columns of float64 and the CSV text) near 2 GB
+MAX_SIMULATED_S = 7200.0
+
+
+def _seed(text: str) -> int:
+    """A noise seed: a whole number from 0 (numpy's generators take no negative seed)."""
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a whole number: {text!r}") from None
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"must be 0 or more, got {value}")
+    return value
 
 
 def _simulate(args: argparse.Namespace) -> int:
@@ -188,6 +205,11 @@ def _simulate(args: argparse.Namespace) -> int:
     if profile.plant is None:
         raise InputError("profile has no [plant] table to simulate", source=profile.source)
     fs_hz = profile.sample_rate_hz
+    if args.duration is not None and not (
+            math.isfinite(args.duration) and args.duration <= MAX_SIMULATED_S):
+        raise InputError(f"must be a number of seconds from 8 to {MAX_SIMULATED_S:g} (a "
+                         f"recording's arrays are planned whole), got {args.duration:g}",
+                         source="--duration")
     if args.command is not None:
         mode, command = _command_from_csv(args.command, fs_hz)
         name = args.command.name

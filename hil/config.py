@@ -48,8 +48,8 @@ def read_toml(path: Path) -> tuple[dict[str, Any], bytes]:
         payload = path.read_bytes()
     except OSError as exc:
         raise ProfileError(f"cannot read: {exc.strerror}", source=str(path)) from None
-    try:
-        return tomllib.loads(payload.decode("utf-8")), payload
+    try:  # a byte-order mark some editors write is not part of the document
+        return tomllib.loads(payload.decode("utf-8").removeprefix("\ufeff")), payload
     except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
         raise ProfileError(f"not valid TOML: {exc}", source=str(path)) from None
 

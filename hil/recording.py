@@ -139,7 +139,7 @@ def _read_text(path: Path) -> list[str]:
         raw = path.read_bytes()
         if path.suffix == ".gz":
             raw = gzip.decompress(raw)
-        return raw.decode("utf-8").splitlines()
+        return raw.decode("utf-8-sig").splitlines()  # a byte-order mark is no column name
     except (OSError, EOFError, gzip.BadGzipFile) as exc:
         raise RecordingError(f"cannot read file: {exc}", source=source) from exc
     except UnicodeDecodeError as exc:

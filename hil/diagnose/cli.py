@@ -75,6 +75,10 @@ def run(args: argparse.Namespace) -> int:
     except HilError as exc:
         print(f"gimbal-hil diagnose: error: {exc}", file=sys.stderr)
         return 2
+    except OSError as exc:  # an output that cannot be written (--json, --plots, --profile-out)
+        print(f"gimbal-hil diagnose: error: {exc.filename or ''}: cannot write: "
+              f"{exc.strerror or exc}", file=sys.stderr)
+        return 2
     causes = data["causes"]
     named = ", ".join(c["name"] for c in causes) if causes else "none"
     print(f"{args.recording}: base fit {data['base']['fit_pct']:.1f} % held out; "
