@@ -27,7 +27,7 @@ from hil.calibration import SERIAL_PATTERN, CalibrationRun, UnitLock
 from hil.certificate import write_certificate
 from hil.drives.base import Drive, DriveInfo
 from hil.drives.connect import open_drive
-from hil.drives.kinds import SIMULATED_KINDS
+from hil.drives.kinds import drive_kind as kind_named
 from hil.drives.station import StationIdentity, load_station_identity
 from hil.errors import HilError
 from hil.gum import rounded_pair
@@ -74,7 +74,7 @@ def start(config: pytest.Config) -> None:
     config.stash[CONSOLE_KEY] = _Console()
     _stop_on_signals(config)
     kind = drive_kind(config)
-    if config.getoption("--unit-serial") is None and kind not in SIMULATED_KINDS:
+    if config.getoption("--unit-serial") is None and not kind_named(kind).simulated:
         raise pytest.UsageError(f"--drive {kind} (a real unit) needs --unit-serial SERIAL")
     try:
         profile = config.stash[PROFILE_KEY] = load_profile(config.getoption("--profile"))

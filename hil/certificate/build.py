@@ -19,6 +19,7 @@ from hil.certificate.controller import controller_outputs
 from hil.certificate.integrity import seal
 from hil.certificate.procedure import profile_sha256_without_firmware
 from hil.certificate.render import render_text
+from hil.drives.kinds import drive_kind
 from hil.measurement import DECISION_RULE
 from hil.recording import write_atomic
 
@@ -113,7 +114,8 @@ def build_certificate(
             "wall_time_s": round(sum(r.wall_time_s for r in run.protocols.values()), 3),
         },
         "drive": {"kind": run.drive_kind, **(_drive_info(info) if info else {})},
-        "conditions": {"drive_kind": run.drive_kind, "simulated": run.drive_kind == "sim"},
+        "conditions": {"drive_kind": run.drive_kind,
+                       "simulated": drive_kind(run.drive_kind).simulated},  # emulators too
         "software": {
             "name": "gimbal-hil",
             "version": __version__,

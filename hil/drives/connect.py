@@ -8,7 +8,7 @@ from contextlib import contextmanager
 from pathlib import Path
 
 from hil.drives.base import Drive
-from hil.drives.kinds import DRIVE_KINDS
+from hil.drives.kinds import DriveKind, drive_kind
 from hil.errors import ProfileError
 from hil.profile import UnitProfile
 
@@ -25,11 +25,12 @@ def open_drive(
     """Open the drive named by ``kind``; on leaving, the drive is quick-stopped on error
     and always disabled and closed. Emulator kinds start (and stop) their emulator.
     """
-    if kind == "sim":
+    opened = drive_kind(kind)  # an unknown kind: one line naming the known ones
+    if opened.opens == "simulator":
         from hil.drives.sim import SimDrive
 
         if profile.plant is None:
-            raise ProfileError("--drive sim needs a [plant] table", source=profile.source)
+            raise ProfileError(f"--drive {kind} needs a [plant] table", source=profile.source)
         with SimDrive(
             profile.plant,
             firmware=profile.firmware,
@@ -40,33 +41,30 @@ def open_drive(
         ) as drive:
             yield drive
         return
-    if kind in ("canopen", "canopen-emulator", "modbus", "modbus-emulator"):
-        with _open_field_drive(
-            kind, profile=profile, unit_serial=unit_serial, station=station, seed=seed
-        ) as drive:
-            yield drive
-        return
-    raise ProfileError(f"unknown drive kind '{kind}' (known: {', '.join(DRIVE_KINDS)})")
+    with _open_field_drive(
+        opened, profile=profile, unit_serial=unit_serial, station=station, seed=seed
+    ) as drive:
+        yield drive
 
 
 @contextmanager
 def _open_field_drive(
-    kind: str, *, profile: UnitProfile, unit_serial: str, station: Path | None, seed: int
+    kind: DriveKind, *, profile: UnitProfile, unit_serial: str, station: Path | None, seed: int
 ) -> Iterator[Drive]:
     """The CANopen and Modbus kinds: a real drive from ``station``, or an emulator of
     ``profile.plant`` started here (and stopped on leaving), reached with ``station``'s
     settings when one is given (the built-in emulator station's otherwise)."""
     from hil.drives.station import CanOpenStation, ModbusStation, load_station
 
-    bus = kind.removesuffix("-emulator")
+    bus = kind.station_kind
     loaded = None
     if station is not None:  # an emulator takes the file's settings, at its own endpoint
         loaded = load_station(station)
         if not isinstance(loaded, CanOpenStation if bus == "canopen" else ModbusStation):
             raise ProfileError(f"not a {bus} station file", source=str(station))
-    if kind in ("canopen", "modbus"):
+    if kind.needs_station:
         if loaded is None:
-            raise ProfileError(f"--drive {kind} needs --station FILE (a station TOML)")
+            raise ProfileError(f"--drive {kind.name} needs --station FILE (a station TOML)")
         with _backend(loaded, profile) as drive:
             yield drive
         return
