@@ -187,6 +187,7 @@ def diagnose(
         ``validate`` is of another axis kind than ``recording``.
     """
     signals = prepare(recording, cutoff_hz=cutoff_hz)
+    data_issues.refuse_unusable(signals)
     if validate is not None:
         if validate.axis_kind != recording.axis_kind:
             raise IdentificationError(

@@ -15,6 +15,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from hil.diagnose.signals import Signals, _noise_std
+from hil.errors import IdentificationError
 from hil.identify.quantisation import quantisation_step
 from hil.recording import Recording
 
@@ -52,6 +53,31 @@ class DataIssue:
         """``kind``, ``severity``, ``message`` and the :attr:`values` in one flat dict."""
         return {"kind": self.kind, "severity": self.severity, "message": self.message,
                 **self.values}
+
+
+#: Below this sample rate a recording cannot hold a servo axis's dynamics (loops at
+#: 0.5-10 kHz, the diagnosis's band an eighth of the rate): most likely its time column is
+#: not in seconds.
+MIN_SAMPLE_RATE_HZ = 50.0
+
+
+def refuse_unusable(signals: Signals) -> None:
+    """Data no diagnosis can use, refused in one line before any fit.
+
+    Raises
+    ------
+    IdentificationError
+        The samples are too far apart for the axis's dynamics (a time column in
+        milliseconds reads as 1 Hz), or the axis never moves.
+    """
+    if signals.fs_hz < MIN_SAMPLE_RATE_HZ:
+        raise IdentificationError(
+            f"{signals.source}: time_s steps by {1 / signals.fs_hz:.3g} s "
+            f"({signals.fs_hz:.3g} Hz, under {MIN_SAMPLE_RATE_HZ:g} Hz): too slow for a "
+            "servo axis; is the time column in milliseconds? (time_s is seconds)")
+    if not np.ptp(signals.position[signals.valid]) > 0:
+        raise IdentificationError(f"{signals.source}: the axis never moves (the position is "
+                                  "constant): nothing to identify")
 
 
 def velocity_delay_samples(signals: Signals) -> float:
