@@ -21,6 +21,7 @@ from typing import Literal
 import numpy as np
 from numpy.typing import NDArray
 
+from hil.budget import memory_budget_bytes
 from hil.errors import RecordingError
 
 log = logging.getLogger(__name__)
@@ -133,12 +134,15 @@ def _axis_kind(names: set[str], source: str) -> AxisKind:
 
 
 # -- reading ------------------------------------------------------------------------------
-def _read_text(path: Path) -> list[str]:
+READ_BYTES_PER_ROW = 1536  # memory of reading one row (text, cells, floats): ~1.1 kB measured
+MAX_ROW_TEXT_BYTES = 1024  # a row's text beyond which a file is no recording (a gzip bomb)
+READ_CHUNK_BYTES = 1 << 20
+
+
+def _read_text(path: Path, *, bytes_per_row: int = READ_BYTES_PER_ROW) -> list[str]:
     source = str(path)
     try:
-        raw = path.read_bytes()
-        if path.suffix == ".gz":
-            raw = gzip.decompress(raw)
+        raw = _bounded_bytes(path, bytes_per_row=bytes_per_row)
         return raw.decode("utf-8-sig").splitlines()  # a byte-order mark is no column name
     except (OSError, EOFError, gzip.BadGzipFile) as exc:
         raise RecordingError(f"cannot read file: {exc}", source=source) from exc
@@ -146,7 +150,41 @@ def _read_text(path: Path) -> list[str]:
         raise RecordingError("file is not UTF-8 text", source=source) from exc
 
 
-def read_recording(path: str | Path, *, log_warnings: bool = True) -> Recording:
+def _bounded_bytes(path: Path, *, bytes_per_row: int) -> bytes:
+    """The file's bytes (decompressed), read in chunks and refused once its rows would take
+    more than the memory budget (``bytes_per_row`` each, reading included) or its text more
+    than :data:`MAX_ROW_TEXT_BYTES` per allowed row: rows are counted before anything is
+    held whole, a gzip file is decompressed no further than the limit.
+
+    Raises
+    ------
+    RecordingError
+        Past the limit (one line: rows or bytes seen, the budget).
+    OSError, EOFError, gzip.BadGzipFile
+        The file cannot be read.
+    """
+    budget, how = memory_budget_bytes()
+    per_row = max(bytes_per_row, READ_BYTES_PER_ROW)
+    max_rows = max(MIN_SAMPLES, budget // per_row)
+    max_bytes = max_rows * MAX_ROW_TEXT_BYTES
+    chunks: list[bytes] = []
+    rows = size = 0
+    with (gzip.open(path, "rb") if path.suffix == ".gz" else path.open("rb")) as stream:
+        while chunk := stream.read(READ_CHUNK_BYTES):
+            rows += chunk.count(b"\n")
+            size += len(chunk)
+            if rows > max_rows or size > max_bytes:
+                seen = f"{rows:,} rows" if rows > max_rows else f"{size:,} bytes of text"
+                raise RecordingError(
+                    f"more than {seen} (read so far): over the limit of {max_rows:,} rows "
+                    f"({per_row:,} B of memory each within a budget of "
+                    f"{budget / 2**20:,.0f} MiB: {how}); not read further", source=str(path))
+            chunks.append(chunk)
+    return b"".join(chunks)
+
+
+def read_recording(path: str | Path, *, log_warnings: bool = True,
+                   bytes_per_row: int = READ_BYTES_PER_ROW) -> Recording:
     """Read a recording, refusing bad input with file, line and column named; the format's
     warnings (gaps, saturation, a still position) are logged unless ``log_warnings`` is
     false, and kept on the recording either way.
@@ -155,10 +193,14 @@ def read_recording(path: str | Path, *, log_warnings: bool = True) -> Recording:
     ------
     RecordingError
         Missing required column, duplicate column, non-numeric or non-finite value, time
-        not strictly increasing, fewer than 100 samples, unreadable file.
+        not strictly increasing, fewer than 100 samples, unreadable file; more rows than
+        the memory budget (:func:`hil.budget.memory_budget_bytes`) allows at
+        ``bytes_per_row`` each (the reader's own by default; a caller that needs more per
+        row, e.g. ``diagnose``, says so), refused before the file is held whole.
     """
     path = Path(path)
-    return parse_recording(_read_text(path), source=str(path), log_warnings=log_warnings)
+    return parse_recording(_read_text(path, bytes_per_row=bytes_per_row), source=str(path),
+                           log_warnings=log_warnings)
 
 
 @dataclass(frozen=True, slots=True)

@@ -55,15 +55,17 @@ def run(args: argparse.Namespace) -> int:
         stderr (a bad file, data that cannot support the fit).
     """
     # heavy imports here, so that `gimbal-hil --help` stays fast
-    from hil.diagnose.core import diagnose
+    from hil.diagnose.core import DIAGNOSE_BYTES_PER_ROW, diagnose
     from hil.diagnose.profile_out import write_profile
     from hil.diagnose.report import write_json
     from hil.recording import read_recording
 
     try:
         started = time.perf_counter()
-        recording = read_recording(args.recording)
-        validate = read_recording(args.validate) if args.validate else None
+        # refused before being read whole when too long for the memory budget
+        recording = read_recording(args.recording, bytes_per_row=DIAGNOSE_BYTES_PER_ROW)
+        validate = (read_recording(args.validate, bytes_per_row=DIAGNOSE_BYTES_PER_ROW)
+                    if args.validate else None)
         diagnosis = diagnose(recording, validate=validate, cutoff_hz=args.cutoff_hz)
         data = write_json(diagnosis, args.json)
         if args.profile_out:

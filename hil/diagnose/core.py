@@ -17,6 +17,7 @@ from typing import Any
 
 import numpy as np
 
+from hil.budget import check_memory
 from hil.diagnose import data_issues, interpret
 from hil.diagnose.data_issues import DataIssue
 from hil.diagnose.effects import reweighted
@@ -151,6 +152,25 @@ def block_split(signals: Signals) -> tuple[DataSet, DataSet]:
     return DataSet(signals=signals, rows=train), DataSet(signals=signals, rows=test)
 
 
+# memory per row of a diagnosis (signals, the candidates' design matrices, the fits),
+# reading included: maxrss 1072 MB at 100 k rows, 1521 MB at 200 k (4.5 kB/row marginal,
+# ~620 MB fixed); stated with margin as 8 kB/row (benchmarks/bench_diagnose_memory.py)
+DIAGNOSE_BYTES_PER_ROW = 8192
+
+
+def check_size(rows: int, source: str) -> None:
+    """Refuse a recording too long to diagnose within the memory budget, in one line.
+
+    Raises
+    ------
+    InputError
+        ``rows`` x :data:`DIAGNOSE_BYTES_PER_ROW` exceeds the budget
+        (:func:`hil.budget.memory_budget_bytes`).
+    """
+    check_memory(rows * DIAGNOSE_BYTES_PER_ROW,
+                 f"diagnosing {rows:,} rows ({DIAGNOSE_BYTES_PER_ROW:,} B each)", source=source)
+
+
 def diagnose(
     recording: Recording,
     *,
@@ -185,7 +205,12 @@ def diagnose(
     IdentificationError
         The data cannot support the fit (too short, too few usable samples), or
         ``validate`` is of another axis kind than ``recording``.
+    InputError
+        A recording too long for the memory budget (:func:`check_size`).
     """
+    for each in (recording, validate):
+        if each is not None:
+            check_size(len(each), each.source)
     signals = prepare(recording, cutoff_hz=cutoff_hz)
     data_issues.refuse_unusable(signals)
     if validate is not None:
