@@ -19,7 +19,8 @@ from dataclasses import dataclass, field
 from datetime import UTC, datetime
 from pathlib import Path
 
-from hil.drives.base import Drive, DriveInfo
+from hil.budget import StorageError, storage_error
+from hil.drives.base import Drive, DriveInfo, Interrupted
 from hil.drives.station import StationIdentity
 from hil.errors import DriveError, InputError
 from hil.identify.estimate import Estimate
@@ -195,6 +196,14 @@ class CalibrationRun:
             if isinstance(partial, Recording):
                 self._keep(partial, protocol, excitation, complete=False)
             raise
+        except Interrupted as stop:  # a stop signal mid-excitation: keep what was acquired
+            if isinstance(stop.partial_recording, Recording):
+                try:
+                    self._keep(stop.partial_recording, protocol, excitation, complete=False)
+                except (OSError, StorageError) as exc:  # the stop matters more
+                    log.error("the interrupted recording of %s was not kept: %s",
+                              excitation.name, exc)
+            raise
         finally:
             record.wall_time_s += time.perf_counter() - started
         record.motion_time_s += excitation.duration_s
@@ -272,7 +281,10 @@ class CalibrationRun:
         path = self.unit_dir / name
         path.parent.mkdir(parents=True, exist_ok=True)
         payload = text.encode("utf-8")
-        write_atomic(path, payload)
+        try:
+            write_atomic(path, payload)
+        except OSError as exc:
+            raise storage_error(exc, path) from None
         self.artifacts = [a for a in self.artifacts if a.path != path]
         self.artifacts.append(
             Artifact(
@@ -366,7 +378,10 @@ class CalibrationRun:
             **recording.metadata,
         }
         kept = Recording(columns=recording.columns, metadata=metadata, source=str(path))
-        sha = write_recording(kept, path)
+        try:
+            sha = write_recording(kept, path)
+        except OSError as exc:  # a full or read-only disk: the run stops (written whole or not)
+            raise storage_error(exc, path) from None
         self.raw_files.append(
             RawFile(
                 protocol=protocol,

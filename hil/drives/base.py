@@ -87,6 +87,25 @@ class DriveStatus:
     fault_code: int | None = None
 
 
+class Interrupted(KeyboardInterrupt):
+    """A stop signal (SIGINT; SIGTERM and SIGHUP raise ``KeyboardInterrupt`` too) during
+    :meth:`Drive.run`: the backend quick-stopped the drive and attaches the rows acquired
+    so far as ``partial_recording`` (``None`` when none were), then re-raises this."""
+
+    def __init__(self, message: str, *, partial_recording: Recording | None) -> None:
+        super().__init__(message)
+        self.partial_recording = partial_recording
+
+
+def interrupted(stop: KeyboardInterrupt, recording: Recording | None) -> Interrupted:
+    """``stop`` with the rows acquired so far attached (raise it ``from stop``); an
+    :class:`Interrupted` already carrying rows is kept as it is."""
+    if isinstance(stop, Interrupted) and stop.partial_recording is not None:
+        return stop
+    rows = recording if recording is not None and len(recording) > 0 else None
+    return Interrupted(str(stop) or "interrupted", partial_recording=rows)
+
+
 MONITOR_TRAVEL_MARGIN_RAD = 0.05  # beyond the travel limits before the monitor trips
 MONITOR_VELOCITY_MARGIN = 0.25  # relative, beyond the velocity limit (loop overshoot, noise)
 

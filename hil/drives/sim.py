@@ -16,6 +16,7 @@ from hil.drives.base import (
     DriveStatus,
     MotionEnvelope,
     check_limits,
+    interrupted,
 )
 from hil.errors import DriveStateError
 from hil.motion import CompensationTable, Excitation, Limits, Mode, PositionHarmonic
@@ -133,8 +134,14 @@ class SimDrive(Drive):
         guard = MotionGuard(position_min_rad=envelope.position_min_rad,
                             position_max_rad=envelope.position_max_rad,
                             velocity_max_rad_s=envelope.velocity_rad_s)
-        trace = self._plant.run(excitation.mode, excitation.command, excitation.torque_offset_nm,
-                                guard=guard)
+        try:
+            trace = self._plant.run(excitation.mode, excitation.command,
+                                    excitation.torque_offset_nm, guard=guard)
+        except KeyboardInterrupt as stop:
+            # the kernel runs a whole excitation in one numba call: a signal is handled
+            # after it returns, so a stop lands between excitations, with no rows to keep
+            self.quick_stop()
+            raise interrupted(stop, None) from stop
         metadata = {
             "drive": "plant_sim",
             "excitation": excitation.name,

@@ -93,10 +93,12 @@ class RunSetup:
 @dataclass(frozen=True, slots=True)
 class Acquired:
     """A run's recording, and the error that cut it short (then the drive must be made
-    safe before the error, with this recording attached, is raised)."""
+    safe before the error, with this recording attached, is raised), or the stop signal
+    that did (then the drive is quick-stopped and the signal re-raised with the rows)."""
 
     recording: Recording
     failure: DriveError | None = None
+    stop: KeyboardInterrupt | None = None
 
 
 class _FaultedError(Exception):
@@ -179,6 +181,7 @@ def run_stream(link: CanLink, setup: RunSetup, excitation: Excitation) -> Acquir
     link.forget()
     first = link.sync_index + 1
     error: DriveError | None = None
+    stop: KeyboardInterrupt | None = None
     log.info(
         "node %d: streaming %s (%d samples at %.0f Hz)",
         setup.node_id,
@@ -201,9 +204,12 @@ def run_stream(link: CanLink, setup: RunSetup, excitation: Excitation) -> Acquir
     except DriveError as exc:
         error = exc
         done = link.sync_index - first + 1
+    except KeyboardInterrupt as exc:  # a stop signal: keep the rows answered so far
+        stop = exc
+        done = max(0, min(len(raw), link.sync_index - first + 1))
     recording = _stream_recording(link, setup, excitation, raw, first, done)
-    if error is not None:
-        return Acquired(recording, error)
+    if error is not None or stop is not None:
+        return Acquired(recording, error, stop)
     link.target = 0 if mode is not Mode.POSITION else int(raw[-1])
     link.tick()
     lost = len(raw) - len(recording)
@@ -349,7 +355,6 @@ def run_recorder(link: CanLink, setup: RunSetup, excitation: Excitation) -> Acqu
         The excitation does not fit the recorder (nothing moved).
     """
     st_period_s = setup.sync_period_s
-    sc = setup.scaling
     if excitation.torque_offset_nm is not None:
         raise DriveStateError(f"'{excitation.name}' sends a torque offset (0x60B2): the drive "
                               "recorder plays no offset; stream it (at the SYNC rate)")
@@ -387,6 +392,15 @@ def run_recorder(link: CanLink, setup: RunSetup, excitation: Excitation) -> Acqu
             raise DriveStateError(f"drive recorder did not finish '{excitation.name}'")
     except DriveError as exc:
         error = exc
+    # a stop signal propagates: the caller quick-stops first, then uploads (recorder_upload)
+    return Acquired(recorder_upload(link, setup, excitation, divider), error)
+
+
+def recorder_upload(link: CanLink, setup: RunSetup, excitation: Excitation,
+                    divider: int) -> Recording:
+    """What the drive recorder holds of ``excitation`` (all of it after a finished run,
+    the samples up to the stop after an interrupted one), uploaded by segmented SDO."""
+    sc = setup.scaling
     data = bytes(link.read(0x2200, 7)) if link.connected else b""
     samples = np.frombuffer(data[: len(data) // 12 * 12], dtype=RECORDER_SAMPLE)
     n = len(samples)
@@ -400,7 +414,7 @@ def run_recorder(link: CanLink, setup: RunSetup, excitation: Excitation) -> Acqu
         COMMAND_COLUMN[excitation.mode]: np.asarray(excitation.command[:n], dtype=np.float64),
         "current_a": np.asarray(samples["current"] * sc.rated_current_a / 1e3, dtype=np.float64),
     }
-    recording = Recording(
+    return Recording(
         columns=columns,
         metadata=_metadata(
             setup,
@@ -413,4 +427,3 @@ def run_recorder(link: CanLink, setup: RunSetup, excitation: Excitation) -> Acqu
         ),
         source=f"canopen-recorder:{excitation.name}",
     )
-    return Acquired(recording, error)

@@ -21,8 +21,9 @@ from hil.drives.base import (
     DriveStatus,
     MotionEnvelope,
     check_limits,
+    interrupted,
 )
-from hil.drives.cia402.acquire import RunSetup, run_recorder, run_stream
+from hil.drives.cia402.acquire import RunSetup, recorder_upload, run_recorder, run_stream
 from hil.drives.cia402.link import CanLink
 from hil.drives.cia402.protocol import (
     COMPENSATION_TABLE,
@@ -417,14 +418,32 @@ class CanOpenDrive(Drive):
             acquired = acquire(self.link, self._run_setup(), excitation)
         except DriveError:
             raise
+        except KeyboardInterrupt as stop:  # the recorder's run (or a stream not begun)
+            self.states.quick_stop()
+            raise interrupted(stop, self._recorded(excitation) if use_recorder
+                              else None) from stop
         except BaseException:
             self.states.quick_stop()
             raise
+        if acquired.stop is not None:  # a stop signal: quick stop, the rows so far kept
+            self.states.quick_stop()
+            raise interrupted(acquired.stop, acquired.recording) from acquired.stop
         if acquired.failure is not None:
             self.states.make_safe(acquired.failure)
             acquired.failure.partial_recording = acquired.recording
             raise acquired.failure
         return acquired.recording
+
+    def _recorded(self, excitation: Excitation) -> Recording | None:
+        """After a stop signal (the drive quick-stopped): what the drive recorder holds of
+        ``excitation``, or ``None`` when it cannot be uploaded (logged)."""
+        try:
+            divider = round(self.recorder_rate_hz / excitation.fs_hz)
+            return recorder_upload(self.link, self._run_setup(), excitation, divider)
+        except (DriveError, ValueError) as exc:
+            log.warning("node %d: the drive recorder's samples of '%s' not uploaded: %s",
+                        self.station.node_id, excitation.name, exc)
+            return None
 
     def _run_setup(self) -> RunSetup:
         assert self.scaling is not None

@@ -32,6 +32,7 @@ from hil.drives.base import (
     DriveStatus,
     MotionEnvelope,
     check_limits,
+    interrupted,
 )
 from hil.drives.modbus.acquire import (
     Feedback,
@@ -238,6 +239,10 @@ class ModbusDrive(Drive):
             poll(excitation, run, self.feedback, MotionEnvelope.of(self.limits))
         except DriveError as exc:
             error = exc
+        except KeyboardInterrupt as stop:  # a stop signal: quick stop, keep the rows so far
+            states.quick_stop()
+            raise interrupted(stop, to_recording(excitation, run, self.feedback,
+                                                 self._info)) from stop
         except BaseException:
             states.quick_stop()
             raise
