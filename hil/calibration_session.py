@@ -23,6 +23,14 @@ from types import FrameType
 
 import pytest
 
+from hil.budget import (
+    CALIBRATE_BYTES_PER_SAMPLE,
+    StorageError,
+    address_space_bounded,
+    check_disk,
+    check_memory,
+    storage_error,
+)
 from hil.calibration import SERIAL_PATTERN, CalibrationRun, UnitLock
 from hil.certificate import write_certificate
 from hil.drives.base import Drive, DriveInfo
@@ -52,6 +60,7 @@ DOCUMENTS_KEY = pytest.StashKey[list[str]]()
 STORE_MESSAGE_KEY = pytest.StashKey[str]()
 STATION_KEY = pytest.StashKey[StationIdentity]()
 REFUSALS_KEY = pytest.StashKey[list[HilError]]()
+STORAGE_FAILURE_KEY = pytest.StashKey[str]()  # the certificate could not be written
 PROTOCOL_MARK = "protocol"
 
 
@@ -80,7 +89,10 @@ def start(config: pytest.Config) -> None:
         profile = config.stash[PROFILE_KEY] = load_profile(config.getoption("--profile"))
         # every table known and every protocol's settings read, before any motion
         check_profile(profile)
-        check_protocol_settings(profile, _planning_info(profile))
+        with address_space_bounded("building the profile's excitations",
+                                   source=profile.source):  # 200,000 Stribeck speeds: 23 GB
+            check_protocol_settings(profile, _planning_info(profile))
+        _check_resources(config, profile)
         station = config.getoption("--station")
         config.stash[STATION_KEY] = (
             load_station_identity(station) if station is not None else StationIdentity()
@@ -91,6 +103,30 @@ def start(config: pytest.Config) -> None:
         _lock_unit_folder(config)
     except HilError as exc:
         raise pytest.UsageError(str(exc)) from None
+
+
+def _check_resources(config: pytest.Config, profile: UnitProfile) -> None:
+    """Memory and disk before the first motion, from the planned samples: the largest
+    protocol's samples within the memory budget, every recording and the documents within
+    the free space of --out (hil/budget.py states the sizes and margins).
+
+    Raises
+    ------
+    InputError
+        One line naming the budget or the folder, what is there and what is needed.
+    """
+    info = _planning_info(profile)
+    samples = {name: seconds * info.max_sample_rate_hz
+               for name, seconds in planned_motion_s(profile, info).items()}
+    if not samples:
+        return
+    largest = max(samples, key=lambda name: samples[name])
+    check_memory(samples[largest] * CALIBRATE_BYTES_PER_SAMPLE,
+                 f"protocol {largest} ({samples[largest]:,.0f} samples at "
+                 f"{info.max_sample_rate_hz:g} Hz, {CALIBRATE_BYTES_PER_SAMPLE:,} B each)",
+                 source=profile.source)
+    if not config.option.collectonly:
+        check_disk(Path(config.getoption("--out")), samples=sum(samples.values()))
 
 
 def _lock_unit_folder(config: pytest.Config) -> None:
@@ -348,6 +384,8 @@ def pytest_runtest_makereport(
     if name is None or run is None:
         return report
     if report.failed and call.excinfo is not None and isinstance(call.excinfo.value, HilError):
+        if isinstance(call.excinfo.value, StorageError):  # a full disk: no further motion
+            item.session.shouldstop = str(call.excinfo.value)
         return _refused(item, name, call.excinfo.value, report, run)
     if report.failed:
         outcome = Outcome.FAIL if report.when == "call" else Outcome.ERROR
@@ -400,7 +438,13 @@ def pytest_sessionfinish(session: pytest.Session, exitstatus: int) -> None:
     if run is None or not run.active:
         return
     aborted = exitstatus == pytest.ExitCode.INTERRUPTED or session.shouldstop is not False
-    path = write_certificate(run, aborted=bool(aborted))
+    try:
+        path = write_certificate(run, aborted=bool(aborted))
+    except OSError as exc:  # nothing half-written (atomic writes); no certificate to store
+        failure = storage_error(exc, exc.filename or run.unit_dir / "certificate.json")
+        session.config.stash[STORAGE_FAILURE_KEY] = str(failure)
+        session.exitstatus = pytest.ExitCode.TESTS_FAILED
+        return
     session.config.stash[CERTIFICATE_KEY] = path
     if run.overall_outcome(aborted=bool(aborted)) == Outcome.INCOMPLETE and exitstatus == 0:
         session.exitstatus = pytest.ExitCode.TESTS_FAILED  # every test passed, not every result
@@ -438,6 +482,9 @@ def pytest_terminal_summary(terminalreporter: pytest.TerminalReporter) -> None:
     config = terminalreporter.config
     path = config.stash.get(CERTIFICATE_KEY, None)
     run = config.stash.get(RUN_KEY, None)
+    if STORAGE_FAILURE_KEY in config.stash:
+        terminalreporter.write_line(f"gimbal-hil: error: {config.stash[STORAGE_FAILURE_KEY]}",
+                                    red=True, bold=True)
     if path is None or run is None:
         return
     terminalreporter.section("gimbal-hil calibration")
