@@ -26,6 +26,7 @@ from hil.suite.cogging import (
     COMPENSATION_FILE,
     MEASUREMENTS,
     NAME,
+    NEEDS,
     SWEEP_PASSES,
     Spec,
     analyse,
@@ -33,6 +34,7 @@ from hil.suite.cogging import (
     inertia_for_correction,
     sweep_passes,
 )
+from hil.suite.needs import note_fallbacks
 from hil.suite.rate import sample_rate_shortfall
 from hil.suite.stop_rule import run_repeated
 from hil.suite.travel import on_command_grid
@@ -75,6 +77,7 @@ def result(drive: Drive, calibration: CalibrationRun, profile: UnitProfile
     else:
         passes_from = "passes (this protocol's own)"
         first_sample = 0
+    note_fallbacks(calibration, NAME, NEEDS)
     inertia, source = inertia_for_correction(calibration, profile)
 
     def run_once() -> tuple[CoggingResult, int]:

@@ -18,18 +18,23 @@ from hil.drives.base import Drive
 from hil.errors import DriveStateError
 from hil.identify.estimate import Estimate
 from hil.measurement import Declared, declare
+from hil.motion import Mode
 from hil.profile import UnitProfile
 from hil.suite.cogging_compensation import (
     MEASUREMENTS,
     NAME,
+    NEEDS,
+    TABLE,
     TABLE_LINE,
     Spec,
     analyse,
     excitation,
+    motion,
     orders,
     table_from_json,
     table_relative_uncertainty,
 )
+from hil.suite.needs import note_fallbacks
 from hil.suite.rate import sample_rate_shortfall
 from hil.suite.stop_rule import run_repeated
 
@@ -65,7 +70,8 @@ def cleared(drive: Drive) -> Iterator[Drive]:
 def result(cleared: Drive, calibration: CalibrationRun, profile: UnitProfile
            ) -> dict[str, Estimate]:
     drive = cleared
-    path = calibration.details.get("cogging", {}).get("compensation_table")
+    note_fallbacks(calibration, NAME, NEEDS)
+    path = calibration.details.get(TABLE.protocol, {}).get(TABLE.result)
     if not isinstance(path, str):
         pytest.skip("no cogging_compensation.json in this calibration (the cogging protocol "
                     "did not run before this one)")
@@ -84,11 +90,13 @@ def result(cleared: Drive, calibration: CalibrationRun, profile: UnitProfile
 
     def run_once() -> tuple[dict[str, Estimate], list[int]]:
         recorded = []
-        for loaded, run in ((None, off), (table, on)):
-            calibration.run(drive, spec.move_to_start(drive.status().position_rad, hold_s=0.2),
-                            protocol=NAME)
-            drive.load_compensation(loaded)
-            recorded.append(calibration.run(drive, run, protocol=NAME))
+        # the protocol's one sequence (the planner sums the same): per run a move, the run
+        for e in motion(spec, (off, on), position=lambda: drive.status().position_rad):
+            if e.mode is Mode.POSITION:
+                calibration.run(drive, e, protocol=NAME)
+                continue
+            drive.load_compensation(None if e is off else table)
+            recorded.append(calibration.run(drive, e, protocol=NAME))
         drive.load_compensation(None)
         recorded_off, recorded_on = recorded
         return analyse((recorded_off, off), (recorded_on, on), spec, table,

@@ -12,7 +12,6 @@ Library: :mod:`hil.suite.inertia_elevation`.
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import replace
 from typing import cast
 
 import pytest
@@ -22,15 +21,19 @@ from hil.drives.base import Drive
 from hil.identify.estimate import Estimate
 from hil.identify.inertia_elevation import InertiaElevationResult, fit_inertia_elevation
 from hil.measurement import Declared, declare
+from hil.motion import Mode
 from hil.profile import UnitProfile
-from hil.suite import inertia_friction as sine
+from hil.recording import Recording
 from hil.suite.inertia_elevation import (
     MEASUREMENTS,
     NAME,
+    NEEDS,
     Spec,
     inertia_at_elevation,
+    motion,
     reported_torque_gain,
 )
+from hil.suite.needs import note_fallbacks
 from hil.suite.stop_rule import run_repeated
 
 pytestmark = pytest.mark.protocol(NAME)
@@ -61,23 +64,26 @@ def result(
             f"{type(drive).__name__} cannot move the station's elevation axis (set_elevation())"
         )
     spec = Spec.from_profile(profile, drive.info)
+    note_fallbacks(calibration, NAME, NEEDS)
     gain = reported_torque_gain(calibration)
     move_elevation = cast(Callable[[float], None], set_elevation)
 
     def run_once() -> tuple[InertiaElevationResult, list[Estimate]]:
-        if spec.sine.centre_rad is not None:
-            calibration.run(drive, sine.move_to_centre(
-                spec.sine, spec.sine.centre_rad, position_rad=drive.status().position_rad),
-                protocol=NAME)
-        inertias: list[Estimate] = []
-        for elevation in spec.elevations_rad:
+        by_elevation: list[list[Recording]] = []
+
+        def to_elevation(elevation: float) -> None:
             move_elevation(elevation)
-            recordings = [
-                calibration.run(drive, replace(e, name=f"{e.name}_el{elevation:+.2f}rad"),
-                                protocol=NAME)
-                for e in sine.excitation(spec.sine)
-            ]
-            inertias.append(inertia_at_elevation(recordings, spec, calibration, gain=gain))
+            by_elevation.append([])
+
+        # the protocol's one sequence (the planner sums the same): the centre move, then
+        # each elevation's sines (the station's other axis moved before them)
+        for e in motion(spec, position=lambda: drive.status().position_rad,
+                        set_elevation=to_elevation):
+            recording = calibration.run(drive, e, protocol=NAME)
+            if e.mode is not Mode.POSITION:
+                by_elevation[-1].append(recording)
+        inertias = [inertia_at_elevation(recordings, spec, calibration, gain=gain)
+                    for recordings in by_elevation]
         return fit_inertia_elevation(spec.elevations_rad, inertias), inertias
 
     try:

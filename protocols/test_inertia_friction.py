@@ -16,15 +16,17 @@ from hil.drives.base import Drive
 from hil.identify.estimate import Estimate
 from hil.identify.inertia_friction import InertiaFrictionResult
 from hil.measurement import Declared, declare
+from hil.motion import Mode
 from hil.profile import UnitProfile
 from hil.suite.inertia_friction import (
     MEASUREMENTS,
     NAME,
+    NEEDS,
     Spec,
     analyse_in_calibration,
-    excitation,
-    move_to_centre,
+    motion,
 )
+from hil.suite.needs import note_fallbacks
 from hil.suite.stop_rule import run_repeated
 
 pytestmark = pytest.mark.protocol(NAME)
@@ -50,12 +52,15 @@ def result(
     drive: Drive, calibration: CalibrationRun, profile: UnitProfile
 ) -> dict[str, Estimate]:
     spec = Spec.from_profile(profile, drive.info)
-    if spec.centre_rad is not None:
-        move = move_to_centre(spec, spec.centre_rad, position_rad=drive.status().position_rad)
+    note_fallbacks(calibration, NAME, NEEDS)
+    # the protocol's one sequence (the planner sums the same): the centre move, the sines
+    sequence = list(motion(spec, position=lambda: drive.status().position_rad))
+    sines = [e for e in sequence if e.mode is not Mode.POSITION]
+    for move in sequence[:len(sequence) - len(sines)]:  # once: a repeat stays at the centre
         calibration.run(drive, move, protocol=NAME)
 
     def run_once() -> tuple[InertiaFrictionResult, dict[str, Estimate], dict[str, object]]:
-        recordings = [calibration.run(drive, e, protocol=NAME) for e in excitation(spec)]
+        recordings = [calibration.run(drive, e, protocol=NAME) for e in sines]
         return analyse_in_calibration(recordings, spec, calibration)
 
     runs = run_repeated(run_once, lambda found: found[1], rule=spec.stop, calibration=calibration)

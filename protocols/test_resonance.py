@@ -21,10 +21,12 @@ from hil.identify.estimate import Estimate
 from hil.identify.resonance import ResonanceResult
 from hil.measurement import Declared, declare
 from hil.profile import UnitProfile
+from hil.suite.needs import note_fallbacks
 from hil.suite.rate import sample_rate_shortfall
 from hil.suite.resonance import (
     MEASUREMENTS,
     NAME,
+    NEEDS,
     MultisineSpec,
     analyse,
     excitation,
@@ -65,6 +67,7 @@ def result(drive: Drive, calibration: CalibrationRun, profile: UnitProfile) -> R
     )
     if shortfall is not None:
         pytest.skip(shortfall)
+    note_fallbacks(calibration, NAME, NEEDS)
     *moves, measured = excitation(spec, position_rad=drive.status().position_rad)
     for move in moves:
         calibration.run(drive, move, protocol=NAME)

@@ -14,10 +14,12 @@ from hil.identify.estimate import Estimate
 from hil.identify.stribeck import StribeckResult
 from hil.measurement import Declared, declare
 from hil.profile import UnitProfile
+from hil.suite.needs import note_fallbacks
 from hil.suite.stop_rule import run_repeated
 from hil.suite.stribeck import (
     MEASUREMENTS,
     NAME,
+    NEEDS,
     Spec,
     analyse,
     cross_check,
@@ -43,6 +45,7 @@ DECLARED = declare(
 def result(drive: Drive, calibration: CalibrationRun, profile: UnitProfile
            ) -> dict[str, Estimate]:
     spec = Spec.from_profile(profile, drive.info)
+    note_fallbacks(calibration, NAME, NEEDS)
     ripple = kt_ripple_from_cogging(calibration)
 
     def run_once() -> tuple[StribeckResult, int]:

@@ -20,22 +20,24 @@ from hil.identify.estimate import Estimate
 from hil.identify.torque_constant import (
     LockedSweep,
     TorqueConstantResult,
-    balanced_angles,
     datasheet_torque_constant_nm_a,
     identify_torque_constant,
 )
 from hil.measurement import Declared, declare
+from hil.motion import Mode
 from hil.profile import UnitProfile
+from hil.suite.needs import note_fallbacks
 from hil.suite.stop_rule import run_repeated
 from hil.suite.torque_constant import (
     MEASUREMENTS,
     NAME,
+    NEEDS,
     Spec,
     analyse_sweep,
     estimates,
     kt_ripple_from_cogging,
-    move,
-    sweep,
+    locked_angles,
+    motion,
 )
 
 pytestmark = pytest.mark.protocol(NAME)
@@ -65,19 +67,20 @@ def result(
     if locked_rotor is None:
         pytest.skip(f"{type(drive).__name__} offers no locked-rotor fixture (locked_rotor())")
     spec = Spec.from_profile(profile, drive.info)
+    note_fallbacks(calibration, NAME, NEEDS)
     ripple = kt_ripple_from_cogging(calibration)
-    angles = balanced_angles(spec.angles_rad, ripple)
+    angles = locked_angles(spec, ripple)
 
     def run_once() -> tuple[TorqueConstantResult, list[LockedSweep]]:
-        sweeps = []
-        for angle in angles:
-            calibration.run(
-                drive,
-                move(spec, position_rad=drive.status().position_rad, angle_rad=angle),
-                protocol=NAME,
-            )
+        sweeps: list[LockedSweep] = []
+        # the protocol's one sequence (the planner sums the same): per angle a move, a sweep
+        for e in motion(spec, angles_rad=angles, position=lambda: drive.status().position_rad):
+            if e.mode is Mode.POSITION:
+                calibration.run(drive, e, protocol=NAME)
+                continue
+            angle = angles[len(sweeps)]
             with cast(AbstractContextManager[Any], locked_rotor()):
-                recording = calibration.run(drive, sweep(spec, angle_rad=angle), protocol=NAME)
+                recording = calibration.run(drive, e, protocol=NAME)
             sweeps.append(analyse_sweep(recording, spec, angle_rad=angle))
         return identify_torque_constant(sweeps, ripple=ripple), sweeps
 

@@ -14,7 +14,9 @@ from hil.closed_loop.tracking import Following
 from hil.drives.base import Drive
 from hil.identify.estimate import Estimate
 from hil.measurement import Declared, declare
+from hil.motion import Mode
 from hil.profile import UnitProfile
+from hil.suite.needs import note_fallbacks
 from hil.suite.rate import sample_rate_shortfall
 from hil.suite.stop_rule import run_repeated
 from hil.suite.tracking import (
@@ -22,10 +24,12 @@ from hil.suite.tracking import (
     MEASUREMENTS,
     MICRO,
     NAME,
+    NEEDS,
     Spec,
     analyse,
     excitation,
     feedforward_values,
+    motion,
 )
 
 pytestmark = pytest.mark.protocol(NAME)
@@ -55,17 +59,20 @@ def result(drive: Drive, calibration: CalibrationRun, profile: UnitProfile
             "a whole poll and writes it with the host's jitter")
     if shortfall is not None:
         pytest.skip(shortfall)
+    note_fallbacks(calibration, NAME, NEEDS)
     viscous, coulomb, u_rel, source = feedforward_values(calibration, profile, spec)
     off, on = excitation(spec, viscous_nm_s_rad=viscous, coulomb_nm=coulomb)
 
     def run_once() -> tuple[dict[str, Estimate], Following, Following]:
         recorded = []
-        for move in (off, on):
-            calibration.run(drive, spec.move_to_start(drive.status().position_rad, hold_s=0.2),
-                            protocol=NAME)
-            drive.disable()  # re-enabled: the velocity integrator starts empty for either run
-            drive.enable()
-            recorded.append(calibration.run(drive, move, protocol=NAME))
+        # the protocol's one sequence (the planner sums the same): per run a move, the run
+        for e in motion(spec, (off, on), position=lambda: drive.status().position_rad):
+            if e.mode is Mode.POSITION:
+                calibration.run(drive, e, protocol=NAME)
+                drive.disable()  # re-enabled: the velocity integrator starts empty for the run
+                drive.enable()
+                continue
+            recorded.append(calibration.run(drive, e, protocol=NAME))
         recorded_off, recorded_on = recorded
         return analyse((recorded_off, off), (recorded_on, on), spec, feedforward_u_rel=u_rel)
 

@@ -1,7 +1,8 @@
-"""Every protocol of the suite and the results it measures, from each protocol's own module:
-what a unit profile may configure (``[protocols.NAME]``) and declare
-(``[measurements.NAME]``). A table that names neither is a typo, refused when the profile
-is checked, before any motion."""
+"""Every protocol of the suite, the results it measures and what it needs from earlier ones,
+from each protocol's own module: what a unit profile may configure (``[protocols.NAME]``)
+and declare (``[measurements.NAME]``), and in which order. A table that names neither is a
+typo, and a protocol listed before one it needs would run without it: both are refused
+when the profile is checked, before any motion."""
 
 from __future__ import annotations
 
@@ -25,14 +26,17 @@ from hil.suite import (
     velocity_loop_frf,
     velocity_step,
 )
+from hil.suite.needs import Need
 
+_MODULES = (current_loop, gravity_cable, inertia_friction, stribeck, cogging, torque_constant,
+            resonance, inertia_elevation, velocity_loop_frf, velocity_step, tracking,
+            standstill, cogging_compensation)
 #: protocol → the results it measures
 PROTOCOLS: Mapping[str, tuple[str, ...]] = {
-    module.NAME: tuple(module.MEASUREMENTS)
-    for module in (current_loop, gravity_cable, inertia_friction, stribeck, cogging,
-                   torque_constant, resonance, inertia_elevation, velocity_loop_frf,
-                   velocity_step, tracking, standstill, cogging_compensation)
+    module.NAME: tuple(module.MEASUREMENTS) for module in _MODULES
 }
+#: protocol → what it takes from earlier protocols (each with its fallback)
+NEEDS: Mapping[str, tuple[Need, ...]] = {module.NAME: tuple(module.NEEDS) for module in _MODULES}
 #: result → the protocol that measures it
 PROTOCOL_OF: Mapping[str, str] = {
     result: protocol for protocol, results in PROTOCOLS.items() for result in results
@@ -59,6 +63,7 @@ def check_profile(profile: UnitProfile) -> None:
         if name not in PROTOCOLS:
             raise ProfileError(f"[protocols.{name}]: no such protocol{_nearest(name, PROTOCOLS)}",
                                source=profile.source)
+    check_order(profile)
     for name in profile.measurements:
         protocol = PROTOCOL_OF.get(name)
         if protocol is None:
@@ -68,6 +73,29 @@ def check_profile(profile: UnitProfile) -> None:
             raise ProfileError(f"[measurements.{name}]: measured by protocol '{protocol}', "
                                f"which the profile does not configure ([protocols.{protocol}])",
                                source=profile.source)
+
+
+def check_order(profile: UnitProfile) -> None:
+    """Refuse a profile that lists a protocol before one it needs: the protocols run in the
+    order of the tables, so it would run on its fallback although the profile configures
+    what it needs. (Refused, not reordered: the file stays the run order a reader sees.)
+    A need on a protocol the profile does not configure is no error: its fallback is used
+    and the certificate says so (:func:`hil.suite.needs.note_fallbacks`).
+
+    Raises
+    ------
+    ProfileError
+        One line naming both tables and what is needed.
+    """
+    order = list(profile.protocols)
+    for index, name in enumerate(order):
+        for need in NEEDS.get(name, ()):
+            if need.protocol in order[index + 1:]:
+                raise ProfileError(
+                    f"[protocols.{name}] is listed before [protocols.{need.protocol}], whose "
+                    f"{need.result} it needs (without it: {need.without}); protocols run in "
+                    f"the file's order: move [protocols.{need.protocol}] above it",
+                    source=profile.source)
 
 
 def _nearest(name: str, known: Mapping[str, object]) -> str:

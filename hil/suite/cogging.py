@@ -29,6 +29,7 @@ from hil.motion import Excitation, Mode
 from hil.profile import UnitProfile
 from hil.recording import read_recording
 from hil.suite import gravity_cable
+from hil.suite.needs import Need
 from hil.suite.rate import needed_sample_rate_hz
 from hil.suite.stop_rule import StopRule
 from hil.suite.travel import TravelSpec, on_command_grid
@@ -36,6 +37,11 @@ from hil.suite.travel import TravelSpec, on_command_grid
 NAME = "cogging"
 #: the results this protocol measures, in the certificate's order
 MEASUREMENTS = ("cogging_peak_nm", "kt_ripple_peak_pct")
+#: what it takes from earlier protocols (:mod:`hil.suite.needs`); with passes =
+#: "gravity_cable" it also reads that sweep, refused without it (:func:`sweep_passes`)
+INERTIA = Need(protocol="inertia_friction", result="inertia_kg_m2",
+               without="the declared nominal J for the acceleration correction")
+NEEDS: tuple[Need, ...] = (INERTIA,)
 
 
 COMPENSATION_FILE = "cogging_compensation.json"
@@ -235,7 +241,7 @@ def inertia_for_correction(calibration: CalibrationRun, profile: UnitProfile) ->
     ProfileError
         Neither measured nor declared (no ``[measurements.inertia_kg_m2]``).
     """
-    inertia = calibration.result("inertia_kg_m2")
+    inertia = INERTIA.read(calibration)
     if inertia is not None:
         return inertia.value, "measured (inertia_friction)"
     return profile.measurement("inertia_kg_m2").nominal, "declared nominal"

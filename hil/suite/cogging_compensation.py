@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from collections.abc import Mapping
+from collections.abc import Callable, Iterator, Mapping
 from dataclasses import dataclass
 from typing import Any
 
@@ -27,13 +27,18 @@ from hil.motion import CompensationTable, Excitation, Mode, PositionHarmonic
 from hil.profile import UnitProfile
 from hil.recording import Recording
 from hil.suite.cogging import MIN_SAMPLES_PER_PASS
+from hil.suite.needs import Need
 from hil.suite.stop_rule import StopRule
-from hil.suite.travel import TravelSpec, on_command_grid, speed_ramp
+from hil.suite.travel import TravelSpec, on_command_grid, runs_from_start, speed_ramp
 
 NAME = "cogging_compensation"
 TABLE_LINE = "the table's own uncertainty"  # shared by repeated runs (stop_rule)
 MEASUREMENTS = ("cogging_ripple_uncompensated_urad", "cogging_ripple_compensated_urad",
                 "cogging_compensation_removed_pct")
+#: what it takes from earlier protocols (:mod:`hil.suite.needs`)
+TABLE = Need(protocol="cogging", result="compensation_table",
+             without="skipped: no compensation table to load")
+NEEDS: tuple[Need, ...] = (TABLE,)
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -133,6 +138,14 @@ def excitation(spec: Spec) -> tuple[Excitation, Excitation]:
     off, on = (Excitation(name=f"pass_{label}", mode=Mode.VELOCITY, fs_hz=spec.fs_hz,
                           command=command) for label in ("uncompensated", "compensated"))
     return off, on
+
+
+def motion(spec: Spec, runs: tuple[Excitation, Excitation], *,
+           position: Callable[[], float]) -> Iterator[Excitation]:
+    """The protocol's motion, the one sequence the test runs and the planner sums: each of
+    ``runs`` (:func:`excitation`: table cleared, then loaded) after a move to
+    :attr:`Spec.start_rad` from ``position()``."""
+    return runs_from_start(spec, runs, position=position)
 
 
 def analyse(off: tuple[Recording, Excitation], on: tuple[Recording, Excitation],

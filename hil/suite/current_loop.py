@@ -22,12 +22,16 @@ from hil.identify.current_loop import (
 from hil.motion import Excitation, Mode
 from hil.profile import UnitProfile
 from hil.recording import Recording
+from hil.suite.needs import Need
 from hil.suite.stop_rule import StopRule
 from hil.suite.travel import SteppedSineSpec, TravelSpec
 
 NAME = "current_loop"
 #: the results this protocol measures, in the certificate's order
 MEASUREMENTS = ("current_loop_time_constant_ms",)
+
+#: what it takes from earlier protocols (:mod:`hil.suite.needs`): nothing
+NEEDS: tuple[Need, ...] = ()
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)

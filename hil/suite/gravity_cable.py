@@ -26,6 +26,7 @@ from hil.identify.gravity_cable import (
 )
 from hil.motion import Excitation, Mode
 from hil.profile import UnitProfile
+from hil.suite.needs import Need
 from hil.suite.stop_rule import StopRule
 from hil.suite.travel import TravelSpec
 
@@ -41,6 +42,9 @@ MEASUREMENTS = (
     "cable_stiffness_nm_rad",
     "cable_hysteresis_nm",
 )
+
+#: what it takes from earlier protocols (:mod:`hil.suite.needs`): nothing
+NEEDS: tuple[Need, ...] = ()
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)

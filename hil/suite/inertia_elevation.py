@@ -17,15 +17,18 @@ the next), so the stretch is stated rather than inherited.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass, replace
 
 from hil.calibration import CalibrationRun
 from hil.drives.base import DriveInfo
 from hil.identify.estimate import Estimate
 from hil.identify.inertia_elevation import scale_by_gain
+from hil.motion import Excitation
 from hil.profile import UnitProfile
 from hil.recording import Recording
 from hil.suite import inertia_friction as sine
+from hil.suite.needs import Need
 from hil.suite.stop_rule import StopRule
 from hil.suite.travel import move_speed_rad_s
 
@@ -36,6 +39,11 @@ MEASUREMENTS = (
     "azimuth_inertia_zenith_kg_m2",
     "azimuth_inertia_ratio",
 )
+#: what it takes from earlier protocols (:mod:`hil.suite.needs`): the K_t protocol's gain,
+#: and what the sine analysis takes (:data:`hil.suite.inertia_friction.NEEDS`)
+GAIN = Need(protocol="torque_constant", result="reported_torque_gain_error_pct",
+            without="J in reported-torque units (no shaft-torque gain applied)")
+NEEDS: tuple[Need, ...] = (GAIN, *sine.NEEDS)
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -87,6 +95,26 @@ class Spec:
         return spec
 
 
+def motion(spec: Spec, *, position: Callable[[], float],
+           set_elevation: Callable[[float], None] = lambda _: None) -> Iterator[Excitation]:
+    """The protocol's motion, the one sequence the test runs and the planner sums: the move
+    to the sines' centre (when the spec has one), then per elevation the J/B/T_c sines,
+    named after it. ``set_elevation`` moves the station's other axis before that
+    elevation's sines are yielded (not this drive's motion; the planner passes none).
+
+    Yields
+    ------
+    Excitation
+        At most one position-mode move, then the velocity sines of each elevation.
+    """
+    if spec.sine.centre_rad is not None:
+        yield sine.move_to_centre(spec.sine, spec.sine.centre_rad, position_rad=position())
+    for elevation in spec.elevations_rad:
+        set_elevation(elevation)
+        for e in sine.excitation(spec.sine):
+            yield replace(e, name=f"{e.name}_el{elevation:+.2f}rad")
+
+
 def reported_torque_gain(calibration: CalibrationRun) -> tuple[float, float] | None:
     """Shaft over reported torque (and its standard uncertainty) from the K_t protocol.
 
@@ -101,7 +129,7 @@ def reported_torque_gain(calibration: CalibrationRun) -> tuple[float, float] | N
         ``(gain, u(gain))`` from ``reported_torque_gain_error_pct``, or ``None`` when the
         torque-constant protocol has not measured it.
     """
-    gain_error = calibration.result("reported_torque_gain_error_pct")
+    gain_error = GAIN.read(calibration)
     if gain_error is None:
         return None
     return 1.0 + gain_error.value / 100.0, gain_error.standard_uncertainty / 100.0

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 
 import numpy as np
@@ -28,12 +29,22 @@ from hil.identify.sine_run import analyse_sine_run, torque_hold_samples, without
 from hil.motion import Excitation, Mode
 from hil.profile import UnitProfile
 from hil.recording import Recording
+from hil.suite.needs import Need
 from hil.suite.stop_rule import StopRule
 from hil.suite.travel import move_excitation, move_speed_rad_s
 
 NAME = "inertia_friction"
 #: the results this protocol measures, in the certificate's order
 MEASUREMENTS = ("inertia_kg_m2", "viscous_nm_s_rad", "coulomb_nm", "inertia_amplitude_spread_pct")
+#: what it takes from earlier protocols (:mod:`hil.suite.needs`)
+LAG = Need(protocol="current_loop", result="current_loop_time_constant_ms",
+           without="no current-loop lag taken out of the sines (0 s)")
+CABLE = Need(protocol="gravity_cable", result="cable_hysteresis_nm",
+             without="the cable's hysteresis loop left in T_c")
+STIFFNESS = tuple(Need(protocol="gravity_cable", result=name,
+                       without="J not corrected for the load's stiffness")
+                  for name in ("gravity_mge_nm", "gravity_phase_rad", "cable_stiffness_nm_rad"))
+NEEDS: tuple[Need, ...] = (LAG, CABLE, *STIFFNESS)
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -150,6 +161,28 @@ def excitation(spec: Spec) -> list[Excitation]:
     ]
 
 
+def motion(spec: Spec, *, position: Callable[[], float]) -> Iterator[Excitation]:
+    """The protocol's motion, the one sequence the test runs and the planner sums: the move
+    to the sines' centre (when the spec has one; from ``position()``), then
+    :func:`excitation`'s sines.
+
+    Parameters
+    ----------
+    spec : Spec
+        The protocol's spec.
+    position : callable
+        Where the axis is now: the drive's position when run, the plan's when planned.
+
+    Yields
+    ------
+    Excitation
+        At most one position-mode move, then the velocity sines.
+    """
+    if spec.centre_rad is not None:
+        yield move_to_centre(spec, spec.centre_rad, position_rad=position())
+    yield from excitation(spec)
+
+
 def analyse(
     recordings: list[Recording],
     spec: Spec,
@@ -210,7 +243,7 @@ def measured_cable_loop(calibration: CalibrationRun) -> CableLoop | None:
         Half-width, its standard uncertainty and the loop's angle; ``None`` when not
         measured.
     """
-    h = calibration.result("cable_hysteresis_nm")
+    h = CABLE.read(calibration)
     details = calibration.details.get("gravity_cable", {})
     angle = details.get("cable_hysteresis_angle_rad")
     if h is None or not isinstance(angle, float):
@@ -348,7 +381,7 @@ def measured_load_stiffness(calibration: CalibrationRun, *, position_rad: float)
         The load's stiffness (N·m/rad), or ``None`` unless m·g·e, its phase and k_cable
         were all measured.
     """
-    found = calibration.results("gravity_mge_nm", "gravity_phase_rad", "cable_stiffness_nm_rad")
+    found = calibration.results(*(need.result for need in STIFFNESS))
     if found is None:
         return None
     mge, phase, cable = found
@@ -368,7 +401,7 @@ def measured_current_loop_lag(calibration: CalibrationRun) -> Estimate | None:
     Estimate or None
         τ in seconds (from ``current_loop_time_constant_ms``), or ``None``.
     """
-    tau = calibration.result("current_loop_time_constant_ms")
+    tau = LAG.read(calibration)
     if tau is None:
         return None
     return dataclasses.replace(tau, value=tau.value / 1000, unit="s", budget=(),

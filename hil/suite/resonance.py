@@ -30,6 +30,7 @@ from hil.identify.resonance import ResonanceResult, frf_lines, frf_point, identi
 from hil.motion import Excitation, Mode
 from hil.profile import UnitProfile
 from hil.recording import Recording
+from hil.suite.needs import Need
 from hil.suite.rate import needed_sample_rate_hz
 from hil.suite.travel import SteppedSineSpec, TravelSpec, speed_ramp
 from hil.suite.velocity_loop_frf import direction_from
@@ -42,6 +43,12 @@ MEASUREMENTS = (
     "resonance_damping_ratio",
     "resonance_to_bandwidth_ratio",
 )
+#: τ's start value when the current-loop protocol has not measured it (s)
+LAG_START_S = 2e-4
+#: what it takes from earlier protocols (:mod:`hil.suite.needs`)
+LAG = Need(protocol="current_loop", result="current_loop_time_constant_ms",
+           without=f"the model's current-loop τ starts from {LAG_START_S:g} s")
+NEEDS: tuple[Need, ...] = (LAG,)
 EXCITATIONS = ("multisine", "stepped_sine")
 
 
@@ -408,5 +415,5 @@ def measured_time_constant_s(calibration: CalibrationRun) -> float:
     float
         τ in seconds; 2e-4 when the current-loop protocol has not measured it.
     """
-    tau = calibration.result("current_loop_time_constant_ms")
-    return 2e-4 if tau is None else tau.value * 1e-3
+    tau = LAG.read(calibration)
+    return LAG_START_S if tau is None else tau.value * 1e-3

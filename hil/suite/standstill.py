@@ -19,6 +19,7 @@ from hil.identify.quantisation import quantisation_step
 from hil.motion import Excitation
 from hil.profile import UnitProfile
 from hil.recording import Recording
+from hil.suite.needs import Need
 from hil.suite.stop_rule import StopRule
 from hil.suite.travel import TravelSpec, move_excitation, on_command_grid
 
@@ -26,6 +27,9 @@ NAME = "standstill"
 NUDGE_RAD = 0.05  # the hold follows a move this long: a held pointing, and the encoder's
 # resolution shows in the recording (a position that never changed reads as none)
 MEASUREMENTS = ("standstill_torque_ripple_mnm", "standstill_jitter_urad")
+
+#: what it takes from earlier protocols (:mod:`hil.suite.needs`): nothing
+NEEDS: tuple[Need, ...] = ()
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)

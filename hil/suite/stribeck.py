@@ -19,6 +19,7 @@ from hil.identify.stribeck import Staircase, StribeckResult, identify_stribeck, 
 from hil.identify.torque_constant import ripple_factors
 from hil.motion import Excitation, Mode
 from hil.profile import UnitProfile
+from hil.suite.needs import Need
 from hil.suite.stop_rule import StopRule
 from hil.suite.travel import TravelSpec
 
@@ -34,6 +35,16 @@ MEASUREMENTS = ("static_friction_nm", "stribeck_velocity_rad_s")
 CROSS_CHECK = (
     ("coulomb_nm", "stribeck_coulomb_nm"),
     ("viscous_nm_s_rad", "stribeck_viscous_nm_s_rad"),
+)
+#: what it takes from earlier protocols (:mod:`hil.suite.needs`)
+RIPPLE = Need(protocol="cogging", result="kt_ripple",
+              without="no K_t ripple correction of the staircase's torque")
+CABLE = Need(protocol="gravity_cable", result="cable_hysteresis_nm",
+             without="the sines' T_c cross-checked without the cable loop added")
+NEEDS: tuple[Need, ...] = (
+    RIPPLE, CABLE,
+    *(Need(protocol="inertia_friction", result=other, without=f"no cross-check of {other}")
+      for other, _ in CROSS_CHECK),
 )
 
 
@@ -215,7 +226,7 @@ def cross_check(result: StribeckResult, calibration: CalibrationRun) -> dict[str
         value, the sine's and the normalised error; empty when the sine did not run.
     """
     ours = {e.name: e for e in (result.coulomb, result.viscous)}
-    loop = calibration.result("cable_hysteresis_nm")
+    loop = CABLE.read(calibration)
     checks: dict[str, object] = {}
     for other, mine in CROSS_CHECK:
         b = calibration.result(other)

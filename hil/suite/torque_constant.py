@@ -11,6 +11,7 @@ locked-rotor fixture the harness can engage (``drive.locked_rotor()``); skips ot
 from __future__ import annotations
 
 import math
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
 from typing import Any, cast
 
@@ -23,11 +24,13 @@ from hil.identify.torque_constant import (
     LockedSweep,
     TorqueConstantResult,
     analyse_locked_sweep,
+    balanced_angles,
     datasheet_deviation,
 )
 from hil.motion import Excitation, Mode
 from hil.profile import UnitProfile
 from hil.recording import Recording
+from hil.suite.needs import Need
 from hil.suite.stop_rule import StopRule
 from hil.suite.travel import move_excitation, move_speed_rad_s
 
@@ -39,6 +42,10 @@ MEASUREMENTS = (
     "reported_torque_gain_error_pct",
     "torque_constant_vs_datasheet_pct",
 )
+#: what it takes from earlier protocols (:mod:`hil.suite.needs`)
+RIPPLE = Need(protocol="cogging", result="kt_ripple",
+              without="locked at the configured angles, no K_t ripple correction")
+NEEDS: tuple[Need, ...] = (RIPPLE,)
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -134,6 +141,38 @@ def move(spec: Spec, *, position_rad: float, angle_rad: float) -> Excitation:
         speed_rad_s=spec.move_speed_rad_s,
         hold_s=0.1,
     )
+
+
+def locked_angles(spec: Spec, ripple: Sequence[tuple[int, float, float]]) -> tuple[float, ...]:
+    """The angles the rotor is locked at: the configured ones, nudged so the largest
+    measured K_t ripple harmonic averages out (:func:`balanced_angles`; as configured
+    without a ripple table)."""
+    return balanced_angles(spec.angles_rad, ripple)
+
+
+def motion(spec: Spec, *, angles_rad: Sequence[float],
+           position: Callable[[], float]) -> Iterator[Excitation]:
+    """The protocol's motion, the one sequence the test runs and the planner sums: per
+    locked angle, the move there (from ``position()``, read when the move is built) and
+    the torque staircase (torque mode, run with the rotor locked).
+
+    Parameters
+    ----------
+    spec : Spec
+        The protocol's spec.
+    angles_rad : sequence of float
+        The locked angles (:func:`locked_angles`).
+    position : callable
+        Where the axis is now: the drive's position when run, the plan's when planned.
+
+    Yields
+    ------
+    Excitation
+        Move (position mode), sweep (torque mode), in that order per angle.
+    """
+    for angle in angles_rad:
+        yield move(spec, position_rad=position(), angle_rad=angle)
+        yield sweep(spec, angle_rad=angle)
 
 
 def sweep(spec: Spec, *, angle_rad: float) -> Excitation:
@@ -239,7 +278,6 @@ def kt_ripple_from_cogging(calibration: CalibrationRun) -> list[tuple[int, float
         ``(order, amplitude, phase_rad)`` per harmonic of
         ``K_t(θ) = K_t·(1 + Σ a_n·sin(n·θ + ψ_n))``; empty when cogging did not run.
     """
-    table = cast(
-        list[dict[str, Any]], calibration.details.get("cogging", {}).get("kt_ripple", [])
-    )
+    table = cast(list[dict[str, Any]],
+                 calibration.details.get(RIPPLE.protocol, {}).get(RIPPLE.result, []))
     return [(int(h["order"]), float(h["amplitude"]), float(h["phase_rad"])) for h in table]

@@ -14,6 +14,7 @@ Numerics in :mod:`hil.closed_loop.tracking`.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 
 import numpy as np
@@ -34,13 +35,19 @@ from hil.identify.quantisation import quantisation_step
 from hil.motion import Excitation, Mode
 from hil.profile import UnitProfile
 from hil.recording import Recording
+from hil.suite.needs import Need
 from hil.suite.stop_rule import StopRule
-from hil.suite.travel import TravelSpec, on_command_grid
+from hil.suite.travel import TravelSpec, on_command_grid, runs_from_start
 
 NAME = "tracking"
 FEEDFORWARD_LINE = "the feedforward's B and T_c"  # shared by repeated runs (stop_rule)
 MEASUREMENTS = ("tracking_rms_error_urad", "tracking_peak_error_urad",
                 "tracking_rms_error_no_ff_urad", "tracking_ff_reduction")
+#: what it takes from earlier protocols (:mod:`hil.suite.needs`)
+NEEDS: tuple[Need, ...] = tuple(
+    Need(protocol="inertia_friction", result=name,
+         without="the declared nominal B and T_c as the feedforward")
+    for name in ("viscous_nm_s_rad", "coulomb_nm"))
 MICRO = 1e6
 
 
@@ -98,7 +105,7 @@ def feedforward_values(calibration: CalibrationRun, profile: UnitProfile, spec: 
     terms weighted by their RMS over it: ``√((T_c·u_r(T_c))² + (B·ω*_rms·u_r(B))²) /
     √(T_c² + (B·ω*_rms)²)`` (0 for declared nominals: no measurement, nothing propagated).
     """
-    found = calibration.results("viscous_nm_s_rad", "coulomb_nm")
+    found = calibration.results(*(need.result for need in NEEDS))
     if found is None:
         return (profile.measurement("viscous_nm_s_rad").nominal,
                 profile.measurement("coulomb_nm").nominal, 0.0, "declared nominals")
@@ -121,6 +128,14 @@ def excitation(spec: Spec, *, viscous_nm_s_rad: float, coulomb_nm: float
                        command=command),
             Excitation(name="move_ff", mode=Mode.VELOCITY, fs_hz=spec.fs_hz, command=command,
                        torque_offset_nm=offset))
+
+
+def motion(spec: Spec, runs: tuple[Excitation, Excitation], *,
+           position: Callable[[], float]) -> Iterator[Excitation]:
+    """The protocol's motion, the one sequence the test runs and the planner sums: each of
+    ``runs`` (:func:`excitation`: without, then with the feedforward) after a move to
+    :attr:`Spec.start_rad` from ``position()`` (the drive is re-enabled between them)."""
+    return runs_from_start(spec, runs, position=position)
 
 
 def analyse(off: tuple[Recording, Excitation], on: tuple[Recording, Excitation], spec: Spec,

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass
 
 import numpy as np
@@ -53,6 +54,16 @@ def move_excitation(
         position_rad, target_rad, fs_hz=fs_hz, speed_rad_s=speed_rad_s, hold_s=hold_s
     )
     return Excitation(name=name, mode=Mode.POSITION, fs_hz=fs_hz, command=command)
+
+
+def runs_from_start(spec: TravelSpec, runs: Iterable[Excitation], *,
+                    position: Callable[[], float]) -> Iterator[Excitation]:
+    """Each of ``runs`` after a move to ``spec.start_rad`` (0.2 s hold), each move built
+    from ``position()`` when it is reached: the drive's position when run, the plan's when
+    planned (a velocity run ends away from its start)."""
+    for run in runs:
+        yield spec.move_to_start(position(), hold_s=0.2)
+        yield run
 
 
 def on_command_grid(

@@ -20,6 +20,7 @@ from hil.identify.multisine import multisine
 from hil.motion import Excitation, Mode
 from hil.profile import UnitProfile
 from hil.recording import Recording
+from hil.suite.needs import Need
 from hil.suite.rate import needed_sample_rate_hz
 from hil.suite.stop_rule import StopRule
 from hil.suite.travel import TravelSpec, speed_ramp
@@ -27,6 +28,9 @@ from hil.suite.travel import TravelSpec, speed_ramp
 NAME = "velocity_loop_frf"
 MEASUREMENTS = ("velocity_bandwidth_hz", "velocity_peak_gain_db", "velocity_gain_margin_db",
                 "velocity_phase_margin_deg", "velocity_sensitivity_peak_db")
+
+#: what it takes from earlier protocols (:mod:`hil.suite.needs`): nothing
+NEEDS: tuple[Need, ...] = ()
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)

@@ -19,6 +19,7 @@ from hil.identify.estimate import Estimate
 from hil.motion import Excitation, Mode
 from hil.profile import UnitProfile
 from hil.recording import Recording
+from hil.suite.needs import Need
 from hil.suite.stop_rule import StopRule
 from hil.suite.travel import TravelSpec, on_command_grid, speed_ramp
 from hil.suite.velocity_loop_frf import direction_from
@@ -31,6 +32,9 @@ MEASUREMENTS = (
     "step_settling_time_small_ms", "step_settling_time_large_ms",
     "step_steady_state_error_pct",
 )
+
+#: what it takes from earlier protocols (:mod:`hil.suite.needs`): nothing
+NEEDS: tuple[Need, ...] = ()
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)

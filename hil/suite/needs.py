@@ -1,0 +1,43 @@
+"""What a protocol takes from an earlier one: each suite module declares its ``NEEDS``
+(protocol, result, what it does without it); the catalogue checks the profile's run order
+against them before any motion, and a protocol that runs without one says so on the
+certificate (its messages)."""
+
+from __future__ import annotations
+
+from collections.abc import Iterable
+from dataclasses import dataclass
+
+from hil.calibration import CalibrationRun
+from hil.identify.estimate import Estimate
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class Need:
+    """One input from an earlier protocol of the same calibration."""
+
+    protocol: str  # the protocol that provides it
+    result: str  # a declared measurement, or a key of that protocol's details
+    without: str  # what the protocol does when it is missing (its fallback)
+
+    def met(self, calibration: CalibrationRun) -> bool:
+        """The earlier protocol left it in this calibration."""
+        return (calibration.result(self.result) is not None
+                or self.result in calibration.details.get(self.protocol, {}))
+
+    def read(self, calibration: CalibrationRun) -> Estimate | None:
+        """The judged result, ``None`` when the earlier protocol has not measured it."""
+        return calibration.result(self.result)
+
+    def fallback_line(self) -> str:
+        """The certificate's line for a fallback used."""
+        return f"without {self.protocol}'s {self.result}: {self.without}"
+
+
+def note_fallbacks(calibration: CalibrationRun, protocol: str, needs: Iterable[Need]) -> list[str]:
+    """Record on the protocol's certificate entry (its messages) each need this calibration
+    has not met, with the fallback used; returns those lines."""
+    lines = [need.fallback_line() for need in needs if not need.met(calibration)]
+    record = calibration.protocol(protocol)
+    record.messages.extend(line for line in lines if line not in record.messages)
+    return lines
