@@ -37,7 +37,7 @@ from hil.drives.base import Drive, DriveInfo
 from hil.drives.connect import open_drive
 from hil.drives.kinds import drive_kind as kind_named
 from hil.drives.station import StationIdentity, load_station_identity
-from hil.errors import HilError
+from hil.errors import HilError, InputError
 from hil.gum import rounded_pair
 from hil.measurement import MethodBiasMap, Outcome, load_method_bias
 from hil.motion import Mode
@@ -93,6 +93,7 @@ def start(config: pytest.Config) -> None:
                                    source=profile.source):  # 200,000 Stribeck speeds: 23 GB
             check_protocol_settings(profile, _planning_info(profile))
         _check_resources(config, profile)
+        _check_run_options(config, profile, kind)
         station = config.getoption("--station")
         config.stash[STATION_KEY] = (
             load_station_identity(station) if station is not None else StationIdentity()
@@ -103,6 +104,26 @@ def start(config: pytest.Config) -> None:
         _lock_unit_folder(config)
     except HilError as exc:
         raise pytest.UsageError(str(exc)) from None
+
+
+def _check_run_options(config: pytest.Config, profile: UnitProfile, kind: str) -> None:
+    """What the run would otherwise find per protocol, once per test: a unit serial it
+    cannot file, a simulated drive without a plant to simulate, a method-bias map that
+    does not load.
+
+    Raises
+    ------
+    InputError
+        Naming the option or the file.
+    """
+    serial = config.getoption("--unit-serial")
+    if serial is not None and not re.fullmatch(SERIAL_PATTERN, serial):
+        raise InputError(f"{serial!r} is not a unit serial: 1-64 letters, digits, '.', '_' "
+                         "or '-', starting with a letter or digit", source="--unit-serial")
+    if kind_named(kind).simulated and profile.plant is None:
+        raise InputError(f"--drive {kind} simulates the unit from the profile's [plant] "
+                         "table, and it has none", source=profile.source)
+    _method_bias(config.getoption("--method-bias"), profile)
 
 
 def _check_resources(config: pytest.Config, profile: UnitProfile) -> None:

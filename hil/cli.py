@@ -166,6 +166,13 @@ def main(argv: Sequence[str] | None = None) -> int:
     except HilError as exc:
         print(f"gimbal-hil: error: {exc}", file=sys.stderr)
         return 2
+    except Exception as exc:  # a bug: one line for the operator, the traceback with -v
+        if args.verbose:
+            raise
+        print(f"gimbal-hil: internal error: {type(exc).__name__}: {exc} (a bug in "
+              f"gimbal-hil: run it again with -v for the traceback and report it)",
+              file=sys.stderr)
+        return INTERNAL_ERROR
 
 
 def _check_unit_serial(drive: str, serial: str | None) -> None:
@@ -177,6 +184,9 @@ def _check_unit_serial(drive: str, serial: str | None) -> None:
         raise InputError(f"--drive {drive} calibrates a real unit: give its --unit-serial "
                          f"SERIAL (the default {SIMULATOR_SERIAL} is for the simulator only)")
 
+
+#: exit status of a bug (an exception gimbal-hil did not raise on purpose)
+INTERNAL_ERROR = 3
 
 #: the longest built-in excitation `simulate` plans: two hours at the demo's 4 kHz keep a
 #: run's arrays (~30 columns of float64 and the CSV text) near 2 GB

@@ -10,8 +10,9 @@ import argparse
 import logging
 import sys
 import time
+from pathlib import Path
 
-from hil.errors import HilError
+from hil.errors import HilError, InputError
 
 log = logging.getLogger(__name__)
 
@@ -62,6 +63,7 @@ def run(args: argparse.Namespace) -> int:
 
     try:
         started = time.perf_counter()
+        _check_outputs(args)  # before minutes of fitting, not after
         # refused before being read whole when too long for the memory budget
         recording = read_recording(args.recording, bytes_per_row=DIAGNOSE_BYTES_PER_ROW)
         validate = (read_recording(args.validate, bytes_per_row=DIAGNOSE_BYTES_PER_ROW)
@@ -86,6 +88,26 @@ def run(args: argparse.Namespace) -> int:
     print(f"{args.recording}: base fit {data['base']['fit_pct']:.1f} % held out; "
           f"causes: {named} ({time.perf_counter() - started:.1f} s) -> {args.json}")
     return 0
+
+
+def _check_outputs(args: argparse.Namespace) -> None:
+    """Each output can be written where it is asked for: a file's folder is a folder (or can
+    be made), a plot folder is not a file.
+
+    Raises
+    ------
+    InputError
+        Naming the option and the path.
+    """
+    for option, target in (("--json", args.json), ("--profile-out", args.profile_out)):
+        if target is None:
+            continue
+        folder = Path(target).resolve().parent
+        blocked = next((p for p in (folder, *folder.parents) if p.exists()), None)
+        if blocked is not None and not blocked.is_dir():
+            raise InputError(f"{target}: cannot write: {blocked} is a file", source=option)
+    if args.plots is not None and Path(args.plots).exists() and not Path(args.plots).is_dir():
+        raise InputError(f"{args.plots}: cannot write plots: it is a file", source="--plots")
 
 
 def main(argv: list[str] | None = None) -> int:
