@@ -161,7 +161,7 @@ def _diagnose(tmp_path: Path, recording: Path, budget_mb: str) -> tuple[int, str
     done = subprocess.run([sys.executable, "-c", code, "diagnose", str(recording), "--json",
                            str(tmp_path / "out.json")], capture_output=True, text=True,
                           env={**os.environ, "GIMBAL_HIL_MEMORY_BUDGET_MB": budget_mb},
-                          timeout=600, check=False)
+                          cwd=tmp_path, timeout=600, check=False)
     found = re.search(r"MAXRSS_KB (\d+)", done.stderr)
     assert found, done.stderr
     other = [line for line in done.stderr.splitlines() if not line.startswith("MAXRSS_KB")]
