@@ -10,11 +10,11 @@ from datetime import UTC, datetime
 from pathlib import Path
 
 from sqlalchemy import Connection, func, insert, select
-from sqlalchemy.exc import IntegrityError, OperationalError
+from sqlalchemy.exc import DBAPIError, IntegrityError
 
 from hil.certificate.integrity import verify_document
 from hil.errors import InputError
-from hil.store.engine import Store, StoreUnavailableError
+from hil.store.engine import Store, store_failure
 from hil.store.rows import CertificateRows, certificate_rows
 from hil.store.schema import protocol_outcomes, recordings, results, runs
 
@@ -95,8 +95,8 @@ def ingest_text(store: Store, text: str, *, source: str) -> Ingested:
             if _stored(connection, run["certificate_id"]):
                 return done
         raise
-    except OperationalError as exc:
-        raise StoreUnavailableError(f"results store {store.url}: {exc.orig}") from None
+    except DBAPIError as exc:  # down, locked past the timeout, a table gone, …
+        raise store_failure(exc, store.url) from None
     log.info("stored run %s (%s)", run["run_id"], run["certificate_id"])
     return Ingested(run["certificate_id"], run["run_id"], run["serial"], new=True)
 
