@@ -71,12 +71,16 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    """Run one ``results`` subcommand; its exit code."""
+    """Run one ``results`` subcommand; its exit code.
+
+    A database error while it runs (a table gone, a lock held past the timeout, the server
+    gone) is one line, exit 2 (:func:`hil.store.engine.store_failure`), never a traceback.
+    """
+    from sqlalchemy.exc import SQLAlchemyError
+
     from hil.drives.station import load_station_identity
-    from hil.store.engine import open_store, resolve_store_url
-    from hil.store.ingest import ingest_tree
-    from hil.store.outbox import sync_outbox
-    from hil.store.query import units
+    from hil.store.engine import open_store, resolve_store_url, store_failure, store_target
+    from hil.store.outbox import foreign_entries, pending, refusal
 
     station_store = (load_station_identity(args.station_file).store
                      if args.station_file is not None else None)
@@ -84,24 +88,45 @@ def run(args: argparse.Namespace) -> int:
     command = args.results_command
     if command not in WRITING_COMMANDS:
         _require_existing_store(url)
+    if command == "sync":  # every waiting run meant for another store: no store opened
+        foreign = foreign_entries(args.out, store_target(url))
+        if foreign and sum(map(len, foreign.values())) == len(pending(args.out)):
+            raise InputError(refusal(args.out, foreign, _shown(url)))
     store = open_store(url)
     try:
-        if command in WRITING_COMMANDS:
-            done = (sync_outbox(store, args.out) if command == "sync" else
-                    [i for d in args.directories for i in ingest_tree(store, d)])
-            _emit(args, _ingested_json(done, store), _ingested_text(done, store, command))
-            return 0
-        if command == "units":
-            found = units(store)
-            _emit(args, [_summary_json(s) for s in found], _units_text(found))
-            return 0
-        if command == "history":
-            return _history(args, store)
-        if command == "trend":
-            return _trend(args, store)
-        return fleet_cli.run(args, store)
+        return _run(args, store)
+    except SQLAlchemyError as exc:
+        raise store_failure(exc, store.url, url=url) from None
     finally:
         store.close()
+
+
+def _shown(url: str) -> str:
+    from hil.store.engine import parse_store_url
+
+    return parse_store_url(url).render_as_string(hide_password=True)
+
+
+def _run(args: argparse.Namespace, store: Store) -> int:
+    from hil.store.ingest import ingest_tree
+    from hil.store.outbox import sync_outbox
+    from hil.store.query import units
+
+    command = args.results_command
+    if command in WRITING_COMMANDS:
+        done = (sync_outbox(store, args.out) if command == "sync" else
+                [i for d in args.directories for i in ingest_tree(store, d)])
+        _emit(args, _ingested_json(done, store), _ingested_text(done, store, command))
+        return 0
+    if command == "units":
+        found = units(store)
+        _emit(args, [_summary_json(s) for s in found], _units_text(found))
+        return 0
+    if command == "history":
+        return _history(args, store)
+    if command == "trend":
+        return _trend(args, store)
+    return fleet_cli.run(args, store)
 
 
 def _require_existing_store(url: str) -> None:

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import argparse
 import json
+from collections.abc import Callable
 from datetime import UTC, datetime
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -82,7 +83,8 @@ def run(args: argparse.Namespace, store: Store) -> int:
         points = result_series(store, args.parameter, station=args.station, since=since,
                                include_reference=True)
         _require(points, args.parameter, store)
-        path = export_rows(points, format=args.format, path=args.output)
+        path = _writing(args.output, lambda: export_rows(points, format=args.format,
+                                                         path=args.output))
         print(f"{len(points)} run(s) of {args.parameter} written to {path}")
         return 0
     if command == "yield":
@@ -95,8 +97,9 @@ def run(args: argparse.Namespace, store: Store) -> int:
               for name in names}
     baselines = {name: found for name in names
                  if (found := load_baseline(store, BASELINE_PREFIX + name)) is not None}
-    path = fleet_report_html(series, run_summaries(store, station=args.station, since=since),
-                             args.html, baselines=baselines)
+    summaries = run_summaries(store, station=args.station, since=since)
+    path = _writing(args.html, lambda: fleet_report_html(series, summaries, args.html,
+                                                         baselines=baselines))
     print(f"fleet report of {len(names)} result(s) written to {path}")
     return 0
 
@@ -136,6 +139,20 @@ def _spc(args: argparse.Namespace, store: Store, since: datetime | None) -> int:
                  "any run" if not args.gate_last else f"the newest {args.gate_last} runs")
         print(f"SIGNAL: a selected rule or the EWMA fired on {scope} (exit 1)")
     return 1 if signal else 0
+
+
+def _writing(path: Path, write: Callable[[], Path]) -> Path:
+    """``write()``; a file that cannot be written is one line naming it (exit 2).
+
+    Raises
+    ------
+    InputError
+        The folder is missing or read-only, the path is a folder, the disk is full, …
+    """
+    try:
+        return write()
+    except OSError as exc:
+        raise InputError(f"cannot write: {exc.strerror or exc}", source=str(path)) from None
 
 
 def _since(text: str | None) -> datetime | None:
