@@ -263,6 +263,19 @@ def _check_outcomes(document: Mapping[str, Any], problems: list[str]) -> None:
                         f"({implied} by the decision rule)")
 
 
+def stated_outcomes(document: Mapping[str, Any]) -> dict[str, Any]:
+    """``document`` with each result's outcome and the overall outcome set as the decision
+    rule gives them (a tool that writes a certificate of its own, a test that derives one
+    run from another); seal it afterwards (:func:`seal`)."""
+    restated: dict[str, Any] = json.loads(json.dumps(document))
+    judged = [_judged(entry, i, []) for i, entry in enumerate(restated.get("results", []))]
+    for entry, outcome in zip(restated.get("results", []), judged, strict=True):
+        if outcome is not None:
+            entry["outcome"] = outcome
+    restated["outcome"] = _implied(restated, [j for j in judged if j is not None])
+    return restated
+
+
 def _judged(entry: Any, i: int, problems: list[str]) -> str | None:
     """Result ``i``'s outcome by :func:`hil.measurement.judge`, checked against the stated
     one; ``None`` when it cannot be judged (a problem is noted)."""

@@ -18,7 +18,7 @@ from pathlib import Path
 from typing import Any
 
 from sqlalchemy import func, select
-from store_variants import SERIAL, variant
+from store_variants import SERIAL, copy_files, variant
 
 from hil.store import open_store
 from hil.store.outbox import pending
@@ -42,15 +42,17 @@ def test_eight_stations_at_once_lose_and_duplicate_nothing(
     text = (calibrated / SERIAL / "certificate.json").read_text(encoding="utf-8")
     shared = tmp_path / "shared" / "certificate.json"
     shared.parent.mkdir()
-    shared.write_text(variant(text, serial="SHARED", index=0), encoding="utf-8")
+    shared.write_text(variant(text, serial="SHARED", index=0, files=True), encoding="utf-8")
+    copy_files(shared, calibrated / SERIAL)
     plans: list[list[Path]] = []
     for station in range(STATIONS):
         paths = []
         for k in range(RUNS_EACH):
             path = tmp_path / f"st{station}" / f"U{station}-{k}" / "certificate.json"
             path.parent.mkdir(parents=True)
-            path.write_text(variant(text, serial=f"U{station}-{k}", index=k,
+            path.write_text(variant(text, serial=f"U{station}-{k}", index=k, files=True,
                                     station=f"ST-{station}"), encoding="utf-8")
+            copy_files(path, calibrated / SERIAL)
             paths.append(path)
         paths.insert(station % RUNS_EACH, shared)
         plans.append(paths)

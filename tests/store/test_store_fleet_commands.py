@@ -10,7 +10,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from store_variants import SERIAL, variant
+from store_variants import SERIAL, resealed, variant
 
 from hil.cli import main
 
@@ -30,7 +30,7 @@ def _with_value(text: str, value: float, index: int, tmp: Path) -> Path:
             result["value"] = value
     path = tmp / f"u{index}" / "certificate.json"
     path.parent.mkdir(parents=True)
-    path.write_text(json.dumps(cert), encoding="utf-8")
+    path.write_text(json.dumps(resealed(cert)), encoding="utf-8")
     return path
 
 
