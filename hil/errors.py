@@ -2,6 +2,11 @@
 
 from __future__ import annotations
 
+#: control characters an error message shows escaped, so that it stays one line
+_ONE_LINE = {ord("\n"): "\\n", ord("\r"): "\\r", ord("\t"): "\\t", ord("\v"): "\\v",
+             ord("\f"): "\\f", 0x1C: "\\x1c", 0x1D: "\\x1d", 0x1E: "\\x1e", 0x85: "\\x85",
+             0x2028: "\\u2028", 0x2029: "\\u2029"}
+
 
 class HilError(Exception):
     """Base of every error gimbal-hil raises on purpose."""
@@ -31,7 +36,9 @@ class InputError(HilError):
             )
             if part
         )
-        super().__init__(f"{where}: {message}" if where else message)
+        text = f"{where}: {message}" if where else message
+        # one line, whatever the input held (a key or a value with a line break in it)
+        super().__init__(text.translate(_ONE_LINE))
 
 
 class RecordingError(InputError):
