@@ -9,6 +9,7 @@ where it is handled.
 
 from __future__ import annotations
 
+import math
 import subprocess
 import sys
 from collections.abc import Callable
@@ -100,6 +101,9 @@ CASES: dict[str, Case] = {
     "a recording of an axis at rest": Case(
         ("diagnose", "rest.csv", "--json", "d.json"), 2, "the axis never moves",
         setup=lambda d: _recording(d / "rest.csv", moving=False)),
+    "a recording with its position in degrees": Case(
+        ("diagnose", "deg.csv", "--json", "d.json"), 2, "position_rad looks like degrees",
+        setup=lambda d: _in_degrees(EXAMPLE, d / "deg.csv")),
     "a recording with a byte-order mark": Case(
         ("diagnose", "bom.csv", "--json", "d.json"), 0, "base fit",
         setup=lambda d: (d / "bom.csv").write_text(
@@ -107,6 +111,17 @@ CASES: dict[str, Case] = {
     "a results command on a folder without a store": Case(
         ("results", "units", "--out", "nowhere"), 2, "no results store"),
 }
+
+
+def _in_degrees(source: Path, target: Path) -> None:
+    lines = _lines_of(source)
+    column = lines[0].split(",").index("position_rad")
+    out = [lines[0]]
+    for line in lines[1:]:
+        cells = line.split(",")
+        cells[column] = repr(math.degrees(float(cells[column])))
+        out.append(",".join(cells))
+    target.write_text("\n".join(out) + "\n", encoding="utf-8")
 
 
 def _lines_of(path: Path) -> list[str]:

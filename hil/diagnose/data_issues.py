@@ -78,6 +78,30 @@ def refuse_unusable(signals: Signals) -> None:
     if not np.ptp(signals.position[signals.valid]) > 0:
         raise IdentificationError(f"{signals.source}: the axis never moves (the position is "
                                   "constant): nothing to identify")
+    ratio = _position_to_velocity_scale(signals)
+    for name, scale in UNIT_SLIPS.items():
+        if abs(ratio / scale - 1.0) < UNIT_SLIP_TOLERANCE:
+            raise IdentificationError(
+                f"{signals.source}: the position's derivative is {ratio:.4g} × the recorded "
+                f"velocity: position_rad looks like {name} (the format's position is rad or m)")
+
+
+#: a position column in another unit than the velocity's: the factor its derivative shows
+UNIT_SLIPS = {"degrees": 180.0 / math.pi, "milliradians (or mm)": 1000.0}
+#: how close to a slip's factor the measured one must come (a velocity filter's droop
+#: and noise change the RMS ratio by a few percent, never by a factor)
+UNIT_SLIP_TOLERANCE = 0.05
+
+
+def _position_to_velocity_scale(signals: Signals) -> float:
+    """RMS of the position's derivative over RMS of the recorded velocity (1 when both are
+    in the same unit; nan without a usable velocity column)."""
+    reported = signals.velocity_reported[signals.valid]
+    derived = signals.velocity[signals.valid]
+    reported_rms = float(np.sqrt(np.mean(reported**2))) if reported.size else 0.0
+    if not (math.isfinite(reported_rms) and reported_rms > 0):
+        return math.nan
+    return float(np.sqrt(np.mean(derived**2))) / reported_rms
 
 
 def velocity_delay_samples(signals: Signals) -> float:
