@@ -139,7 +139,7 @@ def _profile_text() -> str:
         (
             "torque_nm = 0.5\ntravel",
             "torque_nm = -1\ntravel",
-            "\\[limits\\] 'torque_nm': must be above",
+            "\\[limits\\] torque_nm = -1: must be > 0",
         ),
         (
             "inertia_kg_m2 = 0.0036\n",

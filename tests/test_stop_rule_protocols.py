@@ -23,6 +23,7 @@ from hil.drives.sim import SimDrive
 from hil.errors import ProfileError
 from hil.profile import builtin_profile_path, load_profile
 from hil.suite import cogging
+from hil.suite.catalogue import PROTOCOL_OF
 
 pytest_plugins = ["pytester"]
 
@@ -43,6 +44,9 @@ def _profile(tmp_path: Path, *, noise_scale: float, tables: dict[str, str]) -> P
         table = re.match(r"\[protocols\.(\w+)\]", block)
         if table and table.group(1) not in tables:
             continue
+        result = re.match(r"\[measurements\.(\w+)\]", block)
+        if result and PROTOCOL_OF[result.group(1)] not in tables:
+            continue  # a result whose protocol the profile does not configure is refused
         blocks.append(block.rstrip("\n") + "\n" + tables[table.group(1)] + "\n\n"
                       if table else block)
     noise = load_profile(DEMO).plant

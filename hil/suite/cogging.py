@@ -40,7 +40,8 @@ MEASUREMENTS = ("cogging_peak_nm", "kt_ripple_peak_pct")
 #: what it takes from earlier protocols (:mod:`hil.suite.needs`); with passes =
 #: "gravity_cable" it also reads that sweep, refused without it (:func:`sweep_passes`)
 INERTIA = Need(protocol="inertia_friction", result="inertia_kg_m2",
-               without="the declared nominal J for the acceleration correction")
+               without="the declared nominal J for the acceleration correction (none "
+                       "when the profile declares no J)")
 NEEDS: tuple[Need, ...] = (INERTIA,)
 
 
@@ -236,15 +237,15 @@ def inertia_for_correction(calibration: CalibrationRun, profile: UnitProfile) ->
     source : str
         Where it came from, for the certificate's details.
 
-    Raises
-    ------
-    ProfileError
-        Neither measured nor declared (no ``[measurements.inertia_kg_m2]``).
     """
     inertia = INERTIA.read(calibration)
     if inertia is not None:
         return inertia.value, "measured (inertia_friction)"
-    return profile.measurement("inertia_kg_m2").nominal, "declared nominal"
+    if "inertia_kg_m2" in profile.measurements:
+        return profile.measurement("inertia_kg_m2").nominal, "declared nominal"
+    # a unit type that neither measures nor declares J: the passes run at constant speed,
+    # only their ramps (left out of the fit's core) carry J·α
+    return 0.0, "none (J neither measured nor declared: no acceleration correction)"
 
 
 def sweep_passes(
