@@ -9,17 +9,13 @@ from __future__ import annotations
 import gzip
 import hashlib
 import json
-import os
-import re
 import signal
-import subprocess
-import sys
-import threading
 import time
 from pathlib import Path
 
 import pytest
 
+from tests.calibration_process import RunningCalibration
 from tests.helpers import subset_profile
 
 # the protocol with a long excitation, and the log line saying that excitation started
@@ -29,51 +25,17 @@ LONG_RUN = {
 }
 
 
-def _wait_for_line(path: Path, pattern: str, timeout_s: float) -> None:
-    deadline = time.monotonic() + timeout_s
-    while time.monotonic() < deadline:
-        if path.is_file() and re.search(pattern, path.read_text("utf-8", "replace")):
-            return
-        time.sleep(0.02)
-    raise AssertionError(f"no '{pattern}' in {path} after {timeout_s} s")
-
-
 @pytest.mark.parametrize("kind", sorted(LONG_RUN))
 def test_sigint_mid_excitation_keeps_the_rows_acquired(tmp_path: Path, kind: str) -> None:
     protocol, excitation, started_line = LONG_RUN[kind]
     profile = subset_profile(tmp_path / "profiles", protocol)
-    log_file = tmp_path / "calibrate.log"
-    command = [sys.executable, "-m", "hil.cli", "calibrate", "--drive", kind,
-               "--profile", str(profile), "--unit-serial", "INT-1", "--out",
-               str(tmp_path / "out"), "--", "--store", "off", "--no-documents",
-               "-p", "no:cacheprovider", "--log-file", str(log_file),
-               "--log-file-level", "INFO"]
-    process = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
-                               text=True, env={**os.environ, "PYTHONUNBUFFERED": "1"},
-                               cwd=tmp_path)
-    lines: list[str] = []
-    started = threading.Event()
-
-    def read() -> None:
-        assert process.stdout is not None
-        for line in process.stdout:
-            lines.append(line)
-            if "▶ protocol 1" in line:
-                started.set()
-
-    reader = threading.Thread(target=read, daemon=True)
-    reader.start()
-    try:
-        assert started.wait(240), "".join(lines)
-        _wait_for_line(log_file, started_line, 120)
-        time.sleep(1.0)  # about a second of the excitation acquired
-        process.send_signal(signal.SIGINT)
-        code = process.wait(120)
-    finally:
-        if process.poll() is None:
-            process.kill()
-    reader.join(10)
-    console = "".join(lines)
+    run = RunningCalibration(tmp_path, ["--drive", kind, "--profile", str(profile),
+                                        "--unit-serial", "INT-1", "--out", str(tmp_path / "out")])
+    run.wait_for_console("▶ protocol 1")
+    run.wait_for_log(started_line)
+    time.sleep(1.0)  # about a second of the excitation acquired
+    code = run.stop_with(signal.SIGINT)
+    console = run.console
     assert code != 0, console
     assert "Traceback" not in console, console
     unit = tmp_path / "out" / "INT-1"

@@ -8,9 +8,6 @@ import json
 import os
 import re
 import signal
-import subprocess
-import sys
-import threading
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -23,6 +20,7 @@ from hil.drives.cia402.emulator import HEARTBEAT_ERROR, QUICK_STOP, SWITCH_ON_DI
 from hil.drives.emulated import canopen_emulator
 from hil.motion import Mode
 from hil.profile import load_profile
+from tests.calibration_process import RunningCalibration
 
 # each backend's log lines: a run moving the axis, quick stop, disabled
 STATE_LINES = {
@@ -32,60 +30,24 @@ STATE_LINES = {
 }
 
 
-def _wait_for_line(path: Path, offset: int, pattern: str, timeout_s: float) -> None:
-    deadline = time.monotonic() + timeout_s
-    while time.monotonic() < deadline:
-        with path.open("rb") as stream:
-            stream.seek(offset)
-            if re.search(pattern, stream.read().decode("utf-8", "replace")):
-                return
-        time.sleep(0.02)
-    raise AssertionError(f"no '{pattern}' in {path} after {timeout_s} s")
-
-
-def _calibrate_and_signal(tmp_path: Path, kind: str, signum: int, *, after_s: float
-                          ) -> tuple[int, str, list[str], dict[str, object]]:
+def _calibrate_and_signal(tmp_path: Path, kind: str, signum: signal.Signals, *,
+                          after_s: float) -> tuple[int, str, list[str], dict[str, object]]:
     """Start a calibration, send ``signum`` ``after_s`` after protocol 2 started moving the
     axis; its exit code, console output, the log lines written after the signal, the
     certificate."""
-    log_file = tmp_path / "calibrate.log"
-    command = [sys.executable, "-m", "hil.cli", "calibrate", "--drive", kind,
-               "--unit-serial", "SIG-1", "--out", str(tmp_path / "out"), "--",
-               "--store", "off", "--no-documents", "-p", "no:cacheprovider",
-               "--log-file", str(log_file), "--log-file-level", "INFO"]
-    env = {**os.environ, "PYTHONUNBUFFERED": "1"}
-    process = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
-                               text=True, env=env, cwd=tmp_path)
-    assert process.stdout is not None
-    lines: list[str] = []
-    started = threading.Event()
-
-    def read() -> None:
-        assert process.stdout is not None
-        for line in process.stdout:
-            lines.append(line)
-            if "▶ protocol 2" in line:
-                started.set()
-
-    reader = threading.Thread(target=read, daemon=True)
-    reader.start()
-    try:
-        assert started.wait(240), "".join(lines)
-        _wait_for_line(log_file, log_file.stat().st_size, STATE_LINES[kind][0], 60)
-        time.sleep(after_s)  # the protocol's motion under way
-        logged = log_file.stat().st_size
-        process.send_signal(signum)
-        code = process.wait(120)
-    finally:
-        if process.poll() is None:
-            process.kill()
-    reader.join(10)
-    with log_file.open("rb") as stream:
+    run = RunningCalibration(tmp_path, ["--drive", kind, "--unit-serial", "SIG-1",
+                                        "--out", str(tmp_path / "out")])
+    run.wait_for_console("▶ protocol 2")
+    run.wait_for_log(STATE_LINES[kind][0], offset=run.log_size(), timeout_s=60)
+    time.sleep(after_s)  # the protocol's motion under way
+    logged = run.log_size()
+    code = run.stop_with(signum)
+    with run.log_file.open("rb") as stream:
         stream.seek(logged)
         after = stream.read().decode("utf-8", "replace").splitlines()
     certificate = tmp_path / "out" / "SIG-1" / "certificate.json"
-    assert certificate.is_file(), "".join(lines)
-    return code, "".join(lines), after, json.loads(certificate.read_text(encoding="utf-8"))
+    assert certificate.is_file(), run.console
+    return code, run.console, after, json.loads(certificate.read_text(encoding="utf-8"))
 
 
 @pytest.mark.parametrize(("kind", "signum", "after_s"), [
