@@ -297,8 +297,11 @@ def suite_arguments() -> list[str]:
     suite = str(protocols_dir())
     # the command has imported hil already: pytest cannot rewrite the asserts of the
     # package its plugin comes from (the protocols' asserts carry their own messages)
+    # the test extras' plugins, where installed, have nothing to do in a calibration
+    # (hypothesis alone imports for a second at the run's end)
     return [suite, "-c", os.devnull, "--rootdir", suite, "--confcutdir", suite,
-            "-p", "no:cacheprovider", "-q", "-W", "ignore::pytest.PytestAssertRewriteWarning"]
+            "-p", "no:cacheprovider", "-p", "no:hypothesispytest", "-p", "no:benchmark",
+            "-q", "-W", "ignore::pytest.PytestAssertRewriteWarning"]
 
 
 def _render(args: argparse.Namespace) -> int:

@@ -13,7 +13,7 @@ import hashlib
 import logging
 import os
 import tempfile
-from collections.abc import Iterable, Mapping
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Literal
@@ -208,7 +208,16 @@ class _Table:
     metadata: dict[str, str]
     header: list[str]
     cells: NDArray[np.str_]
-    line_numbers: list[int]
+    line_numbers: Sequence[int]
+    numeric: FloatArray | None = None  # every cell, when all are finite numbers
+
+    def column(self, position: int, name: str, source: str, *, strict: bool
+               ) -> FloatArray | None:
+        """Column ``position`` as floats (see :func:`_to_float`)."""
+        if self.numeric is not None:
+            return self.numeric[:, position].copy()
+        return _to_float(self.cells[:, position], name, self.line_numbers, source,
+                         strict=strict)
 
 
 def _parse_table(lines: list[str], *, source: str) -> _Table:
@@ -234,6 +243,11 @@ def _parse_table(lines: list[str], *, source: str) -> _Table:
         if name in seen:
             raise RecordingError("duplicate column name", source=source, column=name)
         seen.add(name)
+    numeric = _numeric_body(lines[header_index + 1 :], len(header))
+    if numeric is not None:  # every line a plain row of numbers: no line to name
+        first = header_index + 2
+        return _Table(metadata, header, np.empty((0, len(header)), dtype=str),
+                      range(first, first + numeric.shape[0]), numeric)
     numbered = [
         (number, line)
         for number, line in enumerate(lines[header_index + 1 :], start=header_index + 2)
@@ -251,6 +265,21 @@ def _parse_table(lines: list[str], *, source: str) -> _Table:
         )
     cells = np.array(rows, dtype=str)
     return _Table(metadata, header, cells, [number for number, _ in numbered])
+
+
+def _numeric_body(body: list[str], width: int) -> FloatArray | None:
+    """The rows as one float array, parsed in C, when every line is ``width`` finite
+    numbers and there are enough of them; otherwise None, and the line-by-line reader
+    finds and names what is wrong (a blank line, a text cell, a short row)."""
+    if len(body) < MIN_SAMPLES or not all(body):
+        return None
+    try:
+        values = np.loadtxt(body, delimiter=",", dtype=np.float64, ndmin=2, comments=None)
+    except ValueError:
+        return None
+    if values.shape != (len(body), width) or not np.isfinite(values).all():
+        return None
+    return values
 
 
 def _strictly_increasing(time_s: FloatArray, table: _Table, source: str) -> None:
@@ -276,9 +305,7 @@ def parse_recording(lines: list[str], *, source: str, log_warnings: bool = True)
     known = set(required) | set(ROTARY_OPTIONAL if kind == "rotary" else LINEAR_OPTIONAL)
     columns: dict[str, FloatArray] = {}
     for position, name in enumerate(table.header):
-        values = _to_float(
-            table.cells[:, position], name, table.line_numbers, source, strict=name in known
-        )
+        values = table.column(position, name, source, strict=name in known)
         if values is not None:
             columns[name] = values
     _strictly_increasing(columns["time_s"], table, source)
@@ -304,9 +331,7 @@ def read_command_csv(path: str | Path, *, allowed: tuple[str, ...]) -> dict[str,
         )
     columns: dict[str, FloatArray] = {}
     for name in ("time_s", present[0]):
-        values = _to_float(
-            table.cells[:, table.header.index(name)], name, table.line_numbers, source, strict=True
-        )
+        values = table.column(table.header.index(name), name, source, strict=True)
         assert values is not None  # strict conversion returns values or raises
         columns[name] = values
     _strictly_increasing(columns["time_s"], table, source)
@@ -314,7 +339,7 @@ def read_command_csv(path: str | Path, *, allowed: tuple[str, ...]) -> dict[str,
 
 
 def _to_float(
-    text: NDArray[np.str_], name: str, line_numbers: list[int], source: str, *, strict: bool
+    text: NDArray[np.str_], name: str, line_numbers: Sequence[int], source: str, *, strict: bool
 ) -> FloatArray | None:
     """Column to floats; a known column must be numeric and finite, an unknown one is skipped."""
     try:
@@ -400,8 +425,9 @@ def write_recording(recording: Recording, path: str | Path) -> str:
     names = _ordered(recording.columns)
     lines = [f"# {key}: {value}" for key, value in recording.metadata.items()]
     lines.append(",".join(names))
-    formatted = [map("{:.9g}".format, recording.columns[name].tolist()) for name in names]
-    lines.extend(map(",".join, zip(*formatted, strict=True)))
+    row_format = ",".join(["%.9g"] * len(names))  # one format per row: twice as fast
+    lines.extend(row_format % row for row in zip(
+        *(recording.columns[name].tolist() for name in names), strict=True))
     payload = ("\n".join(lines) + "\n").encode("utf-8")
     if path.suffix == ".gz":
         payload = gzip.compress(payload, compresslevel=3, mtime=0)
