@@ -58,8 +58,17 @@ class RunningCalibration:
                     stream.seek(offset)
                     if re.search(pattern, stream.read().decode("utf-8", "replace")):
                         return
+            assert self.process.poll() is None, (
+                f"ended before '{pattern}' was logged:\n{self.console}\n{self._log_tail()}")
             time.sleep(0.02)
-        raise AssertionError(f"no '{pattern}' in {self.log_file} after {timeout_s} s")
+        raise AssertionError(f"no '{pattern}' in {self.log_file} after {timeout_s} s:\n"
+                             f"{self.console}\n{self._log_tail()}")
+
+    def _log_tail(self, lines: int = 40) -> str:
+        if not self.log_file.is_file():
+            return "(no log)"
+        text = self.log_file.read_text(encoding="utf-8", errors="replace")
+        return "log, last lines:\n" + "\n".join(text.splitlines()[-lines:])
 
     def log_size(self) -> int:
         return self.log_file.stat().st_size if self.log_file.is_file() else 0

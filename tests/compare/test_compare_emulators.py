@@ -30,7 +30,7 @@ def calibrate(document: dict[str, Any], out: Path, *, drive: str, only: str,
     done = subprocess.run(
         [sys.executable, "-m", "hil.cli", "calibrate", "--drive", drive, "--station",
          str(station), "--profile", str(profile), "--unit-serial", "EMU-1", "--seed",
-         str(seed), "--out", str(out), "--", "-k", only],
+         str(seed), "--out", str(out), "--", "-k", only, "--no-documents", "--store", "off"],
         capture_output=True, text=True, timeout=600, check=False,
     )
     path = out / "EMU-1" / "certificate.json"

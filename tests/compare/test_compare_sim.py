@@ -102,7 +102,8 @@ def calibrate(document: dict[str, Any], out: Path, *, seed: int) -> Path:
     profile = write_profile(document, out / "profile.toml")
     done = subprocess.run(
         [sys.executable, "-m", "hil.cli", "calibrate", "--drive", "sim", "--profile",
-         str(profile), "--unit-serial", SERIAL, "--seed", str(seed), "--out", str(out)],
+         str(profile), "--unit-serial", SERIAL, "--seed", str(seed), "--out", str(out),
+         "--", "--no-documents", "--store", "off"],  # compare reads the JSON record only
         capture_output=True, text=True, timeout=600, check=False,
     )
     path = out / SERIAL / "certificate.json"

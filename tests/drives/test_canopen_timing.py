@@ -212,3 +212,26 @@ def test_averaged_torque_lag_at_the_lower_limit(profile: UnitProfile) -> None:
     assert accuracy is not None
     result = _current_loop_over_canopen(_lagged(profile, 2.1e-4), seed=0, sampling="mean")
     assert result.time_constant.value == pytest.approx(0.21, rel=accuracy)
+
+
+def test_a_slower_excitation_is_paced_at_its_own_sync_period(profile: UnitProfile) -> None:
+    """Real-time pacing at a quarter of the station's SYNC rate: the drive is told 4 ms
+    (0x1006) and the host sends a SYNC every 4 ms, so 0.5 s of excitation takes 0.5 s (it
+    took 0.2 s: the SYNCs kept the station's 1 ms while the recording and the drive said
+    4 ms). The emulator, in this process, answers some SYNCs late in real time (why its
+    station runs in lockstep): lost rows are allowed here, the pace is the subject."""
+    changes = {"sync_pacing": "realtime", "lost_sample_fraction": 0.5}
+    with (
+        canopen_emulator(profile, seed=5, station_changes=changes) as (_, station),
+        CanOpenDrive(station, limits=profile.limits) as drive,
+    ):
+        drive.enable()
+        fs_hz = drive.info.max_sample_rate_hz / 4
+        excitation = Excitation(name="half_rate", mode=Mode.VELOCITY, fs_hz=fs_hz,
+                                command=0.2 * np.sin(2 * math.pi * 2.0 * np.arange(
+                                    round(0.5 * fs_hz)) / fs_hz))
+        started = time.monotonic()
+        recording = drive.run(excitation)
+        took_s = time.monotonic() - started
+    assert recording.metadata["sync_period_s"] == f"{1 / fs_hz:g}"
+    assert 0.9 * excitation.duration_s < took_s < 3 * excitation.duration_s, took_s

@@ -27,6 +27,7 @@ from hil.drives.cia402.protocol import (
     Scaling,
     state_of,
 )
+from hil.drives.realtime import collector_held
 from hil.errors import (
     DriveCommunicationError,
     DriveError,
@@ -190,7 +191,7 @@ def run_stream(link: CanLink, setup: RunSetup, excitation: Excitation) -> Acquir
         1 / setup.sync_period_s,
     )
     try:
-        with link.direct_receive():
+        with link.direct_receive(), collector_held():
             done = _stream_loop(link, setup, excitation, raw, offset, cob, packer)
     except _FaultedError as fault:
         # 0x603F by SDO: only now that the Notifier receives again

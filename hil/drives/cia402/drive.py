@@ -223,6 +223,7 @@ class CanOpenDrive(Drive):
         self.link.write(0x60C2, 1, mantissa)
         self.link.write(0x1006, 0, period_us)
         self._period_us = period_us
+        self.link.sync_period_s = period_us / 1e6  # the SYNCs we send keep this period
 
     def _write_limits(self) -> None:
         """The unit's limits into the drive, so that it enforces them itself: 0x6072 max
@@ -451,7 +452,7 @@ class CanOpenDrive(Drive):
         mode_code = self.states.mode_code
         return RunSetup(
             node_id=st.node_id,
-            sync_period_s=st.sync_period_s,
+            sync_period_s=self.link.sync_period_s,
             lost_sample_fraction=st.lost_sample_fraction,
             scaling=self.scaling,
             envelope=MotionEnvelope.of(self.limits),

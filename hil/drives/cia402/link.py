@@ -76,6 +76,7 @@ class CanLink:
         self.network = canopen.Network()
         self.node: canopen.RemoteNode | None = None
         self.sync_index = -1  # index of the last SYNC we sent
+        self.sync_period_s = station.sync_period_s  # the drive's 0x1006, as last written
         self.rx1: dict[int, bytes] = {}
         self.rx2: dict[int, bytes] = {}
         self.emcy: list[tuple[int, float]] = []
@@ -307,7 +308,7 @@ class CanLink:
         """
         if cob is None or payload is None:
             cob, payload = self.rpdo_payload(self.mode, self.controlword, self.target)
-        period = self.station.sync_period_s
+        period = self.sync_period_s
         realtime = self.station.sync_pacing == "realtime"
         try:
             self.network.send_message(cob, payload)

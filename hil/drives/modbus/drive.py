@@ -46,6 +46,7 @@ from hil.drives.modbus.acquire import (
 from hil.drives.modbus.link import ModbusLink
 from hil.drives.modbus.regmap import TORQUE_MEAN, TORQUE_OFFSET, RegisterMap, load_register_map
 from hil.drives.modbus.state_machine import ModbusStateMachine
+from hil.drives.realtime import collector_held
 from hil.drives.station import ModbusStation
 from hil.errors import DriveError, DriveStateError, ProfileError
 from hil.motion import Excitation, Limits, Mode
@@ -236,7 +237,8 @@ class ModbusDrive(Drive):
         log.info("%s: polling %s (%.2f s at %g Hz)", self.link.where, excitation.name,
                  excitation.duration_s, excitation.fs_hz)
         try:
-            poll(excitation, run, self.feedback, MotionEnvelope.of(self.limits))
+            with collector_held():
+                poll(excitation, run, self.feedback, MotionEnvelope.of(self.limits))
         except DriveError as exc:
             error = exc
         except KeyboardInterrupt as stop:  # a stop signal: quick stop, keep the rows so far
