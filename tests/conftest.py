@@ -12,6 +12,7 @@ import pytest
 from hypothesis import HealthCheck, settings
 from hypothesis.internal.conjecture import providers
 from hypothesis.internal.constants_ast import Constants
+from numba.core.registry import cpu_target
 
 settings.register_profile(
     "ci",
@@ -29,6 +30,14 @@ settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "ci"))
 # draws. Off: derandomized draws depend on the test's own source and the pinned release.
 _NO_LOCAL_CONSTANTS = Constants()
 providers._get_local_constants = lambda: _NO_LOCAL_CONSTANTS
+
+
+# pytester restores sys.modules after each in-process run, so a module first imported
+# inside one is imported afresh later. numba refuses that of the typing registries its
+# CPU target loads on first use ("duplicate registration for PolynomialType": every
+# diagnosis test after tests/test_rate.py failed, in whichever run put them after it).
+# They are loaded here, before any run.
+cpu_target.target_context.refresh()
 
 
 # The project's own tests decide where they write from nothing of the user's: not the

@@ -14,6 +14,7 @@ own seed, not the one the shipped method-bias map was measured on.
 from __future__ import annotations
 
 import math
+import os
 import sys
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import replace
@@ -42,6 +43,9 @@ POPULATION_SEED = 7  # the shipped map was measured on seed 11, the benchmark ta
 MIN_COVERAGE = 0.80
 RMS_RANGE = (0.5, 2.0)
 
+# two at a time alone; one under pytest-xdist, whose other workers have the other cores
+CALIBRATIONS_AT_ONCE = 1 if os.environ.get("PYTEST_XDIST_WORKER") else 2
+
 pytestmark = pytest.mark.slow
 
 
@@ -53,9 +57,9 @@ def population(tmp_path_factory: pytest.TempPathFactory) -> Population:
     directory = tmp_path_factory.mktemp("coverage")
     units = write_population(directory / "units", units_per_profile=UNITS_PER_PROFILE,
                              seed=POPULATION_SEED)
-    rows = run_population(units, directory / "certificates")
+    rows = run_population(units, directory / "certificates", workers=CALIBRATIONS_AT_ONCE)
     twice = [u for u in units if int(u.serial.split("-")[1]) < PAIRS_PER_PROFILE]
-    with ThreadPoolExecutor(max_workers=2) as pool:  # the second run of each, two at a time
+    with ThreadPoolExecutor(max_workers=CALIBRATIONS_AT_ONCE) as pool:  # the second runs
         seconds = list(pool.map(
             lambda unit: calibrate(unit, directory / "pairs", seed=unit.seed + 1), twice))
     paired: dict[str, list[float]] = {}
