@@ -245,3 +245,36 @@ def test_mean_torque_required_but_not_offered(tmp_path: object, profile: UnitPro
         CanOpenDrive(station, limits=profile.limits),
     ):
         pass
+
+
+def test_a_drive_powered_up_without_a_heartbeat_is_brought_up(profile: UnitProfile) -> None:
+    """0x1017 = 0 at power-on (a common factory default): bring-up sets the heartbeat by SDO
+    before it waits for one (it failed: "did not confirm NMT PRE-OPERATIONAL by heartbeat
+    (last seen: None)"), and the heartbeat then runs at the station's period."""
+    with (
+        canopen_emulator(profile, seed=6, power_on_heartbeat_ms=0) as (emulator, station),
+        CanOpenDrive(station, limits=profile.limits) as drive,
+    ):
+        assert drive.link.heartbeat_state is not None
+        period_ms = int(drive.link.read(0x1017, 0))
+        drive.enable()
+        recording = drive.run(sine(0.2, fs_hz=drive.info.max_sample_rate_hz, periods=1))
+    assert period_ms == round(station.heartbeat_period_s * 1e3) > 0
+    assert len(recording.time_s) > 100
+    assert emulator.state != ENABLED  # and left disabled
+
+
+def test_no_node_at_the_id_is_refused_in_one_line(profile: UnitProfile) -> None:
+    """Nothing answers at the station's node id: one line naming the node and the object,
+    before any motion."""
+    from dataclasses import replace
+
+    from hil.errors import DriveCommunicationError
+
+    with canopen_emulator(profile, seed=6) as (_, station):
+        absent = replace(station, node_id=station.node_id + 1, sdo_timeout_s=0.2)
+        with pytest.raises(DriveCommunicationError) as refused:
+            CanOpenDrive(absent, limits=profile.limits).__enter__()
+    message = str(refused.value)
+    assert "\n" not in message
+    assert f"node {absent.node_id}" in message

@@ -94,7 +94,10 @@ class CanOpenDrive(Drive):
                 f"{st.bitrate / 1e3:.0f} kbit/s bus (limit {bus_max:.0f} Hz); {st.source}"
             )
         link.open()
-        link.nmt("PRE-OPERATIONAL")  # also proves the node is alive (heartbeat)
+        # many drives power up with no heartbeat (0x1017 = 0, a common factory default):
+        # PRE-OPERATIONAL commanded, the heartbeat set by SDO (its answer proves the node is
+        # there), then the state confirmed by that heartbeat
+        link.command_nmt("PRE-OPERATIONAL")
         link.write(0x1017, 0, round(st.heartbeat_period_s * 1e3))
         link.nmt("PRE-OPERATIONAL")
         self.scaling = self._scaling()

@@ -163,6 +163,7 @@ class Cia402Emulator:
         eds_path: Path | None = None,
         exact_torque_hold: bool = True,
         interpolation: int = 0,
+        power_on_heartbeat_ms: int | None = None,
     ) -> None:
         if exact_torque_hold and not plant.exact_torque_hold:
             plant = plant.with_changes(exact_torque_hold=True)  # the same physics as SimDrive
@@ -183,6 +184,7 @@ class Cia402Emulator:
         _add_safety_objects(self._od)
         self._serial = serial_number
         self._interpolation_code = interpolation
+        self._power_on_heartbeat_ms = power_on_heartbeat_ms  # 0x1017 at boot (None: the EDS)
         self._lock = threading.RLock()
         self._network: canopen.Network | None = None
         self.node: canopen.LocalNode | None = None
@@ -245,6 +247,8 @@ class Cia402Emulator:
         store.setdefault(0x6075, {})[0] = struct.pack("<I", round(self.rated_current_a * 1e3))
         store.setdefault(0x608F, {})[1] = struct.pack("<I", self.counts_per_rev)
         store.setdefault(0x60C0, {})[0] = struct.pack("<h", self._interpolation_code)
+        if self._power_on_heartbeat_ms is not None:  # 0: no heartbeat until 0x1017 is set
+            store.setdefault(0x1017, {})[0] = struct.pack("<H", self._power_on_heartbeat_ms)
         node.add_read_callback(self._on_read)  # type: ignore[no-untyped-call]
         node.add_write_callback(self._on_write)  # type: ignore[no-untyped-call]
         if self.faults.sdo_delay_s > 0:

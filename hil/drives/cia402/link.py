@@ -252,12 +252,16 @@ class CanLink:
             raise DriveCommunicationError(f"{what}: CAN error {exc}") from exc
 
     # -- NMT -------------------------------------------------------------------------
+    def command_nmt(self, state: str) -> None:
+        """Command an NMT state, unconfirmed (the node may not produce a heartbeat yet)."""
+        assert self.node is not None
+        self.node.nmt.state = state
+
     def nmt(self, state: str, *, timeout_s: float | None = None) -> None:
         """Command an NMT state and confirm it from the node's heartbeat."""
-        assert self.node is not None
         expected = {"PRE-OPERATIONAL": 127, "OPERATIONAL": 5, "STOPPED": 4}[state]
         self._heartbeat_seen.clear()
-        self.node.nmt.state = state
+        self.command_nmt(state)
         deadline = time.monotonic() + (timeout_s or self.station.heartbeat_timeout_s * 2)
         while time.monotonic() < deadline:
             self._heartbeat_seen.wait(0.05)
