@@ -259,7 +259,9 @@ class CalibrationRun:
             bias = None
         estimate = with_method_terms(estimate, spec, bias)
         measurement = Measurement(
-            protocol=protocol, spec=spec, estimate=estimate, outcome=judge(estimate, spec),
+            protocol=protocol, spec=spec, estimate=estimate,
+            outcome=judge(estimate, spec, non_negative=declared is not None and
+                          declared.non_negative),
             validation=None if bias is None or method_of else bias.validation(),
             declared=declared,
         )

@@ -23,7 +23,9 @@ DECISION_RULE = (
     "4.2.1). PASS: value inside the limits, value ± U inside the limits and the value outside "
     "the marginal band next to either limit (a fraction of the distance from the nominal to "
     "that limit). MARGINAL: value inside the limits but within the "
-    "marginal band or with a limit inside value ± U. FAIL: value outside the limits. The unit "
+    "marginal band or with a limit inside value ± U. FAIL: value outside the limits. A "
+    "quantity that cannot be negative (a spread, a ripple) cannot cross a lower limit at or "
+    "below zero: that limit has no marginal band and value − U below it is no risk. The unit "
     "conforms when every result is PASS or MARGINAL and every protocol ran to completion."
 )
 
@@ -125,17 +127,22 @@ class Measurement:
         }
 
 
-def judge(estimate: Estimate, spec: MeasurementSpec) -> Outcome:
-    """Apply :data:`DECISION_RULE`."""
+def judge(estimate: Estimate, spec: MeasurementSpec, *, non_negative: bool = False) -> Outcome:
+    """Apply :data:`DECISION_RULE` (``non_negative``: the quantity cannot be below zero)."""
     value, expanded = estimate.value, estimate.expanded_uncertainty
     if not math.isfinite(value) or not spec.lower_limit <= value <= spec.upper_limit:
         return Outcome.FAIL
+    # a lower limit the quantity cannot cross (a spread's "≥ 0") is no risk at any U: a
+    # spread of 0.5 ± 1 % was MARGINAL against [-0.001, 5] for its interval's impossible part
+    lower_binds = not (non_negative and spec.lower_limit <= 0.0)
     # the marginal band is a fraction of the distance from the nominal to each limit, so a
     # one-sided quantity (nominal at its lower limit, smaller is better) has none below
     low_band = spec.marginal_fraction * max(spec.nominal - spec.lower_limit, 0.0)
     high_band = spec.marginal_fraction * max(spec.upper_limit - spec.nominal, 0.0)
-    near_limit = value < spec.lower_limit + low_band or value > spec.upper_limit - high_band
-    straddles = value - expanded < spec.lower_limit or value + expanded > spec.upper_limit
+    near_limit = (lower_binds and value < spec.lower_limit + low_band) or (
+        value > spec.upper_limit - high_band)
+    straddles = (lower_binds and value - expanded < spec.lower_limit) or (
+        value + expanded > spec.upper_limit)
     return Outcome.MARGINAL if near_limit or straddles else Outcome.PASS
 
 

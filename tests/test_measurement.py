@@ -7,6 +7,8 @@ import math
 from pathlib import Path
 
 import pytest
+from hypothesis import given
+from hypothesis import strategies as st
 
 from hil.errors import ProfileError
 from hil.identify.estimate import Estimate, coverage_factor
@@ -64,6 +66,35 @@ def test_one_sided_quantity_has_no_marginal_band_at_its_nominal() -> None:
     assert outcome(0.3) is Outcome.PASS
     assert outcome(4.5) is Outcome.MARGINAL
     assert outcome(5.1) is Outcome.FAIL
+
+
+SPREAD = MeasurementSpec(name="spread", unit="%", nominal=0.0, lower_limit=-0.001,
+                         upper_limit=5.0, marginal_fraction=0.2)
+
+
+@given(value=st.floats(0.0, 6.0), u=st.floats(0.0, 3.0))
+def test_a_quantity_that_cannot_be_negative_is_never_marginal_for_its_lower_limit(
+    value: float, u: float
+) -> None:
+    """Issue 30: a spread of 0.5 ± 1 % was MARGINAL against [-0.001, 5] (31 of 40 units of a
+    foreign drive held for review), its interval reaching a limit no spread can cross. As
+    non-negative: judged by the upper limit alone; as a signed quantity: as before."""
+    estimate = Estimate(name="spread", value=value, standard_uncertainty=u / 2, unit="%")
+    signed = judge(estimate, SPREAD)
+    positive = judge(estimate, SPREAD, non_negative=True)
+    upper_only = dataclasses.replace(SPREAD, lower_limit=-math.inf)
+    assert positive is judge(estimate, upper_only)
+    lower_side = value - estimate.expanded_uncertainty < SPREAD.lower_limit
+    if not lower_side:
+        assert positive is signed
+    elif value + estimate.expanded_uncertainty <= SPREAD.upper_limit - 1.0:
+        assert (signed, positive) == (Outcome.MARGINAL, Outcome.PASS)
+
+
+def test_a_positive_lower_limit_still_binds_a_non_negative_quantity() -> None:
+    ripple = dataclasses.replace(SPREAD, nominal=1.0, lower_limit=0.5, upper_limit=5.0)
+    estimate = Estimate(name="ripple", value=0.7, standard_uncertainty=0.2, unit="%")
+    assert judge(estimate, ripple, non_negative=True) is Outcome.MARGINAL
 
 
 def test_coverage_factor_follows_student_t_for_few_degrees_of_freedom() -> None:

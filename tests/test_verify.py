@@ -302,3 +302,27 @@ def test_parsing_verify_loads_no_subcommand_dependency() -> None:
                           check=False)
     assert done.returncode == 0, done.stderr
     assert done.stdout.splitlines() == ["PARSED", "[]"], done.stdout + done.stderr
+
+
+@pytest.mark.parametrize(("rule_knows_bounds", "outcome"), [(True, "PASS"), (False, "MARGINAL")])
+def test_a_certificate_is_judged_by_its_own_decision_rule(
+    calibrated: Path, tmp_path: Path, rule_knows_bounds: bool, outcome: str
+) -> None:
+    """A spread of 0.5 ± 1 % against [-0.001, 5]: PASS by today's rule (a quantity that
+    cannot be negative crosses no lower limit at or below zero), MARGINAL by the rule a
+    certificate issued before it states; each verifies under its own rule and not the
+    other's outcome."""
+    from hil.certificate.integrity import seal, verify_document
+
+    document = load(calibrated)
+    spread = next(r for r in document["results"]
+                  if r["parameter"] == "inertia_amplitude_spread_pct")
+    assert spread["non_negative"] is True
+    spread.update(value=0.5, expanded_uncertainty=1.0, lower_limit=-0.001, upper_limit=5.0)
+    if not rule_knows_bounds:
+        document["decision_rule"] = document["decision_rule"].split(" A quantity")[0]
+    for stated, holds in ((outcome, True), ({"PASS": "MARGINAL"}.get(outcome, "PASS"), False)):
+        spread["outcome"] = stated
+        verification = verify_document(seal(document), path=tmp_path / "c.json", unit_dir=None)
+        problems = [p for p in verification.outcomes if "inertia_amplitude_spread" in p]
+        assert (problems == []) is holds, (stated, problems)

@@ -247,7 +247,7 @@ def _check_outcomes(document: Mapping[str, Any], problems: list[str]) -> None:
         return
     judged: list[str] = []
     for i, entry in enumerate(results):
-        outcome = _judged(entry, i, problems)
+        outcome = _judged(entry, i, problems, bounded=_bounded_rule(document))
         if outcome is not None:
             judged.append(outcome)
     stated = document.get("outcome")
@@ -268,7 +268,9 @@ def stated_outcomes(document: Mapping[str, Any]) -> dict[str, Any]:
     rule gives them (a tool that writes a certificate of its own, a test that derives one
     run from another); seal it afterwards (:func:`seal`)."""
     restated: dict[str, Any] = json.loads(json.dumps(document))
-    judged = [_judged(entry, i, []) for i, entry in enumerate(restated.get("results", []))]
+    bounded = _bounded_rule(restated)
+    judged = [_judged(entry, i, [], bounded=bounded)
+              for i, entry in enumerate(restated.get("results", []))]
     for entry, outcome in zip(restated.get("results", []), judged, strict=True):
         if outcome is not None:
             entry["outcome"] = outcome
@@ -276,9 +278,16 @@ def stated_outcomes(document: Mapping[str, Any]) -> dict[str, Any]:
     return restated
 
 
-def _judged(entry: Any, i: int, problems: list[str]) -> str | None:
-    """Result ``i``'s outcome by :func:`hil.measurement.judge`, checked against the stated
-    one; ``None`` when it cannot be judged (a problem is noted)."""
+def _bounded_rule(document: Mapping[str, Any]) -> bool:
+    """Whether the certificate's decision rule exempts a quantity that cannot be negative
+    from a lower limit at or below zero (certificates issued before it do not)."""
+    return "cannot be negative" in str(document.get("decision_rule", ""))
+
+
+def _judged(entry: Any, i: int, problems: list[str], *, bounded: bool) -> str | None:
+    """Result ``i``'s outcome by :func:`hil.measurement.judge` under the certificate's own
+    rule (``bounded``: :func:`_bounded_rule`), checked against the stated one; ``None``
+    when it cannot be judged (a problem is noted)."""
     if not isinstance(entry, dict):
         problems.append(f"results[{i}] is not an object")
         return None
@@ -307,7 +316,8 @@ def _judged(entry: Any, i: int, problems: list[str]) -> str | None:
     # k = 2 at infinite degrees of freedom: judge() sees exactly the stated U
     estimate = Estimate(name=name, value=numbers["value"], standard_uncertainty=expanded / 2,
                         unit=spec.unit)
-    outcome = judge(estimate, spec).value
+    outcome = judge(estimate, spec,
+                    non_negative=bounded and entry.get("non_negative") is True).value
     stated = entry.get("outcome")
     if stated != outcome:
         problems.append(f"result {name}: outcome {stated} contradicts its value and limits "
