@@ -42,7 +42,6 @@ from hil.gum import rounded_pair
 from hil.measurement import MethodBiasMap, Outcome, load_method_bias
 from hil.motion import Mode
 from hil.profile import UnitProfile, load_profile
-from hil.report import write_documents
 from hil.report.console import outcome_banner, protocol_start
 from hil.report.junit import PYTEST_DEFAULT_SUITE_NAME, measurement_properties, suite_name
 from hil.report.junit import suite_properties as junit_suite_properties
@@ -481,6 +480,8 @@ def pytest_sessionfinish(session: pytest.Session, exitstatus: int) -> None:
         log.info("%s", message)
         session.config.stash[STORE_MESSAGE_KEY] = message
     if not session.config.getoption("--no-documents"):
+        from hil.report.documents import write_documents  # matplotlib: only if drawn
+
         session.config.stash[DOCUMENTS_KEY] = write_documents(path)
 
 

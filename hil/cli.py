@@ -305,7 +305,7 @@ def suite_arguments() -> list[str]:
 
 
 def _render(args: argparse.Namespace) -> int:
-    from hil.report import certificate_file, write_documents
+    from hil.report.documents import certificate_file, write_documents
 
     paths = [certificate_file(target) for target in args.certificates]
     failed = 0

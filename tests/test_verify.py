@@ -136,10 +136,11 @@ def test_compare_refuses_a_tampered_certificate_in_one_line(
 def test_render_refuses_a_tampered_certificate_in_one_line(
         calibrated: Path, tampered: tuple[Path, str], capsys: pytest.CaptureFixture[str],
         monkeypatch: pytest.MonkeyPatch) -> None:
-    import hil.report
+    import hil.report.documents
 
     drawn: list[Path] = []
-    monkeypatch.setattr(hil.report, "write_documents", lambda path: drawn.append(path) or [])
+    monkeypatch.setattr(hil.report.documents, "write_documents",
+                        lambda path: drawn.append(path) or [])
     assert main(["render", str(calibrated)]) == 0  # the untampered one is drawn
     assert drawn == [calibrated / "certificate.json"]
     capsys.readouterr()
@@ -241,10 +242,10 @@ def test_a_certificate_without_digest_is_not_verified_but_said_why(
 def test_a_certificate_without_digest_is_still_read_with_a_warning(
         calibrated: Path, tmp_path: Path, caplog: pytest.LogCaptureFixture,
         monkeypatch: pytest.MonkeyPatch) -> None:
-    import hil.report
+    import hil.report.documents
 
     unit = _old(calibrated, tmp_path / "old")
-    monkeypatch.setattr(hil.report, "write_documents", lambda path: [])
+    monkeypatch.setattr(hil.report.documents, "write_documents", lambda path: [])
     store = tmp_path / "store.sqlite"
     with caplog.at_level(logging.WARNING):
         assert main(["compare", str(calibrated), str(unit)]) == 0

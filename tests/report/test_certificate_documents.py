@@ -145,7 +145,7 @@ def _copy(run: Run, tmp_path: Path) -> Path:
 
 def _write_documents(unit_dir: Path, *, block_typst: bool) -> str:
     code = ("import sys\n" + ("sys.modules['typst'] = None\n" if block_typst else "")
-            + "from pathlib import Path\nfrom hil.report import write_documents\n"
+            + "from pathlib import Path\nfrom hil.report.documents import write_documents\n"
             "print(write_documents(Path(sys.argv[1])))\n")
     done = subprocess.run([sys.executable, "-c", code, str(unit_dir / "certificate.json")],
                           capture_output=True, text=True, timeout=300, check=True)
