@@ -235,3 +235,24 @@ def test_a_slower_excitation_is_paced_at_its_own_sync_period(profile: UnitProfil
         took_s = time.monotonic() - started
     assert recording.metadata["sync_period_s"] == f"{1 / fs_hz:g}"
     assert 0.9 * excitation.duration_s < took_s < 3 * excitation.duration_s, took_s
+    # the SYNCs' own timing is on the recording (issue 28): who produced them, how evenly
+    assert recording.metadata["sync_producer"].startswith("host (")
+    spread_s = float(recording.metadata["sync_interval_sd_s"])
+    assert 0 < spread_s < 1 / fs_hz, spread_s
+    assert spread_s <= float(recording.metadata["sync_interval_max_error_s"])
+
+
+def test_the_sync_spread_is_what_the_intervals_show() -> None:
+    """Intervals of 4 ms with a known jitter: their standard deviation and largest error."""
+    from hil.drives.cia402.acquire import sync_timing
+
+    rng = np.random.default_rng(3)
+    error_s = rng.normal(0.0, 2e-4, 500)
+    sent_s = list(np.cumsum(np.concatenate([[0.0], 0.004 + error_s])))
+    timing = sync_timing(sent_s, 0.004, realtime=True)
+    assert float(timing["sync_interval_sd_s"]) == pytest.approx(float(np.std(error_s)), rel=1e-2)
+    assert float(timing["sync_interval_max_error_s"]) == pytest.approx(
+        float(np.max(np.abs(error_s))), rel=1e-2)
+    lockstep = sync_timing(sent_s, 0.004, realtime=False)
+    assert "lockstep" in lockstep["sync_producer"]
+    assert "sync_interval_sd_s" not in lockstep

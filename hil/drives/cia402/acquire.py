@@ -279,6 +279,21 @@ def _stream_loop(
     return done
 
 
+def sync_timing(sent_s: list[float], period_s: float, *, realtime: bool) -> dict[str, str]:
+    """Who produced the SYNCs and, paced by the wall clock, how evenly: the standard
+    deviation and the largest error of the intervals between them. The recording's time
+    base is the SYNC count (``k · period``), so this spread is error in its time axis."""
+    if not realtime:
+        return {"sync_producer": "host, in lockstep with the drive's answers (a simulated "
+                                 "drive's clock: no wall-clock spread)"}
+    timing = {"sync_producer": "host (python-can messages timed by the host's sleeps)"}
+    if len(sent_s) > 2:
+        error = np.diff(np.asarray(sent_s, dtype=np.float64)) - period_s
+        timing["sync_interval_sd_s"] = f"{float(np.std(error)):.3g}"
+        timing["sync_interval_max_error_s"] = f"{float(np.max(np.abs(error))):.3g}"
+    return timing
+
+
 def _stream_recording(
     link: CanLink,
     setup: RunSetup,
@@ -325,6 +340,7 @@ def _stream_recording(
         excitation,
         acquisition="sync stream",
         sync_period_s=f"{period:g}",
+        **sync_timing(link.sync_sent_s, period, realtime=link.station.sync_pacing == "realtime"),
         lost_samples=str(done - len(rows)),
         **timing,
     )

@@ -77,6 +77,7 @@ class CanLink:
         self.node: canopen.RemoteNode | None = None
         self.sync_index = -1  # index of the last SYNC we sent
         self.sync_period_s = station.sync_period_s  # the drive's 0x1006, as last written
+        self.sync_sent_s: list[float] = []  # monotonic time of each SYNC since forget()
         self.rx1: dict[int, bytes] = {}
         self.rx2: dict[int, bytes] = {}
         self.emcy: list[tuple[int, float]] = []
@@ -321,6 +322,7 @@ class CanLink:
             self._answered.clear()
             self.sync_index += 1
             self.network.send_message(0x80, b"")
+            self.sync_sent_s.append(time.monotonic())
             if realtime:
                 now = time.monotonic()
                 if self._next_deadline < now - period:
@@ -459,9 +461,10 @@ class CanLink:
         return one, two
 
     def forget(self) -> None:
-        """Drop the feedback received so far (before a run)."""
+        """Drop the feedback received and the SYNC times so far (before a run)."""
         self.rx1.clear()
         self.rx2.clear()
+        self.sync_sent_s.clear()
 
 
 def _sleep_until(deadline: float) -> None:
