@@ -27,7 +27,7 @@ def pytest_xdist_make_scheduler(config: pytest.Config, log: Any) -> Any:
     """``-n N``: each test file to one worker (its module fixtures, a calibration or a
     population, made once), and the calibration's protocols together, in the profile's
     order (one session, one certificate); files marked slow first, so that none of them
-    is the last thing running. A ``--dist`` given is kept."""
+    is the last thing running. Another ``--dist`` (loadfile, loadgroup, ...) is kept."""
     if config.option.dist != "load":
         return None
     from xdist.scheduler import LoadScopeScheduling

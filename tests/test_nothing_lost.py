@@ -21,12 +21,12 @@ import os
 
 def pytest_configure(config):
     """The process dies (as on SIGKILL or a power cut) while the documents render."""
-    import hil.calibration_session as session
+    import hil.report.documents as documents
 
     def die(path):
         os._exit(9)
 
-    session.write_documents = die
+    documents.write_documents = die
 '''
 
 

@@ -14,8 +14,9 @@ def collector_held() -> Iterator[None]:
     A full collection stops every thread of the process for as long as it walks the heap:
     0.1 s with a calibration's libraries loaded, more in a long-lived process. That is
     longer than a Modbus setpoint lead or many SYNC periods, so one collection at the wrong
-    moment spoils a recording (seen: a 25 ms pause in a 0.5 s Modbus run). Reference
-    counting still frees what the loop drops; cycles wait for the collector's return.
+    moment spoils a recording (CI refused a 0.5 s Modbus run for a 25 ms pause, in a test
+    process whose collections took that long). Reference counting still frees what the
+    loop drops; cycles wait for the collector's return.
     """
     enabled = gc.isenabled()
     gc.disable()
