@@ -15,6 +15,9 @@ from hil.drives.kinds import DRIVE_KINDS, KINDS, SIMULATED_KINDS, DriveKind, dri
 from hil.errors import ProfileError
 from tests.helpers import subset_profile
 
+# the wall clock times its field-bus loops: run alone, not beside other tests (README)
+pytestmark = pytest.mark.realtime
+
 
 def test_each_kind_knows_what_it_is() -> None:
     assert DRIVE_KINDS == ("sim", "canopen-emulator", "modbus-emulator", "canopen", "modbus")

@@ -18,6 +18,9 @@ import pytest
 from tests.calibration_process import RunningCalibration
 from tests.helpers import subset_profile
 
+# the wall clock times its field-bus loops: run alone, not beside other tests (README)
+pytestmark = pytest.mark.realtime
+
 # the protocol with a long excitation, and the log line saying that excitation started
 LONG_RUN = {
     "canopen-emulator": ("stribeck", "staircase", r"node 5: streaming staircase"),

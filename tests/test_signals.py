@@ -22,6 +22,9 @@ from hil.motion import Mode
 from hil.profile import load_profile
 from tests.calibration_process import RunningCalibration
 
+# the wall clock times its field-bus loops: run alone, not beside other tests (README)
+pytestmark = pytest.mark.realtime
+
 # each backend's log lines: a run moving the axis, quick stop, disabled
 STATE_LINES = {
     "sim": (r"sim: running", r"sim: quick stop", r"sim: drive disabled"),

@@ -18,7 +18,8 @@ from hil.cli import main
 from hil.config import builtin_fixture
 from tests.compare.firmware_variants import firmware_setting, with_firmware, write_profile
 
-pytestmark = pytest.mark.slow
+# the wall clock times its field-bus loops: run alone, not beside other tests (README)
+pytestmark = [pytest.mark.slow, pytest.mark.realtime]
 
 PROFILE = "demo_gimbal_elevation"
 

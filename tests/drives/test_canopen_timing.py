@@ -28,6 +28,9 @@ from hil.suite import current_loop as protocol
 from plant_sim.firmware import Firmware
 from plant_sim.params import PlantParams
 
+# the wall clock times its field-bus loops: run alone, not beside other tests (README)
+pytestmark = pytest.mark.realtime
+
 J = 0.004
 CONTROL_S = 2.5e-4  # the emulator's control period at the demo's 4 kHz
 PERIOD_S = 1e-3  # the station's SYNC

@@ -20,6 +20,9 @@ from hil.profile import UnitProfile
 from plant_sim.firmware import Firmware
 from plant_sim.params import Harmonic, PlantParams
 
+# the wall clock times its field-bus loops: run alone, not beside other tests (README)
+pytestmark = pytest.mark.realtime
+
 SYNC_HZ = 1000.0  # the CANopen emulator station's stream rate
 FRICTIONLESS = PlantParams(inertia_kg_m2=0.004, torque_limit_nm=0.5, exact_torque_hold=True)
 GAINS = {"velocity_kp_nm_s_rad": 0.45, "velocity_ki_nm_rad": 12.0}

@@ -16,6 +16,9 @@ from hil.drives.modbus.regmap import load_register_map
 from hil.errors import DriveCommunicationError, DriveFaultError
 from hil.profile import UnitProfile
 
+# the wall clock times its field-bus loops: run alone, not beside other tests (README)
+pytestmark = pytest.mark.realtime
+
 
 def test_register_codec_word_order() -> None:
     regmap = load_register_map(builtin_station("regmap_gimbal_hil_servo.toml"))

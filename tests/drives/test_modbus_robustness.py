@@ -19,6 +19,9 @@ from hil.errors import DriveCommunicationError
 from hil.profile import UnitProfile
 from hil.recording import Recording
 
+# the wall clock times its field-bus loops: run alone, not beside other tests (README)
+pytestmark = pytest.mark.realtime
+
 WATCHDOG_S = 0.5  # the emulator's default
 
 

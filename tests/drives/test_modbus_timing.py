@@ -28,6 +28,9 @@ from hil.profile import UnitProfile
 from hil.recording import Recording
 from plant_sim.model import PlantTrace
 
+# the wall clock times its field-bus loops: run alone, not beside other tests (README)
+pytestmark = pytest.mark.realtime
+
 REGMAP = builtin_station("regmap_gimbal_hil_servo.toml")
 CONTROL_PERIOD_S = 1 / 4000.0  # the demo unit's drive loop
 ERROR_RAD_S = 0.015
