@@ -14,7 +14,14 @@ from hil.identify.estimate import Estimate
 from hil.measurement import Declared, declare
 from hil.motion import Excitation
 from hil.profile import UnitProfile
-from hil.suite.standstill import MEASUREMENTS, NAME, Spec, analyse, excitation
+from hil.suite.standstill import (
+    MEASUREMENTS,
+    NAME,
+    Spec,
+    analyse,
+    analysed_windows,
+    excitation,
+)
 from hil.suite.stop_rule import run_repeated
 
 pytestmark = pytest.mark.protocol(NAME)
@@ -44,8 +51,11 @@ def result(drive: Drive, calibration: CalibrationRun, profile: UnitProfile
     _, blocks, hold = runs.first
     calibration.details[NAME] = {
         **runs.details(),
-        "position_rad": float(hold.command[-1]),
-        "hold_s": spec.hold_s,  # for the plot: the analysed end of the hold
+        "hold_positions_rad": [float(hold.command[stop - 1])
+                               for _, stop in analysed_windows(hold, spec)],
+        "hold_s": spec.hold_s,
+        # for the plot: each block's samples in the recording
+        "block_windows": [list(w) for w in analysed_windows(hold, spec)],
         "block_torque_rms_mnm": [float(v) * 1e3 for v in blocks.torque_rms_nm],
         "block_position_rms_urad": [float(v) * 1e6 for v in blocks.position_rms_rad],
     }

@@ -7,10 +7,12 @@ Library: :mod:`hil.suite.tracking`.
 
 from __future__ import annotations
 
+import math
+
 import pytest
 
 from hil.calibration import CalibrationRun
-from hil.closed_loop.tracking import Following
+from hil.closed_loop.tracking import Repeated
 from hil.drives.base import Drive
 from hil.identify.estimate import Estimate
 from hil.measurement import Declared, declare
@@ -63,7 +65,7 @@ def result(drive: Drive, calibration: CalibrationRun, profile: UnitProfile
     viscous, coulomb, u_rel, source = feedforward_values(calibration, profile, spec)
     off, on = excitation(spec, viscous_nm_s_rad=viscous, coulomb_nm=coulomb)
 
-    def run_once() -> tuple[dict[str, Estimate], Following, Following]:
+    def run_once() -> tuple[dict[str, Estimate], Repeated, Repeated]:
         recorded = []
         # the protocol's one sequence (the planner sums the same): per run a move, the run
         for e in motion(spec, (off, on), position=lambda: drive.status().position_rad):
@@ -72,9 +74,8 @@ def result(drive: Drive, calibration: CalibrationRun, profile: UnitProfile
                 drive.disable()  # re-enabled: the velocity integrator starts empty for the run
                 drive.enable()
                 continue
-            recorded.append(calibration.run(drive, e, protocol=NAME))
-        recorded_off, recorded_on = recorded
-        return analyse((recorded_off, off), (recorded_on, on), spec, feedforward_u_rel=u_rel)
+            recorded.append((calibration.run(drive, e, protocol=NAME), e))
+        return analyse(recorded[0::2], recorded[1::2], spec, feedforward_u_rel=u_rel)
 
     runs = run_repeated(run_once, lambda found: found[0], rule=spec.stop,
                         calibration=calibration, shared=(FEEDFORWARD_LINE,))
@@ -84,7 +85,9 @@ def result(drive: Drive, calibration: CalibrationRun, profile: UnitProfile
         "feedforward": {"viscous_nm_s_rad": viscous, "coulomb_nm": coulomb,
                         "relative_uncertainty": u_rel, "source": source,
                         "sent_as": "torque offset (CiA 402 0x60B2)"},
-        "noise_urad": {"no_ff": f_off.noise_rad * MICRO, "ff": f_on.noise_rad * MICRO},
+        "repeats": spec.repeats,
+        "run_to_run_sd_urad": {"no_ff": f_off.u_rms_rad * math.sqrt(f_off.runs) * MICRO,
+                               "ff": f_on.u_rms_rad * math.sqrt(f_on.runs) * MICRO},
         "peak_error_no_ff_urad": f_off.peak_rad * MICRO,
         "move_s": len(on.command) / on.fs_hz,
     }

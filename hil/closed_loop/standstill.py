@@ -1,10 +1,14 @@
 """Standstill: torque ripple and position jitter while the drive holds a position.
 
-Over ``blocks`` equal blocks of the hold: the RMS of the reported torque about its block
-mean and trend (N·m) and the RMS of the encoder position about its block mean and trend
-(rad; a slow settling after the move is not jitter). The result is
+Over ``b`` blocks, each the end of a hold at a position of its own: the RMS of the reported
+torque about its block mean and trend (N·m) and the RMS of the encoder position about its
+block mean and trend (rad; a slow settling after the move is not jitter). The result is
 the RMS over all blocks; its Type A uncertainty the scatter of the block values ``s/√b``
-(``b − 1`` degrees of freedom). The encoder's resolution is a rectangular Type B line of
+(``b − 1`` degrees of freedom). Holding each block at another position makes that scatter
+include what depends on where the axis stands: where inside an encoder count it rests
+(a position held near a count's edge toggles it, one near its middle does not), the
+local cogging slope; blocks of one hold would see one such place only, and runs held
+elsewhere scatter beyond it. The encoder's resolution is a rectangular Type B line of
 the jitter (a position held inside one count reads as no jitter at all), the torque's
 resolution one of the ripple.
 """
@@ -31,20 +35,33 @@ class Standstill:
     position_rms_rad: FloatArray
 
 
-def standstill_blocks(position_rad: FloatArray, torque_nm: FloatArray, *, blocks: int
-                      ) -> Standstill:
-    """Block RMS values of the hold.
+def hold_windows(command: FloatArray, *, block_samples: int) -> list[tuple[int, int]]:
+    """``(start, stop)`` sample indices of the last ``block_samples`` of each stretch of
+    ``command`` that holds one value at least that long (the analysed end of each hold)."""
+    values = np.asarray(command, dtype=float)
+    changes = np.flatnonzero(np.diff(values) != 0.0) + 1
+    starts = np.concatenate(([0], changes))
+    stops = np.concatenate((changes, [len(values)]))
+    return [(int(stop) - block_samples, int(stop))
+            for start, stop in zip(starts, stops, strict=True) if stop - start >= block_samples]
+
+
+def standstill_blocks(position_rad: FloatArray, torque_nm: FloatArray,
+                      windows: list[tuple[int, int]]) -> Standstill:
+    """Block RMS values, one block per window (``(start, stop)`` sample indices).
 
     Raises
     ------
     IdentificationError
-        Fewer than 2 blocks or fewer than 10 samples a block.
+        Fewer than 2 windows, windows of unequal length, or fewer than 10 samples a block.
     """
-    n = len(position_rad) // blocks if blocks > 0 else 0
-    if blocks < 2 or n < 10:
-        raise IdentificationError(f"standstill: {len(position_rad)} samples in {blocks} blocks")
-    pos = _detrended(np.asarray(position_rad[: n * blocks]).reshape(blocks, n))
-    tq = _detrended(np.asarray(torque_nm[: n * blocks]).reshape(blocks, n))
+    lengths = {stop - start for start, stop in windows}
+    if len(windows) < 2 or len(lengths) != 1 or min(lengths) < 10:
+        raise IdentificationError(
+            f"standstill: {len(windows)} holds of {sorted(lengths)} samples (at least 2 "
+            "holds of one length, each at least 10 samples, are needed)")
+    pos = _detrended(np.stack([position_rad[a:b] for a, b in windows]))
+    tq = _detrended(np.stack([torque_nm[a:b] for a, b in windows]))
     return Standstill(torque_rms_nm=tq.std(axis=1), position_rms_rad=pos.std(axis=1))
 
 

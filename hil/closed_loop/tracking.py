@@ -11,11 +11,14 @@ Feedforward (the certificate's ``B·ω* + T_c·sgn(ω*)``) is sent as the drive'
 offset; a drive whose firmware has ``feedforward`` adds it to its command. Figures: RMS
 and peak of ``|e|`` over the move, and the RMS ratio off/on (the reduction).
 
-Type A: the error's noise (encoder quantisation, torque noise through the loop) is what
-the sample-to-sample scatter of ``e`` about its smoothed course shows (``σ_n``, the
-residual of a centred moving average over ``smooth_s``). Propagated: ``u(RMS) =
-σ_n·√(Σeᵢ²)/(N·RMS)`` (the first-order change of the RMS with white noise on each
-sample) and ``u(peak) = σ_n``.
+Type A: the move is run ``R ≥ 2`` times (interleaved without and with feedforward); each
+figure is the mean over its runs, its Type A the runs' scatter ``s/√R`` with ``R − 1``
+degrees of freedom. Nothing less holds on a real axis: the runs differ by the noise in the
+loop, and the largest differences are not noise-like at all. Where friction holds the
+axis (the start, the reversal) the noise decides the instant it breaks away, and the
+offset that leaves in the position persists until the next such event; a velocity loop
+turns a white disturbance into a slow wander besides. Within one run no smoothing or
+blocking separates either from the move's own error.
 """
 
 from __future__ import annotations
@@ -76,18 +79,16 @@ def reference_position(velocity_cmd_rad_s: FloatArray, *, start_rad: float,
 
 @dataclass(frozen=True, slots=True, kw_only=True)
 class Following:
-    """The following error of one run: RMS and peak (rad) with their Type A uncertainty."""
+    """The following error of one run: RMS and peak (rad)."""
 
     rms_rad: float
     peak_rad: float
-    noise_rad: float
-    u_rms_rad: float
     samples: int
     error_rad: FloatArray  # θ − θ*, one per sample
 
 
 def following_error(position_rad: FloatArray, velocity_cmd_rad_s: FloatArray, *,
-                    fs_hz: float, smooth_s: float = 0.005) -> Following:
+                    fs_hz: float) -> Following:
     """RMS and peak following error of a velocity-mode run from its first sample's position.
 
     Raises
@@ -99,17 +100,50 @@ def following_error(position_rad: FloatArray, velocity_cmd_rad_s: FloatArray, *,
         raise IdentificationError("the tracking recording does not match its command")
     error = position_rad - reference_position(velocity_cmd_rad_s, start_rad=position_rad[0],
                                               fs_hz=fs_hz)
-    width = max(3, round(smooth_s * fs_hz) // 2 * 2 + 1)
-    smooth = np.convolve(np.pad(error, width // 2, mode="edge"), np.ones(width) / width,
-                         mode="valid")
-    noise = float(np.std(error - smooth, ddof=1)) * math.sqrt(width / (width - 1))
-    rms = float(np.sqrt(np.mean(error**2)))
-    u_rms = noise * float(np.sqrt(np.sum(error**2))) / (len(error) * rms) if rms > 0 else noise
-    return Following(rms_rad=rms, peak_rad=float(np.max(np.abs(error))), noise_rad=noise,
-                     u_rms_rad=u_rms, samples=len(error), error_rad=error)
+    return Following(rms_rad=float(np.sqrt(np.mean(error**2))),
+                     peak_rad=float(np.max(np.abs(error))), samples=len(error),
+                     error_rad=error)
 
 
-def feedforward_change(off: Following, on: Following, *, relative: float
+@dataclass(frozen=True, slots=True, kw_only=True)
+class Repeated:
+    """The following error of one move run ``runs`` times: mean figures and Type A."""
+
+    rms_rad: float  # mean of the runs' RMS
+    peak_rad: float  # mean of the runs' peaks
+    u_rms_rad: float  # s/√R of the runs' RMS
+    u_peak_rad: float  # s/√R of the runs' peaks
+    runs: int
+    error_rad: FloatArray  # the runs' mean θ − θ*
+
+    @property
+    def dof(self) -> float:
+        """Degrees of freedom of both Type A lines."""
+        return float(self.runs - 1)
+
+
+def repeated(runs: list[Following]) -> Repeated:
+    """Mean figures of repeated runs of one move and their Type A from the runs' scatter.
+
+    Raises
+    ------
+    IdentificationError
+        Fewer than 2 runs, or runs of different lengths.
+    """
+    if len(runs) < 2 or len({r.samples for r in runs}) != 1:
+        raise IdentificationError(
+            f"the tracking move needs at least 2 runs of one length, got "
+            f"{[r.samples for r in runs]}")
+    rms = np.array([r.rms_rad for r in runs])
+    peak = np.array([r.peak_rad for r in runs])
+    root = math.sqrt(len(runs))
+    return Repeated(rms_rad=float(rms.mean()), peak_rad=float(peak.mean()),
+                    u_rms_rad=float(rms.std(ddof=1)) / root,
+                    u_peak_rad=float(peak.std(ddof=1)) / root, runs=len(runs),
+                    error_rad=np.mean([r.error_rad for r in runs], axis=0))
+
+
+def feedforward_change(off: Repeated | Following, on: Repeated | Following, *, relative: float
                        ) -> tuple[float, float]:
     """Change of (RMS, peak) of the run with feedforward when the feedforward were
     ``1 + relative`` times as large: by superposition of the runs without and with it,
@@ -120,15 +154,18 @@ def feedforward_change(off: Following, on: Following, *, relative: float
 
 
 def as_estimate(name: str, value_rad: float, u_rad: float, *, scale: float, unit: str,
-                resolution_rad: float) -> Estimate:
+                dof: float, resolution_rad: float) -> Estimate:
     """A following-error figure (rad) as an estimate in ``unit`` (``scale`` per rad): Type A
-    from the noise, and the encoder's resolution (rectangular) as Type B."""
-    lines = [Component(source="noise of the following error (Type A)", kind="A",
-                       standard_uncertainty=u_rad * scale, unit=unit)]
+    from the runs' scatter (``dof``), and the encoder's resolution as Type B:
+    ``resolution_rad`` is that line's size in the figure (LSB/√12 for a peak; for an RMS
+    over ``N`` samples, whose reading errors are independent while the axis moves,
+    ``LSB/√(12·N)``)."""
+    lines = [Component(source="noise of the following error, scatter of the repeated runs "
+                              "(Type A)", kind="A", standard_uncertainty=u_rad * scale,
+                       unit=unit, dof=dof)]
     if resolution_rad > 0:
-        lines.append(Component(source="encoder resolution (rectangular, LSB/√12)", kind="B",
-                               standard_uncertainty=resolution_rad / math.sqrt(12) * scale,
-                               unit=unit))
+        lines.append(Component(source="encoder resolution (rectangular)", kind="B",
+                               standard_uncertainty=resolution_rad * scale, unit=unit))
     base = Estimate(name=name, value=value_rad * scale, standard_uncertainty=0.0, unit=unit)
     return with_budget(base, [c for c in lines if c.contribution > 0] or lines[:1],
                        value=value_rad * scale)
@@ -150,3 +187,4 @@ def reduction(off: Estimate, on: Estimate, *, name: str,
               for c in on.components()]
     base = Estimate(name=name, value=ratio, standard_uncertainty=0.0, unit="")
     return with_budget(base, lines, value=ratio)
+

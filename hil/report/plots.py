@@ -47,8 +47,8 @@ CAPTIONS = {
                      "rise, the overshoot and the 2 % settling",
     "tracking": "following error over the standard move without and with the friction "
                 "feedforward",
-    "standstill": "held position and reported torque about each block's line, with each "
-                  "block's RMS (jitter, torque ripple)",
+    "standstill": "held position and reported torque about each block's line, one block "
+                  "per hold position, with each block's RMS (jitter, torque ripple)",
     "cogging_compensation": "position ripple against angle with the compensation table "
                             "cleared and loaded, and its amplitude per order",
 }

@@ -262,25 +262,25 @@ def tracking(data: ProtocolData) -> Figure | None:
 
 
 def standstill(data: ProtocolData) -> Figure | None:
-    """The held position and the reported torque over the analysed hold, each about its
-    block's straight line (what the RMS is taken of), with each block's ± RMS."""
+    """The held position and the reported torque over each hold's analysed block, about
+    the block's straight line (what the RMS is taken of), end to end, with each block's
+    ± RMS."""
     hold = data.recording("move_and_hold")
-    hold_s = data.number("hold_s")
+    windows = data.details.get("block_windows") or []
     torque_rms = data.details.get("block_torque_rms_mnm") or []
     jitter_rms = data.details.get("block_position_rms_urad") or []
     ripple, jitter = data.value("standstill_torque_ripple_mnm"), data.value(
         "standstill_jitter_urad")
-    if hold is None or hold_s is None or not torque_rms or len(torque_rms) != len(jitter_rms) \
+    if hold is None or not windows or not (len(windows) == len(torque_rms) == len(jitter_rms)) \
             or ripple is None or jitter is None:
         return None
     fs_hz = sample_rate_hz(hold)
-    held = min(round(hold_s * fs_hz), len(hold))
-    blocks = len(torque_rms)
-    n = held // blocks
-    if n < 10:
+    blocks = len(windows)
+    n = int(windows[0][1]) - int(windows[0][0])
+    if n < 10 or int(windows[-1][1]) > len(hold):
         return None
-    position = _block_detrended(hold.position[-held:], blocks) * MICRO
-    torque = _block_detrended(hold.effort[-held:], blocks) * MILLI
+    position = _block_detrended(hold.position, windows) * MICRO
+    torque = _block_detrended(hold.effort, windows) * MILLI
     t = np.arange(n * blocks) / fs_hz
     lsb_urad = _step_urad(hold.position)
     fig = new_figure()
@@ -297,7 +297,7 @@ def standstill(data: ProtocolData) -> Figure | None:
                     label="± block RMS" if sign > 0 else None)
         for edge in edges[1:-1]:
             ax.axvline(edge, color=MEASURED, lw=0.6, ls=":")
-        ax.set_xlabel("time in the analysed hold (s)")
+        ax.set_xlabel("time in the analysed blocks, one per hold position (s)")
         top = max(float(np.max(np.abs(values))), float(np.max(rms)))
         ax.set_ylim(-1.15 * top, 1.15 * top)
     step = "" if lsb_urad is None else f" (encoder step {lsb_urad:.3g} µrad)"
@@ -311,11 +311,11 @@ def standstill(data: ProtocolData) -> Figure | None:
     return fig
 
 
-def _block_detrended(values: FloatArray, blocks: int) -> FloatArray:
-    """Each of ``blocks`` equal blocks less its mean and straight line, end to end (as the
-    standstill analysis takes them)."""
-    n = len(values) // blocks
-    rows = np.asarray(values[: n * blocks], dtype=float).reshape(blocks, n)
+def _block_detrended(values: FloatArray, windows: list[list[int]]) -> FloatArray:
+    """Each block (``[start, stop]`` samples) less its mean and straight line, end to end
+    (as the standstill analysis takes them)."""
+    rows = np.stack([np.asarray(values[int(a):int(b)], dtype=float) for a, b in windows])
+    n = rows.shape[1]
     ramp = np.arange(n) - (n - 1) / 2
     rows = rows - rows.mean(axis=1, keepdims=True)
     rows = rows - (rows @ ramp / (ramp @ ramp))[:, None] * ramp[None, :]

@@ -1,9 +1,10 @@
 """tracking: the protocol's library (spec, excitation, analysis); the test and its declared
 measurements are in ``protocols/test_tracking.py``.
 
-The standard gimbal move (slew, constant-rate track, reversal) twice: without and with
-the certificate's friction feedforward ``B·ω* + T_c·sgn(ω*)`` sent as the drive's torque
-offset (CiA 402 0x60B2; a drive adds it only when its firmware has ``feedforward``).
+The standard gimbal move (slew, constant-rate track, reversal) without and with the
+certificate's friction feedforward ``B·ω* + T_c·sgn(ω*)`` sent as the drive's torque
+offset (CiA 402 0x60B2; a drive adds it only when its firmware has ``feedforward``), the
+pair ``repeats`` times (the runs' scatter is the Type A: see :mod:`hil.closed_loop.tracking`).
 RMS and peak following error, and the reduction (RMS without / with). Each run starts at
 rest at the same place with the drive just re-enabled (its velocity integrator empty): in
 velocity mode the position error is the integrator's change over ``Ki``, so a run that
@@ -13,6 +14,7 @@ Numerics in :mod:`hil.closed_loop.tracking`.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
@@ -21,13 +23,14 @@ import numpy as np
 
 from hil.calibration import CalibrationRun
 from hil.closed_loop.tracking import (
-    Following,
+    Repeated,
     as_estimate,
     feedforward_change,
     following_error,
     friction_feedforward,
     gimbal_move,
     reduction,
+    repeated,
 )
 from hil.drives.base import DriveInfo
 from hil.identify.estimate import Component, Estimate
@@ -62,6 +65,7 @@ class Spec(TravelSpec):
     track_s: float
     reversal_s: float
     min_sample_rate_hz: float  # the offset follows ω* sample by sample (not a polled link)
+    repeats: int  # runs of the pair (without, with): their scatter is the Type A
     stop: StopRule | None = None  # run again until U is reached (hil.suite.stop_rule)
 
     @classmethod
@@ -83,9 +87,13 @@ class Spec(TravelSpec):
             track_s=settings.positive("track_s", 0.5),
             reversal_s=settings.positive("reversal_s", 0.5),
             min_sample_rate_hz=settings.positive("min_sample_rate_hz", 1000.0),
+            repeats=settings.integer("repeats", 3),
             stop=StopRule.from_settings(settings),
         )
         settings.done()
+        if spec.repeats < 2:
+            raise settings.error("repeats", "must be at least 2 (the Type A is the scatter of "
+                                            f"the repeated runs), not {spec.repeats}")
         spec.require_travel(float(np.sum(spec.command())) / spec.fs_hz, protocol=NAME,
                             source=profile.source)
         return spec
@@ -132,31 +140,42 @@ def excitation(spec: Spec, *, viscous_nm_s_rad: float, coulomb_nm: float
 
 def motion(spec: Spec, runs: tuple[Excitation, Excitation], *,
            position: Callable[[], float]) -> Iterator[Excitation]:
-    """The protocol's motion, the one sequence the test runs and the planner sums: each of
-    ``runs`` (:func:`excitation`: without, then with the feedforward) after a move to
-    :attr:`Spec.start_rad` from ``position()`` (the drive is re-enabled between them)."""
-    return runs_from_start(spec, runs, position=position)
+    """The protocol's motion, the one sequence the test runs and the planner sums: the pair
+    ``runs`` (:func:`excitation`: without, then with the feedforward) ``spec.repeats`` times,
+    each run after a move to :attr:`Spec.start_rad` from ``position()`` (the drive is
+    re-enabled between them); repeats after the first are named ``<name>_<k>``."""
+    return runs_from_start(spec, (dataclasses.replace(run, name=repeat_name(run.name, k))
+                                  for k in range(1, spec.repeats + 1) for run in runs),
+                           position=position)
 
 
-def analyse(off: tuple[Recording, Excitation], on: tuple[Recording, Excitation], spec: Spec,
-            *, feedforward_u_rel: float = 0.0
-            ) -> tuple[dict[str, Estimate], Following, Following]:
-    """The declared figures from the two runs; ``feedforward_u_rel`` (the feedforward's
-    relative uncertainty, see :func:`feedforward_values`) adds a Type A line to the
-    figures with feedforward, its size by superposition of the two runs
-    (:func:`~hil.closed_loop.tracking.feedforward_change`)."""
-    runs = []
-    for recording, exc in (off, on):
-        position, _, _ = on_command_grid(recording, exc)
-        runs.append(following_error(position, exc.command, fs_hz=spec.fs_hz))
-    f_off, f_on = runs
-    lsb = quantisation_step(on[0].position)  # the encoder's resolution, as recorded
+def repeat_name(name: str, repeat: int) -> str:
+    """The excitation's name in its ``repeat``-th run (1: the name itself)."""
+    return name if repeat == 1 else f"{name}_{repeat}"
 
-    def est(name: str, value: float, u: float) -> Estimate:
-        return as_estimate(name, value, u, scale=MICRO, unit="µrad", resolution_rad=lsb)
 
-    rms_on = est("tracking_rms_error_urad", f_on.rms_rad, f_on.u_rms_rad)
-    peak_on = est("tracking_peak_error_urad", f_on.peak_rad, f_on.noise_rad)
+def analyse(off: list[tuple[Recording, Excitation]], on: list[tuple[Recording, Excitation]],
+            spec: Spec, *, feedforward_u_rel: float = 0.0
+            ) -> tuple[dict[str, Estimate], Repeated, Repeated]:
+    """The declared figures from the repeated runs without (``off``) and with (``on``) the
+    feedforward; ``feedforward_u_rel`` (the feedforward's relative uncertainty, see
+    :func:`feedforward_values`) adds a Type A line to the figures with feedforward, its
+    size by superposition of the two (:func:`~hil.closed_loop.tracking.feedforward_change`)."""
+    lsb = quantisation_step(on[0][0].position)  # the encoder's resolution, as recorded
+    f_off, f_on = (repeated([following_error(on_command_grid(rec, exc)[0], exc.command,
+                                             fs_hz=spec.fs_hz) for rec, exc in runs])
+                   for runs in (off, on))
+    per_sample = lsb / math.sqrt(12)
+
+    def est(name: str, value: float, u: float, dof: float, resolution: float) -> Estimate:
+        return as_estimate(name, value, u, scale=MICRO, unit="µrad", dof=dof,
+                           resolution_rad=resolution)
+
+    rms_resolution = per_sample / math.sqrt(len(f_on.error_rad) * f_on.runs)
+    rms_on = est("tracking_rms_error_urad", f_on.rms_rad, f_on.u_rms_rad, f_on.dof,
+                 rms_resolution)
+    peak_on = est("tracking_peak_error_urad", f_on.peak_rad, f_on.u_peak_rad, f_on.dof,
+                  per_sample / math.sqrt(f_on.runs))
     if feedforward_u_rel > 0:
         d_rms, d_peak = feedforward_change(f_off, f_on, relative=feedforward_u_rel)
         lines = [Component(source=f"{FEEDFORWARD_LINE} (this calibration's u), by "
@@ -165,7 +184,8 @@ def analyse(off: tuple[Recording, Excitation], on: tuple[Recording, Excitation],
                  for change in (d_rms, d_peak)]
         rms_on = rms_on.with_components(lines[0])
         peak_on = peak_on.with_components(lines[1])
-    rms_off = est("tracking_rms_error_no_ff_urad", f_off.rms_rad, f_off.u_rms_rad)
+    rms_off = est("tracking_rms_error_no_ff_urad", f_off.rms_rad, f_off.u_rms_rad, f_off.dof,
+                  rms_resolution)
     out = {
         "tracking_rms_error_urad": rms_on,
         "tracking_peak_error_urad": peak_on,
