@@ -2,11 +2,10 @@
 
 Every effect is off by default in :class:`PlantParams` (an ideal axis for the numerics'
 tests), and so is the noise inside the loops unless a ``[plant]`` table names it:
-:data:`LOOP_NOISE_DEFAULTS` gives the sizes a real unit has, each with its reason. They are
-not applied by default: with them on, the tracking protocol's and the resonance ratio's
-Type A (within-run scatter) miss the run-to-run scatter they cause (following error without
-feedforward 11 µrad between seeds against a stated 0.06 µrad), so `gimbal-hil compare`
-flags the same firmware under another seed; on once those budgets see it.
+:data:`LOOP_NOISE_DEFAULTS` gives the sizes a real unit has, each with its reason, and the
+demo profiles name them. The closed-loop protocols' Type A is built for such noise: the
+tracking move's repeated runs, standstill blocks held at several positions, the ripple
+fit's fixed-b Newey–West bandwidth (``tests/closed_loop/test_loop_noise_budgets.py``).
 """
 
 from __future__ import annotations
@@ -45,8 +44,8 @@ LOOP_NOISE_DEFAULTS: Final[dict[str, float]] = {
     # of a count (datasheets: about ±1 count peak); the demo's 19 bits make it 3.6 µrad
     "encoder_noise_rms_counts": 0.3,
 }
-"""The in-loop noise sizes of a real unit, for a ``[plant]`` table to name (none by default:
-see the module's docstring)."""
+"""The in-loop noise sizes of a real unit, for a ``[plant]`` table to name (the demo
+profiles do; an unnamed key is 0)."""
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)

@@ -154,6 +154,9 @@ class FrfPoint:
         ``jω·P / V``, motor velocity over velocity command, the mean over the blocks.
     blocks : int
         Blocks of whole periods used (a multisine: its analysed periods).
+    closed_loop_relative_u : float
+        Standard error of ``|closed_loop|`` (block scatter, or the jackknife over periods),
+        relative to it: the loop's own noise moves the bandwidth from run to run.
     """
 
     frequency_hz: float
@@ -162,6 +165,7 @@ class FrfPoint:
     coherence: float  # γ² over the blocks, 1 for a perfectly linear noise-free response
     closed_loop: complex  # jω·P / V (motor velocity over velocity command)
     blocks: int
+    closed_loop_relative_u: float = 0.0  # standard error of |closed_loop|, relative
 
 
 def frf_point(time_s: FloatArray, position_rad: FloatArray, torque_nm: FloatArray,
@@ -211,6 +215,7 @@ def frf_point(time_s: FloatArray, position_rad: FloatArray, torque_nm: FloatArra
     if np.any(t_arr == 0):
         raise IdentificationError(f"{frequency_hz:g} Hz: no torque at the frequency")
     ratios = p_arr / t_arr
+    closed = np.abs(1j * omega * p_arr / v_arr)
     mean = complex(np.sum(p_arr * np.conj(t_arr)) / np.sum(np.abs(t_arr) ** 2))  # H1
     cross = abs(np.sum(p_arr * np.conj(t_arr))) ** 2
     coherence = float(cross / (np.sum(np.abs(p_arr) ** 2) * np.sum(np.abs(t_arr) ** 2)))
@@ -218,7 +223,9 @@ def frf_point(time_s: FloatArray, position_rad: FloatArray, torque_nm: FloatArra
         frequency_hz=frequency_hz, frf_rad_nm=mean,
         relative_u=float(np.std(ratios, ddof=1) / math.sqrt(blocks) / abs(mean)),
         coherence=coherence, closed_loop=complex(np.mean(1j * omega * p_arr / v_arr)),
-        blocks=blocks)
+        blocks=blocks,
+        closed_loop_relative_u=float(np.std(closed, ddof=1) / math.sqrt(blocks)
+                                     / abs(np.mean(1j * omega * p_arr / v_arr))))
 
 
 def frf_lines(position_rad: FloatArray, torque_nm: FloatArray, command_rad_s: FloatArray, *,
@@ -268,9 +275,13 @@ def frf_lines(position_rad: FloatArray, torque_nm: FloatArray, command_rad_s: Fl
         np.sum(np.abs(p) ** 2, axis=0) * power.sum(axis=0))
     frequency_hz = np.asarray(harmonics, dtype=np.float64) / period_s
     closed = 2j * math.pi * frequency_hz * p.sum(axis=0) / v.sum(axis=0)
+    closed_left_out = np.abs(2j * math.pi * frequency_hz * (p.sum(axis=0) - p)
+                             / (v.sum(axis=0) - v))
+    closed_se = jackknife(closed_left_out, np.abs(closed))[1]
     return [FrfPoint(frequency_hz=float(f), frf_rad_nm=complex(h1[k]),
                      relative_u=float(se[k] / abs(h1[k])), coherence=float(coherence[k]),
-                     closed_loop=complex(closed[k]), blocks=periods)
+                     closed_loop=complex(closed[k]), blocks=periods,
+                     closed_loop_relative_u=float(closed_se[k] / abs(closed[k])))
             for k, f in enumerate(frequency_hz)]
 
 
@@ -310,6 +321,7 @@ class ResonanceResult:
 
 def velocity_loop_bandwidth_hz(points: Sequence[FrfPoint]) -> float:
     """First frequency where ``|closed loop|`` falls below 1/√2 (log-log interpolation).
+    :func:`bandwidth_relative_u` is its uncertainty.
 
     Parameters
     ----------
@@ -335,6 +347,21 @@ def velocity_loop_bandwidth_hz(points: Sequence[FrfPoint]) -> float:
     x = np.log([freqs[k - 1], freqs[k]])
     y = np.log([gain[k - 1], gain[k]])
     return float(np.exp(x[0] + (math.log(HALF_POWER) - y[0]) * (x[1] - x[0]) / (y[1] - y[0])))
+
+
+def bandwidth_relative_u(points: Sequence[FrfPoint]) -> float:
+    """Relative standard uncertainty of :func:`velocity_loop_bandwidth_hz` from the two
+    lines it interpolates between: ``ln f = x₀ + t·(x₁ − x₀)``, ``t = (ln h − y₀)/(y₁ − y₀)``
+    with ``y = ln|T|``, so ``u(ln f) = |x₁ − x₀|/|y₁ − y₀|·√((1 − t)²u₀² + t²u₁²)``, ``uᵢ``
+    the lines' relative u of ``|T|`` (independent: each line its own jackknife)."""
+    freqs = np.array([p.frequency_hz for p in points])
+    gain = np.abs([p.closed_loop for p in points])
+    k = int(np.flatnonzero(gain < HALF_POWER)[0])
+    x0, x1 = math.log(freqs[k - 1]), math.log(freqs[k])
+    y0, y1 = math.log(gain[k - 1]), math.log(gain[k])
+    t = (math.log(HALF_POWER) - y0) / (y1 - y0)
+    u0, u1 = points[k - 1].closed_loop_relative_u, points[k].closed_loop_relative_u
+    return abs(x1 - x0) / abs(y1 - y0) * math.hypot((1 - t) * u0, t * u1)
 
 
 def _initial_model(points: Sequence[FrfPoint], *, time_constant_s: float) -> TwoMassModel:
@@ -375,7 +402,10 @@ def identify_resonance(points: Sequence[FrfPoint], *, fs_hz: float,
         Uncertainties from the fit covariance scaled by ``√(χ²/ν)``: below one the
         residual's scatter is the noise (the per-period jackknife that weights the lines
         also counts cogging that averages out over the run); above one the excess is a
-        Type B line (the model's misfit to this unit). The ratio's from f_r's alone.
+        Type B line (the model's misfit to this unit). The ratio's from f_r's and a Type A
+        line of the bandwidth's (:func:`bandwidth_relative_u`, scaled as f_r's by
+        ``√min(χ²/ν, 1)``: the per-period jackknife also counts the cogging each period
+        meets at its own place, the same on every run over the same path).
 
     Raises
     ------
@@ -429,5 +459,10 @@ def identify_resonance(points: Sequence[FrfPoint], *, fs_hz: float,
         resonance=estimate("resonance_frequency_hz", model.resonance_hz, 3, "Hz"),
         antiresonance=estimate("antiresonance_frequency_hz", model.antiresonance_hz, 1, "Hz"),
         damping=estimate("resonance_damping_ratio", model.resonance_damping, 4, "1"),
-        ratio=estimate("resonance_to_bandwidth_ratio", ratio, 3, "1"),
+        ratio=estimate("resonance_to_bandwidth_ratio", ratio, 3, "1").with_components(
+            Component(source="velocity-loop bandwidth, from the jackknife of |T| at the two "
+                             "lines about its −3 dB point (Type A)", kind="A",
+                      standard_uncertainty=ratio * bandwidth_relative_u(points)
+                      * math.sqrt(min(chi2_per_dof, 1.0)), unit="1",
+                      dof=float(points[0].blocks - 1))),
     )

@@ -52,7 +52,10 @@ CLOSED_LOOP_PREFIXES = ("velocity_", "step_", "tracking_", "standstill_", "coggi
                         "cogging_compensation_")
 # per change: mechanics results that may be flagged (with the verdict they then get)
 MAY_FLAG: dict[str, dict[str, str]] = {
-    "velocity_gain": {SPREAD: "CHANGED"},
+    # a loop half as stiff lets the in-loop noise stick-slip the slow staircase (4 of 9
+    # speeds at × 0.5): the Stribeck protocol refuses to fit, its results go MISSING
+    "velocity_gain": {SPREAD: "CHANGED", "static_friction_nm": "MISSING",
+                      "stribeck_velocity_rad_s": "MISSING"},
     "velocity_filter": {SPREAD: "CHANGED", "coulomb_nm": "CHANGED"},
     "current_loop": {TAU: "WORSE"},
     "command_delay": {TAU: "WORSE"},

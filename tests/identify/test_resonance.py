@@ -20,6 +20,7 @@ from hil.identify.current_loop import sampled_response
 from hil.identify.resonance import (
     FrfPoint,
     TwoMassModel,
+    bandwidth_relative_u,
     frf_point,
     identify_resonance,
     two_mass_response,
@@ -107,6 +108,26 @@ def test_reported_uncertainty_matches_the_scatter() -> None:
     # a nonlinear fit: a small noise-induced bias (∝ σ²), well below one standard uncertainty
     assert abs(np.mean(values) - 81.65) < 0.5 * u
     assert 0.5 < u / scatter < 2.0
+
+
+def test_the_bandwidths_uncertainty_from_the_two_lines_about_its_crossing() -> None:
+    """Two lines straddling 1/√2; moving each |T| by its u (one at a time) moves the
+    interpolated bandwidth by what the propagated u says, to first order."""
+    def line(frequency_hz: float, gain: float, u: float) -> FrfPoint:
+        return FrfPoint(frequency_hz=frequency_hz, frf_rad_nm=1.0 + 0j, relative_u=0.01,
+                        coherence=1.0, closed_loop=complex(gain), blocks=17,
+                        closed_loop_relative_u=u)
+
+    points = [line(10.0, 0.95, 0.0), line(20.0, 0.80, 0.004), line(30.0, 0.60, 0.006)]
+    found = velocity_loop_bandwidth_hz(points)
+    shifts = []
+    for k in (1, 2):
+        moved = list(points)
+        moved[k] = dataclasses.replace(points[k], closed_loop=points[k].closed_loop
+                                       * (1 + 1e-3 * points[k].closed_loop_relative_u))
+        shifts.append(math.log(velocity_loop_bandwidth_hz(moved) / found) / 1e-3)
+    assert bandwidth_relative_u(points) == pytest.approx(math.hypot(*shifts), rel=1e-3)
+    assert bandwidth_relative_u(points) > 0
 
 
 def test_a_band_without_the_resonance_is_refused() -> None:
