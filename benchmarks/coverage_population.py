@@ -26,7 +26,7 @@ cable_hysteresis_nm                ``cable_hysteresis_nm / g``
 inertia_kg_m2                      ``(J_motor + J_load + J_elevation·cos²(el)) / g``
 viscous_nm_s_rad                   ``viscous_nm_s_rad / g``
 coulomb_nm                         ``coulomb_nm / g``
-static_friction_nm                 ``(static_friction_nm + cable_hysteresis_nm) / g``
+static_friction_nm                 ``static_friction_nm / g`` (the cable loop taken out)
 stribeck_velocity_rad_s            ``stribeck_velocity_rad_s``
 cogging_peak_nm                    largest cogging amplitude ``/ g``
 kt_ripple_peak_pct                 ``100·`` largest K_t ripple amplitude (a ratio: no ``g``)
@@ -240,7 +240,7 @@ def truths(unit: Unit) -> dict[str, float]:
         "inertia_kg_m2": _total_inertia(plant, plant.elevation_rad) / g,
         "viscous_nm_s_rad": plant.viscous_nm_s_rad / g,
         "coulomb_nm": plant.coulomb_nm / g,
-        "static_friction_nm": (plant.static_friction_nm + plant.cable_hysteresis_nm) / g,
+        "static_friction_nm": plant.static_friction_nm / g,
         "stribeck_velocity_rad_s": plant.stribeck_velocity_rad_s,
         "cogging_peak_nm": max((h.amplitude for h in plant.cogging), default=0.0) / g,
         "kt_ripple_peak_pct": 100 * max((h.amplitude for h in plant.kt_ripple), default=0.0),

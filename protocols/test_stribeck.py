@@ -17,6 +17,7 @@ from hil.profile import UnitProfile
 from hil.suite.needs import note_fallbacks
 from hil.suite.stop_rule import run_repeated
 from hil.suite.stribeck import (
+    CABLE,
     MEASUREMENTS,
     NAME,
     NEEDS,
@@ -25,6 +26,7 @@ from hil.suite.stribeck import (
     cross_check,
     excitation,
     finite_or_none,
+    without_cable_loop,
 )
 from hil.suite.torque_constant import kt_ripple_from_cogging
 from hil.suite.travel import on_command_grid
@@ -35,7 +37,7 @@ pytestmark = pytest.mark.protocol(NAME)
 DECLARED = declare(
     Declared("static_friction_nm", "Static (breakaway) friction",
              "T_s: the friction torque as sliding starts, from a slow velocity staircase in both "
-             "directions"),
+             "directions, the cable loop's half-width taken out"),
     Declared("stribeck_velocity_rad_s", "Stribeck velocity",
              "v_s: the speed over which friction falls from T_s to the Coulomb level"),
 )
@@ -56,8 +58,10 @@ def result(drive: Drive, calibration: CalibrationRun, profile: UnitProfile
         time_s = np.arange(len(position)) / stairs.fs_hz
         return analyse(time_s, position, torque, spec, ripple=ripple), rows
 
+    loop = CABLE.read(calibration)
     runs = run_repeated(run_once, lambda found: {
-        e.name: e for e in (found[0].static, found[0].stribeck_velocity)},
+        e.name: e for e in (without_cable_loop(found[0].static, loop),
+                            found[0].stribeck_velocity)},
         rule=spec.stop, calibration=calibration)
     analysed, rows = runs.first
     calibration.details[NAME] = {
@@ -80,7 +84,8 @@ def result(drive: Drive, calibration: CalibrationRun, profile: UnitProfile
         ],
         "cross_check_sine": cross_check(analysed, calibration),
         "note": "steady sliding friction includes the cable's hysteresis half-width "
-        "(direction-dependent, not separable at constant speed)",
+        "(direction-dependent, not separable at constant speed): coulomb_nm here holds it, "
+        "static_friction_nm has it taken out when gravity_cable measured it",
     }
     return runs.estimates
 

@@ -2,7 +2,9 @@
 clean simulated unit stops after one run, a noisy one runs ``max_runs`` and its certificate
 says which U was above which target; a protocol that cannot pool refuses the rule.
 
-The noisy unit's plant has 20 × the demo's torque noise. The target, 0.05 of the
+The noisy unit's plant has 20 × the demo's torque noise; both units leave out the demo's
+noise inside the loops (the standstill ripple is made of it: the clean unit would not be
+clean). The target, 0.05 of the
 half-width, sits between the two units' Us (U over the half-width after one run, clean →
 noisy, on the simulator's deterministic seed: τ 0.017 → 0.18, T_s 0.012 → 0.15, torque
 ripple 0.023 → 0.29): at least 2 × below the noisy one's even pooled over two runs
@@ -24,6 +26,7 @@ from hil.errors import ProfileError
 from hil.profile import builtin_profile_path, load_profile
 from hil.suite import cogging
 from hil.suite.catalogue import PROTOCOL_OF
+from plant_sim.params import LOOP_NOISE_DEFAULTS
 
 pytest_plugins = ["pytester"]
 
@@ -55,6 +58,8 @@ def _profile(tmp_path: Path, *, noise_scale: float, tables: dict[str, str]) -> P
                           f"torque_noise_nm = {noise.torque_noise_nm * noise_scale!r}",
                           "".join(blocks))
     assert found == 1
+    for key in LOOP_NOISE_DEFAULTS:
+        text = re.sub(rf"(?m)^{key} = .*$", f"{key} = 0.0", text)
     path = tmp_path / "unit.toml"
     path.write_text(text, encoding="utf-8")
     return path
@@ -123,6 +128,8 @@ def test_cogging_on_the_gravity_sweeps_passes_refuses_the_rule(tmp_path: Path) -
     protocol: running its analysis again would pool one measurement with itself."""
     text = builtin_profile_path(DEMO).read_text("utf-8")
     assert '[protocols.cogging]\npasses = "gravity_cable"' in text
+    for key in LOOP_NOISE_DEFAULTS:
+        text = re.sub(rf"(?m)^{key} = .*$", f"{key} = 0.0", text)
     path = tmp_path / "unit.toml"
     path.write_text(text.replace('[protocols.cogging]\n',
                                  '[protocols.cogging]\nstop_at_u_fraction = 0.25\n'), "utf-8")

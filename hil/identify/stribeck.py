@@ -1,11 +1,13 @@
 """Stribeck friction (T_s, v_s) from a slow constant-velocity staircase in both directions.
 
-The staircase runs forward through decreasing speeds, turns round beyond its end (so cable
-hysteresis has settled before the first slow backward step) and comes back over the *same*
-positions in the reverse order. At each speed the settled torque of the two directions is
-averaged over the positions both passes covered, so every torque that depends on position
-only (gravity, cable, cogging, offset) cancels in the half difference and the friction
-magnitude remains::
+The staircase runs in forward (so a cable's hysteresis loop is dragged to its full
+half-width before the first step, whichever way the axis came), forward through
+decreasing speeds, turns round beyond its end (so the loop has settled again before the
+first slow backward step) and comes back over the *same* positions in the reverse order.
+At each speed the settled torque of the two directions is averaged over the positions both
+passes covered, so every torque that depends on position only (gravity, cable, cogging,
+offset) cancels in the half difference and the friction magnitude remains (with the cable
+loop's half-width, which sliding drags along: :mod:`hil.suite.stribeck` takes it out)::
 
     F(v) = T_c + (T_s − T_c)·exp(−(v/v_s)²) + B·v
 
@@ -53,7 +55,8 @@ class Staircase:
     travel_rad : float
         Net forward travel of the staircase, without the turnaround (rad).
     turnaround_rad : float
-        Travel out (and back) of the turnaround, as sampled (rad).
+        Travel out (and back) of the turnaround, as sampled (rad); the run-in before the
+        first step is as long.
     """
 
     command_rad_s: FloatArray
@@ -61,7 +64,7 @@ class Staircase:
     forward_steps: tuple[tuple[int, int], ...]  # (start, stop) per speed, forward pass
     backward_steps: tuple[tuple[int, int], ...]  # same order of speeds, backward pass
     travel_rad: float  # net forward travel of the staircase (without the turnaround)
-    turnaround_rad: float
+    turnaround_rad: float  # out and back at the end; the run-in at the start is as long
 
 
 def staircase(
@@ -73,8 +76,9 @@ def staircase(
     turnaround_rad: float,
     turnaround_speed_rad_s: float,
 ) -> Staircase:
-    """Build the staircase: forward at ``speeds`` (sorted fast → slow), out and back over
-    ``turnaround_rad`` at ``turnaround_speed_rad_s``, backward over the same steps slow → fast.
+    """Build the staircase: a run-in of ``turnaround_rad`` at ``turnaround_speed_rad_s``,
+    forward at ``speeds`` (sorted fast → slow), out and back over ``turnaround_rad``,
+    backward over the same steps slow → fast.
 
     Each step lasts ``2·settle_s`` plus the time to cover ``step_travel_rad`` at its speed,
     so the settled parts of the forward and the backward step overlap by ``step_travel_rad``.
@@ -90,7 +94,8 @@ def staircase(
     settle_s : float
         Settling time (s); each step lasts twice this plus its travel time.
     turnaround_rad : float
-        Travel beyond the last forward step before turning back (rad).
+        Travel beyond the last forward step before turning back, and of the run-in before
+        the first (rad).
     turnaround_speed_rad_s : float
         Speed of the turnaround (rad/s).
 
@@ -109,9 +114,9 @@ def staircase(
         raise IdentificationError("need at least four positive staircase speeds")
     lengths = [round((2 * settle_s + step_travel_rad / v) * fs_hz) for v in speeds]
     turn = round(turnaround_rad / turnaround_speed_rad_s * fs_hz)
-    pieces: list[FloatArray] = []
+    pieces: list[FloatArray] = [np.full(turn, turnaround_speed_rad_s)]  # the run-in
     forward, backward = [], []
-    index = 0
+    index = turn
     for v, n in zip(speeds, lengths, strict=True):
         pieces.append(np.full(n, v))
         forward.append((index, index + n))

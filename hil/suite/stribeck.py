@@ -15,6 +15,7 @@ import numpy as np
 
 from hil.calibration import CalibrationRun
 from hil.drives.base import DriveInfo
+from hil.identify.estimate import Component, Estimate
 from hil.identify.stribeck import Staircase, StribeckResult, identify_stribeck, staircase
 from hil.identify.torque_constant import ripple_factors
 from hil.motion import Excitation, Mode
@@ -40,7 +41,9 @@ CROSS_CHECK = (
 RIPPLE = Need(protocol="cogging", result="kt_ripple",
               without="no K_t ripple correction of the staircase's torque")
 CABLE = Need(protocol="gravity_cable", result="cable_hysteresis_nm",
-             without="the sines' T_c cross-checked without the cable loop added")
+             without="T_s still holds the cable loop's half-width (steady sliding drags "
+                     "the loop along), and the sines' T_c is cross-checked without it")
+CABLE_LINE = "cable loop's half-width h taken out (gravity_cable)"
 NEEDS: tuple[Need, ...] = (
     RIPPLE, CABLE,
     *(Need(protocol="inertia_friction", result=other, without=f"no cross-check of {other}")
@@ -114,7 +117,7 @@ class Spec(TravelSpec):
             The staircase and its turnaround need more than 90 % of the travel.
         """
         stairs = self.stairs
-        extent = stairs.travel_rad + stairs.turnaround_rad
+        extent = stairs.travel_rad + 2 * stairs.turnaround_rad  # run-in and turnaround
         middle = (self.travel_min_rad + self.travel_max_rad) / 2
         if extent > 0.9 * (self.travel_max_rad - self.travel_min_rad):
             raise ValueError(f"staircase needs {extent:.3g} rad, more than 90 % of the travel")
@@ -187,6 +190,22 @@ def analyse(
         stairs=spec.stairs,
         settle_s=spec.settle_s,
     )
+
+
+def without_cable_loop(static: Estimate, loop: Estimate | None) -> Estimate:
+    """T_s less the cable loop's half-width ``h`` (``None``: not measured, T_s as found).
+
+    In steady sliding the cable's hysteresis loop is dragged along at its half-width, in
+    the direction of motion like friction: the staircase's half difference of the two
+    directions is ``T_s + h`` (and ``T_c + h``; ``v_s`` is unchanged). The certificate's
+    static friction is the friction: ``h`` comes out, its uncertainty a Type B line (an
+    earlier protocol's result, measured again in each calibration)."""
+    if loop is None:
+        return static
+    return static.with_components(
+        Component(source=CABLE_LINE, kind="B", standard_uncertainty=loop.standard_uncertainty,
+                  unit=static.unit, sensitivity=-1.0, dof=loop.dof),
+        value=static.value - loop.value)
 
 
 def finite_or_none(value: float) -> float | None:
