@@ -3,11 +3,13 @@
     python benchmarks/bench_coverage.py --units 100 --pairs 20 --out /tmp/coverage
 
 Draws ``--units`` simulated units of each demo profile across the profile's tolerance
-ranges (``coverage_population``: every plant parameter varied, every effect on, random noise
-seeds), calibrates each through ``gimbal-hil calibrate --drive sim`` and reports per result
-the bias, the RMS of the normalised error ``(x − truth)/u`` and the fraction of truths
-inside ``±U``. Goal: coverage 93–98 %, RMS normalised error 0.7–1.3. Results without a truth
-of the plant's are checked by repeatability over ``--pairs`` units calibrated twice.
+ranges (:mod:`hil.characterise`, as ``gimbal-hil characterise`` does: every plant parameter
+varied, every effect on, random noise seeds), calibrates each through ``gimbal-hil
+calibrate --drive sim`` and reports per result the bias, the RMS of the normalised error
+``(x − truth)/u`` and the fraction of truths inside ``±U``. Goal: coverage 93–98 %, RMS
+normalised error 0.7–1.3. Results without a truth of the plant's are checked by
+repeatability over ``--pairs`` units calibrated twice (what this adds to ``gimbal-hil
+characterise``).
 """
 
 from __future__ import annotations
@@ -23,45 +25,11 @@ from pathlib import Path
 import numpy as np
 import tomli_w
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-
-from coverage_population import (
-    NO_TRUTH,
-    Summary,
-    bias_map,
-    calibrate,
-    repeatability,
-    run_population,
-    summarise,
-    with_validation,
-    write_population,
-)
-
-BIAS_MAP_HEADER = """\
-# Each method's error over a simulated population of units, per axis, written by
-# benchmarks/bench_coverage.py --write-bias-map (see benchmarks/RESULTS.md). A calibration
-# corrects the mean error (bias) and states the unit-to-unit scatter beyond Type A as a
-# named Type B line of its budget. `--method-bias off` calibrates without it.
-# validated_coverage / validated_units: how often the certificate's ±U held the truth on a
-# second population not used for these figures (--write-validation); note: what keeps a
-# result's coverage from 95 %, where that was traced. Both are printed on the certificate.
-"""
-GOAL_COVERAGE = (0.93, 0.98)
-GOAL_RMS = (0.7, 1.3)
-
-
-def verdict(s: Summary) -> str:
-    """``met``: coverage and RMS inside the goal; ``consistent``: not both, but the 95 %
-    interval of each overlaps its goal (the population cannot tell it from a result that
-    meets it); ``MISSED``: an interval lies wholly outside."""
-    inside = (GOAL_COVERAGE[0] <= s.coverage <= GOAL_COVERAGE[1]
-              and GOAL_RMS[0] <= s.rms_normalised <= GOAL_RMS[1])
-    if inside:
-        return "met"
-    overlaps = (s.coverage_interval[0] <= GOAL_COVERAGE[1]
-                and s.coverage_interval[1] >= GOAL_COVERAGE[0]
-                and s.rms_interval[0] <= GOAL_RMS[1] and s.rms_interval[1] >= GOAL_RMS[0])
-    return "consistent" if overlaps else "MISSED"
+from hil.characterise.draw import write_population
+from hil.characterise.method_map import HEADER, bias_map, with_validation
+from hil.characterise.run import calibrate, run_population
+from hil.characterise.summary import repeatability, summarise, table
+from hil.characterise.truth import NO_TRUTH
 
 
 def main() -> int:
@@ -92,27 +60,14 @@ def main() -> int:
         population = (f"bench_coverage.py --units {args.units} --seed {args.seed} "
                       f"--method-bias {args.method_bias}: {len(units)} units")
         args.write_bias_map.write_text(
-            BIAS_MAP_HEADER + tomli_w.dumps(bias_map(rows, population=population)),
+            HEADER + tomli_w.dumps(bias_map(rows, population=population)),
             encoding="utf-8")
     if args.write_validation:
         document = tomllib.loads(args.write_validation.read_text(encoding="utf-8"))
         args.write_validation.write_text(
-            BIAS_MAP_HEADER + tomli_w.dumps(with_validation(document, summaries)),
+            HEADER + tomli_w.dumps(with_validation(document, summaries)),
             encoding="utf-8")
-    print("| axis | result | n | bias | RMS (x−truth)/u [95 %] | coverage ±U [95 %] | "
-          "median u | goal |")
-    print("|---|---|---|---|---|---|---|---|")
-    for s in summaries:
-        bias, u = ((f"{100 * s.bias:+.2f} %", f"{100 * s.median_u:.2g} %") if s.relative
-                   else (f"{s.bias:+.2g}", f"{s.median_u:.2g}"))
-        (c_lo, c_hi), (r_lo, r_hi) = s.coverage_interval, s.rms_interval
-        print(f"| {s.axis} | {s.parameter} | {s.n} | {bias} | {s.rms_normalised:.2f} "
-              f"[{r_lo:.2f}, {r_hi:.2f}] | {100 * s.coverage:.1f} % [{100 * c_lo:.0f}, "
-              f"{100 * c_hi:.0f}] | {u} | {verdict(s)} |")
-    counts = {v: sum(verdict(s) == v for s in summaries) for v in ("met", "consistent",
-                                                                   "MISSED")}
-    print(f"\n{counts['met']} met, {counts['consistent']} consistent with the goal, "
-          f"{counts['MISSED']} missed, of {len(summaries)}.")
+    print("\n".join(table(summaries)))
 
     pairs = [u for u in units if int(u.serial.split("-")[1]) < args.pairs]
     z: dict[str, list[float]] = {}

@@ -67,12 +67,6 @@ def bare_firmware(profile: UnitProfile, *, keep_lag: bool = False) -> UnitProfil
     return dataclasses.replace(profile, firmware=firmware)
 
 
-def reported_scale(plant: PlantParams) -> float:
-    """Reported torque units per true N·m: the drive converts current with the nominal K_t,
-    so a physical torque ``T`` is reported as ``T / (1 + torque_constant_error_rel)``."""
-    return 1.0 / (1.0 + plant.torque_constant_error_rel)
-
-
 def sim_drive(
     plant: PlantParams, *, firmware: Firmware, limits: Limits, fs_hz: float, seed: int,
     exact_torque_hold: bool = True,

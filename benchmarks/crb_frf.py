@@ -21,12 +21,12 @@ from crb_common import (
     frf_blocks,
     frf_information,
     monte_carlo,
-    reported_scale,
     sim_drive,
 )
 
 import hil.suite.current_loop as current_protocol
 import hil.suite.resonance as resonance_protocol
+from hil.characterise.truth import reported_scale, two_mass_truth
 from hil.errors import IdentificationError
 from hil.identify.current_loop import sampled_response
 from hil.identify.resonance import TwoMassModel, two_mass_response
@@ -167,26 +167,6 @@ def stepped_sine_profile(profile: UnitProfile) -> UnitProfile:
     """``profile`` with its ``[protocols.resonance]`` table replaced by :data:`STEPPED_SINE`."""
     return dataclasses.replace(profile, protocols={**profile.protocols,
                                                    "resonance": STEPPED_SINE})
-
-
-def two_mass_truth(plant: PlantParams, *, time_constant_s: float) -> TwoMassModel:
-    """The fitted model's parameters for the simulated plant (as ``bench_frf.py`` derives
-    them; torque in reported units: the K_t error scales J)."""
-    j_total = plant.total_inertia_kg_m2
-    j_load = plant.load_at_elevation_kg_m2
-    k, c = plant.shaft_stiffness_nm_rad, plant.shaft_damping_nm_s_rad
-    reduced = plant.motor_inertia_kg_m2 * j_load / j_total
-    wa, wr = math.sqrt(k / j_load), math.sqrt(k / reduced)
-    return TwoMassModel(
-        inertia_kg_m2=j_total * reported_scale(plant),
-        antiresonance_hz=wa / (2 * math.pi),
-        antiresonance_damping=c / (2 * math.sqrt(k * j_load)),
-        resonance_hz=wr / (2 * math.pi),
-        resonance_damping=c / (2 * math.sqrt(k * reduced))
-        + plant.viscous_nm_s_rad / (2 * plant.motor_inertia_kg_m2 * wr) * j_load / j_total,
-        viscous_over_inertia_1_s=plant.viscous_nm_s_rad / j_total,
-        time_constant_s=time_constant_s,
-    )
 
 
 def resonance(

@@ -13,13 +13,13 @@ from crb_common import (
     bare_plant,
     bound,
     monte_carlo,
-    reported_scale,
     sim_drive,
 )
 
 import hil.suite.inertia_elevation as elevation_protocol
 import hil.suite.inertia_friction as sine
 import hil.suite.torque_constant as torque_protocol
+from hil.characterise.truth import reported_scale
 from hil.errors import IdentificationError
 from hil.identify.estimate import Estimate
 from hil.identify.inertia_elevation import fit_inertia_elevation

@@ -16,7 +16,6 @@ from crb_common import (
     bound,
     linear_information,
     monte_carlo,
-    reported_scale,
     sim_drive,
 )
 from numpy.typing import NDArray
@@ -24,6 +23,7 @@ from numpy.typing import NDArray
 import hil.suite.cogging as cogging_protocol
 import hil.suite.gravity_cable as gravity_protocol
 import hil.suite.stribeck as stribeck_protocol
+from hil.characterise.truth import reported_scale
 from hil.errors import IdentificationError
 from hil.identify.cogging import _design
 from hil.identify.quantisation import quantisation_step

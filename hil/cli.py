@@ -1,4 +1,5 @@
-"""The ``gimbal-hil`` command: simulate, calibrate, render, diagnose, results, compare.
+"""The ``gimbal-hil`` command: simulate, calibrate, render, diagnose, results, compare,
+verify, characterise.
 
 Only argparse and the subcommands' argument definitions load at start (``--help`` stays
 fast); a subcommand imports what it needs (numpy, numba, scipy, SQLAlchemy, pytest…) when it
@@ -17,6 +18,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from hil import __version__
+from hil.characterise.cli import add_arguments as add_characterise_arguments
 from hil.compare.cli import add_arguments as add_compare_arguments
 from hil.diagnose.cli import add_arguments as add_diagnose_arguments
 from hil.drives.kinds import DRIVE_KINDS, KINDS
@@ -41,6 +43,7 @@ COMMANDS = (
     ("results", "the results store: ingest, units, history, trend, spc…"),
     ("compare", "a baseline calibration against a candidate (regression)"),
     ("verify", "check certificates: digest, recordings' SHA-256, outcomes"),
+    ("characterise", "a unit type's method-bias map, from simulated units drawn across it"),
 )
 
 
@@ -129,6 +132,7 @@ def build_parser() -> argparse.ArgumentParser:
     add_diagnose_arguments(subs["diagnose"])
     add_results_arguments(subs["results"])
     add_compare_arguments(subs["compare"])
+    add_characterise_arguments(subs["characterise"])
     return parser
 
 
@@ -160,6 +164,10 @@ def main(argv: Sequence[str] | None = None) -> int:
             return run_compare(args)
         if args.subcommand == "verify":
             return _verify(args)
+        if args.subcommand == "characterise":
+            from hil.characterise.cli import run as run_characterise
+
+            return run_characterise(args)
         from hil.diagnose.cli import run as run_diagnose
 
         return run_diagnose(args)

@@ -1,6 +1,6 @@
 """The stated uncertainties describe the errors: a small population of simulated units,
 calibrated as a user would, against the truth each result claims (the benchmark
-``benchmarks/bench_coverage.py`` at 30 units; its truth map is in ``coverage_population``).
+``gimbal-hil characterise`` at 30 units; its truth map is in :mod:`hil.characterise.truth`).
 
 A result fails when its k = 2 interval covers the truth in fewer than 80 % of the units or
 the RMS of ``(x − truth)/u`` leaves 0.5–2.0 (both a 95 %-coverage uncertainty would meet
@@ -15,27 +15,17 @@ from __future__ import annotations
 
 import math
 import os
-import sys
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import replace
-from pathlib import Path
 
 import numpy as np
 import pytest
 from scipy import stats
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
-
-from coverage_population import (
-    NO_TRUTH,
-    Row,
-    Summary,
-    calibrate,
-    repeatability,
-    run_population,
-    summarise,
-    write_population,
-)
+from hil.characterise.draw import write_population
+from hil.characterise.run import Row, calibrate, run_population
+from hil.characterise.summary import Summary, repeatability, summarise
+from hil.characterise.truth import NO_TRUTH
 
 UNITS_PER_PROFILE = 15
 PAIRS_PER_PROFILE = 8

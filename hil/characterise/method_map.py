@@ -1,0 +1,80 @@
+"""The method-bias map (``fixtures/method_bias.toml``) a population's results show, and its
+validation on a second population.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterable, Mapping
+from typing import Any
+
+import numpy as np
+from scipy.optimize import brentq
+
+from hil.characterise.run import Row
+from hil.characterise.summary import FloatArray, Summary, by_result, errors_of
+
+HEADER = """\
+# Each method's error over a simulated population of units, per axis, written by
+# gimbal-hil characterise --write-map (see benchmarks/RESULTS.md). A calibration corrects
+# the mean error (bias) and states the unit-to-unit scatter beyond Type A as a named Type B
+# line of its budget. `--method-bias off` calibrates without it.
+# validated_coverage / validated_units: how often the certificate's ±U held the truth on a
+# second population not used for these figures (--validate-map); note: what keeps a
+# result's coverage from 95 %, where that was traced. Both are printed on the certificate.
+"""
+
+
+def bias_map(rows: Iterable[Row], *, population: str) -> dict[str, Any]:
+    """The method-bias map (``fixtures/method_bias.toml``) the rows show, per axis.
+
+    Per result, with errors ``e`` relative to the truth when every truth is positive (else
+    absolute) and the stated (Type A) ``u``: the scatter ``s`` beyond what ``u`` covers is
+    the maximum-likelihood one, ``mean((e − b)²/(u² + s²)) = 1`` (zero when the stated
+    ``u`` already covers the errors), the bias ``b`` the mean of ``e`` weighted by
+    ``1/(u² + s²)``; the bias's own standard error is added to ``s``. Units whose ``u``
+    differs a lot (an ill-determined cable loop) then count by their own ``u``, which a
+    moment estimate ``var(e) − mean(u²)`` would not do. Computed on results calibrated
+    with ``--method-bias off``.
+    """
+    results: dict[str, dict[str, Any]] = {}
+    for (axis, name), group in by_result(rows).items():
+        relative, errors, u = errors_of(group)
+        bias, scatter = float(np.mean(errors)), 0.0
+        for _ in range(20):
+            scatter = _excess_scatter(errors - bias, u)
+            weights = 1 / (u**2 + scatter**2)
+            bias = float(np.sum(weights * errors) / np.sum(weights))
+        results.setdefault(axis, {})[name] = {
+            "scale": "relative" if relative else "absolute",
+            "bias": bias,
+            "scatter": math.hypot(scatter, 1 / math.sqrt(float(np.sum(weights)))),
+            "units": len(group),
+        }
+    return {"population": population, "results": results}
+
+
+def with_validation(document: Mapping[str, Any], summaries: Iterable[Summary]
+                    ) -> dict[str, Any]:
+    """The map ``document`` with each result's coverage on this (out-of-sample)
+    population: ``validated_coverage`` and ``validated_units`` (notes are kept)."""
+    results = {axis: {name: dict(entry) for name, entry in table.items()}
+               for axis, table in document["results"].items()}
+    for s in summaries:
+        entry = results.get(s.axis, {}).get(s.parameter)
+        if entry is not None:
+            entry["validated_coverage"] = round(s.coverage, 4)
+            entry["validated_units"] = s.n
+    return {**document, "results": results}
+
+
+def _excess_scatter(errors: FloatArray, u: FloatArray) -> float:
+    """``s ≥ 0`` with ``mean(e²/(u² + s²)) = 1``."""
+
+    def excess(s: float) -> float:
+        return float(np.mean(errors**2 / (u**2 + s**2))) - 1.0
+
+    if excess(0.0) <= 0:
+        return 0.0
+    high = float(np.sqrt(np.mean(errors**2))) + 1e-300
+    return float(brentq(excess, 0.0, high))
