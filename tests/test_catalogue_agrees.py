@@ -1,0 +1,55 @@
+"""The places one protocol lives in agree with the catalogue (``hil.suite.catalogue``):
+its pytest module, its planned motion, its plot and caption, its title on the certificate,
+the results the demo profiles declare, the method-bias map and the repeatability map. A
+protocol added in its suite module but forgotten in one of them fails here, naming it
+(docs/contributing.md lists the files)."""
+
+from __future__ import annotations
+
+import importlib
+import tomllib
+from pathlib import Path
+
+import pytest
+
+from hil.certificate.render import PROTOCOL_TITLES
+from hil.profile import builtin_profile_path, load_profile
+from hil.report.plan import PLANNERS
+from hil.report.plots import CAPTIONS, PLOTTERS
+from hil.suite.catalogue import PROTOCOL_OF, PROTOCOLS
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+@pytest.mark.parametrize("name", sorted(PROTOCOLS))
+def test_every_protocol_has_its_test_plan_plot_and_title(name: str) -> None:
+    module = importlib.import_module(f"gimbal_hil_protocols.test_{name}")
+    assert set(module.DECLARED) == set(PROTOCOLS[name]), "declared ≠ the suite's MEASUREMENTS"
+    assert name in PLANNERS, "no planned motion (hil/report/plan.py PLANNERS)"
+    assert name in PROTOCOL_TITLES, "no title (hil/certificate/render.py PROTOCOL_TITLES)"
+    assert name in PLOTTERS, "no plot (hil/report/plots.py PLOTTERS)"
+    assert name in CAPTIONS, "no caption (hil/report/plots.py CAPTIONS)"
+
+
+def test_nothing_outside_the_catalogue_is_planned_plotted_or_titled() -> None:
+    for table, where in ((PLANNERS, "PLANNERS"), (PLOTTERS, "PLOTTERS"),
+                         (CAPTIONS, "CAPTIONS"), (PROTOCOL_TITLES, "PROTOCOL_TITLES")):
+        assert set(table) <= set(PROTOCOLS), f"{where}: {set(table) - set(PROTOCOLS)}"
+
+
+@pytest.mark.parametrize("profile", ["demo_gimbal_elevation", "demo_gimbal_azimuth"])
+def test_a_demo_profile_declares_only_what_its_protocols_measure(profile: str) -> None:
+    loaded = load_profile(profile)
+    for result in loaded.measurements:
+        assert PROTOCOL_OF[result] in loaded.protocols, result
+    raw = tomllib.loads(builtin_profile_path(profile).read_text(encoding="utf-8"))
+    assert list(raw["protocols"]) == list(loaded.protocols)
+
+
+@pytest.mark.parametrize("path", ["fixtures/method_bias.toml",
+                                  "fixtures/compare_repeatability.toml"])
+def test_the_maps_name_only_results_the_catalogue_knows(path: str) -> None:
+    document = tomllib.loads((ROOT / path).read_text(encoding="utf-8"))
+    for axis, results in document["results"].items():
+        unknown = set(results) - set(PROTOCOL_OF)
+        assert not unknown, f"{path} [{axis}]: {unknown}"
