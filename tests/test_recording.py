@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import gzip
+import subprocess
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -161,3 +163,30 @@ def test_gzip_is_deterministic(tmp_path: Path) -> None:
         rec, tmp_path / "b.csv.gz"
     )
     assert gzip.decompress((tmp_path / "a.csv.gz").read_bytes()).startswith(b"time_s,")
+
+
+def test_a_long_recording_is_written_the_same_when_half_is_formatted_in_a_child(
+        tmp_path: Path) -> None:
+    """A single-threaded process formats half of a long recording in a forked child
+    (``gimbal-hil simulate``); the file is byte for byte what one process writes."""
+    script = (
+        "import sys, numpy as np\n"
+        "from hil.recording import Recording, write_recording, FORK_ROWS\n"
+        "import hil.recording as r\n"
+        "n = FORK_ROWS + 12345\n"
+        "rng = np.random.default_rng(4)\n"
+        "cols = {'time_s': np.arange(n) / 4000.0, 'position_rad': rng.standard_normal(n),\n"
+        "        'velocity_rad_s': rng.standard_normal(n) * 1e-5,\n"
+        "        'torque_nm': rng.standard_normal(n) * 1e3}\n"
+        "rec = Recording(columns=cols, metadata={'drive': 'test'})\n"
+        "write_recording(rec, sys.argv[1])\n"
+        "r.FORK_ROWS = 10**12\n"
+        "write_recording(rec, sys.argv[2])\n"
+    )
+    done = subprocess.run([sys.executable, "-c", script, str(tmp_path / "forked.csv"),
+                           str(tmp_path / "one.csv")], capture_output=True, text=True,
+                          check=False, timeout=300)
+    assert done.returncode == 0, done.stderr
+    forked, one = (tmp_path / "forked.csv").read_bytes(), (tmp_path / "one.csv").read_bytes()
+    assert forked == one
+    assert forked.count(b"\n") == 200_000 + 12345 + 2  # metadata line, header, rows

@@ -180,15 +180,26 @@ def _current_loop_over_canopen(
 def test_hidden_lag_is_recovered_over_canopen(
     profile: UnitProfile, tau_ms: float, seed: int
 ) -> None:
-    """The demo plant with noise, quantisation, cogging, velocity filter on, τ hidden: the
-    1 kHz SYNC stream measures it within the accuracy the profile claims, from the unit's
-    lower limit (0.21 ms) up. The point-sampled torque keeps an alias bias of about
-    -0.005 ms (interpolation images through the velocity loop, module docstring of
-    hil.identify.current_loop): 3 % of τ only down to ≈ 0.2 ms."""
+    """The demo plant with noise (in the loops too), quantisation, cogging, velocity filter
+    on, τ hidden: the 1 kHz SYNC stream with the torque averaged over each SYNC period (the
+    default where the drive offers it) measures it within the accuracy the profile claims,
+    from the unit's lower limit (0.21 ms) up."""
     accuracy = profile.measurement("current_loop_time_constant_ms").accuracy_rel
     assert accuracy is not None
-    result = _current_loop_over_canopen(_lagged(profile, tau_ms * 1e-3), seed=seed)
+    result = _current_loop_over_canopen(_lagged(profile, tau_ms * 1e-3), seed=seed,
+                                        sampling="mean")
     assert result.time_constant.value == pytest.approx(tau_ms, rel=accuracy)
+
+
+@pytest.mark.xfail(strict=True, reason="point-sampled torque over a 1 kHz stream: an alias "
+                   "bias of −2 … −4 % with the loops' noise (interpolation images through the "
+                   "velocity loop) that no method line of this acquisition path corrects yet; "
+                   "issue 30")
+def test_point_sampled_lag_is_within_its_stated_uncertainty(profile: UnitProfile) -> None:
+    """τ 0.3 ms, seed 2: −3.2 % against U = 2.0 % (the averaged torque: +1.5 %)."""
+    result = _current_loop_over_canopen(_lagged(profile, 3e-4), seed=2)
+    estimate = result.time_constant
+    assert abs(estimate.value - 0.3) <= estimate.expanded_uncertainty
 
 
 def test_held_targets_are_refused(profile: UnitProfile) -> None:
