@@ -43,7 +43,7 @@ COMMANDS = (
     ("results", "the results store: ingest, units, history, trend, spc…"),
     ("compare", "a baseline calibration against a candidate (regression)"),
     ("verify", "check certificates: digest, recordings' SHA-256, outcomes"),
-    ("characterise", "a unit type's method-bias map, from simulated units drawn across it"),
+    ("characterise", "a unit type's method-bias map from simulated units"),
 )
 
 
@@ -61,6 +61,16 @@ class HelpFormatter(argparse.HelpFormatter):
         if "default" in text or unset or default == [] or not takes_default:
             return text
         return f"{text} (default: %(default)s)"
+
+    def add_argument(self, action: argparse.Action) -> None:
+        super().add_argument(action)
+        # argparse measures the commands' names at the list's indent, not one level deeper
+        # where it prints them: the longest name would wrap its description to a line of
+        # its own
+        if isinstance(action, argparse._SubParsersAction):
+            longest = max((len(name) for name in action.choices), default=0)
+            self._action_max_length = max(self._action_max_length, self._current_indent
+                                          + self._indent_increment + longest)
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -22,7 +22,8 @@ from tests.compare.certificate_factory import certificate, result, write
 
 REAL_KINDS = tuple(k for k in DRIVE_KINDS if k not in SIMULATED_KINDS)
 HEAVY = ("numpy", "scipy", "sqlalchemy", "matplotlib", "numba", "pytest", "alembic")
-COMMANDS = ("simulate", "calibrate", "render", "diagnose", "results", "compare", "verify")
+COMMANDS = ("simulate", "calibrate", "render", "diagnose", "results", "compare", "verify",
+            "characterise")
 RESULTS_COMMANDS = ("ingest", "sync", "units", "history", "trend", "spc", "export", "yield",
                     "report")
 

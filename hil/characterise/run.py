@@ -16,10 +16,10 @@ from typing import Any
 
 from hil.characterise.draw import Unit
 from hil.characterise.truth import truths
+from hil.suite.catalogue import PROTOCOLS as CATALOGUE
 
 #: The protocols an earlier result's budget line may name (``… (gravity_cable)``).
-PROTOCOLS = ("current_loop", "gravity_cable", "inertia_friction", "cogging", "stribeck",
-             "torque_constant", "resonance", "inertia_elevation")
+PROTOCOLS = tuple(CATALOGUE)
 #: The closed-loop protocols measure behaviour with no truth in the plant's parameters;
 #: their run-to-run check is ``bench_compare.py`` (same firmware, other seeds). Left out
 #: here, they would only add machine time.

@@ -93,7 +93,8 @@ def _progress(total: int, started: float) -> Callable[[Unit, int], None]:
     def report(unit: Unit, results: int) -> None:
         with lock:
             done[0] += 1
-            print(f"[{done[0]}/{total}] {unit.serial}: {results} results "
+            found = f"{results} results" if results else "no certificate: its calibration failed"
+            print(f"[{done[0]}/{total}] {unit.serial}: {found} "
                   f"({time.perf_counter() - started:.0f} s)", flush=True)
 
     return report

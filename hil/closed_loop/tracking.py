@@ -147,10 +147,12 @@ def feedforward_change(off: Repeated | Following, on: Repeated | Following, *, r
                        ) -> tuple[float, float]:
     """Change of (RMS, peak) of the run with feedforward when the feedforward were
     ``1 + relative`` times as large: by superposition of the runs without and with it,
-    ``e = e_on + relative·(e_on − e_off)`` (the loop linear about the run with it)."""
-    error = on.error_rad + relative * (on.error_rad - off.error_rad)
-    return (float(np.sqrt(np.mean(error**2))) - on.rms_rad,
-            float(np.max(np.abs(error))) - on.peak_rad)
+    ``e = e_on + relative·(e_on − e_off)`` (the loop linear about the run with it), each
+    figure against the same figure of ``e_on`` (of repeated runs: their mean error)."""
+    base = on.error_rad
+    error = base + relative * (base - off.error_rad)
+    return (float(np.sqrt(np.mean(error**2)) - np.sqrt(np.mean(base**2))),
+            float(np.max(np.abs(error)) - np.max(np.abs(base))))
 
 
 def as_estimate(name: str, value_rad: float, u_rad: float, *, scale: float, unit: str,
