@@ -16,7 +16,6 @@ from hil.closed_loop.tracking import Repeated
 from hil.drives.base import Drive
 from hil.identify.estimate import Estimate
 from hil.measurement import Declared, declare
-from hil.motion import Mode
 from hil.profile import UnitProfile
 from hil.suite.needs import note_fallbacks
 from hil.suite.rate import sample_rate_shortfall
@@ -31,7 +30,7 @@ from hil.suite.tracking import (
     analyse,
     excitation,
     feedforward_values,
-    motion,
+    run_motion,
 )
 
 pytestmark = pytest.mark.protocol(NAME)
@@ -66,15 +65,9 @@ def result(drive: Drive, calibration: CalibrationRun, profile: UnitProfile
     off, on = excitation(spec, viscous_nm_s_rad=viscous, coulomb_nm=coulomb)
 
     def run_once() -> tuple[dict[str, Estimate], Repeated, Repeated]:
-        recorded = []
         # the protocol's one sequence (the planner sums the same): per run a move, the run
-        for e in motion(spec, (off, on), position=lambda: drive.status().position_rad):
-            if e.mode is Mode.POSITION:
-                calibration.run(drive, e, protocol=NAME)
-                drive.disable()  # re-enabled: the velocity integrator starts empty for the run
-                drive.enable()
-                continue
-            recorded.append((calibration.run(drive, e, protocol=NAME), e))
+        recorded = run_motion(spec, (off, on), drive=drive,
+                              run=lambda e: calibration.run(drive, e, protocol=NAME))
         return analyse(recorded[0::2], recorded[1::2], spec, feedforward_u_rel=u_rel)
 
     runs = run_repeated(run_once, lambda found: found[0], rule=spec.stop,

@@ -32,7 +32,7 @@ from hil.closed_loop.tracking import (
     reduction,
     repeated,
 )
-from hil.drives.base import DriveInfo
+from hil.drives.base import Drive, DriveInfo
 from hil.identify.estimate import Component, Estimate
 from hil.identify.quantisation import quantisation_step
 from hil.motion import Excitation, Mode
@@ -147,6 +147,23 @@ def motion(spec: Spec, runs: tuple[Excitation, Excitation], *,
     return runs_from_start(spec, (dataclasses.replace(run, name=repeat_name(run.name, k))
                                   for k in range(1, spec.repeats + 1) for run in runs),
                            position=position)
+
+
+def run_motion(spec: Spec, runs: tuple[Excitation, Excitation], *, drive: Drive,
+               run: Callable[[Excitation], Recording]) -> list[tuple[Recording, Excitation]]:
+    """Run :func:`motion` on ``drive`` through ``run`` (the drive's, or the calibration's
+    that keeps the recording), the drive re-enabled after each move so that each run's
+    velocity integrator starts empty; the runs' recordings with their excitations, in
+    order (without, with the feedforward, repeated)."""
+    recorded = []
+    for e in motion(spec, runs, position=lambda: drive.status().position_rad):
+        if e.mode is Mode.POSITION:
+            run(e)
+            drive.disable()
+            drive.enable()
+            continue
+        recorded.append((run(e), e))
+    return recorded
 
 
 def repeat_name(name: str, repeat: int) -> str:

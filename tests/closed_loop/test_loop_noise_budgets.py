@@ -20,7 +20,6 @@ import pytest
 
 from hil.drives.sim import SimDrive
 from hil.identify.estimate import Estimate
-from hil.motion import Mode
 from hil.profile import load_profile
 from hil.suite import standstill, tracking
 from hil.suite.travel import move_excitation
@@ -44,14 +43,7 @@ def _one_unit_run(seed: int) -> dict[str, Estimate]:
         found, _ = standstill.analyse(drive.run(hold), hold, hold_spec)
         spec = tracking.Spec.from_profile(profile, drive.info)
         pair = tracking.excitation(spec, viscous_nm_s_rad=0.0059, coulomb_nm=0.0197)
-        recorded = []
-        for e in tracking.motion(spec, pair, position=lambda: drive.status().position_rad):
-            if e.mode is Mode.POSITION:
-                drive.run(e)
-                drive.disable()
-                drive.enable()
-                continue
-            recorded.append((drive.run(e), e))
+        recorded = tracking.run_motion(spec, pair, drive=drive, run=drive.run)
         drive.disable()
     moves, _, _ = tracking.analyse(recorded[0::2], recorded[1::2], spec)
     return {**found, **moves}

@@ -18,7 +18,6 @@ from hil.closed_loop.tracking import (
     repeated,
 )
 from hil.drives.sim import SimDrive
-from hil.motion import Mode
 from hil.profile import load_profile
 from hil.suite import tracking
 
@@ -193,15 +192,8 @@ def test_the_drives_feedforward_reduces_the_following_error_of_the_standard_move
                   fs_hz=profile.sample_rate_hz, seed=0) as drive:
         spec = tracking.Spec.from_profile(profile, drive.info)
         pair = tracking.excitation(spec, viscous_nm_s_rad=0.005, coulomb_nm=0.02)
-        runs = []
         drive.enable()
-        for move in tracking.motion(spec, pair, position=lambda: drive.status().position_rad):
-            if move.mode is Mode.POSITION:
-                drive.run(move)
-                drive.disable()
-                drive.enable()
-                continue
-            runs.append((drive.run(move), move))
+        runs = tracking.run_motion(spec, pair, drive=drive, run=drive.run)
     estimates, _, _ = tracking.analyse(runs[0::2], runs[1::2], spec)
     ratio = estimates["tracking_ff_reduction"]
     if feedforward:
