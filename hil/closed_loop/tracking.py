@@ -189,4 +189,3 @@ def reduction(off: Estimate, on: Estimate, *, name: str,
               for c in on.components()]
     base = Estimate(name=name, value=ratio, standard_uncertainty=0.0, unit="")
     return with_budget(base, lines, value=ratio)
-

@@ -215,17 +215,16 @@ def frf_point(time_s: FloatArray, position_rad: FloatArray, torque_nm: FloatArra
     if np.any(t_arr == 0):
         raise IdentificationError(f"{frequency_hz:g} Hz: no torque at the frequency")
     ratios = p_arr / t_arr
-    closed = np.abs(1j * omega * p_arr / v_arr)
+    closed = 1j * omega * p_arr / v_arr  # per block
     mean = complex(np.sum(p_arr * np.conj(t_arr)) / np.sum(np.abs(t_arr) ** 2))  # H1
     cross = abs(np.sum(p_arr * np.conj(t_arr))) ** 2
     coherence = float(cross / (np.sum(np.abs(p_arr) ** 2) * np.sum(np.abs(t_arr) ** 2)))
     return FrfPoint(
         frequency_hz=frequency_hz, frf_rad_nm=mean,
         relative_u=float(np.std(ratios, ddof=1) / math.sqrt(blocks) / abs(mean)),
-        coherence=coherence, closed_loop=complex(np.mean(1j * omega * p_arr / v_arr)),
-        blocks=blocks,
-        closed_loop_relative_u=float(np.std(closed, ddof=1) / math.sqrt(blocks)
-                                     / abs(np.mean(1j * omega * p_arr / v_arr))))
+        coherence=coherence, closed_loop=complex(np.mean(closed)), blocks=blocks,
+        closed_loop_relative_u=float(np.std(np.abs(closed), ddof=1) / math.sqrt(blocks)
+                                     / abs(np.mean(closed))))
 
 
 def frf_lines(position_rad: FloatArray, torque_nm: FloatArray, command_rad_s: FloatArray, *,
@@ -338,15 +337,28 @@ def velocity_loop_bandwidth_hz(points: Sequence[FrfPoint]) -> float:
     IdentificationError
         No point falls below 1/√2, or the first already does.
     """
+    (x0, x1), (y0, y1), _ = _crossing(points)
+    return float(np.exp(x0 + (math.log(HALF_POWER) - y0) * (x1 - x0) / (y1 - y0)))
+
+
+def _crossing(points: Sequence[FrfPoint]) -> tuple[tuple[float, float], tuple[float, float],
+                                                   int]:
+    """``ln f`` and ``ln|T|`` of the two lines about the first fall below 1/√2, and the
+    index of the second.
+
+    Raises
+    ------
+    IdentificationError
+        No point falls below 1/√2, or the first already does.
+    """
     freqs = np.array([p.frequency_hz for p in points])
     gain = np.abs([p.closed_loop for p in points])
     below = np.flatnonzero(gain < HALF_POWER)
     if below.size == 0 or below[0] == 0:
         raise IdentificationError("the band does not bracket the velocity loop's -3 dB point")
     k = int(below[0])
-    x = np.log([freqs[k - 1], freqs[k]])
-    y = np.log([gain[k - 1], gain[k]])
-    return float(np.exp(x[0] + (math.log(HALF_POWER) - y[0]) * (x[1] - x[0]) / (y[1] - y[0])))
+    return ((math.log(freqs[k - 1]), math.log(freqs[k])),
+            (math.log(gain[k - 1]), math.log(gain[k])), k)
 
 
 def bandwidth_relative_u(points: Sequence[FrfPoint]) -> float:
@@ -354,11 +366,7 @@ def bandwidth_relative_u(points: Sequence[FrfPoint]) -> float:
     lines it interpolates between: ``ln f = x₀ + t·(x₁ − x₀)``, ``t = (ln h − y₀)/(y₁ − y₀)``
     with ``y = ln|T|``, so ``u(ln f) = |x₁ − x₀|/|y₁ − y₀|·√((1 − t)²u₀² + t²u₁²)``, ``uᵢ``
     the lines' relative u of ``|T|`` (independent: each line its own jackknife)."""
-    freqs = np.array([p.frequency_hz for p in points])
-    gain = np.abs([p.closed_loop for p in points])
-    k = int(np.flatnonzero(gain < HALF_POWER)[0])
-    x0, x1 = math.log(freqs[k - 1]), math.log(freqs[k])
-    y0, y1 = math.log(gain[k - 1]), math.log(gain[k])
+    (x0, x1), (y0, y1), k = _crossing(points)
     t = (math.log(HALF_POWER) - y0) / (y1 - y0)
     u0, u1 = points[k - 1].closed_loop_relative_u, points[k].closed_loop_relative_u
     return abs(x1 - x0) / abs(y1 - y0) * math.hypot((1 - t) * u0, t * u1)

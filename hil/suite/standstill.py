@@ -73,7 +73,7 @@ class Spec(TravelSpec):
         )
         settings.done()
         if spec.blocks < 2:
-            raise settings.error("blocks", f"must be at least 2 (the Type A is their "
+            raise settings.error("blocks", "must be at least 2 (the Type A is their "
                                            f"scatter), not {spec.blocks}")
         return spec
 
