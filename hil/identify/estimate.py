@@ -11,7 +11,7 @@ from typing import Literal
 
 import numpy as np
 from numpy.typing import ArrayLike
-from scipy import stats
+from scipy.special import stdtrit
 
 COVERAGE_PROBABILITY = 0.9545  # the coverage of k = 2 for a normal distribution
 
@@ -32,7 +32,8 @@ def coverage_factor(dof: float) -> float:
     """
     if not math.isfinite(dof) or dof >= 50:
         return 2.0
-    return float(stats.t.ppf(0.5 + COVERAGE_PROBABILITY / 2, max(dof, 1.0)))
+    # stdtrit is what scipy.stats.t.ppf evaluates, without scipy.stats' second of imports
+    return float(stdtrit(max(dof, 1.0), 0.5 + COVERAGE_PROBABILITY / 2))
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
