@@ -1,13 +1,11 @@
 """Calibrating the drawn units through the command line, as a test engineer would
-(``gimbal-hil calibrate --drive sim``), each result beside its truth.
+(``gimbal-hil calibrate --drive sim``, each in a process of its own:
+:mod:`hil.characterise.processes`), each result beside its truth.
 """
 
 from __future__ import annotations
 
 import json
-import os
-import subprocess
-import sys
 from collections.abc import Callable, Sequence
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
@@ -15,6 +13,7 @@ from pathlib import Path
 from typing import Any
 
 from hil.characterise.draw import Unit
+from hil.characterise.processes import run_command
 from hil.characterise.truth import truths
 from hil.suite.catalogue import PROTOCOLS as CATALOGUE
 
@@ -39,12 +38,8 @@ def calibrate(unit: Unit, out_dir: Path, *, seed: int | None = None,
         return {r["parameter"]: r for r in json.loads(path.read_text("utf-8"))["results"]}
     extra = ["--", "--no-documents", "--store", "off", "-k", MECHANICS_ONLY] + (
         [] if method_bias is None else ["--method-bias", method_bias])
-    subprocess.run(
-        [sys.executable, "-m", "hil.cli", "calibrate", "--drive", "sim",
-         "--profile", str(unit.profile_path), "--unit-serial", serial,
-         "--seed", str(seed), "--out", str(out_dir), *extra],
-        capture_output=True, check=False, env={**os.environ, "PYTHONHASHSEED": "0"},
-    )
+    run_command(["calibrate", "--drive", "sim", "--profile", str(unit.profile_path),
+                 "--unit-serial", serial, "--seed", str(seed), "--out", str(out_dir), *extra])
     if not path.is_file():
         return {}
     certificate = json.loads(path.read_text(encoding="utf-8"))
