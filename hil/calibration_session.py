@@ -518,7 +518,9 @@ def pytest_terminal_summary(terminalreporter: pytest.TerminalReporter) -> None:
     cert = json.loads(path.read_text(encoding="utf-8"))
     outcome = cert["outcome"]
     problems = config.stash.get(DOCUMENTS_KEY, [])
-    beside = ["certificate.txt"] + [name for name in ("certificate.html", "certificate.pdf")
+    documents = () if config.getoption("--no-documents") else (
+        "certificate.html", "certificate.pdf")
+    beside = ["certificate.txt"] + [name for name in documents
                                     if not any(p.startswith(name) for p in problems)]
     terminalreporter.write_line(f"certificate: {path} (and {', '.join(beside)} beside it)")
     for problem in problems:

@@ -3,13 +3,12 @@
 from __future__ import annotations
 
 import json
-import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
 
+from hil.characterise.processes import run_command
 from hil.cli import main
 from hil.recording import read_recording
 from tests.helpers import subset_profile
@@ -59,13 +58,25 @@ def test_bad_command_files_exit_2_with_one_line(
 
 
 def test_calibrate_runs_the_suite_and_writes_the_certificate(tmp_path: Path) -> None:
-    done = subprocess.run(
-        [sys.executable, "-m", "hil.cli", "calibrate", "--drive", "sim", "--unit-serial",
-         "CLI-7", "--out", str(tmp_path),
+    done = run_command(
+        ["calibrate", "--drive", "sim", "--unit-serial", "CLI-7", "--out", str(tmp_path),
          "--profile", str(subset_profile(tmp_path / "profiles", "inertia_friction"))],
-        capture_output=True, text=True, timeout=300, check=False,
+        timeout_s=300,
     )
     assert done.returncode == 0, done.stdout + done.stderr
     cert = json.loads((tmp_path / "CLI-7" / "certificate.json").read_text())
     assert cert["outcome"] == "PASS"
     assert "unit CLI-7: PASS" in done.stdout
+    assert "(and certificate.txt, certificate.html, certificate.pdf beside it)" in done.stdout
+
+
+def test_without_documents_the_console_names_only_what_was_written(tmp_path: Path) -> None:
+    done = run_command(
+        ["calibrate", "--drive", "sim", "--unit-serial", "CLI-8", "--out", str(tmp_path),
+         "--profile", str(subset_profile(tmp_path / "profiles", "current_loop")), "--",
+         "--no-documents", "--store", "off"],
+        timeout_s=300,
+    )
+    assert done.returncode == 0, done.stdout + done.stderr
+    assert "(and certificate.txt beside it)" in done.stdout
+    assert not (tmp_path / "CLI-8" / "certificate.html").exists()
