@@ -17,7 +17,7 @@ import pytest
 
 from tests.helpers import subset_profile
 
-pytestmark = pytest.mark.slow
+pytestmark = pytest.mark.slow(seconds=25)
 
 
 def _characterise(out: Path, profile: Path, *extra: str) -> subprocess.CompletedProcess[str]:

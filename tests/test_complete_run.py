@@ -12,14 +12,13 @@ from __future__ import annotations
 
 import json
 import re
-import subprocess
-import sys
 import tomllib
 from pathlib import Path
 
 import pytest
 
 from hil.calibration import CalibrationRun
+from hil.characterise.processes import Finished, run_command
 from hil.identify.estimate import Estimate
 from hil.measurement import MethodBiasMap, Outcome
 from hil.profile import UnitProfile, builtin_profile_path, load_profile, profile_from_mapping
@@ -29,15 +28,15 @@ DEMO = builtin_profile_path().read_text(encoding="utf-8")
 
 
 def _calibrate(tmp_path: Path, *args: str, profile_text: str | None = None
-               ) -> subprocess.CompletedProcess[str]:
-    command = [sys.executable, "-m", "hil.cli", "calibrate", "--drive", "sim",
+               ) -> Finished:
+    command = ["calibrate", "--drive", "sim",
                "--unit-serial", "K-2", "--out", str(tmp_path / "out")]
     if profile_text is not None:
         path = tmp_path / "unit.toml"
         path.write_text(profile_text, encoding="utf-8")
         command += ["--profile", str(path)]
-    return subprocess.run([*command, "--", "--store", "off", "--no-documents", *args],
-                          capture_output=True, text=True, timeout=600, check=False)
+    return run_command([*command, "--", "--store", "off", "--no-documents", *args],
+                       timeout_s=600)
 
 
 def _certificate(tmp_path: Path) -> dict:  # type: ignore[type-arg]

@@ -4,8 +4,6 @@ with an error naming the file, the table and the key; nothing falls back to a de
 from __future__ import annotations
 
 import importlib
-import subprocess
-import sys
 import tomllib
 from collections.abc import Callable, Iterator
 from pathlib import Path
@@ -14,6 +12,7 @@ from typing import Any
 import pytest
 import tomli_w
 
+from hil.characterise.processes import run_command
 from hil.config import builtin_fixture
 from hil.drives.modbus.regmap import load_register_map
 from hil.drives.sim import SimDrive
@@ -168,12 +167,9 @@ def test_the_issue_cases_are_refused(tmp_path: Path) -> None:
 def test_a_bad_profile_stops_calibrate_in_one_line_before_any_motion(tmp_path: Path) -> None:
     bad = _demo_with(tmp_path, "travel_max_rad = 1.4\n", "")
     out = tmp_path / "certs"
-    done = subprocess.run(
-        [sys.executable, "-m", "hil.cli", "calibrate", "--profile", str(bad), "--out", str(out)],
-        capture_output=True,
-        text=True,
-        timeout=300,
-        check=False,
+    done = run_command(
+        ["calibrate", "--profile", str(bad), "--out", str(out)],
+        timeout_s=300,
     )
     assert done.returncode != 0
     text = done.stdout + done.stderr

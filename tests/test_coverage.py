@@ -36,7 +36,7 @@ RMS_RANGE = (0.5, 2.0)
 # two at a time alone; one under pytest-xdist, whose other workers have the other cores
 CALIBRATIONS_AT_ONCE = 1 if os.environ.get("PYTEST_XDIST_WORKER") else 2
 
-pytestmark = pytest.mark.slow
+pytestmark = pytest.mark.slow(seconds=240)
 
 
 Population = tuple[list[Row], dict[str, list[float]]]

@@ -15,29 +15,28 @@ certificate reports (configured against locked angles) can change its moves.
 from __future__ import annotations
 
 import json
-import subprocess
-import sys
 from pathlib import Path
 from typing import Any
 
 import pytest
 
+from hil.characterise.processes import run_command
 from hil.drives.connect import open_drive
 from hil.profile import load_profile
 from hil.report.plan import planned_motion_s
 from hil.suite import torque_constant
 from hil.suite.travel import MOVE_SPEED_FRACTION
 
-pytestmark = pytest.mark.slow
+pytestmark = pytest.mark.slow(seconds=20)
 
 START_ERROR_RAD = 0.05  # how far the real axis may end a protocol from the planned end
 
 
 def _calibrate(base: str, out: Path) -> dict[str, Any]:
-    done = subprocess.run(
-        [sys.executable, "-m", "hil.cli", "calibrate", "--profile", base, "--unit-serial",
+    done = run_command(
+        ["calibrate", "--profile", base, "--unit-serial",
          "PLAN-1", "--out", str(out), "--", "--store", "off", "--no-documents"],
-        capture_output=True, text=True, timeout=900, check=False, cwd=out.parent,
+        timeout_s=900, cwd=out.parent,
     )
     path = out / "PLAN-1" / "certificate.json"
     assert path.is_file(), done.stdout + done.stderr

@@ -7,12 +7,11 @@ from __future__ import annotations
 
 import dataclasses
 import re
-import subprocess
-import sys
 from pathlib import Path
 
 import pytest
 
+from hil.characterise.processes import run_command
 from hil.config import builtin_fixture
 from hil.drives.base import DriveInfo
 from hil.drives.cia402.drive import CanOpenDrive
@@ -114,11 +113,11 @@ def test_calibrate_refuses_it_in_one_line_before_motion(
     tmp_path: Path, changes: list[tuple[str, str, str]], expected: str
 ) -> None:
     path = _profile_file(tmp_path, changes)
-    done = subprocess.run(
-        [sys.executable, "-m", "hil.cli", "calibrate", "--drive", "sim", "--unit-serial",
+    done = run_command(
+        ["calibrate", "--drive", "sim", "--unit-serial",
          "P-1", "--profile", str(path), "--out", str(tmp_path / "out"), "--", "--store", "off",
          "--no-documents", "-p", "no:cacheprovider"],
-        capture_output=True, text=True, timeout=300, cwd=tmp_path,
+        timeout_s=300, cwd=tmp_path,
     )
     output = done.stdout + done.stderr
     assert done.returncode != 0, output

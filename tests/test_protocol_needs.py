@@ -6,12 +6,11 @@ from __future__ import annotations
 
 import json
 import re
-import subprocess
-import sys
 from pathlib import Path
 
 import pytest
 
+from hil.characterise.processes import run_command
 from hil.errors import ProfileError
 from hil.profile import load_profile
 from hil.suite.catalogue import NEEDS, PROTOCOLS, check_order, check_profile
@@ -64,11 +63,11 @@ def test_the_refusal_comes_before_any_motion(tmp_path: Path) -> None:
     """Failed before: the run certified friction without the lag correction."""
     profile = _moved_last(subset_profile(tmp_path, "current_loop", "inertia_friction"),
                           "current_loop")
-    done = subprocess.run(
-        [sys.executable, "-m", "hil.cli", "calibrate", "--profile", str(profile),
+    done = run_command(
+        ["calibrate", "--profile", str(profile),
          "--unit-serial", "ORDER-1", "--out", str(tmp_path / "out"), "--",
          "--store", "off", "--no-documents"],
-        capture_output=True, text=True, timeout=600, check=False, cwd=tmp_path,
+        timeout_s=600, cwd=tmp_path,
     )
     assert done.returncode == 4, done.stdout + done.stderr
     errors = [line for line in done.stderr.splitlines() if "listed before" in line]
@@ -82,11 +81,11 @@ def test_a_need_not_configured_runs_on_its_fallback_and_says_so(tmp_path: Path) 
     taken out is 0 s, and its certificate entry names each fallback. Failed before: the
     certificate said nothing of it."""
     profile = subset_profile(tmp_path, "inertia_friction")
-    done = subprocess.run(
-        [sys.executable, "-m", "hil.cli", "calibrate", "--profile", str(profile),
+    done = run_command(
+        ["calibrate", "--profile", str(profile),
          "--unit-serial", "FALLBACK-1", "--out", str(tmp_path / "out"), "--",
          "--store", "off", "--no-documents"],
-        capture_output=True, text=True, timeout=600, check=False, cwd=tmp_path,
+        timeout_s=600, cwd=tmp_path,
     )
     path = tmp_path / "out" / "FALLBACK-1" / "certificate.json"
     assert path.is_file(), done.stdout + done.stderr

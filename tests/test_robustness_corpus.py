@@ -10,8 +10,6 @@ where it is handled.
 from __future__ import annotations
 
 import math
-import subprocess
-import sys
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -19,6 +17,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from hil.characterise.processes import run_command
 from hil.profile import builtin_profile_path
 
 DEMO = builtin_profile_path().read_text(encoding="utf-8")
@@ -139,8 +138,7 @@ def test_careless_input_gets_one_line_and_no_traceback(tmp_path: Path, name: str
         (tmp_path / file).write_text(text, encoding="utf-8")
     if case.setup is not None:
         case.setup(tmp_path)
-    done = subprocess.run([sys.executable, "-m", "hil.cli", *case.args], cwd=tmp_path,
-                          capture_output=True, text=True, timeout=600, check=False)
+    done = run_command(case.args, cwd=tmp_path, timeout_s=600)
     text = done.stdout + done.stderr
     assert done.returncode == case.exit_code, text[-3000:]
     assert "Traceback" not in text, text[-3000:]

@@ -11,10 +11,9 @@ from __future__ import annotations
 
 import json
 import re
-import subprocess
-import sys
 from pathlib import Path
 
+from hil.characterise.processes import run_command
 from tests.helpers import subset_profile
 
 HALF_WIDTH_NM = 0.004
@@ -28,10 +27,9 @@ def _calibrate(tmp_path: Path, *protocols: str) -> dict[str, dict[str, object]]:
                   profile.read_text(encoding="utf-8"), count=1, flags=re.M)
     profile.write_text(text, encoding="utf-8")
     out = tmp_path / "out"
-    subprocess.run([sys.executable, "-m", "hil.cli", "calibrate", "--drive", "sim", "--profile",
-                    str(profile), "--unit-serial", "LOOP-1", "--seed", "3", "--out", str(out),
-                    "--", "--store", "off", "--no-documents"],
-                   capture_output=True, text=True, check=False, timeout=600)
+    run_command(["calibrate", "--drive", "sim", "--profile", str(profile), "--unit-serial",
+                 "LOOP-1", "--seed", "3", "--out", str(out), "--", "--store", "off",
+                 "--no-documents"], timeout_s=600)
     certificate = json.loads((out / "LOOP-1" / "certificate.json").read_text(encoding="utf-8"))
     messages = [m for p in certificate["method"]["protocols"].values()
                 for m in p.get("messages", [])]

@@ -15,6 +15,7 @@ from typing import Any
 
 import pytest
 
+from hil.characterise.processes import run_command
 from hil.cli import main
 
 SERIAL = "VERIFY-1"
@@ -24,11 +25,11 @@ SERIAL = "VERIFY-1"
 def calibrated(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """A real simulated calibration (one protocol, no store, no documents): its unit folder."""
     out = tmp_path_factory.mktemp("verify")
-    done = subprocess.run(
-        [sys.executable, "-m", "hil.cli", "calibrate", "--drive", "sim", "--unit-serial",
+    done = run_command(
+        ["calibrate", "--drive", "sim", "--unit-serial",
          SERIAL, "--out", str(out), "--", "--store", "off", "--no-documents",
          "-k", "inertia_friction"],
-        capture_output=True, text=True, timeout=600, check=False)
+        timeout_s=600)
     unit = out / SERIAL
     assert (unit / "certificate.json").is_file(), done.stdout[-3000:] + done.stderr[-3000:]
     return unit

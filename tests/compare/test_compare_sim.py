@@ -24,8 +24,6 @@ Every firmware edit goes through ``firmware_variants.with_firmware``.
 from __future__ import annotations
 
 import json
-import subprocess
-import sys
 from pathlib import Path
 from typing import Any
 
@@ -33,12 +31,13 @@ import pytest
 from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
+from hil.characterise.processes import run_command
 from hil.cli import main
 from hil.compare.budget import Sharing, classify
 from hil.compare.certificates import read_certificate
 from tests.compare.firmware_variants import firmware_setting, with_firmware, write_profile
 
-pytestmark = pytest.mark.slow
+pytestmark = pytest.mark.slow(seconds=60)
 
 PROFILE = "demo_gimbal_elevation"
 SERIAL = "CMP-1"
@@ -103,11 +102,11 @@ CHANGES = st.one_of(
 def calibrate(document: dict[str, Any], out: Path, *, seed: int) -> Path:
     """Calibrate the profile ``document`` on the simulator; its certificate."""
     profile = write_profile(document, out / "profile.toml")
-    done = subprocess.run(
-        [sys.executable, "-m", "hil.cli", "calibrate", "--drive", "sim", "--profile",
+    done = run_command(
+        ["calibrate", "--drive", "sim", "--profile",
          str(profile), "--unit-serial", SERIAL, "--seed", str(seed), "--out", str(out),
          "--", "--no-documents", "--store", "off"],  # compare reads the JSON record only
-        capture_output=True, text=True, timeout=600, check=False,
+        timeout_s=600,
     )
     path = out / SERIAL / "certificate.json"
     assert path.is_file(), done.stdout + done.stderr

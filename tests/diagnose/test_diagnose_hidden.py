@@ -20,6 +20,8 @@ from hypothesis import strategies as st
 from hil.diagnose.core import diagnose
 from hil.diagnose.report import report
 
+pytestmark = pytest.mark.slow(seconds=100)
+
 #: Effects whose recovery this test requires. K_t ripple and the current-loop lag are
 #: tested on their own below (issue 12: their biases, mended).
 EFFECTS = ("offset", "asymmetric_friction", "stribeck", "cogging", "gravity", "cable_spring",

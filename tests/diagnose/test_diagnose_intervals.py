@@ -20,12 +20,15 @@ from __future__ import annotations
 import math
 
 import numpy as np
+import pytest
 from diagnose_simdata import plant, record
 from scipy import stats
 
 from hil.diagnose.core import diagnose
 from hil.diagnose.intervals import JACKKNIFE_GROUPS
 from hil.diagnose.report import report
+
+pytestmark = pytest.mark.slow(seconds=30)
 
 LINEAR = ("offset", "asymmetric_friction", "gravity", "cable_spring", "cogging")
 SEED = 20261124

@@ -50,6 +50,8 @@ from test_diagnose_hidden import DETERMINISTIC, recovered
 from hil.diagnose.core import diagnose
 from hil.diagnose.report import report
 
+pytestmark = pytest.mark.slow(seconds=200)
+
 SEVEN = ("stribeck", "cogging", "kt_ripple", "gravity", "cable_spring", "current_lag",
          "two_mass")
 #: (pair, benchmark rate) not drawn; the reasons in the module docstring.

@@ -20,7 +20,8 @@ from hil.recording import read_recording
 SHARED = Path(__file__).resolve().parents[3] / "shared" / "recordings"
 ANSWERS = SHARED / "answers.json"
 
-pytestmark = pytest.mark.skipif(not ANSWERS.is_file(), reason="shared recordings not present")
+pytestmark = [pytest.mark.skipif(not ANSWERS.is_file(), reason="shared recordings not present"),
+              pytest.mark.slow(seconds=60)]
 
 
 def _answers() -> list[dict[str, Any]]:

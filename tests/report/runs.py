@@ -2,10 +2,10 @@
 
 from __future__ import annotations
 
-import subprocess
-import sys
 from dataclasses import dataclass
 from pathlib import Path
+
+from hil.characterise.processes import run_command
 
 
 @dataclass(frozen=True)
@@ -16,10 +16,10 @@ class Run:
 
 
 def calibrate(out: Path, serial: str, *args: str) -> Run:
-    done = subprocess.run(
-        [sys.executable, "-m", "hil.cli", "calibrate", "--drive", "sim", "--unit-serial", serial,
+    done = run_command(
+        ["calibrate", "--drive", "sim", "--unit-serial", serial,
          "--out", str(out), *args],
-        capture_output=True, text=True, timeout=600, check=False,
+        timeout_s=600,
     )
     return Run(unit_dir=out / serial, stdout=done.stdout + done.stderr,
                returncode=done.returncode)

@@ -12,6 +12,7 @@ from pathlib import Path
 
 import pytest
 
+from hil.characterise.processes import run_command
 from hil.gum import rounded_pair
 from hil.profile import builtin_profile_path
 from hil.report.plots import PLOTTERS
@@ -208,15 +209,13 @@ def test_an_unfinished_run_says_not_completed(tmp_path: Path) -> None:
 def test_render_rewrites_the_documents_of_a_written_certificate(failed_run: Run,
                                                                tmp_path: Path) -> None:
     unit_dir = _copy(failed_run, tmp_path)
-    done = subprocess.run([sys.executable, "-m", "hil.cli", "render", str(unit_dir)],
-                          capture_output=True, text=True, timeout=300, check=False)
+    done = run_command(["render", str(unit_dir)], timeout_s=300)
     assert done.returncode == 0, done.stderr
     assert (unit_dir / "certificate.pdf").exists()
     assert (unit_dir / "certificate.html").exists()
     not_one = tmp_path / "notes.json"
     not_one.write_text('{"schema": "something/else"}', encoding="utf-8")
-    done = subprocess.run([sys.executable, "-m", "hil.cli", "render", str(not_one)],
-                          capture_output=True, text=True, timeout=60, check=False)
+    done = run_command(["render", str(not_one)], timeout_s=60)
     assert done.returncode == 2
     assert done.stderr.strip().splitlines() == [
         f"gimbal-hil: error: {not_one}: not a gimbal-hil certificate (schema 'something/else')"]
