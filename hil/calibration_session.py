@@ -33,7 +33,7 @@ from hil.budget import (
 )
 from hil.calibration import SERIAL_PATTERN, CalibrationRun, UnitLock
 from hil.certificate import write_certificate
-from hil.drives.base import Drive, DriveInfo
+from hil.drives.base import Capability, Drive, DriveInfo
 from hil.drives.connect import open_drive
 from hil.drives.kinds import drive_kind as kind_named
 from hil.drives.station import StationIdentity, load_station_identity
@@ -375,7 +375,7 @@ def _planning_info(profile: UnitProfile) -> DriveInfo:
     return DriveInfo(vendor="", model="", firmware_version="", serial="",
                      rated_torque_nm=profile.limits.torque_nm, limits=profile.limits,
                      modes=tuple(Mode), max_sample_rate_hz=profile.sample_rate_hz,
-                     has_torque_sensor=True, transport="planned")
+                     capabilities=frozenset(Capability), transport="planned")
 
 
 def pytest_runtest_setup(item: pytest.Item) -> None:

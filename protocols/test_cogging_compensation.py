@@ -15,7 +15,6 @@ import pytest
 
 from hil.calibration import CalibrationRun
 from hil.drives.base import Drive
-from hil.errors import DriveStateError
 from hil.identify.estimate import Estimate
 from hil.measurement import Declared, declare
 from hil.motion import Mode
@@ -24,6 +23,7 @@ from hil.suite.cogging_compensation import (
     MEASUREMENTS,
     NAME,
     NEEDS,
+    REQUIRES,
     TABLE,
     TABLE_LINE,
     Spec,
@@ -56,10 +56,9 @@ DECLARED = declare(
 @pytest.fixture(scope="module")
 def cleared(drive: Drive) -> Iterator[Drive]:
     """The drive, its compensation table cleared again afterwards whatever happened."""
-    try:
-        drive.load_compensation(None)
-    except DriveStateError as exc:
-        pytest.skip(f"the drive takes no compensation table: {exc}")
+    if (lacking := drive.info.lacking(REQUIRES)) is not None:
+        pytest.skip(lacking)
+    drive.load_compensation(None)
     try:
         yield drive
     finally:

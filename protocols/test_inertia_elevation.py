@@ -2,7 +2,7 @@
 then ``J(el) = J_zenith + ΔJ·cos²(el)`` (numerics in :mod:`hil.identify.inertia_elevation`).
 
 Skips without a ``[protocols.inertia_elevation]`` table (not an azimuth axis) and on a
-station whose drive cannot move the elevation axis (``drive.set_elevation``). When the
+station without an elevation axis the harness can move (``REQUIRES``). When the
 torque-constant protocol ran first, J is scaled by its reported-torque gain (shaft torque
 over reported torque): the result is in shaft-torque units.
 
@@ -10,9 +10,6 @@ Library: :mod:`hil.suite.inertia_elevation`.
 """
 
 from __future__ import annotations
-
-from collections.abc import Callable
-from typing import cast
 
 import pytest
 
@@ -28,6 +25,7 @@ from hil.suite.inertia_elevation import (
     MEASUREMENTS,
     NAME,
     NEEDS,
+    REQUIRES,
     Spec,
     inertia_at_elevation,
     motion,
@@ -58,21 +56,17 @@ def result(
 ) -> dict[str, Estimate]:
     if NAME not in profile.protocols:
         pytest.skip(f"the profile has no [protocols.{NAME}] table (not an azimuth axis)")
-    set_elevation = getattr(drive, "set_elevation", None)
-    if set_elevation is None:
-        pytest.skip(
-            f"{type(drive).__name__} cannot move the station's elevation axis (set_elevation())"
-        )
+    if (lacking := drive.info.lacking(REQUIRES)) is not None:
+        pytest.skip(lacking)
     spec = Spec.from_profile(profile, drive.info)
     note_fallbacks(calibration, NAME, NEEDS)
     gain = reported_torque_gain(calibration)
-    move_elevation = cast(Callable[[float], None], set_elevation)
 
     def run_once() -> tuple[InertiaElevationResult, list[Estimate]]:
         by_elevation: list[list[Recording]] = []
 
         def to_elevation(elevation: float) -> None:
-            move_elevation(elevation)
+            drive.set_elevation(elevation)
             by_elevation.append([])
 
         # the protocol's one sequence (the planner sums the same): the centre move, then
@@ -91,7 +85,7 @@ def result(
             e.name: e for e in (found[0].level, found[0].zenith, found[0].ratio)},
             rule=spec.stop, calibration=calibration)
     finally:
-        move_elevation(spec.park_elevation_rad)
+        drive.set_elevation(spec.park_elevation_rad)
     analysed, inertias = runs.first
     calibration.details[NAME] = {
         **runs.details(),

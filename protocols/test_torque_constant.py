@@ -1,16 +1,14 @@
 """K_t from a locked rotor and the shaft torque sensor: current swept up and down at several
 locked angles (numerics in :mod:`hil.identify.torque_constant`).
 
-Needs a station with a shaft torque sensor (``drive.info.has_torque_sensor``) and a
-locked-rotor fixture the harness can engage (``drive.locked_rotor()``); skips otherwise.
+Needs a station with a shaft torque sensor and a locked-rotor fixture the harness can
+engage (``drive.locked_rotor()``): its ``REQUIRES``; skips, naming what is missing,
+otherwise.
 
 Library: :mod:`hil.suite.torque_constant`.
 """
 
 from __future__ import annotations
-
-from contextlib import AbstractContextManager
-from typing import Any, cast
 
 import pytest
 
@@ -32,6 +30,7 @@ from hil.suite.torque_constant import (
     MEASUREMENTS,
     NAME,
     NEEDS,
+    REQUIRES,
     Spec,
     analyse_sweep,
     estimates,
@@ -61,11 +60,8 @@ DECLARED = declare(
 def result(
     drive: Drive, calibration: CalibrationRun, profile: UnitProfile
 ) -> dict[str, Estimate]:
-    if not drive.info.has_torque_sensor:
-        pytest.skip("the station has no shaft torque sensor (drive.info.has_torque_sensor)")
-    locked_rotor = getattr(drive, "locked_rotor", None)
-    if locked_rotor is None:
-        pytest.skip(f"{type(drive).__name__} offers no locked-rotor fixture (locked_rotor())")
+    if (lacking := drive.info.lacking(REQUIRES)) is not None:
+        pytest.skip(lacking)
     spec = Spec.from_profile(profile, drive.info)
     note_fallbacks(calibration, NAME, NEEDS)
     ripple = kt_ripple_from_cogging(calibration)
@@ -79,7 +75,7 @@ def result(
                 calibration.run(drive, e, protocol=NAME)
                 continue
             angle = angles[len(sweeps)]
-            with cast(AbstractContextManager[Any], locked_rotor()):
+            with drive.locked_rotor():
                 recording = calibration.run(drive, e, protocol=NAME)
             sweeps.append(analyse_sweep(recording, spec, angle_rad=angle))
         return identify_torque_constant(sweeps, ripple=ripple), sweeps

@@ -8,19 +8,18 @@ from pathlib import Path
 
 import numpy as np
 
-from hil.drives.base import DriveInfo
+from hil.drives.base import Capability, DriveInfo
 from hil.motion import Mode
 from hil.profile import UnitProfile
 from hil.recording import Recording
 
 
-def drive_info(profile: UnitProfile, fs_hz: float, *,
-               has_torque_sensor: bool = False) -> DriveInfo:
-    """A test drive with every mode, ``profile``'s limits and ``fs_hz`` as its highest
-    sample rate (what a protocol's spec is built against)."""
+def drive_info(profile: UnitProfile, fs_hz: float) -> DriveInfo:
+    """A test drive with every mode and capability, ``profile``'s limits and ``fs_hz`` as
+    its highest sample rate (what a protocol's spec is built against)."""
     return DriveInfo(vendor="test", model="test", firmware_version="0", serial="0",
                      rated_torque_nm=0.5, limits=profile.limits, modes=tuple(Mode),
-                     max_sample_rate_hz=fs_hz, has_torque_sensor=has_torque_sensor)
+                     max_sample_rate_hz=fs_hz, capabilities=frozenset(Capability))
 
 
 def sine_model_recording(

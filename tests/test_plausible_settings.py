@@ -13,7 +13,7 @@ import pytest
 
 from hil.characterise.processes import run_command
 from hil.config import builtin_fixture
-from hil.drives.base import DriveInfo
+from hil.drives.base import Capability, DriveInfo
 from hil.drives.cia402.drive import CanOpenDrive
 from hil.drives.emulated import canopen_emulator
 from hil.errors import DriveStateError, ProfileError
@@ -48,7 +48,7 @@ def _info(profile: UnitProfile) -> DriveInfo:
     return DriveInfo(vendor="", model="", firmware_version="", serial="",
                      rated_torque_nm=profile.limits.torque_nm, limits=profile.limits,
                      modes=tuple(Mode), max_sample_rate_hz=profile.sample_rate_hz,
-                     has_torque_sensor=True, transport="planned")
+                     capabilities=frozenset(Capability), transport="planned")
 
 
 SPECS = {"inertia_friction": inertia_friction.Spec, "stribeck": stribeck.Spec,

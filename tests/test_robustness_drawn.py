@@ -18,7 +18,7 @@ from hypothesis import strategies as st
 
 from hil.certificate.integrity import seal, verify_document
 from hil.config import builtin_fixture
-from hil.drives.base import DriveInfo
+from hil.drives.base import Capability, DriveInfo
 from hil.drives.station import station_from_mapping
 from hil.errors import HilError
 from hil.motion import Mode
@@ -93,7 +93,7 @@ def _planning_info(profile: Any) -> DriveInfo:
     return DriveInfo(vendor="", model="", firmware_version="", serial="",
                      rated_torque_nm=profile.limits.torque_nm, limits=profile.limits,
                      modes=tuple(Mode), max_sample_rate_hz=profile.sample_rate_hz,
-                     has_torque_sensor=True, transport="planned")
+                     capabilities=frozenset(Capability), transport="planned")
 
 
 @DRAWN

@@ -8,6 +8,8 @@ from __future__ import annotations
 
 import abc
 import logging
+from collections.abc import Iterable
+from contextlib import AbstractContextManager
 from dataclasses import dataclass
 from enum import Enum
 from types import TracebackType
@@ -33,6 +35,18 @@ class DriveState(Enum):
     FAULT = "fault"
 
 
+class Capability(Enum):
+    """What a station can do beyond the drive contract, declared once per drive in
+    :attr:`DriveInfo.capabilities`. A protocol names the ones it needs (its suite module's
+    ``REQUIRES``) and is skipped, with them named, on a station that lacks one; the drive
+    method that uses one raises :class:`DriveStateError` where it is not declared."""
+
+    TORQUE_SENSOR = "shaft torque sensor"
+    LOCKED_ROTOR = "locked-rotor fixture (Drive.locked_rotor)"
+    ELEVATION_AXIS = "elevation axis the harness can move (Drive.set_elevation)"
+    COMPENSATION_TABLE = "cogging compensation table (Drive.load_compensation)"
+
+
 @dataclass(frozen=True, slots=True, kw_only=True)
 class DriveInfo:
     """What the certificate records about the drive, and what protocols may rely on.
@@ -49,8 +63,8 @@ class DriveInfo:
         The control modes :meth:`Drive.run` accepts.
     max_sample_rate_hz : float
         The fastest rate a recording can be sampled at over this transport.
-    has_torque_sensor : bool
-        A shaft torque sensor is fitted (locked-rotor K_t).
+    capabilities : frozenset of Capability
+        What the station can do beyond the contract (a torque sensor, a fixture, ...).
     transport : str
         ``"sim"``, ``"canopen ..."``, ``"modbus tcp"``, ...: for messages and skips.
     """
@@ -63,8 +77,16 @@ class DriveInfo:
     limits: Limits
     modes: tuple[Mode, ...]
     max_sample_rate_hz: float
-    has_torque_sensor: bool = False
+    capabilities: frozenset[Capability] = frozenset()
     transport: str = "none"
+
+    def lacking(self, required: Iterable[Capability]) -> str | None:
+        """``None`` when the station has every one of ``required``, else one line naming
+        what it lacks (a protocol's skip reason)."""
+        missing = [c.value for c in required if c not in self.capabilities]
+        if not missing:
+            return None
+        return f"the station ({self.transport}) lacks: {'; '.join(missing)}"
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -313,9 +335,35 @@ class Drive(abc.ABC):
         Raises
         ------
         DriveStateError
-            This drive takes no compensation table.
+            The station has no :attr:`Capability.COMPENSATION_TABLE`.
         """
-        raise DriveStateError(f"{self.info.transport} drive takes no compensation table")
+        raise self._without(Capability.COMPENSATION_TABLE)
+
+    def locked_rotor(self) -> AbstractContextManager[None]:
+        """The rotor clamped (the shaft torque sensor reading the torque) inside the block,
+        released after it.
+
+        Raises
+        ------
+        DriveStateError
+            The station has no :attr:`Capability.LOCKED_ROTOR`.
+        """
+        raise self._without(Capability.LOCKED_ROTOR)
+
+    def set_elevation(self, elevation_rad: float) -> None:
+        """Put the station's elevation axis at ``elevation_rad`` (the azimuth inertia across
+        elevation).
+
+        Raises
+        ------
+        DriveStateError
+            The station has no :attr:`Capability.ELEVATION_AXIS`.
+        """
+        raise self._without(Capability.ELEVATION_AXIS)
+
+    def _without(self, capability: Capability) -> DriveStateError:
+        return DriveStateError(f"the station ({self.info.transport}) lacks: "
+                               f"{capability.value}")
 
     def close(self) -> None:
         """Disable the drive, then release the transport."""

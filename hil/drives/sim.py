@@ -10,6 +10,7 @@ from collections.abc import Iterator
 import numpy as np
 
 from hil.drives.base import (
+    Capability,
     Drive,
     DriveInfo,
     DriveState,
@@ -62,7 +63,9 @@ class SimDrive(Drive):
             limits=limits,
             modes=(Mode.TORQUE, Mode.VELOCITY, Mode.POSITION),
             max_sample_rate_hz=fs_hz,
-            has_torque_sensor=has_torque_sensor,
+            capabilities=frozenset({Capability.ELEVATION_AXIS, Capability.COMPENSATION_TABLE}
+                                   | ({Capability.TORQUE_SENSOR, Capability.LOCKED_ROTOR}
+                                      if has_torque_sensor else set())),
             transport="in-process",
         )
 
@@ -78,8 +81,8 @@ class SimDrive(Drive):
     def locked_rotor(self) -> Iterator[None]:
         """The rotor clamped through the shaft torque sensor (``load_torque_nm``) inside the
         block, released afterwards (the simulated station's locked-rotor fixture)."""
-        if not self._info.has_torque_sensor:
-            raise DriveStateError("no shaft torque sensor on this station")
+        if Capability.LOCKED_ROTOR not in self._info.capabilities:
+            raise self._without(Capability.LOCKED_ROTOR)
         self._plant.set_locked_rotor(True)
         try:
             yield

@@ -29,6 +29,7 @@ from hil.suite import (
     velocity_loop_frf,
     velocity_step,
 )
+from hil.suite.catalogue import REQUIRES
 
 log = logging.getLogger(__name__)
 
@@ -123,13 +124,16 @@ def planned_motion_s(profile: UnitProfile, info: DriveInfo) -> dict[str, float]:
     -------
     dict
         Protocol → seconds of commanded motion (one run: a stop rule's repeats are not
-        planned); 0 for one this module cannot plan (an
-        unknown protocol, or settings its protocol will refuse with an error of its own).
+        planned); 0 for one this module cannot plan (an unknown protocol, or settings its
+        protocol will refuse with an error of its own) and for one the station lacks a
+        capability for (it will be skipped).
     """
     track = _Track((info.limits.travel_min_rad + info.limits.travel_max_rad) / 2)
     plan = {}
     for name in profile.protocols:  # each from where the one before left the axis
         planner = PLANNERS.get(name)
+        if info.lacking(REQUIRES.get(name, ())):
+            planner = None  # skipped on this station: no motion
         try:
             excitations = track.walk(planner(profile, info, track.position)) if planner else []
         except (HilError, ValueError) as exc:

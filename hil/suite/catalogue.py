@@ -9,6 +9,7 @@ from __future__ import annotations
 import difflib
 from collections.abc import Mapping
 
+from hil.drives.base import Capability
 from hil.errors import ProfileError
 from hil.profile import UnitProfile
 from hil.suite import (
@@ -37,6 +38,10 @@ PROTOCOLS: Mapping[str, tuple[str, ...]] = {
 }
 #: protocol → what it takes from earlier protocols (each with its fallback)
 NEEDS: Mapping[str, tuple[Need, ...]] = {module.NAME: tuple(module.NEEDS) for module in _MODULES}
+#: protocol → what the station must have to run it (else it is skipped, saying which)
+REQUIRES: Mapping[str, tuple[Capability, ...]] = {
+    module.NAME: tuple(module.REQUIRES) for module in _MODULES
+}
 #: result → the protocol that measures it
 PROTOCOL_OF: Mapping[str, str] = {
     result: protocol for protocol, results in PROTOCOLS.items() for result in results

@@ -22,7 +22,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from hil.calibration import CalibrationRun
-from hil.drives.base import DriveInfo
+from hil.drives.base import Capability, DriveInfo
 from hil.errors import IdentificationError
 from hil.identify.cogging import CoggingResult, identify_cogging
 from hil.motion import Excitation, Mode
@@ -43,6 +43,8 @@ INERTIA = Need(protocol="inertia_friction", result="inertia_kg_m2",
                without="the declared nominal J for the acceleration correction (none "
                        "when the profile declares no J)")
 NEEDS: tuple[Need, ...] = (INERTIA,)
+#: what the station must have beyond the drive contract
+REQUIRES: tuple[Capability, ...] = ()
 
 
 COMPENSATION_FILE = "cogging_compensation.json"

@@ -20,7 +20,7 @@ from typing import Any
 import numpy as np
 
 from hil.closed_loop.ripple import position_ripple, ripple_estimate
-from hil.drives.base import DriveInfo
+from hil.drives.base import Capability, DriveInfo
 from hil.errors import IdentificationError
 from hil.identify.estimate import Component, Estimate, with_budget
 from hil.motion import CompensationTable, Excitation, Mode, PositionHarmonic
@@ -39,6 +39,8 @@ MEASUREMENTS = ("cogging_ripple_uncompensated_urad", "cogging_ripple_compensated
 TABLE = Need(protocol="cogging", result="compensation_table",
              without="skipped: no compensation table to load")
 NEEDS: tuple[Need, ...] = (TABLE,)
+#: what the station must have beyond the drive contract
+REQUIRES: tuple[Capability, ...] = (Capability.COMPENSATION_TABLE,)
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)

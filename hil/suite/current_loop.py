@@ -12,7 +12,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from hil.drives.base import DriveInfo
+from hil.drives.base import Capability, DriveInfo
 from hil.identify.current_loop import (
     CurrentLoopResult,
     analyse_frequency,
@@ -32,6 +32,8 @@ MEASUREMENTS = ("current_loop_time_constant_ms",)
 
 #: what it takes from earlier protocols (:mod:`hil.suite.needs`): nothing
 NEEDS: tuple[Need, ...] = ()
+#: what the station must have beyond the drive contract
+REQUIRES: tuple[Capability, ...] = ()
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)

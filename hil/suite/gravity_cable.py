@@ -17,7 +17,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from hil.drives.base import DriveInfo
+from hil.drives.base import Capability, DriveInfo
 from hil.identify.gravity_cable import (
     GravityCableResult,
     SweepPlan,
@@ -45,6 +45,8 @@ MEASUREMENTS = (
 
 #: what it takes from earlier protocols (:mod:`hil.suite.needs`): nothing
 NEEDS: tuple[Need, ...] = ()
+#: what the station must have beyond the drive contract
+REQUIRES: tuple[Capability, ...] = ()
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)

@@ -21,7 +21,7 @@ from collections.abc import Callable, Iterator
 from dataclasses import dataclass, replace
 
 from hil.calibration import CalibrationRun
-from hil.drives.base import DriveInfo
+from hil.drives.base import Capability, DriveInfo
 from hil.identify.estimate import Estimate
 from hil.identify.inertia_elevation import scale_by_gain
 from hil.motion import Excitation
@@ -44,6 +44,8 @@ MEASUREMENTS = (
 GAIN = Need(protocol="torque_constant", result="reported_torque_gain_error_pct",
             without="J in reported-torque units (no shaft-torque gain applied)")
 NEEDS: tuple[Need, ...] = (GAIN, *sine.NEEDS)
+#: what the station must have beyond the drive contract
+REQUIRES: tuple[Capability, ...] = (Capability.ELEVATION_AXIS,)
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)

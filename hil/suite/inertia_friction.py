@@ -14,7 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from hil.calibration import CalibrationRun
-from hil.drives.base import DriveInfo
+from hil.drives.base import Capability, DriveInfo
 from hil.identify.estimate import Component, Estimate
 from hil.identify.gravity_cable import CableLoop, load_stiffness
 from hil.identify.inertia_friction import (
@@ -45,6 +45,8 @@ STIFFNESS = tuple(Need(protocol="gravity_cable", result=name,
                        without="J not corrected for the load's stiffness")
                   for name in ("gravity_mge_nm", "gravity_phase_rad", "cable_stiffness_nm_rad"))
 NEEDS: tuple[Need, ...] = (LAG, CABLE, *STIFFNESS)
+#: what the station must have beyond the drive contract
+REQUIRES: tuple[Capability, ...] = ()
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)

@@ -23,7 +23,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from hil.calibration import CalibrationRun
-from hil.drives.base import DriveInfo
+from hil.drives.base import Capability, DriveInfo
 from hil.errors import ProfileError
 from hil.identify.multisine import log_harmonics, multisine, schroeder_phases_for
 from hil.identify.resonance import ResonanceResult, frf_lines, frf_point, identify_resonance
@@ -49,6 +49,8 @@ LAG_START_S = 2e-4
 LAG = Need(protocol="current_loop", result="current_loop_time_constant_ms",
            without=f"the model's current-loop τ starts from {LAG_START_S:g} s")
 NEEDS: tuple[Need, ...] = (LAG,)
+#: what the station must have beyond the drive contract
+REQUIRES: tuple[Capability, ...] = ()
 EXCITATIONS = ("multisine", "stepped_sine")
 
 

@@ -21,7 +21,7 @@ from hil.closed_loop.standstill import (
     hold_windows,
     standstill_blocks,
 )
-from hil.drives.base import DriveInfo
+from hil.drives.base import Capability, DriveInfo
 from hil.identify.estimate import Estimate
 from hil.identify.quantisation import quantisation_step
 from hil.motion import Excitation, Mode
@@ -38,6 +38,8 @@ MEASUREMENTS = ("standstill_torque_ripple_mnm", "standstill_jitter_urad")
 
 #: what it takes from earlier protocols (:mod:`hil.suite.needs`): nothing
 NEEDS: tuple[Need, ...] = ()
+#: what the station must have beyond the drive contract
+REQUIRES: tuple[Capability, ...] = ()
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)

@@ -14,7 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from hil.calibration import CalibrationRun
-from hil.drives.base import DriveInfo
+from hil.drives.base import Capability, DriveInfo
 from hil.identify.estimate import Component, Estimate
 from hil.identify.stribeck import Staircase, StribeckResult, identify_stribeck, staircase
 from hil.identify.torque_constant import ripple_factors
@@ -49,6 +49,8 @@ NEEDS: tuple[Need, ...] = (
     *(Need(protocol="inertia_friction", result=other, without=f"no cross-check of {other}")
       for other, _ in CROSS_CHECK),
 )
+#: what the station must have beyond the drive contract
+REQUIRES: tuple[Capability, ...] = ()
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)

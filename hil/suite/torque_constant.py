@@ -4,8 +4,8 @@ declared measurements are in ``protocols/test_torque_constant.py``.
 K_t from a locked rotor and the shaft torque sensor: current swept up and down at several
 locked angles (numerics in :mod:`hil.identify.torque_constant`).
 
-Needs a station with a shaft torque sensor (``drive.info.has_torque_sensor``) and a
-locked-rotor fixture the harness can engage (``drive.locked_rotor()``); skips otherwise.
+Needs a station with a shaft torque sensor and a locked-rotor fixture the harness can
+engage (``drive.locked_rotor()``): :data:`REQUIRES`; skipped otherwise.
 """
 
 from __future__ import annotations
@@ -18,7 +18,7 @@ from typing import Any, cast
 import numpy as np
 
 from hil.calibration import CalibrationRun
-from hil.drives.base import DriveInfo
+from hil.drives.base import Capability, DriveInfo
 from hil.identify.estimate import Estimate
 from hil.identify.torque_constant import (
     LockedSweep,
@@ -46,6 +46,8 @@ MEASUREMENTS = (
 RIPPLE = Need(protocol="cogging", result="kt_ripple",
               without="locked at the configured angles, no K_t ripple correction")
 NEEDS: tuple[Need, ...] = (RIPPLE,)
+#: what the station must have beyond the drive contract
+REQUIRES: tuple[Capability, ...] = (Capability.TORQUE_SENSOR, Capability.LOCKED_ROTOR)
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)

@@ -32,7 +32,7 @@ from hil.closed_loop.tracking import (
     reduction,
     repeated,
 )
-from hil.drives.base import Drive, DriveInfo
+from hil.drives.base import Capability, Drive, DriveInfo
 from hil.identify.estimate import Component, Estimate
 from hil.identify.quantisation import quantisation_step
 from hil.motion import Excitation, Mode
@@ -51,6 +51,8 @@ NEEDS: tuple[Need, ...] = tuple(
     Need(protocol="inertia_friction", result=name,
          without="the declared nominal B and T_c as the feedforward")
     for name in ("viscous_nm_s_rad", "coulomb_nm"))
+#: what the station must have beyond the drive contract
+REQUIRES: tuple[Capability, ...] = ()
 MICRO = 1e6
 
 

@@ -14,7 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from hil.closed_loop.frf import FrfResult, analyse_frf
-from hil.drives.base import DriveInfo
+from hil.drives.base import Capability, DriveInfo
 from hil.errors import ProfileError
 from hil.identify.multisine import multisine
 from hil.motion import Excitation, Mode
@@ -31,6 +31,8 @@ MEASUREMENTS = ("velocity_bandwidth_hz", "velocity_peak_gain_db", "velocity_gain
 
 #: what it takes from earlier protocols (:mod:`hil.suite.needs`): nothing
 NEEDS: tuple[Need, ...] = ()
+#: what the station must have beyond the drive contract
+REQUIRES: tuple[Capability, ...] = ()
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)

@@ -14,7 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from hil.closed_loop.step import StepFigures, mean_estimate, smoothed_velocity, step_figures
-from hil.drives.base import DriveInfo
+from hil.drives.base import Capability, DriveInfo
 from hil.identify.estimate import Estimate
 from hil.motion import Excitation, Mode
 from hil.profile import UnitProfile
@@ -35,6 +35,8 @@ MEASUREMENTS = (
 
 #: what it takes from earlier protocols (:mod:`hil.suite.needs`): nothing
 NEEDS: tuple[Need, ...] = ()
+#: what the station must have beyond the drive contract
+REQUIRES: tuple[Capability, ...] = ()
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)

@@ -25,7 +25,7 @@ from tests.helpers import drive_info
 
 PROFILE = load_profile("demo_gimbal_azimuth")
 FS = 4000.0
-INFO = drive_info(PROFILE, FS, has_torque_sensor=True)
+INFO = drive_info(PROFILE, FS)
 SPEC = protocol.Spec.from_profile(PROFILE, INFO)
 KT_SPEC = kt.Spec.from_profile(PROFILE, INFO)
 

@@ -31,7 +31,7 @@ from tests.helpers import drive_info
 
 PROFILE = load_profile()
 FS = 4000.0
-INFO = drive_info(PROFILE, FS, has_torque_sensor=True)
+INFO = drive_info(PROFILE, FS)
 SPEC = torque_constant_suite.Spec.from_profile(PROFILE, INFO)
 ACCURACY = PROFILE.measurement("torque_constant_nm_a").accuracy_rel
 

@@ -15,6 +15,7 @@ import struct
 from typing import Any
 
 from hil.drives.base import (
+    Capability,
     Drive,
     DriveInfo,
     DriveState,
@@ -294,6 +295,9 @@ class CanOpenDrive(Drive):
             limits=self.limits,
             modes=self.states.modes(),
             max_sample_rate_hz=max(rate_hz, self.recorder_rate_hz),
+            capabilities=frozenset({Capability.COMPENSATION_TABLE}
+                                   if self.node_od is not None
+                                   and COMPENSATION_TABLE in self.node_od else ()),
             transport=f"canopen {st.interface}:{st.channel} node {st.node_id}",
         )
 
