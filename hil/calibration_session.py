@@ -45,10 +45,10 @@ from hil.profile import UnitProfile, load_profile
 from hil.report.console import outcome_banner, protocol_start
 from hil.report.junit import PYTEST_DEFAULT_SUITE_NAME, measurement_properties, suite_name
 from hil.report.junit import suite_properties as junit_suite_properties
-from hil.report.plan import check_protocol_settings, planned_motion_s
 from hil.store.engine import resolve_store_url
 from hil.store.record import record_run
 from hil.suite.catalogue import PROTOCOL_OF, check_profile
+from hil.suite.plan import check_protocol_settings, planned_motion_s
 
 log = logging.getLogger(__name__)
 

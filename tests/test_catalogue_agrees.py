@@ -14,9 +14,9 @@ import pytest
 
 from hil.certificate.render import PROTOCOL_TITLES
 from hil.profile import load_profile
-from hil.report.plan import PLANNERS
 from hil.report.plots import CAPTIONS, PLOTTERS
-from hil.suite.catalogue import PROTOCOL_OF, PROTOCOLS, check_profile
+from hil.suite.catalogue import CATALOGUE, PROTOCOL_OF, PROTOCOLS, check_profile
+from tests.helpers import drive_info
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -25,21 +25,36 @@ ROOT = Path(__file__).resolve().parents[1]
 def test_every_protocol_has_its_test_plan_plot_and_title(name: str) -> None:
     module = importlib.import_module(f"gimbal_hil_protocols.test_{name}")
     assert set(module.DECLARED) == set(PROTOCOLS[name]), "declared ≠ the suite's MEASUREMENTS"
-    assert name in PLANNERS, "no planned motion (hil/report/plan.py PLANNERS)"
+    assert CATALOGUE[name].name == name, "PROTOCOL.name ≠ its catalogue key"
     assert name in PROTOCOL_TITLES, "no title (hil/certificate/render.py PROTOCOL_TITLES)"
     assert name in PLOTTERS, "no plot (hil/report/plots.py PLOTTERS)"
     assert name in CAPTIONS, "no caption (hil/report/plots.py CAPTIONS)"
 
 
 def test_nothing_outside_the_catalogue_is_planned_plotted_or_titled() -> None:
-    for table, where in ((PLANNERS, "PLANNERS"), (PLOTTERS, "PLOTTERS"),
-                         (CAPTIONS, "CAPTIONS"), (PROTOCOL_TITLES, "PROTOCOL_TITLES")):
+    for table, where in ((PLOTTERS, "PLOTTERS"), (CAPTIONS, "CAPTIONS"),
+                         (PROTOCOL_TITLES, "PROTOCOL_TITLES")):
         assert set(table) <= set(PROTOCOLS), f"{where}: {set(table) - set(PROTOCOLS)}"
 
 
 @pytest.mark.parametrize("profile", ["demo_gimbal_elevation", "demo_gimbal_azimuth"])
 def test_a_demo_profile_declares_only_what_its_protocols_measure(profile: str) -> None:
     check_profile(load_profile(profile))  # raises, naming the table
+
+
+def test_every_protocol_plans_its_motion_on_a_demo_profile_that_configures_it() -> None:
+    """Each PROTOCOL's planned motion builds from the profile alone (the planner would log
+    a failure at DEBUG and plan nothing); cogging plans none: it analyses the gravity
+    protocol's sweeps."""
+    planned: dict[str, float] = {}
+    for name in ("demo_gimbal_elevation", "demo_gimbal_azimuth"):
+        profile = load_profile(name)
+        info = drive_info(profile, profile.sample_rate_hz)
+        for protocol in (CATALOGUE[p] for p in profile.protocols):
+            motion = protocol.planned_motion(profile, info, lambda: 0.0)
+            planned[protocol.name] = sum(e.duration_s for e in motion)
+    assert set(planned) == set(CATALOGUE)
+    assert {name for name, seconds in planned.items() if seconds <= 0} == {"cogging"}
 
 
 @pytest.mark.parametrize("path", ["fixtures/method_bias.toml",

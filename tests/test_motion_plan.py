@@ -23,8 +23,8 @@ import pytest
 from hil.characterise.processes import run_command
 from hil.drives.connect import open_drive
 from hil.profile import load_profile
-from hil.report.plan import planned_motion_s
 from hil.suite import torque_constant
+from hil.suite.plan import planned_motion_s
 from hil.suite.travel import MOVE_SPEED_FRACTION
 
 pytestmark = pytest.mark.slow(seconds=20)

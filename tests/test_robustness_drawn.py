@@ -24,8 +24,8 @@ from hil.errors import HilError
 from hil.motion import Mode
 from hil.profile import builtin_profile_path, profile_from_mapping
 from hil.recording import parse_recording
-from hil.report.plan import check_protocol_settings
 from hil.suite.catalogue import check_profile
+from hil.suite.plan import check_protocol_settings
 
 DEMO: dict[str, Any] = tomllib.loads(builtin_profile_path().read_text(encoding="utf-8"))
 STATION_PATH = builtin_fixture("station_canopen_emulator.toml")

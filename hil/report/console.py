@@ -84,7 +84,7 @@ def protocol_start(name: str, plan: Mapping[str, float], *, done_motion_s: float
     name : str
         The protocol starting.
     plan : mapping
-        Planned motion per protocol in run order (:func:`hil.report.plan.planned_motion_s`).
+        Planned motion per protocol in run order (:func:`hil.suite.plan.planned_motion_s`).
     done_motion_s, done_wall_s : float
         Motion commanded and wall time spent by the protocols before it: their ratio is
         this drive's pace (a simulator runs faster than real time, a real axis does not).

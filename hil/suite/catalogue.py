@@ -28,20 +28,20 @@ from hil.suite import (
     velocity_step,
 )
 from hil.suite.needs import Need
+from hil.suite.protocol import Protocol
 
-_MODULES = (current_loop, gravity_cable, inertia_friction, stribeck, cogging, torque_constant,
-            resonance, inertia_elevation, velocity_loop_frf, velocity_step, tracking,
-            standstill, cogging_compensation)
+#: every protocol of the suite, by name, in the suite's run order
+CATALOGUE: Mapping[str, Protocol] = {module.PROTOCOL.name: module.PROTOCOL for module in (
+    current_loop, gravity_cable, inertia_friction, stribeck, cogging, torque_constant,
+    resonance, inertia_elevation, velocity_loop_frf, velocity_step, tracking, standstill,
+    cogging_compensation)}
 #: protocol → the results it measures
-PROTOCOLS: Mapping[str, tuple[str, ...]] = {
-    module.NAME: tuple(module.MEASUREMENTS) for module in _MODULES
-}
+PROTOCOLS: Mapping[str, tuple[str, ...]] = {p.name: p.measurements for p in CATALOGUE.values()}
 #: protocol → what it takes from earlier protocols (each with its fallback)
-NEEDS: Mapping[str, tuple[Need, ...]] = {module.NAME: tuple(module.NEEDS) for module in _MODULES}
+NEEDS: Mapping[str, tuple[Need, ...]] = {p.name: p.needs for p in CATALOGUE.values()}
 #: protocol → what the station must have to run it (else it is skipped, saying which)
-REQUIRES: Mapping[str, tuple[Capability, ...]] = {
-    module.NAME: tuple(module.REQUIRES) for module in _MODULES
-}
+REQUIRES: Mapping[str, tuple[Capability, ...]] = {p.name: p.requires
+                                                  for p in CATALOGUE.values()}
 #: result → the protocol that measures it
 PROTOCOL_OF: Mapping[str, str] = {
     result: protocol for protocol, results in PROTOCOLS.items() for result in results

@@ -17,6 +17,7 @@ at lower frequencies, where it rejects them less (the acceleration correction is
 from __future__ import annotations
 
 import math
+from collections.abc import Iterable
 from dataclasses import dataclass
 
 import numpy as np
@@ -30,6 +31,7 @@ from hil.profile import UnitProfile
 from hil.recording import read_recording
 from hil.suite import gravity_cable
 from hil.suite.needs import Need
+from hil.suite.protocol import Position, Protocol
 from hil.suite.rate import needed_sample_rate_hz
 from hil.suite.stop_rule import StopRule
 from hil.suite.travel import TravelSpec, on_command_grid
@@ -293,3 +295,12 @@ def sweep_passes(
     position, torque, _ = on_command_grid(recording, sweep)
     first = spec.plan.up[0]
     return position[first:], torque[first:], str(raw[0].path), first
+
+
+def planned_motion(profile: UnitProfile, info: DriveInfo, at: Position) -> Iterable[Excitation]:
+    """The protocol's excitations as the run will command them, from the profile alone."""
+    return excitation(Spec.from_profile(profile, info), position_rad=at())
+
+
+PROTOCOL = Protocol(name=NAME, measurements=tuple(MEASUREMENTS), needs=NEEDS,
+                    requires=REQUIRES, planned_motion=planned_motion)

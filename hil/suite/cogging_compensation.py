@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from collections.abc import Callable, Iterator, Mapping
+from collections.abc import Callable, Iterable, Iterator, Mapping
 from dataclasses import dataclass
 from typing import Any
 
@@ -28,6 +28,7 @@ from hil.profile import UnitProfile
 from hil.recording import Recording
 from hil.suite.cogging import MIN_SAMPLES_PER_PASS
 from hil.suite.needs import Need
+from hil.suite.protocol import Position, Protocol
 from hil.suite.stop_rule import StopRule
 from hil.suite.travel import TravelSpec, on_command_grid, runs_from_start, speed_ramp
 
@@ -198,3 +199,13 @@ def removed_fraction(without: Estimate, with_table: Estimate) -> Estimate:
     base = Estimate(name="cogging_compensation_removed_pct", value=value,
                     standard_uncertainty=0.0, unit="%")
     return with_budget(base, lines, value=value)
+
+
+def planned_motion(profile: UnitProfile, info: DriveInfo, at: Position) -> Iterable[Excitation]:
+    """The protocol's excitations as the run will command them, from the profile alone."""
+    spec = Spec.from_profile(profile, info)
+    return motion(spec, excitation(spec), position=at)
+
+
+PROTOCOL = Protocol(name=NAME, measurements=tuple(MEASUREMENTS), needs=NEEDS,
+                    requires=REQUIRES, planned_motion=planned_motion)

@@ -10,6 +10,7 @@ linear); numerics and the sampled-data model in :mod:`hil.identify.current_loop`
 from __future__ import annotations
 
 import math
+from collections.abc import Iterable
 from dataclasses import dataclass
 
 from hil.drives.base import Capability, DriveInfo
@@ -23,6 +24,7 @@ from hil.motion import Excitation, Mode
 from hil.profile import UnitProfile
 from hil.recording import Recording
 from hil.suite.needs import Need
+from hil.suite.protocol import Position, Protocol
 from hil.suite.stop_rule import StopRule
 from hil.suite.travel import SteppedSineSpec, TravelSpec
 
@@ -159,3 +161,12 @@ def analyse(recording: Recording, spec: Spec) -> CurrentLoopResult:
     return fit_current_loop_lag(
         points, fs_hz=spec.fs_hz, hold_s=hold.hold_s, mean_samples=hold.mean_samples
     )
+
+
+def planned_motion(profile: UnitProfile, info: DriveInfo, at: Position) -> Iterable[Excitation]:
+    """The protocol's excitations as the run will command them, from the profile alone."""
+    return excitation(Spec.from_profile(profile, info), position_rad=at())
+
+
+PROTOCOL = Protocol(name=NAME, measurements=tuple(MEASUREMENTS), needs=NEEDS,
+                    requires=REQUIRES, planned_motion=planned_motion)

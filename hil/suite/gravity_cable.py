@@ -13,6 +13,7 @@ friction cancels in the half sum of the two passes (the 48 position bins are the
 from __future__ import annotations
 
 import logging
+from collections.abc import Iterable
 from dataclasses import dataclass
 
 import numpy as np
@@ -27,6 +28,7 @@ from hil.identify.gravity_cable import (
 from hil.motion import Excitation, Mode
 from hil.profile import UnitProfile
 from hil.suite.needs import Need
+from hil.suite.protocol import Position, Protocol
 from hil.suite.stop_rule import StopRule
 from hil.suite.travel import TravelSpec
 
@@ -174,3 +176,12 @@ def analyse(position_rad: np.ndarray, torque_nm: np.ndarray, spec: Spec) -> Grav
         bins=spec.bins,
         settle_rad=spec.probe_settle_s * spec.probe_speed_rad_s,
     )
+
+
+def planned_motion(profile: UnitProfile, info: DriveInfo, at: Position) -> Iterable[Excitation]:
+    """The protocol's excitations as the run will command them, from the profile alone."""
+    return excitation(Spec.from_profile(profile, info), position_rad=at())
+
+
+PROTOCOL = Protocol(name=NAME, measurements=tuple(MEASUREMENTS), needs=NEEDS,
+                    requires=REQUIRES, planned_motion=planned_motion)

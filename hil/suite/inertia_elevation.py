@@ -17,7 +17,7 @@ the next), so the stretch is stated rather than inherited.
 
 from __future__ import annotations
 
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass, replace
 
 from hil.calibration import CalibrationRun
@@ -29,6 +29,7 @@ from hil.profile import UnitProfile
 from hil.recording import Recording
 from hil.suite import inertia_friction as sine
 from hil.suite.needs import Need
+from hil.suite.protocol import Position, Protocol
 from hil.suite.stop_rule import StopRule
 from hil.suite.travel import move_speed_rad_s
 
@@ -173,3 +174,12 @@ def inertia_at_elevation(
     if gain is None:
         return inertia
     return scale_by_gain(inertia, gain=gain[0], gain_u=gain[1])
+
+
+def planned_motion(profile: UnitProfile, info: DriveInfo, at: Position) -> Iterable[Excitation]:
+    """The protocol's excitations as the run will command them, from the profile alone."""
+    return motion(Spec.from_profile(profile, info), position=at)
+
+
+PROTOCOL = Protocol(name=NAME, measurements=tuple(MEASUREMENTS), needs=NEEDS,
+                    requires=REQUIRES, planned_motion=planned_motion)

@@ -17,6 +17,7 @@ its own settling.
 from __future__ import annotations
 
 import math
+from collections.abc import Iterable
 from dataclasses import dataclass
 
 import numpy as np
@@ -31,6 +32,7 @@ from hil.motion import Excitation, Mode
 from hil.profile import UnitProfile
 from hil.recording import Recording
 from hil.suite.needs import Need
+from hil.suite.protocol import Position, Protocol
 from hil.suite.rate import needed_sample_rate_hz
 from hil.suite.travel import SteppedSineSpec, TravelSpec, speed_ramp
 from hil.suite.velocity_loop_frf import direction_from
@@ -419,3 +421,12 @@ def measured_time_constant_s(calibration: CalibrationRun) -> float:
     """
     tau = LAG.read(calibration)
     return LAG_START_S if tau is None else tau.value * 1e-3
+
+
+def planned_motion(profile: UnitProfile, info: DriveInfo, at: Position) -> Iterable[Excitation]:
+    """The protocol's excitations as the run will command them, from the profile alone."""
+    return excitation(spec_from_profile(profile, info), position_rad=at())
+
+
+PROTOCOL = Protocol(name=NAME, measurements=tuple(MEASUREMENTS), needs=NEEDS,
+                    requires=REQUIRES, planned_motion=planned_motion)

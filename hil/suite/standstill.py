@@ -11,6 +11,7 @@ settling time. Numerics in :mod:`hil.closed_loop.standstill`.
 from __future__ import annotations
 
 import math
+from collections.abc import Iterable
 from dataclasses import dataclass
 
 import numpy as np
@@ -28,6 +29,7 @@ from hil.motion import Excitation, Mode
 from hil.profile import UnitProfile
 from hil.recording import Recording
 from hil.suite.needs import Need
+from hil.suite.protocol import Position, Protocol
 from hil.suite.stop_rule import StopRule
 from hil.suite.travel import TravelSpec, move_excitation, on_command_grid
 
@@ -127,3 +129,12 @@ def analyse(recording: Recording, excitation: Excitation, spec: Spec
 def analysed_windows(excitation: Excitation, spec: Spec) -> list[tuple[int, int]]:
     """``(start, stop)`` samples of each hold's analysed block in ``excitation``."""
     return hold_windows(excitation.command, block_samples=spec.block_samples)
+
+
+def planned_motion(profile: UnitProfile, info: DriveInfo, at: Position) -> Iterable[Excitation]:
+    """The protocol's excitations as the run will command them, from the profile alone."""
+    return [excitation(Spec.from_profile(profile, info), position_rad=at())]
+
+
+PROTOCOL = Protocol(name=NAME, measurements=tuple(MEASUREMENTS), needs=NEEDS,
+                    requires=REQUIRES, planned_motion=planned_motion)

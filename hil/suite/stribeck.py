@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import logging
 import math
-from collections.abc import Sequence
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -21,6 +21,7 @@ from hil.identify.torque_constant import ripple_factors
 from hil.motion import Excitation, Mode
 from hil.profile import UnitProfile
 from hil.suite.needs import Need
+from hil.suite.protocol import Position, Protocol
 from hil.suite.stop_rule import StopRule
 from hil.suite.travel import TravelSpec
 
@@ -270,3 +271,12 @@ def cross_check(result: StribeckResult, calibration: CalibrationRun) -> dict[str
                 error,
             )
     return checks
+
+
+def planned_motion(profile: UnitProfile, info: DriveInfo, at: Position) -> Iterable[Excitation]:
+    """The protocol's excitations as the run will command them, from the profile alone."""
+    return excitation(Spec.from_profile(profile, info), position_rad=at())
+
+
+PROTOCOL = Protocol(name=NAME, measurements=tuple(MEASUREMENTS), needs=NEEDS,
+                    requires=REQUIRES, planned_motion=planned_motion)

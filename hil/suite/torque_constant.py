@@ -11,7 +11,7 @@ engage (``drive.locked_rotor()``): :data:`REQUIRES`; skipped otherwise.
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import dataclass
 from typing import Any, cast
 
@@ -31,6 +31,7 @@ from hil.motion import Excitation, Mode
 from hil.profile import UnitProfile
 from hil.recording import Recording
 from hil.suite.needs import Need
+from hil.suite.protocol import Position, Protocol
 from hil.suite.stop_rule import StopRule
 from hil.suite.travel import move_excitation, move_speed_rad_s
 
@@ -283,3 +284,15 @@ def kt_ripple_from_cogging(calibration: CalibrationRun) -> list[tuple[int, float
     table = cast(list[dict[str, Any]],
                  calibration.details.get(RIPPLE.protocol, {}).get(RIPPLE.result, []))
     return [(int(h["order"]), float(h["amplitude"]), float(h["phase_rad"])) for h in table]
+
+
+def planned_motion(profile: UnitProfile, info: DriveInfo, at: Position) -> Iterable[Excitation]:
+    """The protocol's excitations as the run will command them, from the profile alone."""
+    spec = Spec.from_profile(profile, info)
+    # the cogging protocol's ripple table nudges the angles when the run gets there: not
+    # known before, planned as configured (the moves differ by the nudges only)
+    return motion(spec, angles_rad=locked_angles(spec, ()), position=at)
+
+
+PROTOCOL = Protocol(name=NAME, measurements=tuple(MEASUREMENTS), needs=NEEDS,
+                    requires=REQUIRES, planned_motion=planned_motion)

@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass
 
 import numpy as np
@@ -39,6 +39,7 @@ from hil.motion import Excitation, Mode
 from hil.profile import UnitProfile
 from hil.recording import Recording
 from hil.suite.needs import Need
+from hil.suite.protocol import Position, Protocol
 from hil.suite.stop_rule import StopRule
 from hil.suite.travel import TravelSpec, on_command_grid, runs_from_start
 
@@ -212,3 +213,14 @@ def analyse(off: list[tuple[Recording, Excitation]], on: list[tuple[Recording, E
         "tracking_ff_reduction": reduction(rms_off, rms_on, name="tracking_ff_reduction"),
     }
     return out, f_off, f_on
+
+
+def planned_motion(profile: UnitProfile, info: DriveInfo, at: Position) -> Iterable[Excitation]:
+    """The protocol's excitations as the run will command them, from the profile alone."""
+    spec = Spec.from_profile(profile, info)
+    # the feedforward's size (known only after inertia_friction) does not change the time
+    return motion(spec, excitation(spec, viscous_nm_s_rad=0.0, coulomb_nm=0.0), position=at)
+
+
+PROTOCOL = Protocol(name=NAME, measurements=tuple(MEASUREMENTS), needs=NEEDS,
+                    requires=REQUIRES, planned_motion=planned_motion)

@@ -9,6 +9,7 @@ phase margins, peak of ``|S|`` (python-control on the measured loop gain). Numer
 
 from __future__ import annotations
 
+from collections.abc import Iterable
 from dataclasses import dataclass
 
 import numpy as np
@@ -21,6 +22,7 @@ from hil.motion import Excitation, Mode
 from hil.profile import UnitProfile
 from hil.recording import Recording
 from hil.suite.needs import Need
+from hil.suite.protocol import Position, Protocol
 from hil.suite.rate import needed_sample_rate_hz
 from hil.suite.stop_rule import StopRule
 from hil.suite.travel import TravelSpec, speed_ramp
@@ -156,3 +158,12 @@ def analyse(recording: Recording, spec: Spec) -> FrfResult:
     return analyse_frf(command=sign * command[window], velocity=sign * recording.velocity[window],
                        torque=sign * recording.effort[window], harmonics=spec.harmonics,
                        period_s=spec.period_s, fs_hz=spec.fs_hz, periods=spec.periods)
+
+
+def planned_motion(profile: UnitProfile, info: DriveInfo, at: Position) -> Iterable[Excitation]:
+    """The protocol's excitations as the run will command them, from the profile alone."""
+    return excitation(Spec.from_profile(profile, info), position_rad=at())
+
+
+PROTOCOL = Protocol(name=NAME, measurements=tuple(MEASUREMENTS), needs=NEEDS,
+                    requires=REQUIRES, planned_motion=planned_motion)

@@ -9,6 +9,7 @@ constant), small and large, up and down, in both directions of rotation: a stair
 
 from __future__ import annotations
 
+from collections.abc import Iterable
 from dataclasses import dataclass
 
 import numpy as np
@@ -20,6 +21,7 @@ from hil.motion import Excitation, Mode
 from hil.profile import UnitProfile
 from hil.recording import Recording
 from hil.suite.needs import Need
+from hil.suite.protocol import Position, Protocol
 from hil.suite.stop_rule import StopRule
 from hil.suite.travel import TravelSpec, on_command_grid, speed_ramp
 from hil.suite.velocity_loop_frf import direction_from
@@ -157,3 +159,12 @@ def analyse(runs: list[tuple[Recording, Excitation]], spec: Spec
     out["step_steady_state_error_pct"] = mean_estimate(
         "step_steady_state_error_pct", [f.steady_state_error_pct for _, f in steps], "%")
     return out, steps
+
+
+def planned_motion(profile: UnitProfile, info: DriveInfo, at: Position) -> Iterable[Excitation]:
+    """The protocol's excitations as the run will command them, from the profile alone."""
+    return excitation(Spec.from_profile(profile, info), position_rad=at())
+
+
+PROTOCOL = Protocol(name=NAME, measurements=tuple(MEASUREMENTS), needs=NEEDS,
+                    requires=REQUIRES, planned_motion=planned_motion)

@@ -14,8 +14,8 @@ from hil.errors import DriveStateError
 from hil.motion import Excitation
 from hil.profile import load_profile
 from hil.recording import Recording
-from hil.report.plan import planned_motion_s
 from hil.suite import catalogue
+from hil.suite.plan import planned_motion_s
 from tests.helpers import drive_info
 
 PROFILE = load_profile(None)

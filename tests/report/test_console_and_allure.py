@@ -12,7 +12,7 @@ import pytest
 from hil.drives.connect import open_drive
 from hil.profile import load_profile
 from hil.report.console import block_letters, outcome_banner, protocol_start
-from hil.report.plan import planned_motion_s
+from hil.suite.plan import planned_motion_s
 from hil.suite.travel import MOVE_SPEED_FRACTION, move_excitation
 from tests.helpers import subset_profile
 from tests.report.runs import Run

@@ -1,0 +1,97 @@
+"""The motion each protocol plans: its excitations' commanded time, from the same
+sequence the protocol's test runs (its ``PROTOCOL.planned_motion``), each
+protocol's moves from where the one before left the axis (the first from the travel's
+centre). The console turns it into the time left."""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Iterable
+
+import numpy as np
+
+from hil.drives.base import DriveInfo
+from hil.errors import HilError, ProfileError
+from hil.motion import Excitation, Mode
+from hil.profile import UnitProfile
+from hil.suite.catalogue import CATALOGUE
+
+log = logging.getLogger(__name__)
+
+
+class _Track:
+    """The planned axis position, advanced by each excitation as the drive would be: a
+    move ends at its last command, a velocity run at its start plus the command's
+    integral, a torque run (sines about a point, a locked rotor) where it began."""
+
+    def __init__(self, at_rad: float) -> None:
+        self.at_rad = at_rad
+
+    def position(self) -> float:
+        return self.at_rad
+
+    def walk(self, excitations: Iterable[Excitation]) -> list[Excitation]:
+        out = []
+        for e in excitations:  # a generator builds its next move after the last advance
+            out.append(e)
+            if e.mode is Mode.POSITION:
+                self.at_rad = float(e.command[-1])
+            elif e.mode is Mode.VELOCITY:
+                self.at_rad += float(np.sum(e.command)) / e.fs_hz
+        return out
+
+
+def planned_motion_s(profile: UnitProfile, info: DriveInfo) -> dict[str, float]:
+    """Commanded motion time of each protocol the profile configures, in run order.
+
+    Parameters
+    ----------
+    profile : UnitProfile
+        The unit's profile (its ``[protocols.*]`` tables, in order).
+    info : DriveInfo
+        The drive (sample rate and limits shape the excitations).
+
+    Returns
+    -------
+    dict
+        Protocol → seconds of commanded motion (one run: a stop rule's repeats are not
+        planned); 0 for one this module cannot plan (an unknown protocol, or settings its
+        protocol will refuse with an error of its own) and for one the station lacks a
+        capability for (it will be skipped).
+    """
+    track = _Track((info.limits.travel_min_rad + info.limits.travel_max_rad) / 2)
+    plan = {}
+    for name in profile.protocols:  # each from where the one before left the axis
+        protocol = CATALOGUE.get(name)
+        planner = protocol.planned_motion if protocol is not None else None
+        if protocol is not None and info.lacking(protocol.requires):
+            planner = None  # skipped on this station: no motion
+        try:
+            excitations = track.walk(planner(profile, info, track.position)) if planner else []
+        except (HilError, ValueError) as exc:
+            log.debug("no motion plan for %s: %s", name, exc)
+            excitations = []
+        plan[name] = sum(e.duration_s for e in excitations)
+    return plan
+
+
+def check_protocol_settings(profile: UnitProfile, info: DriveInfo) -> None:
+    """Read every configured protocol's settings and build its motion, as the run will, so
+    that a misspelt or impossible setting stops the run before the first motion.
+
+    Raises
+    ------
+    HilError
+        The protocol's own one-line error (file, table and key); a ``ValueError`` of an
+        excitation builder becomes a :class:`ProfileError` naming the protocol's table.
+    """
+    track = _Track((info.limits.travel_min_rad + info.limits.travel_max_rad) / 2)
+    for name in profile.protocols:
+        protocol = CATALOGUE.get(name)
+        if protocol is None:
+            continue
+        planner = protocol.planned_motion
+        try:
+            track.walk(planner(profile, info, track.position))
+        except ValueError as exc:
+            raise ProfileError(f"[protocols.{name}]: {exc}", source=profile.source) from None
