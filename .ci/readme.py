@@ -78,13 +78,15 @@ def excerpt_pattern(line: str) -> re.Pattern[str]:
 
 
 def script(block: Block) -> str:
-    """The block as one bash script that checks each line's exit status."""
+    """The block as one bash script that checks each line's exit status and says how long
+    each line took (whole seconds)."""
     parts = []
     for command in block.commands:
         match = EXIT.search(command)
         expected = int(match.group("code")) if match else 0
         quoted = command.replace("'", "'\\''")
-        parts.append(f"printf '%s\\n' '$ {quoted}'\n{command}\n__rc=$?\n"
+        parts.append(f"printf '%s\\n' '$ {quoted}'\n__t=$SECONDS\n{command}\n__rc=$?\n"
+                     f"echo \"[README.md:{block.line}: $((SECONDS - __t)) s]\"\n"
                      f"if [ $__rc -ne {expected} ]; then echo \"README.md:{block.line}: "
                      f"exited $__rc, expected {expected}\" >&2; exit 1; fi")
     return "\n".join(parts) + "\n"
