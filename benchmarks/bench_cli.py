@@ -12,7 +12,7 @@ The installed ``gimbal-hil`` script is timed when it is on PATH, else ``python -
 The machine's load (1-minute load average before and after, cores) is printed with the
 figures: on a shared machine they move with it.
 
-    nice -n 10 python benchmarks/bench_cli.py --runs 7
+    nice -n 10 python -m benchmarks.bench_cli --runs 7
 """
 
 from __future__ import annotations

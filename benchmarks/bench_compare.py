@@ -1,6 +1,6 @@
 """False alarms and detection power of ``gimbal-hil compare`` on the simulator.
 
-    nice -n 10 python benchmarks/bench_compare.py --pairs 30 --reps 12 --out /tmp/bench-compare
+    nice -n 10 python -m benchmarks.bench_compare --pairs 30 --reps 12 --out /tmp/bench-compare
 
 0. With ``--write-map``: ``--map-pairs`` identical-firmware pairs (seeds 1000 + 2i,
    1001 + 2i) measure each result's run-to-run scatter beyond its budget; where the RMS of
@@ -38,26 +38,24 @@ from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 from typing import Any
 
-ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
+import numpy as np
+import tomli_w
+from scipy import stats
 
-import numpy as np  # noqa: E402
-import tomli_w  # noqa: E402
-from scipy import stats  # noqa: E402
-
-from hil.compare.certificates import load_side  # noqa: E402
-from hil.compare.repeatability import (  # noqa: E402
+from hil.compare.certificates import load_side
+from hil.compare.repeatability import (
     NO_MAP,
     RepeatabilityMap,
     load_repeatability,
 )
-from hil.compare.verdict import Comparison, compare_sides  # noqa: E402
-from tests.compare.firmware_variants import (  # noqa: E402
+from hil.compare.verdict import Comparison, compare_sides
+from tests.compare.firmware_variants import (
     firmware_setting,
     with_firmware,
     write_profile,
 )
 
+ROOT = Path(__file__).resolve().parents[1]
 PROFILE = "demo_gimbal_elevation"
 SERIAL = "BENCH-1"
 GOAL_QUIET = 19 / 20

@@ -1,6 +1,6 @@
 """Does every certificate's k = 2 interval cover the truth about 95 % of the time?
 
-    python benchmarks/bench_coverage.py --units 100 --pairs 20 --out /tmp/coverage
+    python -m benchmarks.bench_coverage --units 100 --pairs 20 --out /tmp/coverage
 
 Draws ``--units`` simulated units of each demo profile across the profile's tolerance
 ranges (:mod:`hil.characterise`, as ``gimbal-hil characterise`` does: every plant parameter

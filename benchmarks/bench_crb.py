@@ -1,6 +1,6 @@
 """Benchmark (not a timed test): every estimator against its Cramér–Rao bound.
 
-    python benchmarks/bench_crb.py [--runs 200] [--only NAME ...] [--json OUT.json]
+    python -m benchmarks.bench_crb [--runs 200] [--only NAME ...] [--json OUT.json]
 
 For each estimator in ``hil/identify/`` the protocol's own excitation is built from the
 profile's ``[protocols.X]`` table (read at run time, through the protocol's ``Spec`` and
@@ -71,11 +71,8 @@ import json
 import time
 from collections.abc import Callable
 
-import crb_frf
-import crb_locked
-import crb_slow
-from crb_common import MonteCarlo, bare_firmware, markdown
-
+from benchmarks import crb_frf, crb_locked, crb_slow
+from benchmarks.crb_common import MonteCarlo, bare_firmware, markdown
 from hil.profile import load_profile
 
 ELEVATION = "demo_gimbal_elevation"

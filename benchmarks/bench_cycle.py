@@ -2,7 +2,7 @@
 uncertainty, on both demo units, for this tree and an earlier revision of it.
 
     git archive REV | tar -x -C /tmp/before        # the revision to compare against
-    python benchmarks/bench_cycle.py --before /tmp/before --seeds 1 2 3 4 5 6 7 8
+    python -m benchmarks.bench_cycle --before /tmp/before --seeds 1 2 3 4 5 6 7 8
 
 Each tree calibrates each demo profile once per seed through the command line
 (``gimbal-hil calibrate --store off -- --no-documents``), on the simulator and, with

@@ -2,9 +2,9 @@
 
 Run:
 
-- ``python benchmarks/bench_diagnose.py [REC.csv.gz ...]``: wall time of ``diagnose`` on each
+- ``python -m benchmarks.bench_diagnose [REC.csv.gz ...]``: wall time of ``diagnose`` on each
   recording (default: the shared examples, 64 000 samples each; target ≤ 10 s each).
-- ``python benchmarks/bench_diagnose.py --hidden N [--pairs] [--unknown] [--seed S]``: N
+- ``python -m benchmarks.bench_diagnose --hidden N [--pairs] [--unknown] [--seed S]``: N
   simulated units (``tests/diagnose/diagnose_simdata.py``), each with one hidden effect,
   two (``--pairs``: every unordered pair of the seven effects in turn) or one effect outside
   the library (``--unknown``), sizes drawn (``--only E ...``: only those single effects;
@@ -34,7 +34,6 @@ from hil.recording import read_recording
 
 ROOT = Path(__file__).resolve().parents[1]
 SHARED = ROOT.parent / "shared" / "recordings"
-sys.path.insert(0, str(ROOT / "tests" / "diagnose"))
 
 SEVEN = ("stribeck", "cogging", "kt_ripple", "gravity", "cable_spring", "current_lag",
          "two_mass")
@@ -82,8 +81,8 @@ def declared_alias(data: dict[str, Any], effect: str, key: str, truth: float) ->
 
 def hidden(count: int, *, pairs: bool, unknown: bool, seed: int,
            only: tuple[str, ...] = (), first: int = 0, with_: tuple[str, ...] = ()) -> int:
-    from diagnose_simdata import plant_with, record
-    from unknown_effects import hide_unknown
+    from tests.diagnose.diagnose_simdata import plant_with, record
+    from tests.diagnose.unknown_effects import hide_unknown
 
     rng = np.random.default_rng(seed)
     combos: list[tuple[str, ...]]

@@ -16,7 +16,7 @@ Measured (2 cores, shared, Python 3.11), the bound in ``hil/diagnose/core.py``:
     (hil/budget.py: 50 % of physical memory, GIMBAL_HIL_MEMORY_BUDGET_MB overrides);
     a recording above it is refused while its rows are counted, before it is read whole.
 
-    nice -n 10 python benchmarks/bench_diagnose_memory.py --seconds 25 50
+    nice -n 10 python -m benchmarks.bench_diagnose_memory --seconds 25 50
 """
 
 from __future__ import annotations

@@ -22,7 +22,7 @@ Cases: **demo unit** (every effect of the azimuth demo plant on: cogging, K_t ri
 encoder, load noise) and **white** (two-mass load, friction, current-loop lag, torque noise
 only; the physics step refined 64 × as in ``bench_crb.py``).
 
-    nice -n 10 python benchmarks/bench_excitation.py --runs 200
+    nice -n 10 python -m benchmarks.bench_excitation --runs 200
 """
 
 from __future__ import annotations
@@ -32,9 +32,11 @@ import math
 import time
 from dataclasses import dataclass
 
-import crb_frf
 import numpy as np
-from crb_common import (
+
+import hil.suite.resonance as protocol
+from benchmarks import crb_frf
+from benchmarks.crb_common import (
     ComplexArray,
     FloatArray,
     FrfBlocks,
@@ -46,8 +48,6 @@ from crb_common import (
     monte_carlo,
     sim_drive,
 )
-
-import hil.suite.resonance as protocol
 from hil.errors import IdentificationError
 from hil.identify.multisine import crest_factor, period_phasors
 from hil.identify.resonance import TwoMassModel, two_mass_response

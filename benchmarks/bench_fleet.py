@@ -1,7 +1,7 @@
 """Benchmark (not a timed test): the fleet statistics on a large series, and the false-alarm
 rates of the ``spc`` gate on in-control data.
 
-    python benchmarks/bench_fleet.py [--runs 100000] [--series 4000] [--seed 5]
+    python -m benchmarks.bench_fleet [--runs 100000] [--series 4000] [--seed 5]
 
 Speed: ``spc_report`` (all eight rules, EWMA), its JSON, the trend table and both exports on
 ``--runs`` results of one parameter (plain dataclasses, as the store hands them over).
@@ -12,15 +12,12 @@ true with trial limits, with known μ and σ, and for the newest run alone (``la
 from __future__ import annotations
 
 import argparse
-import sys
 import tempfile
 import time
 from datetime import timedelta
 from pathlib import Path
 
 import numpy as np
-
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from hil.fleet.baseline import Baseline
 from hil.fleet.commands import export_rows, has_signal, spc_report, trend_table

@@ -1,6 +1,6 @@
 """Benchmark (not a timed test): correlation FRF against a Welch/FFT H1 on the same data.
 
-    python benchmarks/bench_frf.py [--runs 20] [--json OUT.json]
+    python -m benchmarks.bench_frf [--runs 20] [--json OUT.json]
 
 The resonance protocol's stepped sine is simulated on the azimuth demo unit (every effect
 on: noise, quantisation, lag, cogging, Stribeck, cable...) with ``--runs`` noise seeds. On
@@ -28,10 +28,10 @@ import json
 import math
 
 import numpy as np
-from crb_frf import stepped_sine_profile
 from scipy import signal
 
 import hil.suite.resonance as protocol
+from benchmarks.crb_frf import stepped_sine_profile
 from hil.drives.base import DriveInfo
 from hil.drives.sim import SimDrive
 from hil.identify.resonance import TwoMassModel, frf_point, two_mass_response

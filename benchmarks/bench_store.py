@@ -9,7 +9,7 @@
    timed (median of ``--repeat``): ``units``, ``history SERIAL``, ``trend PARAM`` (all
    runs, and one station since a date) and ``result_series``.
 
-Not a timed test: ``python benchmarks/bench_store.py [--runs 100000] [--ingest 300]``.
+Not a timed test: ``python -m benchmarks.bench_store [--runs 100000] [--ingest 300]``.
 """
 
 from __future__ import annotations
@@ -37,9 +37,7 @@ from hil.store.ingest import ingest_text
 from hil.store.query import history, units
 from hil.store.rows import certificate_rows
 from hil.store.schema import protocol_outcomes, recordings, results, runs
-
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests" / "store"))
-from pg_server import NoServerError, temporary_server
+from tests.store.pg_server import NoServerError, temporary_server
 
 STATIONS = [f"ST-{i}" for i in range(1, 7)]
 BATCH_RUNS = 2000

@@ -4,7 +4,7 @@ Runs the J/B/T_c excitation of the demo profile (2 Hz velocity sine, both amplit
 through ``drive.run()`` over the CANopen emulator (real CAN frames on a python-can virtual
 bus, SYNC-clocked plant) and reports wall time against the excitation's duration; for
 comparison the in-process simulator. Not a timed test: run it by hand,
-``python benchmarks/bench_transport.py [--repeat N]``.
+``python -m benchmarks.bench_transport [--repeat N]``.
 """
 
 from __future__ import annotations

@@ -10,7 +10,10 @@ from types import ModuleType
 from typing import Any
 
 import numpy as np
-from crb_common import (
+
+import hil.suite.current_loop as current_protocol
+import hil.suite.resonance as resonance_protocol
+from benchmarks.crb_common import (
     ComplexArray,
     FloatArray,
     FrfBlocks,
@@ -23,9 +26,6 @@ from crb_common import (
     monte_carlo,
     sim_drive,
 )
-
-import hil.suite.current_loop as current_protocol
-import hil.suite.resonance as resonance_protocol
 from hil.characterise.truth import reported_scale, two_mass_truth
 from hil.errors import IdentificationError
 from hil.identify.current_loop import sampled_response

@@ -6,7 +6,11 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from crb_common import (
+
+import hil.suite.inertia_elevation as elevation_protocol
+import hil.suite.inertia_friction as sine
+import hil.suite.torque_constant as torque_protocol
+from benchmarks.crb_common import (
     FloatArray,
     MonteCarlo,
     Parameter,
@@ -15,10 +19,6 @@ from crb_common import (
     monte_carlo,
     sim_drive,
 )
-
-import hil.suite.inertia_elevation as elevation_protocol
-import hil.suite.inertia_friction as sine
-import hil.suite.torque_constant as torque_protocol
 from hil.characterise.truth import reported_scale
 from hil.errors import IdentificationError
 from hil.identify.estimate import Estimate

@@ -8,7 +8,12 @@ import math
 from collections.abc import Sequence
 
 import numpy as np
-from crb_common import (
+from numpy.typing import NDArray
+
+import hil.suite.cogging as cogging_protocol
+import hil.suite.gravity_cable as gravity_protocol
+import hil.suite.stribeck as stribeck_protocol
+from benchmarks.crb_common import (
     FloatArray,
     MonteCarlo,
     Parameter,
@@ -18,11 +23,6 @@ from crb_common import (
     monte_carlo,
     sim_drive,
 )
-from numpy.typing import NDArray
-
-import hil.suite.cogging as cogging_protocol
-import hil.suite.gravity_cable as gravity_protocol
-import hil.suite.stribeck as stribeck_protocol
 from hil.characterise.truth import reported_scale
 from hil.errors import IdentificationError
 from hil.identify.cogging import _design

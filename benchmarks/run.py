@@ -1,6 +1,6 @@
 """Benchmarks (not timed tests): simulator speed and estimator efficiency.
 
-    python benchmarks/run.py [--runs 200] [--json OUT.json]
+    python -m benchmarks.run [--runs 200] [--json OUT.json]
 
 - simulator: × real time at 4 kHz, rigid and with every effect on;
 - J, B, T_c: RMSE over Monte Carlo runs divided by the Cramér–Rao bound σ·sqrt(diag((ΦᵀΦ)⁻¹)),

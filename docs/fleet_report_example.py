@@ -1,5 +1,5 @@
 """Render the fleet report on a synthetic line (60 units, two stations, a drift in J from
-run 35) and print where it went: ``python docs/fleet_report_example.py OUT_DIR``.
+run 35) and print where it went: ``python -m docs.fleet_report_example OUT_DIR``.
 
 The points are the tests' plain dataclasses (what the results store hands over)."""
 
@@ -8,8 +8,6 @@ from __future__ import annotations
 import sys
 from dataclasses import replace
 from pathlib import Path
-
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from hil.fleet.commands import fleet_report_html, freeze_baseline, spc_report
 from tests.fleet.points import START, drifting_values, runs_for, series

@@ -4,16 +4,11 @@ efficient estimator reaches, and closed forms that agree with the sample-level J
 from __future__ import annotations
 
 import math
-import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
-
-import crb_common
-import crb_slow
+from benchmarks import crb_common, crb_slow
 
 RUNS = 600
 # the sample standard deviation over RUNS runs scatters by ≈ 1/√(2·RUNS) ≈ 3 %: 5 σ
