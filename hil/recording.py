@@ -13,7 +13,6 @@ import hashlib
 import logging
 import os
 import tempfile
-import threading
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -24,6 +23,7 @@ from numpy.typing import NDArray
 
 from hil.budget import memory_budget_bytes
 from hil.errors import RecordingError
+from hil.parallel import forked_bytes
 
 log = logging.getLogger(__name__)
 
@@ -436,7 +436,7 @@ def write_recording(recording: Recording, path: str | Path) -> str:
     return hashlib.sha256(payload).hexdigest()
 
 
-#: rows from which a single-threaded process formats half of them in a forked child
+#: rows from which half of them are formatted in a forked child (where one can be forked)
 FORK_ROWS = 200_000
 
 
@@ -450,34 +450,17 @@ def _format_rows(columns: Sequence[FloatArray], start: int, stop: int) -> str:
 
 def _rows_text(columns: Sequence[FloatArray]) -> str:
     """Every row as CSV text. Formatting is most of a long recording's writing time (2.9
-    million values for two minutes at 4 kHz: about a second), so a process with one thread
-    (``gimbal-hil simulate``, not a calibration with its drive threads) formats the second
-    half in a forked child on another core and reads it back through a pipe; the text is
-    the same byte for byte. Any failure of the child: the parent formats it itself."""
+    million values for two minutes at 4 kHz: about a second), so from :data:`FORK_ROWS` rows
+    on the second half is formatted on another core (:func:`hil.parallel.forked_bytes`); the
+    text is the same byte for byte."""
     rows = len(columns[0]) if columns else 0
-    if rows < FORK_ROWS or not hasattr(os, "fork") or (os.cpu_count() or 1) < 2 \
-            or threading.active_count() > 1:
+    if rows < FORK_ROWS:
         return _format_rows(columns, 0, rows)
     half = rows // 2
-    read_end, write_end = os.pipe()
-    child = os.fork()
-    if child == 0:  # pragma: no cover (the child exits without returning)
-        status = 1
-        try:
-            os.close(read_end)
-            with os.fdopen(write_end, "wb") as pipe:
-                pipe.write(_format_rows(columns, half, rows).encode("utf-8"))
-            status = 0
-        finally:
-            os._exit(status)
-    os.close(write_end)
-    first = _format_rows(columns, 0, half)
-    with os.fdopen(read_end, "rb") as pipe:
-        second = pipe.read().decode("utf-8")
-    _, status = os.waitpid(child, 0)
-    if status != 0:
-        second = _format_rows(columns, half, rows)
-    return f"{first}\n{second}"
+    first, second = forked_bytes(lambda: _format_rows(columns, half, rows).encode("utf-8"),
+                                 lambda: _format_rows(columns, 0, half))
+    rest = _format_rows(columns, half, rows) if second is None else second.decode("utf-8")
+    return f"{first}\n{rest}"
 
 
 def write_atomic(path: str | Path, payload: bytes) -> None:
