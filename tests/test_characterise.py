@@ -17,7 +17,7 @@ import pytest
 
 from tests.helpers import subset_profile
 
-pytestmark = pytest.mark.slow(seconds=25)
+pytestmark = pytest.mark.slow(seconds=55)
 
 
 def _characterise(out: Path, profile: Path, *extra: str) -> subprocess.CompletedProcess[str]:
@@ -66,3 +66,37 @@ def test_other_options_on_a_population_folder_are_refused_before_any_run(
     assert refused.stderr.count("\n") == 1
     assert "units_per_profile 3 → 2" in refused.stderr
     assert not (tmp_path / "pop" / "units").exists()
+
+
+def test_a_population_on_a_dask_cluster_gives_the_map_of_the_local_run(
+        profile: Path, tmp_path: Path) -> None:
+    """The cluster's scheduler and worker in this process (loopback, threads); the command
+    connects to it as it would to a cluster's, and each unit still runs in its own process."""
+    from distributed import LocalCluster
+
+    local = _characterise(tmp_path / "local", profile, "--jobs", "2",
+                          "--write-map", str(tmp_path / "local.toml"))
+    assert local.returncode == 0, local.stderr
+    with LocalCluster(n_workers=1, threads_per_worker=2, processes=False,
+                      protocol="tcp", host="127.0.0.1", scheduler_port=0,
+                      dashboard_address=None) as cluster:
+        remote = _characterise(tmp_path / "cluster", profile, "--scheduler",
+                               cluster.scheduler_address,
+                               "--write-map", str(tmp_path / "cluster.toml"))
+    assert remote.returncode == 0, remote.stderr
+    assert f"on the cluster at {cluster.scheduler_address}" in remote.stdout
+    assert remote.stdout.count("results (") == 2
+    maps = [tomllib.loads((tmp_path / f"{name}.toml").read_text(encoding="utf-8"))["results"]
+            for name in ("local", "cluster")]
+    assert maps[0] == maps[1]
+
+
+@pytest.mark.parametrize(("address", "named"), [("tcp://127.0.0.1:9", "127.0.0.1:9"),
+                                              ("nonsense", "tcp://HOST:PORT")])
+def test_an_unreachable_or_malformed_scheduler_is_one_line(
+        profile: Path, tmp_path: Path, address: str, named: str) -> None:
+    refused = _characterise(tmp_path / "pop", profile, "--scheduler", address)
+    assert refused.returncode == 2
+    assert refused.stderr.count("\n") == 1, refused.stderr
+    assert "--scheduler" in refused.stderr
+    assert named in refused.stderr

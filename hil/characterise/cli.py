@@ -2,14 +2,15 @@
 
 Draws ``--units`` units of each ``--profile`` across its tolerances
 (:mod:`hil.characterise.draw`), calibrates each on the simulator through ``gimbal-hil
-calibrate`` (``--jobs`` at once), compares every result with the truth of its drawn plant
-and prints, per result, the bias, the RMS of ``(x − truth)/u`` and the coverage of ±U.
-``--write-map`` writes the map these results show (calibrate with ``--method-bias off``
-for that), ``--validate-map`` adds this population's coverage to a map the calibrations
-used. Resumable: ``--out`` keeps the drawn units, the certificates and the population's
-options; run it again with the same options and finished units are read back, not
-calibrated again. The result does not depend on ``--jobs``: every unit has its own seed
-and its own process, and the rows are kept in the units' order.
+calibrate`` (``--jobs`` at once, or on a Dask cluster: ``--scheduler``), compares every
+result with the truth of its drawn plant and prints, per result, the bias, the RMS of
+``(x − truth)/u`` and the coverage of ±U. ``--write-map`` writes the map these results
+show (calibrate with ``--method-bias off`` for that), ``--validate-map`` adds this
+population's coverage to a map the calibrations used. Resumable: ``--out`` keeps the drawn
+units, the certificates and the population's options; run it again with the same options
+and finished units are read back, not calibrated again. The result does not depend on
+``--jobs`` or on the cluster: every unit has its own seed and its own process, and the
+rows are kept in the units' order.
 """
 
 from __future__ import annotations
@@ -25,7 +26,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "the two demo profiles)")
     parser.add_argument("--units", type=int, default=100, help="units drawn per profile")
     parser.add_argument("--jobs", type=int, default=2,
-                        help="calibrations at once (each is one process)")
+                        help="calibrations at once on this machine (each is one process)")
+    parser.add_argument("--scheduler", default=None, metavar="ADDRESS",
+                        help="run the units on the Dask cluster of this scheduler "
+                             "(tcp://HOST:8786; pip install 'gimbal-hil[cluster]'; its "
+                             "workers must see --out and the profiles at the same paths) "
+                             "instead of --jobs here (default: none)")
     parser.add_argument("--seed", type=int, default=2026, help="the population's seed")
     parser.add_argument("--out", type=Path, default=Path("characterise"),
                         help="folder of the population: units, certificates, summary.json")

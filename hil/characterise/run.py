@@ -68,22 +68,40 @@ class Row:
 
 
 def run_population(units: Sequence[Unit], out_dir: Path, *, workers: int = 2,
-                   method_bias: str | None = None, reuse: bool = False,
+                   scheduler: str | None = None, method_bias: str | None = None,
+                   reuse: bool = False,
                    progress: Callable[[Unit, int], None] | None = None) -> list[Row]:
-    """Calibrate every unit (``workers`` at a time); one row per result with a truth, in
-    the units' order whatever the workers' (``progress(unit, results)`` as each ends)."""
+    """Calibrate every unit (``workers`` at a time here, or on the Dask cluster whose
+    ``scheduler`` address is given: :mod:`hil.characterise.cluster`); one row per result
+    with a truth, in the units' order whatever the workers' (``progress(unit, results)``
+    as each ends)."""
 
-    def one(unit: Unit) -> list[Row]:
-        results = calibrate(unit, out_dir, method_bias=method_bias, reuse=reuse)
+    def ended(unit: Unit, results: dict[str, dict[str, Any]]) -> None:
         if progress is not None:
             progress(unit, len(results))
-        truth = truths(unit)
-        return [
-            Row(unit=unit.serial, axis=unit.axis, parameter=name, value=float(r["value"]),
-                truth=truth[name], standard_uncertainty=float(r["standard_uncertainty"]),
-                expanded_uncertainty=float(r["expanded_uncertainty"]))
-            for name, r in results.items() if name in truth and r["standard_uncertainty"]
-        ]
 
-    with ThreadPoolExecutor(max_workers=workers) as pool:
-        return [row for rows in pool.map(one, units) for row in rows]
+    options = {"out_dir": out_dir, "method_bias": method_bias, "reuse": reuse}
+    if scheduler is not None:
+        from hil.characterise.cluster import map_on_cluster
+
+        found = map_on_cluster(scheduler, calibrate, units, ended, **options)
+    else:
+        def one(unit: Unit) -> dict[str, dict[str, Any]]:
+            results = calibrate(unit, **options)  # type: ignore[arg-type]
+            ended(unit, results)
+            return results
+
+        with ThreadPoolExecutor(max_workers=workers) as pool:
+            found = list(pool.map(one, units))
+    return [row for unit, results in zip(units, found, strict=True)
+            for row in _rows(unit, results)]
+
+
+def _rows(unit: Unit, results: dict[str, dict[str, Any]]) -> list[Row]:
+    truth = truths(unit)
+    return [
+        Row(unit=unit.serial, axis=unit.axis, parameter=name, value=float(r["value"]),
+            truth=truth[name], standard_uncertainty=float(r["standard_uncertainty"]),
+            expanded_uncertainty=float(r["expanded_uncertainty"]))
+        for name, r in results.items() if name in truth and r["standard_uncertainty"]
+    ]

@@ -48,11 +48,13 @@ def characterise(args: argparse.Namespace) -> int:
     units = write_population(args.out / "units", units_per_profile=args.units,
                              seed=args.seed, profiles=profiles)
     rows = run_population(units, args.out / "certificates", workers=args.jobs,
-                          method_bias=args.method_bias, reuse=True,
-                          progress=_progress(len(units), started))
+                          scheduler=args.scheduler, method_bias=args.method_bias,
+                          reuse=True, progress=_progress(len(units), started))
     summaries = summarise(rows)
+    where = (f"on the cluster at {args.scheduler}" if args.scheduler is not None
+             else f"with {args.jobs} job(s)")
     print(f"\n{len(units)} units, {len(rows)} results with a truth, "
-          f"{time.perf_counter() - started:.0f} s with {args.jobs} job(s)\n")
+          f"{time.perf_counter() - started:.0f} s {where}\n")
     print("\n".join(table(summaries)))
     population = (f"gimbal-hil characterise --units {args.units} --seed {args.seed} "
                   f"--method-bias {state['method_bias']}: {len(units)} units")

@@ -1,0 +1,78 @@
+"""A population calibrated on a Dask distributed cluster (``characterise --scheduler
+tcp://HOST:8786``), for populations that outgrow one machine.
+
+Why Dask distributed and not Ray: each unit is one independent task that runs a command
+and writes its certificate. Dask's futures do exactly that from a pure-Python package
+(``pip install 'gimbal-hil[cluster]'``) on the clusters people already run (``dask
+scheduler`` and ``dask worker`` over SSH, dask-jobqueue on SLURM or PBS, Kubernetes).
+Ray would bring its own runtime and object store, a wheel many times the size, for
+features this work does not use.
+
+What the workers need: this project installed (the same version), and ``--out`` and the
+profiles at the same paths as here (a shared file system): every unit's certificate is
+written there, and read back here. The result does not depend on where a unit ran: each
+has its own seed and its own process.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from typing import Any
+
+from hil.characterise.draw import Unit
+from hil.errors import InputError
+
+#: how long to wait for the scheduler before giving up
+CONNECT_TIMEOUT_S = 10.0
+
+Results = dict[str, dict[str, Any]]
+
+
+def map_on_cluster(address: str, calibrate: Callable[..., Results], units: Sequence[Unit],
+                   progress: Callable[[Unit, Results], None], **options: Any) -> list[Results]:
+    """``calibrate(unit, **options)`` for every unit on the cluster at ``address``.
+
+    Parameters
+    ----------
+    address : str
+        The Dask scheduler (``tcp://HOST:8786``).
+    calibrate : callable
+        Module-level, so that a worker can import it.
+    units : sequence of Unit
+    progress : callable
+        Called here with each unit and its results as it ends (in the order they end).
+    **options
+        Passed to ``calibrate``.
+
+    Returns
+    -------
+    list
+        Each unit's results, in the units' order.
+
+    Raises
+    ------
+    InputError
+        Dask distributed is not installed, or the scheduler cannot be reached.
+    """
+    try:
+        from distributed import Client, as_completed
+    except ImportError:
+        raise InputError("needs Dask distributed: pip install 'gimbal-hil[cluster]'",
+                         source="--scheduler") from None
+    try:
+        client = Client(address, timeout=f"{CONNECT_TIMEOUT_S}s")  # type: ignore[no-untyped-call]
+    except ValueError as exc:  # not an address (no port, unknown protocol)
+        raise InputError(f"not a scheduler address (tcp://HOST:PORT): {exc}",
+                         source="--scheduler") from None
+    except (OSError, TimeoutError) as exc:
+        raise InputError(f"cannot reach the Dask scheduler at {address}: {exc}",
+                         source="--scheduler") from None
+    with client:
+        futures = client.map(calibrate, list(units), pure=False, **options)
+        index = {future.key: i for i, future in enumerate(futures)}
+        done: list[Results | None] = [None] * len(futures)
+        for future in as_completed(futures):  # type: ignore[no-untyped-call]
+            i = index[future.key]
+            done[i] = future.result()
+            progress(units[i], done[i] or {})
+    return [results or {} for results in done]
