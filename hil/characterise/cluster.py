@@ -28,21 +28,20 @@ CONNECT_TIMEOUT_S = 10.0
 Results = dict[str, dict[str, Any]]
 
 
-def map_on_cluster(address: str, calibrate: Callable[..., Results], units: Sequence[Unit],
-                   progress: Callable[[Unit, Results], None], **options: Any) -> list[Results]:
-    """``calibrate(unit, **options)`` for every unit on the cluster at ``address``.
+def map_on_cluster(address: str, calibrate: Callable[[Unit], Results], units: Sequence[Unit],
+                   progress: Callable[[Unit, Results], None]) -> list[Results]:
+    """``calibrate(unit)`` for every unit on the cluster at ``address``.
 
     Parameters
     ----------
     address : str
         The Dask scheduler (``tcp://HOST:8786``).
     calibrate : callable
-        Module-level, so that a worker can import it.
+        A module-level function (or a ``functools.partial`` of one), so that a worker can
+        import it.
     units : sequence of Unit
     progress : callable
         Called here with each unit and its results as it ends (in the order they end).
-    **options
-        Passed to ``calibrate``.
 
     Returns
     -------
@@ -68,7 +67,7 @@ def map_on_cluster(address: str, calibrate: Callable[..., Results], units: Seque
         raise InputError(f"cannot reach the Dask scheduler at {address}: {exc}",
                          source="--scheduler") from None
     with client:
-        futures = client.map(calibrate, list(units), pure=False, **options)
+        futures = client.map(calibrate, list(units), pure=False)
         index = {future.key: i for i, future in enumerate(futures)}
         done: list[Results | None] = [None] * len(futures)
         for future in as_completed(futures):  # type: ignore[no-untyped-call]

@@ -39,10 +39,6 @@ MEASURED_BY = {
 FIXED = {"torque_limit_nm", "encoder_counts_per_rev", "elevation_rad", "substeps",
          "exact_torque_hold", "locked_rotor", "position_kp_1_s", "cable_zero_rad",
          "coulomb_neg_nm", "viscous_neg_nm_s_rad", "torque_offset_nm"}
-NO_TRUTH = ("inertia_amplitude_spread_pct", "torque_linearity_pct",
-            "resonance_to_bandwidth_ratio")
-
-
 
 
 def _relative_spread(profile_raw: Mapping[str, Any], measurement: str) -> float:

@@ -107,8 +107,7 @@ def run_command(argv: Sequence[str], *, cwd: Path | None = None,
                                f"{timeout_s} s (killed)")
         stdout, stderr = (s.read_text(encoding="utf-8", errors="replace") if s.is_file()
                           else "" for s in streams)
-    code = child.exitcode
-    return Finished(returncode=1 if code is None else code, stdout=stdout, stderr=stderr)
+    return Finished(returncode=child.exitcode, stdout=stdout, stderr=stderr)
 
 
 def _child(argv: list[str], cwd: str, env: dict[str, str], streams: tuple[str, str]

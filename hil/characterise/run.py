@@ -5,6 +5,7 @@
 
 from __future__ import annotations
 
+import functools
 import json
 from collections.abc import Callable, Sequence
 from concurrent.futures import ThreadPoolExecutor
@@ -15,7 +16,7 @@ from typing import Any
 from hil.characterise.draw import Unit
 from hil.characterise.processes import run_command
 from hil.characterise.truth import truths
-from hil.suite.catalogue import PROTOCOLS as CATALOGUE
+from hil.suite.catalogue import CATALOGUE
 
 #: The protocols an earlier result's budget line may name (``… (gravity_cable)``).
 PROTOCOLS = tuple(CATALOGUE)
@@ -80,14 +81,14 @@ def run_population(units: Sequence[Unit], out_dir: Path, *, workers: int = 2,
         if progress is not None:
             progress(unit, len(results))
 
-    options = {"out_dir": out_dir, "method_bias": method_bias, "reuse": reuse}
+    work = functools.partial(calibrate, out_dir=out_dir, method_bias=method_bias, reuse=reuse)
     if scheduler is not None:
         from hil.characterise.cluster import map_on_cluster
 
-        found = map_on_cluster(scheduler, calibrate, units, ended, **options)
+        found = map_on_cluster(scheduler, work, units, ended)
     else:
         def one(unit: Unit) -> dict[str, dict[str, Any]]:
-            results = calibrate(unit, **options)  # type: ignore[arg-type]
+            results = work(unit)
             ended(unit, results)
             return results
 

@@ -156,7 +156,6 @@ UNITS = {"bandwidth_hz": "Hz", "peak_gain_db": "dB", "gain_margin_db": "dB",
          "phase_margin_deg": "°", "sensitivity_peak_db": "dB"}
 
 
-
 def analyse_frf(
     *, command: FloatArray, velocity: FloatArray, torque: FloatArray, harmonics: Sequence[int],
     period_s: float, fs_hz: float, periods: int,

@@ -261,7 +261,6 @@ def judge(*, position: FloatArray, velocity: FloatArray, residual: FloatArray,
     }
 
 
-
 def misfit(fit_pct: float) -> str | None:
     """The sentence saying the final model misses much of the recording, or ``None``.
 

@@ -218,7 +218,6 @@ class CableLoop:
     covariance: float = 0.0
 
 
-
 def cable_loop_torque_nm(
     position_rad: FloatArray, *, half_width_nm: float, angle_rad: float
 ) -> FloatArray:

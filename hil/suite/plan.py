@@ -63,11 +63,10 @@ def planned_motion_s(profile: UnitProfile, info: DriveInfo) -> dict[str, float]:
     plan = {}
     for name in profile.protocols:  # each from where the one before left the axis
         protocol = CATALOGUE.get(name)
-        planner = protocol.planned_motion if protocol is not None else None
-        if protocol is not None and info.lacking(protocol.requires):
-            planner = None  # skipped on this station: no motion
+        runs = protocol is not None and info.lacking(protocol.requires) is None
         try:
-            excitations = track.walk(planner(profile, info, track.position)) if planner else []
+            excitations = track.walk(protocol.planned_motion(profile, info, track.position)
+                                     ) if protocol is not None and runs else []
         except (HilError, ValueError) as exc:
             log.debug("no motion plan for %s: %s", name, exc)
             excitations = []
@@ -90,8 +89,7 @@ def check_protocol_settings(profile: UnitProfile, info: DriveInfo) -> None:
         protocol = CATALOGUE.get(name)
         if protocol is None:
             continue
-        planner = protocol.planned_motion
         try:
-            track.walk(planner(profile, info, track.position))
+            track.walk(protocol.planned_motion(profile, info, track.position))
         except ValueError as exc:
             raise ProfileError(f"[protocols.{name}]: {exc}", source=profile.source) from None

@@ -166,7 +166,6 @@ def test_ripple_uncertainty_with_a_slowly_wandering_position() -> None:
     assert 0.8 < ratio < 1.3
 
 
-
 def test_standstill_blocks_and_their_resolution_line() -> None:
     rng = np.random.default_rng(2)
     position = np.round(rng.normal(0.0, 5e-6, 4000) / 1e-6) * 1e-6
