@@ -520,12 +520,32 @@ def fractional_shift(matrix: FloatArray, samples: float, rows: IndexArray) -> Fl
         -(u + 1) * u * (u - 2) / 2,
         (u + 1) * u * (u - 1) / 6,
     )
-    n = matrix.shape[0]
     out = np.zeros((len(rows), matrix.shape[1]))
-    for offset, weight in zip((-1, 0, 1, 2), weights, strict=True):
+    taps = _taps(matrix, rows, whole)
+    scaled = np.empty_like(out)
+    for tap, weight in zip(taps, weights, strict=True):
         if weight != 0.0:
-            out += weight * matrix[np.clip(rows + whole + offset, 0, n - 1)]
+            np.multiply(tap(), weight, out=scaled)
+            out += scaled
     return out
+
+
+def _taps(matrix: FloatArray, rows: IndexArray, whole: int) -> list[Callable[[], FloatArray]]:
+    """The four stencil rows ``matrix[rows + whole + k]``, k = −1 … 2, edge repeated: views
+    of one padded window when ``rows`` is a run of consecutive samples (the whole recording,
+    most calls), else gathered."""
+    n = len(rows)
+    if n and int(rows[-1]) - int(rows[0]) == n - 1 and bool(np.all(np.diff(rows) == 1)):
+        first, last = int(rows[0]) + whole - 1, int(rows[-1]) + whole + 2
+        window = matrix[max(first, 0):max(min(last + 1, matrix.shape[0]), 0)]
+        leading = min(max(-first, 0), n + 3)
+        trailing = n + 3 - leading - len(window)
+        if leading or trailing:
+            window = np.concatenate([np.repeat(matrix[:1], leading, axis=0), window,
+                                     np.repeat(matrix[-1:], trailing, axis=0)])
+        return [lambda k=k: window[k:k + n] for k in range(4)]
+    clipped = [np.clip(rows + whole + offset, 0, matrix.shape[0] - 1) for offset in (-1, 0, 1, 2)]
+    return [lambda index=index: np.take(matrix, index, axis=0) for index in clipped]
 
 
 def solve(model: Model, matrix: FloatArray, target: FloatArray, *, n_effective: float) -> Fit:

@@ -96,13 +96,18 @@ def test_canopen_compensation_table_applies_only_with_compensating_firmware(
 
 
 def test_modbus_reports_the_version_and_takes_the_torque_offset(profile: UnitProfile) -> None:
-    """Over the register map's ``torque_offset`` (real time, 100 Hz polling: short runs)."""
+    """Over the register map's ``torque_offset`` (real time, 100 Hz polling: short runs).
+
+    The station's setpoint lead is raised to 100 ms: on a 0.3 s run one host pause of
+    41 ms (seen on an idle 2-core VM) held the setpoint for 5 % of it and the run was
+    refused, rightly; this test is about the firmware's offset, not the link's timing."""
     moved = {}
     for feedforward in (True, False):
         unit = _unit(profile, FRICTIONLESS, version="GMB 2.7.1", feedforward=feedforward,
                      **GAINS)
         with modbus_emulator(unit, seed=1) as (_, station), \
-                ModbusDrive(station, limits=unit.limits) as drive:
+                ModbusDrive(dataclasses.replace(station, setpoint_lead_periods=10),
+                            limits=unit.limits) as drive:
             assert drive.info.firmware_version == "2.7"
             drive.enable()
             fs = drive.info.max_sample_rate_hz
