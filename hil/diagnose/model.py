@@ -521,17 +521,17 @@ def fractional_shift(matrix: FloatArray, samples: float, rows: IndexArray) -> Fl
         (u + 1) * u * (u - 1) / 6,
     )
     out = np.zeros((len(rows), matrix.shape[1]))
-    taps = _taps(matrix, rows, whole)
+    tap = _taps(matrix, rows, whole)
     scaled = np.empty_like(out)
-    for tap, weight in zip(taps, weights, strict=True):
+    for k, weight in enumerate(weights):
         if weight != 0.0:
-            np.multiply(tap(), weight, out=scaled)
+            np.multiply(tap(k), weight, out=scaled)
             out += scaled
     return out
 
 
-def _taps(matrix: FloatArray, rows: IndexArray, whole: int) -> list[Callable[[], FloatArray]]:
-    """The four stencil rows ``matrix[rows + whole + k]``, k = −1 … 2, edge repeated: views
+def _taps(matrix: FloatArray, rows: IndexArray, whole: int) -> Callable[[int], FloatArray]:
+    """Stencil tap ``k`` (0 … 3): ``matrix[rows + whole + k − 1]``, edge repeated; views
     of one padded window when ``rows`` is a run of consecutive samples (the whole recording,
     most calls), else gathered."""
     n = len(rows)
@@ -543,9 +543,9 @@ def _taps(matrix: FloatArray, rows: IndexArray, whole: int) -> list[Callable[[],
         if leading or trailing:
             window = np.concatenate([np.repeat(matrix[:1], leading, axis=0), window,
                                      np.repeat(matrix[-1:], trailing, axis=0)])
-        return [lambda k=k: window[k:k + n] for k in range(4)]
-    clipped = [np.clip(rows + whole + offset, 0, matrix.shape[0] - 1) for offset in (-1, 0, 1, 2)]
-    return [lambda index=index: np.take(matrix, index, axis=0) for index in clipped]
+        return lambda k: window[k:k + n]
+    return lambda k: np.take(matrix, np.clip(rows + (whole + k - 1), 0, matrix.shape[0] - 1),
+                             axis=0)
 
 
 def solve(model: Model, matrix: FloatArray, target: FloatArray, *, n_effective: float) -> Fit:
