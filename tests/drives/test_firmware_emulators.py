@@ -98,9 +98,10 @@ def test_canopen_compensation_table_applies_only_with_compensating_firmware(
 def test_modbus_reports_the_version_and_takes_the_torque_offset(profile: UnitProfile) -> None:
     """Over the register map's ``torque_offset`` (real time, 100 Hz polling: short runs).
 
-    The station's setpoint lead is raised to 100 ms: on a 0.3 s run one host pause of
-    41 ms (seen on an idle 2-core VM) held the setpoint for 5 % of it and the run was
-    refused, rightly; this test is about the firmware's offset, not the link's timing."""
+    The station's setpoint lead is raised to 100 ms: the longest pause of a run at 100 Hz
+    is 20-26 ms on an idle 2-core host with the emulator in-process, and one of 41 ms held
+    this 0.3 s run's setpoint for 5 % of it (refused, rightly, at the default lead of 3
+    periods); this test is about the firmware's offset, not the link's timing."""
     moved = {}
     for feedforward in (True, False):
         unit = _unit(profile, FRICTIONLESS, version="GMB 2.7.1", feedforward=feedforward,
