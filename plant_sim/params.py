@@ -94,8 +94,11 @@ class PlantParams:
     locked_rotor: bool = False  # rotor clamped through a shaft torque sensor (load_torque_nm)
     load_torque_noise_nm: float = 0.0  # std of white noise on the torque sensor
     # azimuth axis carrying the elevation stage: the payload's inertia about this axis is
-    # J + inertia_elevation_kg_m2·cos²(elevation_rad) (on the load of a two-mass axis)
+    # J + inertia_elevation_kg_m2·cos²(el) + inertia_product_kg_m2·sin(2·el) at
+    # el = elevation_rad (on the load of a two-mass axis); the product is the stage's
+    # product of inertia between its level and zenith axes
     inertia_elevation_kg_m2: float = 0.0
+    inertia_product_kg_m2: float = 0.0
     elevation_rad: float = 0.0  # the other axis' angle (station state)
     # --- noise inside the loops (what makes two runs of one unit differ), drawn from the
     # run's seed; sizes a real unit has are LOOP_NOISE_DEFAULTS ---
@@ -138,10 +141,12 @@ class PlantParams:
             raise ProfileError("cable_hysteresis_angle_rad must be > 0")
         if self.load_inertia_kg_m2 > 0 and self.shaft_stiffness_nm_rad <= 0:
             raise ProfileError("a two-mass plant needs shaft_stiffness_nm_rad > 0")
-        if self.effective_inertias_kg_m2(elevation_rad=math.pi / 2)[0] <= 0 or (
-            self.effective_inertias_kg_m2(elevation_rad=0.0)[0] <= 0
-        ):
-            raise ProfileError("inertia_elevation_kg_m2 leaves no positive inertia")
+        # the smallest over elevation: base + ΔJ/2 − √(ΔJ²/4 + P²)
+        swing = math.hypot(self.inertia_elevation_kg_m2 / 2, self.inertia_product_kg_m2)
+        if self.effective_inertias_kg_m2(elevation_rad=0.0)[0] - (
+                self.inertia_elevation_kg_m2 / 2 + swing) <= 0:
+            raise ProfileError("inertia_elevation_kg_m2 and inertia_product_kg_m2 leave no "
+                               "positive inertia at some elevation")
         if not self.torque_constant_error_rel > -1.0:
             raise ProfileError("torque_constant_error_rel must be > -1")
         if not self.torque_limit_nm > 0:
@@ -151,7 +156,8 @@ class PlantParams:
         """(motor, load) inertia with the elevation-dependent part at ``elevation_rad`` (the
         part that depends on elevation sits on the load of a two-mass axis, else on the
         motor; the first element is that part's carrier for the positivity check)."""
-        extra = self.inertia_elevation_kg_m2 * math.cos(elevation_rad) ** 2
+        extra = (self.inertia_elevation_kg_m2 * math.cos(elevation_rad) ** 2
+                 + self.inertia_product_kg_m2 * math.sin(2.0 * elevation_rad))
         if self.load_inertia_kg_m2 > 0:
             return self.load_inertia_kg_m2 + extra, self.inertia_kg_m2
         return self.inertia_kg_m2 + extra, 0.0

@@ -1,5 +1,6 @@
 """Azimuth inertia across elevation: the J/B/T_c sine at several elevations of the other axis,
-then ``J(el) = J_zenith + ΔJ·cos²(el)`` (numerics in :mod:`hil.identify.inertia_elevation`).
+then ``J(el) = J_zenith + ΔJ·cos²(el) + P·sin(2el)`` (numerics in
+:mod:`hil.identify.inertia_elevation`).
 
 Skips without a ``[protocols.inertia_elevation]`` table (not an azimuth axis) and on a
 station without an elevation axis the harness can move (``REQUIRES``). When the
@@ -44,9 +45,14 @@ DECLARED = declare(
     Declared("azimuth_inertia_zenith_kg_m2", "Azimuth inertia, elevation at zenith",
              "Azimuth J with the payload pointing at the zenith, from the same fit",
              non_negative=True),
+    Declared("azimuth_inertia_product_kg_m2", "Elevation stage product of inertia",
+             "P in J_az(el) = J_zenith + ΔJ·cos²(el) + P·sin(2el): the payload's inertia"
+             " off its principal axes, which moves the extremes of J away from level and"
+             " zenith"),
     Declared("azimuth_inertia_ratio", "Azimuth inertia ratio",
-             "J level over J zenith: how much the azimuth inertia changes with elevation (does a "
-             "fixed gain hold?)", non_negative=True),
+             "Largest over smallest azimuth J on the elevation travel: how much the inertia a "
+             "fixed velocity-loop gain meets changes with elevation (does a fixed gain hold?)",
+             non_negative=True),
 )
 
 
@@ -78,18 +84,23 @@ def result(
                 by_elevation[-1].append(recording)
         inertias = [inertia_at_elevation(recordings, spec, calibration, gain=gain)
                     for recordings in by_elevation]
-        return fit_inertia_elevation(spec.elevations_rad, inertias), inertias
+        return fit_inertia_elevation(spec.elevations_rad, inertias,
+                                     travel_rad=spec.travel_rad), inertias
 
     try:
         runs = run_repeated(run_once, lambda found: {
-            e.name: e for e in (found[0].level, found[0].zenith, found[0].ratio)},
+            e.name: e for e in (found[0].level, found[0].zenith, found[0].product,
+                                found[0].ratio)},
             rule=spec.stop, calibration=calibration)
     finally:
         drive.set_elevation(spec.park_elevation_rad)
     analysed, inertias = runs.first
     calibration.details[NAME] = {
         **runs.details(),
-        "model": "J(el) = J_zenith + ΔJ·cos²(el)",
+        "model": "J(el) = J_zenith + ΔJ·cos²(el) + P·sin(2el)",
+        "travel_rad": list(analysed.travel_rad),
+        "largest_at_elevation_rad": analysed.extremes_rad[0],
+        "smallest_at_elevation_rad": analysed.extremes_rad[1],
         "per_elevation": [
             {
                 "elevation_rad": el,

@@ -29,7 +29,8 @@ antiresonance_frequency_hz         two-mass anti-resonance
 resonance_damping_ratio            two-mass resonance damping
 azimuth_inertia_level_kg_m2        ``J_motor + J_load + J_elevation`` (shaft-torque units)
 azimuth_inertia_zenith_kg_m2       ``J_motor + J_load``
-azimuth_inertia_ratio              level / zenith
+azimuth_inertia_product_kg_m2      ``inertia_product_kg_m2``
+azimuth_inertia_ratio              largest / smallest J on the protocol's travel
 =================================  ==========================================================
 
 Results with no truth of the plant's (``inertia_amplitude_spread_pct``,
@@ -42,8 +43,10 @@ from __future__ import annotations
 import math
 
 from hil.characterise.draw import Unit
+from hil.identify.inertia_elevation import inertia_extremes_rad
 from hil.identify.resonance import TwoMassModel
 from hil.profile import load_profile
+from hil.suite.inertia_elevation import travel_of
 from plant_sim.params import PlantParams
 
 STANDARD_GRAVITY_M_S2 = 9.80665
@@ -88,17 +91,23 @@ def truths(unit: Unit) -> dict[str, float]:
         truth["resonance_frequency_hz"] = model.resonance_hz
         truth["antiresonance_frequency_hz"] = model.antiresonance_hz
         truth["resonance_damping_ratio"] = model.resonance_damping
-    if plant.inertia_elevation_kg_m2 > 0:
-        level, zenith = _total_inertia(plant, 0.0), _total_inertia(plant, math.pi / 2)
-        truth["azimuth_inertia_level_kg_m2"] = level
+    if plant.inertia_elevation_kg_m2 > 0 and "inertia_elevation" in profile.protocols:
+        zenith = _total_inertia(plant, math.pi / 2)
+        coefficients = (zenith, plant.inertia_elevation_kg_m2, plant.inertia_product_kg_m2)
+        travel = travel_of(profile)
+        largest, smallest = (_total_inertia(plant, el)
+                             for el in inertia_extremes_rad(coefficients, travel))
+        truth["azimuth_inertia_level_kg_m2"] = _total_inertia(plant, 0.0)
         truth["azimuth_inertia_zenith_kg_m2"] = zenith
-        truth["azimuth_inertia_ratio"] = level / zenith
+        truth["azimuth_inertia_product_kg_m2"] = plant.inertia_product_kg_m2
+        truth["azimuth_inertia_ratio"] = largest / smallest
     return {k: v for k, v in truth.items() if k in profile.measurements}
 
 
 def _total_inertia(plant: PlantParams, elevation_rad: float) -> float:
     return (plant.inertia_kg_m2 + plant.load_inertia_kg_m2
-            + plant.inertia_elevation_kg_m2 * math.cos(elevation_rad) ** 2)
+            + plant.inertia_elevation_kg_m2 * math.cos(elevation_rad) ** 2
+            + plant.inertia_product_kg_m2 * math.sin(2.0 * elevation_rad))
 
 
 def reported_scale(plant: PlantParams) -> float:

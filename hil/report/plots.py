@@ -40,7 +40,7 @@ CAPTIONS = {
     "current_loop": "lag phase per frequency and the sampled-data model with the fitted τ",
     "resonance": "frequency response (Bode) and the two-mass fit",
     "torque_constant": "shaft torque against current at each locked angle, and its linearity",
-    "inertia_elevation": "azimuth inertia per elevation and the cos² fit",
+    "inertia_elevation": "azimuth inertia per elevation, the cos² + sin(2el) fit and its extremes",
     "velocity_loop_frf": "closed loop and sensitivity with the −3 dB bandwidth, and the loop "
                          "gain with its gain and phase margins (Bode)",
     "velocity_step": "every step normalised to its size, small and large, with the 10–90 % "

@@ -143,22 +143,32 @@ def gravity_cable(data: ProtocolData) -> Figure | None:
 
 
 def inertia_elevation(data: ProtocolData) -> Figure | None:
-    """J at each elevation (± 2u) and ``J(el) = J_zenith + ΔJ·cos²(el)``."""
+    """J at each elevation (± 2u) and ``J(el) = J_zenith + ΔJ·cos²(el) + P·sin(2el)``, the
+    travel's largest and smallest J marked."""
     per = data.details.get("per_elevation") or []
     level, zenith = data.value("azimuth_inertia_level_kg_m2"), data.value(
         "azimuth_inertia_zenith_kg_m2")
-    if not per or level is None or zenith is None:
+    product = data.value("azimuth_inertia_product_kg_m2") or 0.0
+    ratio = data.value("azimuth_inertia_ratio")
+    if not per or level is None or zenith is None or ratio is None:
         return None
     fig = new_figure(columns=1)
     (ax,) = fig.axes
     ax.errorbar([p["elevation_rad"] for p in per], [p["inertia_kg_m2"] for p in per],
                 yerr=[2 * p["standard_uncertainty"] for p in per], fmt="o", color=COLOURS[0],
                 capsize=3, label="J at an elevation ± 2u")
-    grid = np.linspace(-np.pi / 2, np.pi / 2, 200)
-    ax.plot(grid, zenith + (level - zenith) * np.cos(grid) ** 2, color=MODEL,
-            label="J_zenith + ΔJ·cos²(el)")
+    low, high = data.details.get("travel_rad") or (-np.pi / 2, np.pi / 2)
+    grid = np.linspace(low, high, 200)
+    ax.plot(grid, zenith + (level - zenith) * np.cos(grid) ** 2 + product * np.sin(2 * grid),
+            color=MODEL, label="J_zenith + ΔJ·cos²(el) + P·sin(2el)")
+    extremes = [data.details.get(k) for k in ("largest_at_elevation_rad",
+                                               "smallest_at_elevation_rad")]
+    if all(isinstance(e, float) for e in extremes):
+        at = np.array(extremes, dtype=float)
+        ax.plot(at, zenith + (level - zenith) * np.cos(at) ** 2 + product * np.sin(2 * at),
+                "v", color=COLOURS[1], label="largest, smallest on the travel")
     ax.set(xlabel="elevation (rad)", ylabel="azimuth inertia (kg·m²)",
-           title=f"azimuth inertia across elevation: ratio {level / zenith:.4g}")
+           title=f"azimuth inertia across elevation: max/min {ratio:.4g}")
     fig.legend(loc="outside lower center", ncols=3)
     return fig
 

@@ -2,7 +2,10 @@
 declared measurements are in ``protocols/test_inertia_elevation.py``.
 
 Azimuth inertia across elevation: the J/B/T_c sine at several elevations of the other axis,
-then ``J(el) = J_zenith + ΔJ·cos²(el)`` (numerics in :mod:`hil.identify.inertia_elevation`).
+then ``J(el) = J_zenith + ΔJ·cos²(el) + P·sin(2el)`` (numerics in
+:mod:`hil.identify.inertia_elevation`): J level and at the zenith, the elevation stage's
+product of inertia P, and the largest over the smallest J on the elevation axis's travel
+(``travel_rad``, default a half turn): the ratio a fixed velocity-loop gain meets.
 
 Skips without a ``[protocols.inertia_elevation]`` table (not an azimuth axis) and on a
 station whose drive cannot move the elevation axis (``drive.set_elevation``). When the
@@ -21,9 +24,10 @@ from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass, replace
 
 from hil.calibration import CalibrationRun
+from hil.config import ConfigTable
 from hil.drives.base import Capability, DriveInfo
 from hil.identify.estimate import Estimate
-from hil.identify.inertia_elevation import scale_by_gain
+from hil.identify.inertia_elevation import HALF_TURN_RAD, scale_by_gain
 from hil.motion import Excitation
 from hil.profile import UnitProfile
 from hil.recording import Recording
@@ -38,6 +42,7 @@ NAME = "inertia_elevation"
 MEASUREMENTS = (
     "azimuth_inertia_level_kg_m2",
     "azimuth_inertia_zenith_kg_m2",
+    "azimuth_inertia_product_kg_m2",
     "azimuth_inertia_ratio",
 )
 #: what it takes from earlier protocols (:mod:`hil.suite.needs`): the K_t protocol's gain,
@@ -55,6 +60,7 @@ class Spec:
 
     elevations_rad: tuple[float, ...]
     park_elevation_rad: float  # where the elevation axis is left afterwards
+    travel_rad: tuple[float, float]  # the elevation axis's travel: the ratio is taken over it
     sine: sine.Spec  # centre_rad: where the sines run (None: where the axis is)
     stop: StopRule | None = None  # run again until U is reached (hil.suite.stop_rule)
 
@@ -82,6 +88,7 @@ class Spec:
         spec = cls(
             elevations_rad=settings.numbers("elevations_rad"),
             park_elevation_rad=settings.number("park_elevation_rad", 0.0),
+            travel_rad=_travel(settings),
             sine=sine.Spec(
                 frequency_hz=settings.number("frequency_hz", 2.0),
                 amplitudes_rad_s=settings.numbers("amplitudes_rad_s"),
@@ -96,6 +103,16 @@ class Spec:
         )
         settings.done()
         return spec
+
+
+def _travel(settings: ConfigTable) -> tuple[float, float]:
+    """``travel_rad = [lowest, highest]`` of the elevation axis (default a half turn)."""
+    if "travel_rad" not in settings:
+        return HALF_TURN_RAD
+    low, high = settings.numbers("travel_rad", count=2)
+    if not low < high:
+        raise settings.error("travel_rad", f"must be [lowest, highest], got [{low}, {high}]")
+    return low, high
 
 
 def motion(spec: Spec, *, position: Callable[[], float],
@@ -174,6 +191,11 @@ def inertia_at_elevation(
     if gain is None:
         return inertia
     return scale_by_gain(inertia, gain=gain[0], gain_u=gain[1])
+
+
+def travel_of(profile: UnitProfile) -> tuple[float, float]:
+    """The elevation travel the profile's ratio is taken over (``travel_rad``)."""
+    return _travel(profile.settings(NAME))
 
 
 def planned_motion(profile: UnitProfile, info: DriveInfo, at: Position) -> Iterable[Excitation]:
