@@ -104,7 +104,11 @@ def test_sim_runaway_torque_is_stopped(profile: UnitProfile) -> None:
         assert drive.status().state.value == "enabled"
 
 
-@pytest.fixture(params=["canopen-emulator", "modbus-emulator"])
+# the Modbus emulator runs on the wall clock: its link's reaction to the trip (the room the
+# stop distance allows) is measured alone, with the realtime tests (it failed beside the
+# parallel half: 0.72 rad from the trip for 0.63 allowed); the CANopen one runs in lockstep
+@pytest.fixture(params=["canopen-emulator",
+                        pytest.param("modbus-emulator", marks=pytest.mark.realtime)])
 def field_drive(request: pytest.FixtureRequest, profile: UnitProfile) -> Iterator[Drive]:
     with open_drive(request.param, profile=profile, unit_serial="M-1") as drive:
         yield drive
