@@ -65,6 +65,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                        help="only runs from this date, YYYY-MM-DD (default: every run)")
     trend.add_argument("--include-aborted", action="store_true",
                        help="also aborted runs (default: left out)")
+    fleet_cli.add_kind_arguments(trend)
     trend.add_argument("--include-reference", action="store_true",
                        help="also reference (golden) units' runs (default: left out)")
     fleet_cli.add_arguments(commands, common, formatter_class=parser.formatter_class)
@@ -231,14 +232,18 @@ def _change_row(change: dict[str, Any]) -> tuple[str, ...]:
 
 
 def _trend(args: argparse.Namespace, store: Store) -> int:
-    from hil.store.query import result_series
+    from hil.store.query import result_kinds, result_series
 
     since = _date(args.since) if args.since else None
+    _known_parameter(store, args.parameter)
+    matching = result_kinds(store, args.parameter, station=args.station, since=since,
+                            axis=args.axis, unit_type=args.unit_type)
+    # several kinds of unit are refused (never pooled); none is an empty trend
     series = result_series(store, args.parameter, station=args.station, since=since,
                            include_aborted=args.include_aborted,
-                           include_reference=args.include_reference)
-    if not series:
-        _known_parameter(store, args.parameter)
+                           include_reference=args.include_reference,
+                           kind=fleet_cli.one_kind(store, args.parameter, args, since)
+                           ) if matching else []
     values = [p.value for p in series]
     summary = {"n": len(values), "mean": statistics.fmean(values) if values else None,
                "standard_deviation": statistics.stdev(values) if len(values) > 1 else None}

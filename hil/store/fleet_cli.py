@@ -5,6 +5,10 @@
 ``--gate-last`` runs (default 1: the unit just calibrated), so a line can gate on it; the
 limits are the frozen baseline's when one was frozen (``spc baseline freeze PARAM``), else
 trial limits from the runs shown.
+
+A result is charted for one kind of unit (unit type and axis): when it is stored for
+several, ``--axis`` or ``--unit-type`` chooses one and without them the command is refused
+naming them; the report shows one section per kind. Baselines are frozen per kind.
 """
 
 from __future__ import annotations
@@ -22,6 +26,7 @@ if TYPE_CHECKING:  # loaded when a command runs: `gimbal-hil --help` stays fast
     from argparse import _FormatterClass  # typeshed's only
 
     from hil.store.engine import Store
+    from hil.store.query import Kind
 
 BASELINE_PREFIX = "spc:"
 EXPORT_FORMATS = ("csv", "parquet")
@@ -38,6 +43,7 @@ def add_arguments(commands: argparse._SubParsersAction[argparse.ArgumentParser],
                            help="only this station id (default: every station)")
     selection.add_argument("--since", default=None,
                            help="only runs from this date, YYYY-MM-DD (default: every run)")
+    add_kind_arguments(selection)
 
     def add(name: str, text: str, description: str | None = None) -> argparse.ArgumentParser:
         return commands.add_parser(name, parents=[common, selection], help=text,
@@ -70,18 +76,73 @@ def add_arguments(commands: argparse._SubParsersAction[argparse.ArgumentParser],
                         help="comma list of results (default: every stored result)")
 
 
+def add_kind_arguments(parser: argparse.ArgumentParser) -> None:
+    """``--axis`` and ``--unit-type``: which kind of unit a result's series is of."""
+    parser.add_argument("--axis", default=None,
+                        help="only units of this axis, e.g. elevation (needed when a result "
+                             "is stored for several axes: they are never pooled)")
+    parser.add_argument("--unit-type", default=None,
+                        help="only units of this type (the profile's unit type)")
+
+
+def one_kind(store: Store, name: str, args: argparse.Namespace,
+             since: datetime | None) -> Kind:
+    """The one kind of unit (unit type, axis) ``name``'s series is of, after ``--axis`` and
+    ``--unit-type``.
+
+    Raises
+    ------
+    InputError
+        No run matches, or several kinds do (listed with the option that picks each).
+    """
+    from hil.store.query import result_kinds
+
+    kinds = result_kinds(store, name, station=args.station, since=since, axis=args.axis,
+                         unit_type=args.unit_type)
+    if not kinds:
+        narrowed = "".join(f" with {flag} {value}" for flag, value in (
+            ("--axis", args.axis), ("--unit-type", args.unit_type)) if value is not None)
+        raise InputError(f"no stored results named '{name}'{narrowed} in {store.url}")
+    if len(kinds) > 1:
+        by_axis = len({k.axis for k in kinds}) == len(kinds)
+        listed = "; ".join(
+            f"{kind}: {count} run(s), " + (f"--axis {kind.axis}" if by_axis
+                                           else f"--unit-type '{kind.unit_type}'")
+            for kind, count in sorted(kinds.items()))
+        raise InputError(f"'{name}' is stored for {len(kinds)} kinds of unit, which are never "
+                         f"pooled ({listed}): choose one")
+    return next(iter(kinds))
+
+
+def baseline_key(name: str, kind: Kind) -> str:
+    """Where the frozen baseline of ``name`` for ``kind`` is kept."""
+    return f"{BASELINE_PREFIX}{kind.unit_type}/{kind.axis}:{name}"
+
+
+def load_kind_baseline(store: Store, name: str, kind: Kind) -> dict[str, Any] | None:
+    """The frozen baseline of ``name`` for ``kind``; one frozen before baselines were kept
+    per kind (``spc:NAME``) is used while the store holds that result for one kind only."""
+    from hil.store.query import load_baseline, result_kinds
+
+    found = load_baseline(store, baseline_key(name, kind))
+    if found is None and len(result_kinds(store, name)) == 1:
+        found = load_baseline(store, BASELINE_PREFIX + name)
+    return found
+
+
 def run(args: argparse.Namespace, store: Store) -> int:
     """Run one of this module's subcommands; its exit code."""
     from hil.fleet.commands import export_rows, fleet_report_html, yield_table
-    from hil.store.query import load_baseline, result_series, run_summaries
+    from hil.store.query import result_kinds, result_series, run_summaries
 
     since = _since(args.since)
     command = args.results_command
     if command == "spc":
         return _spc(args, store, since)
     if command == "export":
+        kind = one_kind(store, args.parameter, args, since)
         points = result_series(store, args.parameter, station=args.station, since=since,
-                               include_reference=True)
+                               include_reference=True, kind=kind)
         _require(points, args.parameter, store)
         path = _writing(args.output, lambda: export_rows(points, format=args.format,
                                                          path=args.output))
@@ -93,10 +154,18 @@ def run(args: argparse.Namespace, store: Store) -> int:
         print(json.dumps(result.to_json(), indent=2) if args.json else result.table())
         return 0
     names = (args.parameters.split(",") if args.parameters else _stored_names(store))
-    series = {name: result_series(store, name, station=args.station, since=since)
-              for name in names}
-    baselines = {name: found for name in names
-                 if (found := load_baseline(store, BASELINE_PREFIX + name)) is not None}
+    # one section per result and kind of unit: "inertia_kg_m2 (GMB-2 azimuth axis)" when the
+    # result is stored for several kinds
+    series, baselines = {}, {}
+    for name in names:
+        kinds = sorted(result_kinds(store, name, station=args.station, since=since,
+                                    axis=args.axis, unit_type=args.unit_type))
+        for kind in kinds:
+            label = name if len(kinds) == 1 else f"{name} ({kind})"
+            series[label] = result_series(store, name, station=args.station, since=since,
+                                          kind=kind)
+            if (found := load_kind_baseline(store, name, kind)) is not None:
+                baselines[label] = found
     summaries = run_summaries(store, station=args.station, since=since)
     path = _writing(args.html, lambda: fleet_report_html(series, summaries, args.html,
                                                          baselines=baselines))
@@ -108,24 +177,26 @@ def _spc(args: argparse.Namespace, store: Store, since: datetime | None) -> int:
     from hil.fleet.baseline import freeze_baseline
     from hil.fleet.charts import EwmaSettings
     from hil.fleet.commands import has_signal, spc_report
-    from hil.store.query import load_baseline, result_series, save_baseline
+    from hil.store.query import result_series, save_baseline
 
     words: list[str] = args.words
     if words[:2] == ["baseline", "freeze"] and len(words) == 3:
         name = words[2]
-        points = result_series(store, name, station=args.station, since=since)
+        kind = one_kind(store, name, args, since)
+        points = result_series(store, name, station=args.station, since=since, kind=kind)
         frozen = freeze_baseline(points, parameter=name, frozen_at=datetime.now(UTC))
-        save_baseline(store, BASELINE_PREFIX + name, frozen.to_dict())
+        save_baseline(store, baseline_key(name, kind), frozen.to_dict())
         print(json.dumps(frozen.to_dict(), indent=2) if args.json else
-              f"baseline for {name} frozen from {frozen.n} runs "
+              f"baseline for {name} ({kind}) frozen from {frozen.n} runs "
               f"({frozen.first_started_at} … {frozen.last_started_at}) in {store.url}")
         return 0
     if len(words) != 1:
         raise InputError("spc takes one result name, or: spc baseline freeze PARAM")
     name = words[0]
-    points = result_series(store, name, station=args.station, since=since)
+    kind = one_kind(store, name, args, since)
+    points = result_series(store, name, station=args.station, since=since, kind=kind)
     _require(points, name, store)
-    baseline = load_baseline(store, BASELINE_PREFIX + name)
+    baseline = load_kind_baseline(store, name, kind)
     rules: Any = "all" if args.rules == "all" else [int(r) for r in args.rules.split(",") if r]
     result = spc_report(points, parameter=name, rules=rules,
                         limits_from="data" if baseline is None else "baseline",

@@ -38,6 +38,18 @@ class StoredResult:
     is_reference: bool
 
 
+@dataclass(frozen=True, slots=True, order=True)
+class Kind:
+    """The kind of unit a result was measured on: its unit type and axis. Statistics never
+    pool results of different kinds (an azimuth and an elevation inertia are two series)."""
+
+    unit_type: str
+    axis: str
+
+    def __str__(self) -> str:
+        return self.unit_type if self.axis in self.unit_type else f"{self.unit_type}, {self.axis}"
+
+
 @dataclass(frozen=True, slots=True)
 class RunSummary:
     """A stored run, as ``units`` and ``history`` list it."""
@@ -70,6 +82,7 @@ def result_series(
     since: datetime | None = None,
     include_aborted: bool = False,
     include_reference: bool = False,
+    kind: Kind | None = None,
 ) -> list[StoredResult]:
     """Every stored value of result ``name``, oldest run first.
 
@@ -87,6 +100,8 @@ def result_series(
         Keep aborted runs (left out of statistics by default).
     include_reference : bool
         Keep runs of reference (golden) units (left out by default).
+    kind : Kind, optional
+        Only runs of this unit type and axis (see :func:`result_kinds`).
 
     Returns
     -------
@@ -113,6 +128,8 @@ def result_series(
         query = query.where(runs.c.aborted.is_(False))
     if not include_reference:
         query = query.where(runs.c.is_reference.is_(False))
+    if kind is not None:
+        query = query.where(runs.c.unit_type == kind.unit_type, runs.c.axis == kind.axis)
     with store.engine.connect() as connection:
         rows = connection.execute(query).all()
     # positional: the columns are selected in the dataclass's field order (fast for 10⁵ rows)
@@ -121,6 +138,36 @@ def result_series(
                      r[11], r[12], bool(r[13]))
         for r in rows
     ]
+
+
+def result_kinds(
+    store: Store,
+    name: str,
+    *,
+    station: str | None = None,
+    since: datetime | None = None,
+    axis: str | None = None,
+    unit_type: str | None = None,
+) -> dict[Kind, int]:
+    """The kinds of unit (unit type, axis) result ``name`` is stored for, with how many runs
+    of each (aborted runs included), narrowed by ``axis`` and ``unit_type`` when given."""
+    query = (
+        select(runs.c.unit_type, runs.c.axis, func.count())
+        .join(results, runs.c.run_id == results.c.run_id)
+        .where(results.c.name == name)
+        .group_by(runs.c.unit_type, runs.c.axis)
+    )
+    if station is not None:
+        query = query.where(runs.c.station == station)
+    if since is not None:
+        query = query.where(runs.c.started_at >= utc(since))
+    if axis is not None:
+        query = query.where(runs.c.axis == axis)
+    if unit_type is not None:
+        query = query.where(runs.c.unit_type == unit_type)
+    with store.engine.connect() as connection:
+        return {Kind(unit_type, axis): int(count)
+                for unit_type, axis, count in connection.execute(query)}
 
 
 def units(store: Store) -> list[RunSummary]:
