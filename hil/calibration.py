@@ -351,8 +351,10 @@ class CalibrationRun:
         return missing
 
     def attempt(self) -> int:
-        """This run's number for the unit: 1 + the calibrations kept in ``history/``."""
-        return 1 + len(list(self.unit_dir.glob("history/*/certificate.json")))
+        """This run's number for the unit's axis: 1 + the calibrations of this axis kept in
+        ``history/`` (one without a readable axis counts)."""
+        return 1 + sum(certificate_axis(path) in (None, self.profile.axis)
+                       for path in self.unit_dir.glob("history/*/certificate.json"))
 
     @property
     def active(self) -> bool:
@@ -420,6 +422,15 @@ class CalibrationRun:
             if item.name not in ("history", LOCK_NAME):
                 shutil.move(str(item), target / item.name)
         log.info("previous calibration of %s moved to %s", self.unit_serial, target)
+
+
+def certificate_axis(certificate: Path) -> str | None:
+    """The axis an earlier certificate states (``None``: none, or none readable)."""
+    try:
+        found = json.loads(certificate.read_bytes())["unit"]["axis"]
+    except (OSError, ValueError, KeyError, TypeError):
+        return None
+    return found if isinstance(found, str) else None
 
 
 def _run_id(certificate: Path) -> str | None:

@@ -31,7 +31,7 @@ from hil.budget import (
     check_memory,
     storage_error,
 )
-from hil.calibration import SERIAL_PATTERN, CalibrationRun, UnitLock
+from hil.calibration import SERIAL_PATTERN, CalibrationRun, UnitLock, certificate_axis
 from hil.certificate import write_certificate
 from hil.drives.base import Capability, Drive, DriveInfo
 from hil.drives.connect import open_drive
@@ -100,7 +100,7 @@ def start(config: pytest.Config) -> None:
         if config.getoption("--store") != "off":  # a bad URL stops here, before any motion
             resolve_store_url(config.getoption("--store"), out_dir=Path(),
                               station_store=config.stash[STATION_KEY].store)
-        _lock_unit_folder(config)
+        _lock_unit_folder(config, axis=profile.axis)
     except HilError as exc:
         raise pytest.UsageError(str(exc)) from None
 
@@ -149,15 +149,24 @@ def _check_resources(config: pytest.Config, profile: UnitProfile) -> None:
         check_disk(Path(config.getoption("--out")), samples=sum(samples.values()))
 
 
-def _lock_unit_folder(config: pytest.Config) -> None:
+def _lock_unit_folder(config: pytest.Config, *, axis: str) -> None:
     """One writer per unit folder, from before the first write to the end of the run: a
-    second calibration of the serial into the same --out is refused here, before motion."""
+    second calibration of the serial into the same --out is refused here, before motion,
+    and so is one of another axis than the folder's certificate (it would file the other
+    axis's calibration as an earlier one of this axis)."""
     serial = config.getoption("--unit-serial")
     serial = "SIM-0001" if serial is None else serial  # as the calibration fixture has it
     if config.option.collectonly or not re.fullmatch(SERIAL_PATTERN, serial):
         return  # nothing written; a bad serial is refused where the run is made
     lock = UnitLock.acquire(Path(config.getoption("--out")) / serial)
     config.add_cleanup(lock.release)
+    held = certificate_axis(lock.path.parent / "certificate.json")
+    if held is not None and held != axis:
+        lock.release()
+        raise InputError(
+            f"{lock.path.parent} holds the {held} axis's calibration of {serial}; this "
+            f"profile calibrates its {axis} axis: calibrate each axis of a gimbal into its "
+            f"own --out folder (e.g. --out {lock.path.parent.parent / axis})")
 
 
 STOP_SIGNALS = ("SIGTERM", "SIGHUP")  # handled as SIGINT is: quick stop, disable, aborted

@@ -4,6 +4,7 @@ once, in one line naming the holder, before any motion."""
 
 from __future__ import annotations
 
+import json
 import os
 import socket
 import subprocess
@@ -103,3 +104,25 @@ def test_two_calibrations_of_one_unit_at_once_one_is_refused(tmp_path: Path) -> 
     assert (unit / "certificate.json").is_file(), stdout[-3000:] + stderr[-3000:]
     assert not (unit / "history").exists()  # one run, not two
     assert main(["verify", str(unit)]) == 0  # every recording as its certificate lists it
+
+
+def test_another_axis_of_the_serial_is_refused_before_motion(tmp_path: Path) -> None:
+    """A folder holding the elevation axis's certificate of GMB-0042: calibrating the
+    azimuth axis into it would file that certificate under ``history/`` as an earlier
+    azimuth run. Refused in one line before any motion, nothing moved or written."""
+    from hil.characterise.processes import run_command
+
+    unit = tmp_path / "units" / "GMB-0042"
+    unit.mkdir(parents=True)
+    held = unit / "certificate.json"
+    held.write_text(json.dumps({"unit": {"serial": "GMB-0042", "axis": "elevation"}}),
+                    encoding="utf-8")
+    done = run_command(["calibrate", "--drive", "sim", "--profile", "demo_gimbal_azimuth",
+                        "--unit-serial", "GMB-0042", "--out", str(tmp_path / "units"),
+                        "--store", "off"], timeout_s=300)
+    text = done.stdout + done.stderr
+    assert done.returncode == 4, text
+    assert "Traceback" not in text
+    (line,) = [s for s in text.splitlines() if "holds the elevation axis" in s]
+    assert f"--out {tmp_path / 'units' / 'azimuth'}" in line
+    assert sorted(p.name for p in unit.iterdir()) == [".gimbal-hil.lock", "certificate.json"]

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
-from datetime import date
+from datetime import date, datetime
 
 from hil.errors import InputError
 from hil.fleet.series import RunRecord
@@ -33,21 +33,54 @@ class YieldRow:
                 "failed": self.failed, "first_pass_yield": self.first_pass_yield}
 
 
+@dataclass(frozen=True, slots=True, kw_only=True)
+class UnitPass:
+    """A unit's first pass: of a gimbal, each axis's first pass together."""
+
+    serial: str
+    station: str  # where its first axis was calibrated
+    started_at: datetime
+    outcome: str  # the worst of its axes' (PASS, MARGINAL, then anything else)
+    attempt: int
+    aborted: bool
+    is_reference: bool
+    axis: str  # its axes, comma-separated
+
+
+def _rank(outcome: str) -> int:
+    return {"PASS": 0, "MARGINAL": 1}.get(outcome.upper(), 2)
+
+
 def first_passes(runs: Sequence[RunRecord], *, include_aborted: bool = False,
-                 include_reference: bool = False) -> list[RunRecord]:
-    """Each unit's first pass: its run with the lowest attempt number (earliest on a tie).
+                 include_reference: bool = False) -> list[UnitPass]:
+    """Each unit's first pass: per axis, its run with the lowest attempt number (earliest
+    on a tie); a unit of several axes (a gimbal under one serial) passes first time only
+    when each axis did, so it takes the worst of its axes' first passes.
 
     Aborted runs and reference (golden) units are left out unless asked, so a unit whose
     first attempt was aborted is judged on its first completed one.
     """
-    best: dict[str, RunRecord] = {}
+    best: dict[tuple[str, str], RunRecord] = {}
     for run in runs:
         if (run.aborted and not include_aborted) or (run.is_reference and not include_reference):
             continue
-        held = best.get(run.serial)
+        key = (run.serial, run.axis)
+        held = best.get(key)
         if held is None or (run.attempt, run.started_at) < (held.attempt, held.started_at):
-            best[run.serial] = run
-    return sorted(best.values(), key=lambda r: (r.started_at, r.serial))
+            best[key] = run
+    by_unit: dict[str, list[RunRecord]] = {}
+    for (serial, _), run in sorted(best.items()):
+        by_unit.setdefault(serial, []).append(run)
+    passes = []
+    for serial, axes in by_unit.items():
+        first = min(axes, key=lambda r: r.started_at)
+        worst = max(axes, key=lambda r: _rank(r.outcome))
+        passes.append(UnitPass(serial=serial, station=first.station, started_at=first.started_at,
+                               outcome=worst.outcome, attempt=max(r.attempt for r in axes),
+                               aborted=any(r.aborted for r in axes),
+                               is_reference=any(r.is_reference for r in axes),
+                               axis=",".join(r.axis for r in axes)))
+    return sorted(passes, key=lambda r: (r.started_at, r.serial))
 
 
 def first_pass_yield(runs: Sequence[RunRecord], *, by: str = "station",
@@ -69,7 +102,7 @@ def first_pass_yield(runs: Sequence[RunRecord], *, by: str = "station",
     """
     if by not in ("station", "day", "station_day"):
         raise InputError(f"yield grouping '{by}' is not station, day or station_day")
-    groups: dict[tuple[str | None, date | None], list[RunRecord]] = {}
+    groups: dict[tuple[str | None, date | None], list[UnitPass]] = {}
     for run in first_passes(runs, include_aborted=include_aborted,
                             include_reference=include_reference):
         key = (run.station if by != "day" else None,

@@ -64,6 +64,8 @@ class RunRecord(Protocol):
     def aborted(self) -> bool: ...
     @property
     def is_reference(self) -> bool: ...
+    @property
+    def axis(self) -> str: ...  # a gimbal's axes share its serial; each has first passes
 
 
 SERIES_FIELDS: tuple[str, ...] = (

@@ -169,7 +169,7 @@ def _ingested_text(done: Sequence[Ingested], store: Store, command: str) -> str:
 
 
 def _summary_json(s: RunSummary) -> dict[str, Any]:
-    return {"serial": s.serial, "unit_type": s.unit_type, "run_id": s.run_id,
+    return {"serial": s.serial, "unit_type": s.unit_type, "axis": s.axis, "run_id": s.run_id,
             "certificate_id": s.certificate_id, "station": s.station, "operator": s.operator,
             "started_at": s.started_at.isoformat(), "ended_at": s.ended_at.isoformat(),
             "outcome": s.outcome, "aborted": s.aborted, "attempt": s.attempt,
@@ -190,23 +190,41 @@ def _history(args: argparse.Namespace, store: Store) -> int:
     runs = history(store, args.serial)
     if not runs:
         raise InputError(f"no runs of unit '{args.serial}' in {store.url}")
-    found = run_results(store, runs[-2].run_id) if len(runs) > 1 else {}
-    left = run_results(store, runs[-1].run_id)
-    changes = [_as_found_left(name, found.get(name), row) for name, row in left.items()]
+    # as found → as left per axis: a gimbal's axes share its serial, never each other's runs
+    axes: dict[str, list[Any]] = {}
+    for summary in runs:
+        axes.setdefault(summary.axis, []).append(summary)
+    compared = []
+    for axis, of_axis in axes.items():
+        found = run_results(store, of_axis[-2].run_id) if len(of_axis) > 1 else {}
+        left = run_results(store, of_axis[-1].run_id)
+        compared.append((axis, of_axis, found,
+                         [_as_found_left(name, found.get(name), row)
+                          for name, row in left.items()]))
     if args.json:
+        per_axis = [{"axis": axis, "as_found_run": of_axis[-2].run_id if found else None,
+                     "as_left_run": of_axis[-1].run_id, "results": changes}
+                    for axis, of_axis, found, changes in compared]
+        latest = next(a for a in per_axis if a["as_left_run"] == runs[-1].run_id)
         _emit(args, {"serial": args.serial, "runs": [_summary_json(s) for s in runs],
-                     "as_found_run": runs[-2].run_id if found else None,
-                     "as_left_run": runs[-1].run_id, "results": changes}, "")
+                     **{k: v for k, v in latest.items() if k != "axis"},  # the latest run's
+                     "axes": per_axis}, "")
         return 0
-    rows = [(str(s.attempt), s.started_at.strftime(TIME_FORMAT), s.station, s.operator,
-             s.outcome + (" aborted" if s.aborted else ""), s.certificate_id) for s in runs]
-    text = [f"unit {args.serial}: {len(runs)} run(s)",
-            _table(("#", "started (UTC)", "station", "operator", "outcome", "certificate"), rows)]
-    if found:
-        text += ["", f"as found (run {runs[-2].attempt}) → as left (run {runs[-1].attempt}, "
-                 "the latest):",
-                 _table(("result", "as found", "as left", "unit", "outcome"),
-                        [_change_row(c) for c in changes])]
+    several = len(axes) > 1
+    rows = [(str(s.attempt), *((s.axis,) if several else ()), s.started_at.strftime(TIME_FORMAT),
+             s.station, s.operator, s.outcome + (" aborted" if s.aborted else ""),
+             s.certificate_id) for s in runs]
+    header = ("#", *(("axis",) if several else ()), "started (UTC)", "station", "operator",
+              "outcome", "certificate")
+    text = [f"unit {args.serial}: {len(runs)} run(s)"
+            + (f" of {len(axes)} axes ({', '.join(axes)})" if several else ""),
+            _table(header, rows)]
+    for axis, of_axis, found, changes in compared:
+        if found:
+            text += ["", f"{axis + ': ' if several else ''}as found (run "
+                     f"{of_axis[-2].attempt}) → as left (run {of_axis[-1].attempt}, the latest):",
+                     _table(("result", "as found", "as left", "unit", "outcome"),
+                            [_change_row(c) for c in changes])]
     print("\n".join(text))
     return 0
 

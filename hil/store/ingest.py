@@ -152,11 +152,12 @@ def _stored(connection: Connection, certificate_id: str) -> bool:
 
 def _insert(connection: Connection, rows: CertificateRows) -> None:
     run = dict(rows.run, ingested_at=datetime.now(UTC))
-    if run["attempt"] is None:  # an old certificate: count this unit's earlier runs
+    if run["attempt"] is None:  # an old certificate: count this unit's axis's earlier runs
         earlier = connection.execute(
             select(func.count())
             .select_from(runs)
-            .where(runs.c.serial == run["serial"], runs.c.started_at < run["started_at"])
+            .where(runs.c.serial == run["serial"], runs.c.axis == run["axis"],
+                   runs.c.started_at < run["started_at"])
         ).scalar_one()
         run["attempt"] = int(earlier) + 1
     connection.execute(insert(runs), [run])

@@ -66,6 +66,7 @@ class RunSummary:
     aborted: bool
     attempt: int
     is_reference: bool
+    axis: str = ""
     runs_of_unit: int = 1
 
 
@@ -185,7 +186,7 @@ def units(store: Store) -> list[RunSummary]:
         .order_by(runs.c.serial, runs.c.run_id)
     )
     with store.engine.connect() as connection:
-        found = {row[2]: _summary(row, runs_of_unit=int(row[12]))
+        found = {row[2]: _summary(row, runs_of_unit=int(row[13]))
                  for row in connection.execute(query)}
     return list(found.values())  # two runs started in the same second: the last run id
 
@@ -270,19 +271,19 @@ def _summary_columns() -> tuple[Any, ...]:
     return (
         runs.c.run_id, runs.c.certificate_id, runs.c.serial, runs.c.unit_type,
         runs.c.station, runs.c.operator, runs.c.started_at, runs.c.ended_at, runs.c.outcome,
-        runs.c.aborted, runs.c.attempt, runs.c.is_reference,
+        runs.c.aborted, runs.c.attempt, runs.c.is_reference, runs.c.axis,
     )
 
 
 def _summary(row: Any, *, runs_of_unit: int = 1) -> RunSummary:
     """A row of :func:`_summary_columns`."""
     (run_id, certificate_id, serial, unit_type, station, operator, started_at, ended_at,
-     outcome, aborted, attempt, is_reference) = row[:12]
+     outcome, aborted, attempt, is_reference, axis) = row[:13]
     return RunSummary(
         run_id=run_id, certificate_id=certificate_id, serial=serial, unit_type=unit_type,
         station=station, operator=operator, started_at=utc(started_at),
         ended_at=utc(ended_at), outcome=outcome, aborted=bool(aborted), attempt=int(attempt),
-        is_reference=bool(is_reference), runs_of_unit=runs_of_unit,
+        is_reference=bool(is_reference), axis=axis, runs_of_unit=runs_of_unit,
     )
 
 

@@ -20,6 +20,7 @@ class Run:
     attempt: int
     aborted: bool
     is_reference: bool
+    axis: str = "elevation"
 
 
 START = datetime(2026, 3, 2, 8, 0, tzinfo=UTC)

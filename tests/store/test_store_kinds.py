@@ -128,3 +128,44 @@ def test_a_baseline_frozen_before_kinds_serves_while_the_store_holds_one_kind(
     _ingest(text, tmp_path, 30, axis="azimuth", value=AZIMUTH, store=store)
     _, out, _ = _run(capsys, "spc", NAME, "--axis", "elevation", "--json", *store)
     assert json.loads(out)["baseline"] is None
+
+
+def test_a_gimbal_serial_passes_first_time_only_when_each_axis_did(
+    store_url: str, calibrated: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Two gimbals, each an azimuth and an elevation run under one serial (attempt 1 each):
+    the one whose elevation failed is a failed first pass (it never lowered the yield when
+    the lowest attempt of the serial alone counted); ``history`` compares each axis with
+    its own earlier run."""
+    store = ["--store", store_url]
+    text = (calibrated / SERIAL / "certificate.json").read_text(encoding="utf-8")
+    index = 0
+    for serial, elevation_outcome in (("GMB-0001", "PASS"), ("GMB-0002", "FAIL")):
+        for axis in ("azimuth", "elevation"):
+            cert = json.loads(variant(text, serial=serial, index=index))
+            index += 1
+            cert["unit"].update(axis=axis, type=f"GMB-2 {axis} axis")
+            cert["run"]["attempt"] = 1
+            path = tmp_path / f"g{index}" / "certificate.json"
+            path.parent.mkdir(parents=True)
+            sealed = resealed(cert)
+            if axis == "elevation" and elevation_outcome == "FAIL":
+                for result in cert["results"]:
+                    if result["parameter"] == NAME:
+                        result["value"] = 10 * result["upper_limit"]
+                sealed = resealed(cert)
+                assert sealed["outcome"] == "FAIL"
+            path.write_text(json.dumps(sealed), encoding="utf-8")
+            assert main(["results", "ingest", str(path), *store]) == 0
+    code, out, _ = _run(capsys, "yield", "--json", *store)
+    assert code == 0
+    (row,) = json.loads(out)["rows"]
+    assert (row["units"], row["passed"], row["failed"]) == (2, 1, 1)
+    code, out, _ = _run(capsys, "history", "GMB-0002", "--json", *store)
+    assert code == 0
+    shown = json.loads(out)
+    assert [a["axis"] for a in shown["axes"]] == ["azimuth", "elevation"]
+    assert all(a["as_found_run"] is None for a in shown["axes"])  # one run of each axis
+    code, out, _ = _run(capsys, "history", "GMB-0002", *store)
+    assert "2 run(s) of 2 axes (azimuth, elevation)" in out
+    assert "as found" not in out
