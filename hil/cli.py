@@ -107,8 +107,13 @@ def build_parser() -> argparse.ArgumentParser:
     cal = subs["calibrate"]
     cal.add_argument("--drive", default="sim", choices=DRIVE_KINDS, metavar="KIND",
                      help="the drive to calibrate through: " + ", ".join(DRIVE_KINDS))
-    cal.add_argument("--profile", default=None,
-                     help="unit profile TOML or built-in name (default: the demo unit)")
+    unit = cal.add_mutually_exclusive_group()
+    unit.add_argument("--profile", default=None,
+                      help="unit profile TOML or built-in name (default: the demo unit)")
+    unit.add_argument("--gimbal", default=None, metavar="GIMBAL_PROFILE",
+                      help="gimbal profile TOML or built-in name (e.g. demo_gimbal): every "
+                           "axis under the one --unit-serial, then one gimbal certificate "
+                           "in OUT/SERIAL")
     cal.add_argument("--unit-serial", default=None, metavar="SERIAL",
                      help="serial number of the unit; required with a real drive ("
                           + ", ".join(k.name for k in KINDS.values() if not k.simulated)
@@ -276,6 +281,8 @@ def _command_from_csv(path: Path, fs_hz: float) -> tuple[Mode, FloatArray]:
 
 
 def _calibrate(args: argparse.Namespace) -> int:
+    if args.gimbal is not None:
+        return _calibrate_gimbal(args)
     _check_unit_folder(args.out, args.unit_serial or SIMULATOR_SERIAL)
     import pytest
 
@@ -290,6 +297,26 @@ def _calibrate(args: argparse.Namespace) -> int:
     options += ["--operator", args.operator] if args.operator else []
     options += ["--reference"] if args.reference else []
     return int(pytest.main([*suite_arguments(), *options, *args.pytest_args]))
+
+
+def _calibrate_gimbal(args: argparse.Namespace) -> int:
+    from hil.drives.station import load_station_identity
+    from hil.gimbal.profile import load_gimbal_profile
+    from hil.gimbal.run import calibrate_gimbal
+    from hil.store.engine import resolve_store_url
+
+    gimbal = load_gimbal_profile(args.gimbal)
+    serial = args.unit_serial or SIMULATOR_SERIAL
+    station = load_station_identity(args.station) if args.station else None
+    store = "off" if args.store == "off" else resolve_store_url(
+        args.store, out_dir=args.out, station_store=station.store if station else None)
+    options = ["--drive", args.drive, "--seed", str(args.seed)]
+    options += ["--station", str(args.station)] if args.station else []
+    options += ["--operator", args.operator] if args.operator else []
+    options += ["--reference"] if args.reference else []
+    options += ["--", *args.pytest_args] if args.pytest_args else []
+    return calibrate_gimbal(gimbal, serial=serial, out=args.out, store_url=store,
+                            options=options)
 
 
 def _check_unit_folder(out: Path, serial: str) -> None:

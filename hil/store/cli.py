@@ -177,7 +177,10 @@ def _summary_json(s: RunSummary) -> dict[str, Any]:
 
 
 def _units_text(found: Sequence[RunSummary]) -> str:
-    rows = [(s.serial, s.unit_type, str(s.runs_of_unit), s.started_at.strftime(TIME_FORMAT),
+    # a gimbal (several axes under one serial) shows its axes; its outcome is the worst of
+    # each axis's latest run
+    rows = [(s.serial, s.unit_type if "," not in s.axis else f"gimbal: {s.axis}",
+             str(s.runs_of_unit), s.started_at.strftime(TIME_FORMAT),
              s.station, s.outcome + (" (reference)" if s.is_reference else ""))
             for s in found]
     return _table(("serial", "type", "runs", "last run (UTC)", "station", "outcome"), rows,

@@ -185,10 +185,27 @@ def units(store: Store) -> list[RunSummary]:
                            runs.c.started_at == latest.c.last))
         .order_by(runs.c.serial, runs.c.run_id)
     )
+    latest_per_axis = (select(runs.c.serial, runs.c.axis, runs.c.outcome)
+                       .order_by(runs.c.started_at, runs.c.run_id))
     with store.engine.connect() as connection:
         found = {row[2]: _summary(row, runs_of_unit=int(row[13]))
                  for row in connection.execute(query)}
-    return list(found.values())  # two runs started in the same second: the last run id
+        axes: dict[str, dict[str, str]] = {}
+        for serial, axis, outcome in connection.execute(latest_per_axis):
+            axes.setdefault(serial, {})[axis] = outcome
+    # two runs started in the same second: the last run id; a gimbal (several axes under one
+    # serial): its axes, and the worst of each axis's latest outcome
+    return [_of_axes(summary, axes.get(serial, {})) for serial, summary in found.items()]
+
+
+def _of_axes(summary: RunSummary, latest: dict[str, str]) -> RunSummary:
+    from dataclasses import replace
+
+    if len(latest) < 2:
+        return summary
+    ranks = {"PASS": 0, "MARGINAL": 1}
+    worst = max(latest.values(), key=lambda outcome: ranks.get(outcome, 2))
+    return replace(summary, axis=", ".join(sorted(latest)), outcome=worst)
 
 
 def history(store: Store, serial: str) -> list[RunSummary]:

@@ -1,0 +1,119 @@
+"""The gimbal certificate: the gimbal's identity, a section per axis (its certificate's id,
+file and SHA-256, its verdict and results) and one verdict, the worst of its axes'. Written
+as ``gimbal-certificate.json`` and ``.txt`` beside the axes' folders; each axis keeps its
+full certificate (budgets, plots, recordings) in its own folder."""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import uuid
+from collections.abc import Sequence
+from dataclasses import dataclass
+from datetime import UTC, datetime
+from pathlib import Path
+from typing import Any
+
+from hil.gimbal.profile import GimbalProfile
+from hil.gum import rounded_pair
+
+SCHEMA = "gimbal-hil/gimbal-certificate/1"
+#: worst last; an axis without a certificate (refused, crashed) is an ERROR
+RANKS = {"PASS": 0, "MARGINAL": 1, "INCOMPLETE": 2, "FAIL": 3, "ERROR": 4}
+NOT_STARTED = -1  # an axis's exit code when an earlier axis stopped the gimbal
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class AxisOutcome:
+    """What one axis's calibration left: its certificate (``None``: none was written) and
+    the calibration's exit code."""
+
+    name: str
+    certificate: Path | None
+    exit_code: int
+
+
+def verdict(outcomes: Sequence[str]) -> str:
+    """The gimbal's verdict: the worst of its axes' (unknown outcomes count as ERROR)."""
+    return max(outcomes, key=lambda o: RANKS.get(o, RANKS["ERROR"]), default="ERROR")
+
+
+def build(gimbal: GimbalProfile, *, serial: str, folder: Path,
+          axes: Sequence[AxisOutcome]) -> dict[str, Any]:
+    """The gimbal certificate as a JSON-ready dict (paths relative to ``folder``)."""
+    issued = datetime.now(UTC)
+    sections = [_section(axis, folder) for axis in axes]
+    return {
+        "schema": SCHEMA,
+        "certificate_id": f"{serial}-{issued:%Y%m%dT%H%M%SZ}-{uuid.uuid4().hex[:8]}",
+        "gimbal": {"serial": serial, "part_number": gimbal.part_number,
+                   "revision": gimbal.revision, "description": gimbal.description,
+                   "profile": Path(gimbal.source).name, "profile_sha256": gimbal.sha256},
+        "issued": issued.isoformat(timespec="seconds"),
+        "axes": sections,
+        "outcome": verdict([s["outcome"] for s in sections]),
+    }
+
+
+def _section(axis: AxisOutcome, folder: Path) -> dict[str, Any]:
+    if axis.certificate is None or not axis.certificate.is_file():
+        note = ("not started: an earlier axis stopped the gimbal"
+                if axis.exit_code == NOT_STARTED else
+                "no certificate was written (the calibration was refused or stopped before "
+                "it; see its console output)")
+        return {"axis": axis.name, "outcome": "ERROR", "certificate": None,
+                "exit_code": axis.exit_code, "note": note, "results": []}
+    payload = axis.certificate.read_bytes()
+    cert = json.loads(payload)
+    outcome = "ERROR" if cert.get("aborted") else str(cert.get("outcome", "ERROR"))
+    return {
+        "axis": axis.name,
+        "outcome": outcome,
+        "certificate": axis.certificate.relative_to(folder).as_posix(),
+        "certificate_id": cert.get("certificate_id"),
+        "certificate_sha256": hashlib.sha256(payload).hexdigest(),
+        "unit_type": cert.get("unit", {}).get("type"),
+        "exit_code": axis.exit_code,
+        "results": [{k: r.get(k) for k in ("parameter", "title", "value",
+                                           "expanded_uncertainty", "unit", "outcome")}
+                    for r in cert.get("results", [])],
+    }
+
+
+def text(certificate: dict[str, Any]) -> str:
+    """The certificate for a person: identity, verdict, then each axis's results (values
+    and U as GUM asks: U to two significant digits, the value to the same decimal)."""
+    g = certificate["gimbal"]
+    lines = [f"Gimbal calibration certificate {certificate['certificate_id']}",
+             f"Gimbal {g['serial']}: part number {g['part_number']}"
+             + (f" revision {g['revision']}" if g["revision"] else "")
+             + (f" ({g['description']})" if g["description"] else ""),
+             f"Gimbal profile {g['profile']} (SHA-256 {g['profile_sha256']})",
+             f"Issued {certificate['issued']}",
+             f"Verdict: {certificate['outcome']} (the worst of its "
+             f"{len(certificate['axes'])} axes)", ""]
+    for axis in certificate["axes"]:
+        lines.append(f"Axis {axis['axis']}: {axis['outcome']}")
+        if axis["certificate"] is None:
+            lines += [f"  {axis['note']}", ""]
+            continue
+        lines.append(f"  certificate {axis['certificate_id']} ({axis['certificate']}, "
+                     f"SHA-256 {axis['certificate_sha256']})")
+        rows = [(r["title"] or r["parameter"],
+                 " ± ".join(rounded_pair(r["value"], r["expanded_uncertainty"])),
+                 r["unit"], r["outcome"]) for r in axis["results"]
+                if r["value"] is not None and r["expanded_uncertainty"] is not None]
+        widths = [max((len(row[i]) for row in rows), default=0) for i in range(3)]
+        lines += [f"  {t:<{widths[0]}}  {v:>{widths[1]}}  {u:<{widths[2]}}  {o}"
+                  for t, v, u, o in rows]
+        lines.append("")
+    return "\n".join(lines)
+
+
+def write(certificate: dict[str, Any], folder: Path) -> tuple[Path, Path]:
+    """``gimbal-certificate.json`` and ``.txt`` in ``folder``."""
+    json_path = folder / "gimbal-certificate.json"
+    json_path.write_text(json.dumps(certificate, indent=2) + "\n", encoding="utf-8")
+    text_path = folder / "gimbal-certificate.txt"
+    text_path.write_text(text(certificate) + "\n", encoding="utf-8")
+    return json_path, text_path

@@ -1,0 +1,123 @@
+"""A gimbal as the unit (issue 27): ``calibrate --gimbal`` calibrates each axis under the
+gimbal's one serial and issues one gimbal certificate whose verdict is the worst of its
+axes'; a refused axis stops the gimbal and no gimbal certificate passes without every axis.
+The axes here are the demo axes cut to their J/B/T_c protocol (a quick complete run)."""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import re
+from pathlib import Path
+
+import pytest
+
+from hil.characterise.processes import run_command
+from hil.errors import ProfileError
+from hil.gimbal.certificate import verdict
+from hil.gimbal.profile import load_gimbal_profile
+from tests.helpers import subset_profile
+
+pytestmark = pytest.mark.slow(seconds=40)
+
+SERIAL = "GMB-0042"
+
+
+def _gimbal(directory: Path, *, elevation_text: str | None = None) -> Path:
+    """A two-axis gimbal profile over quick axis profiles (``elevation_text`` replaces the
+    elevation axis profile's text)."""
+    azimuth = subset_profile(directory, "inertia_friction", base="demo_gimbal_azimuth")
+    elevation = subset_profile(directory, "inertia_friction")
+    if elevation_text is not None:
+        elevation.write_text(elevation_text, encoding="utf-8")
+    path = directory / "gimbal.toml"
+    path.write_text(f'[gimbal]\npart_number = "GMB-2"\nrevision = "B"\n\n'
+                    f'[axes.azimuth]\nprofile = "{azimuth.name}"\n\n'
+                    f'[axes.elevation]\nprofile = "{elevation.name}"\n', encoding="utf-8")
+    return path
+
+
+def _calibrate(gimbal: Path, out: Path) -> tuple[int, str]:
+    done = run_command(["calibrate", "--gimbal", str(gimbal), "--unit-serial", SERIAL,
+                        "--out", str(out)], timeout_s=600)
+    return done.returncode, done.stdout + done.stderr
+
+
+def test_a_gimbal_is_one_serial_one_certificate_one_verdict(tmp_path: Path) -> None:
+    out = tmp_path / "certs"
+    code, text = _calibrate(_gimbal(tmp_path), out)
+    assert code == 0, text
+    folder = out / SERIAL
+    issued = json.loads((folder / "gimbal-certificate.json").read_text(encoding="utf-8"))
+    assert issued["gimbal"]["serial"] == SERIAL
+    assert issued["gimbal"]["part_number"] == "GMB-2"
+    assert [a["axis"] for a in issued["axes"]] == ["azimuth", "elevation"]
+    assert issued["outcome"] == "PASS"
+    for axis in issued["axes"]:
+        certificate = folder / axis["certificate"]
+        assert hashlib.sha256(certificate.read_bytes()).hexdigest() == axis["certificate_sha256"]
+        own = json.loads(certificate.read_text(encoding="utf-8"))
+        assert own["unit"]["serial"] == SERIAL
+        assert own["unit"]["axis"] == axis["axis"]
+        assert {r["parameter"] for r in axis["results"]} == {
+            r["parameter"] for r in own["results"]}
+    person = (folder / "gimbal-certificate.txt").read_text(encoding="utf-8")
+    assert "Verdict: PASS (the worst of its 2 axes)" in person
+    assert re.search(r"Moment of inertia +0\.00\d+ ± 0\.0000\d\d +kg·m²", person)
+    done = run_command(["results", "units", "--out", str(out)])
+    assert re.search(rf"{SERIAL} +gimbal: azimuth, elevation +2 ", done.stdout), done.stdout
+
+
+def test_a_failed_axis_fails_the_gimbal_and_the_other_axis_is_still_calibrated(
+    tmp_path: Path
+) -> None:
+    elevation = subset_profile(tmp_path / "base", "inertia_friction").read_text(encoding="utf-8")
+    # the elevation axis's inertia specified far from the unit's: that axis FAILs
+    failing = re.sub(r"(\[measurements\.inertia_kg_m2\][^\[]*?nominal = )[0-9.e-]+",
+                     r"\g<1>0.0072", elevation)
+    assert failing != elevation
+    out = tmp_path / "certs"
+    code, text = _calibrate(_gimbal(tmp_path, elevation_text=failing), out)
+    assert code == 1, text
+    issued = json.loads((out / SERIAL / "gimbal-certificate.json").read_text(encoding="utf-8"))
+    assert [(a["axis"], a["outcome"]) for a in issued["axes"]] == [
+        ("azimuth", "PASS"), ("elevation", "FAIL")]
+    assert issued["outcome"] == "FAIL"
+
+
+def test_a_refused_axis_stops_the_gimbal_and_nothing_passes(tmp_path: Path) -> None:
+    """The azimuth axis's folder is locked by a certificate of another axis: refused before
+    motion (exit 4); the elevation axis is not started; the gimbal certificate says ERROR."""
+    out = tmp_path / "certs"
+    held = out / SERIAL / "azimuth" / SERIAL / "certificate.json"
+    held.parent.mkdir(parents=True)
+    held.write_text(json.dumps({"unit": {"serial": SERIAL, "axis": "roll"}}), encoding="utf-8")
+    code, text = _calibrate(_gimbal(tmp_path), out)
+    assert code == 4, text
+    assert "Traceback" not in text
+    issued = json.loads((out / SERIAL / "gimbal-certificate.json").read_text(encoding="utf-8"))
+    assert issued["outcome"] == "ERROR"
+    assert [a["outcome"] for a in issued["axes"]] == ["ERROR", "ERROR"]
+    assert issued["axes"][1]["note"] == "not started: an earlier axis stopped the gimbal"
+    assert not (out / SERIAL / "elevation").exists()
+
+
+def test_a_gimbal_profile_is_checked_before_any_axis_runs(tmp_path: Path) -> None:
+    path = _gimbal(tmp_path)
+    swapped = path.read_text(encoding="utf-8").replace("[axes.azimuth]", "[axes.roll]")
+    path.write_text(swapped, encoding="utf-8")
+    with pytest.raises(ProfileError, match=r"\[axes\.roll\] 'profile': .* calibrates the "
+                                           r"'azimuth' axis, not 'roll'"):
+        load_gimbal_profile(path)
+    path.write_text('[gimbal]\npart_number = "GMB-2"\n', encoding="utf-8")
+    with pytest.raises(ProfileError, match=r"at least one \[axes\.NAME\] table"):
+        load_gimbal_profile(path)
+    assert load_gimbal_profile("demo_gimbal").axes[0].name == "azimuth"
+
+
+def test_the_verdict_is_the_worst_axis() -> None:
+    assert verdict(["PASS", "MARGINAL"]) == "MARGINAL"
+    assert verdict(["PASS", "INCOMPLETE", "MARGINAL"]) == "INCOMPLETE"
+    assert verdict(["FAIL", "PASS"]) == "FAIL"
+    assert verdict(["PASS", "NOT COMPLETED"]) == "NOT COMPLETED"  # unknown: never better
+    assert verdict([]) == "ERROR"
