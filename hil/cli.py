@@ -113,7 +113,7 @@ def build_parser() -> argparse.ArgumentParser:
     unit.add_argument("--gimbal", default=None, metavar="GIMBAL_PROFILE",
                       help="gimbal profile TOML or built-in name (e.g. demo_gimbal): every "
                            "axis under the one --unit-serial, then one gimbal certificate "
-                           "in OUT/SERIAL")
+                           "in OUT/SERIAL (default: none, one axis by --profile)")
     cal.add_argument("--unit-serial", default=None, metavar="SERIAL",
                      help="serial number of the unit; required with a real drive ("
                           + ", ".join(k.name for k in KINDS.values() if not k.simulated)

@@ -43,7 +43,6 @@ def add_arguments(commands: argparse._SubParsersAction[argparse.ArgumentParser],
                            help="only this station id (default: every station)")
     selection.add_argument("--since", default=None,
                            help="only runs from this date, YYYY-MM-DD (default: every run)")
-    add_kind_arguments(selection)
 
     def add(name: str, text: str, description: str | None = None) -> argparse.ArgumentParser:
         return commands.add_parser(name, parents=[common, selection], help=text,
@@ -53,6 +52,7 @@ def add_arguments(commands: argparse._SubParsersAction[argparse.ArgumentParser],
     spc = add("spc", "one result's capability, I-MR chart, Nelson rules, EWMA",
               "capability, I-MR chart, Nelson rules, EWMA of one result (exit 1 on a "
               "signal); 'spc baseline freeze PARAM' freezes the limits")
+    add_kind_arguments(spc)
     spc.add_argument("words", nargs="+", metavar="PARAM",
                      help="the result's name, or: baseline freeze PARAM")
     spc.add_argument("--rules", default="1,2,5,6", help="Nelson rules (comma list or 'all')")
@@ -64,6 +64,7 @@ def add_arguments(commands: argparse._SubParsersAction[argparse.ArgumentParser],
                      help="exit 1 on a signal among the newest N runs (0: any run)")
     export = add("export", "one result's stored values as CSV or parquet")
     export.add_argument("parameter", metavar="PARAM", help="the result's name")
+    add_kind_arguments(export)
     export.add_argument("--format", choices=EXPORT_FORMATS, default="csv", metavar="FORMAT",
                         help=" or ".join(EXPORT_FORMATS))
     export.add_argument("--output", type=Path, required=True, help="file to write")
@@ -72,6 +73,7 @@ def add_arguments(commands: argparse._SubParsersAction[argparse.ArgumentParser],
                      help="group the runs by " + ", ".join(YIELD_GROUPS))
     report = add("report", "HTML fleet report: histograms, charts, Cpk, yield")
     report.add_argument("--html", type=Path, required=True, help="file to write")
+    add_kind_arguments(report)
     report.add_argument("--parameters", default=None,
                         help="comma list of results (default: every stored result)")
 
@@ -79,10 +81,12 @@ def add_arguments(commands: argparse._SubParsersAction[argparse.ArgumentParser],
 def add_kind_arguments(parser: argparse.ArgumentParser) -> None:
     """``--axis`` and ``--unit-type``: which kind of unit a result's series is of."""
     parser.add_argument("--axis", default=None,
-                        help="only units of this axis, e.g. elevation (needed when a result "
-                             "is stored for several axes: they are never pooled)")
+                        help="only units of this axis, e.g. elevation; needed when a result "
+                             "is stored for several axes, which are never pooled (default: "
+                             "the one axis the result is stored for)")
     parser.add_argument("--unit-type", default=None,
-                        help="only units of this type (the profile's unit type)")
+                        help="only units of this type, the profile's unit type (default: "
+                             "the one type the result is stored for)")
 
 
 def one_kind(store: Store, name: str, args: argparse.Namespace,
