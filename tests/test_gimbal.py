@@ -8,13 +8,15 @@ from __future__ import annotations
 import hashlib
 import json
 import re
+import shutil
+import subprocess
 from pathlib import Path
 
 import pytest
 
 from hil.characterise.processes import run_command
 from hil.errors import ProfileError
-from hil.gimbal.certificate import verdict
+from hil.gimbal.certificate import AxisOutcome, build, verdict, write
 from hil.gimbal.profile import load_gimbal_profile
 from tests.helpers import subset_profile
 
@@ -61,6 +63,16 @@ def test_a_gimbal_is_one_serial_one_certificate_one_verdict(tmp_path: Path) -> N
         assert own["unit"]["axis"] == axis["axis"]
         assert {r["parameter"] for r in axis["results"]} == {
             r["parameter"] for r in own["results"]}
+    page = (folder / "gimbal-certificate.html").read_text(encoding="utf-8")
+    assert "Axis elevation: <span" in page
+    assert "azimuth/GMB-0042/certificate.pdf" in page
+    pdf = (folder / "gimbal-certificate.pdf").read_bytes()
+    assert pdf.startswith(b"%PDF")
+    if shutil.which("pdftotext"):
+        shown = subprocess.run(["pdftotext", "-", "-"], input=pdf, capture_output=True,
+                               check=True).stdout.decode()
+        assert "Axis azimuth: PASS" in shown
+        assert "the worst of its 2 axes' verdicts" in shown
     person = (folder / "gimbal-certificate.txt").read_text(encoding="utf-8")
     assert "Verdict: PASS (the worst of its 2 axes)" in person
     assert re.search(r"Moment of inertia +0\.00\d+ ± 0\.0000\d\d +kg·m²", person)
@@ -86,12 +98,15 @@ def test_a_failed_axis_fails_the_gimbal_and_the_other_axis_is_still_calibrated(
 
 
 def test_a_refused_axis_stops_the_gimbal_and_nothing_passes(tmp_path: Path) -> None:
-    """The azimuth axis's folder is locked by a certificate of another axis: refused before
-    motion (exit 4); the elevation axis is not started; the gimbal certificate says ERROR."""
+    """The azimuth axis's folder holds a (passing) certificate of another axis: refused
+    before motion (exit 4); the elevation axis is not started; the gimbal certificate says
+    ERROR for both, the certificate left there is not taken as this run's."""
     out = tmp_path / "certs"
     held = out / SERIAL / "azimuth" / SERIAL / "certificate.json"
     held.parent.mkdir(parents=True)
-    held.write_text(json.dumps({"unit": {"serial": SERIAL, "axis": "roll"}}), encoding="utf-8")
+    # a passing certificate of another axis: it must not pass for this run's azimuth
+    held.write_text(json.dumps({"unit": {"serial": SERIAL, "axis": "roll"}, "outcome": "PASS",
+                                "aborted": False, "results": []}), encoding="utf-8")
     code, text = _calibrate(_gimbal(tmp_path), out)
     assert code == 4, text
     assert "Traceback" not in text
@@ -121,3 +136,18 @@ def test_the_verdict_is_the_worst_axis() -> None:
     assert verdict(["FAIL", "PASS"]) == "FAIL"
     assert verdict(["PASS", "NOT COMPLETED"]) == "NOT COMPLETED"  # unknown: never better
     assert verdict([]) == "ERROR"
+
+
+def test_an_earlier_gimbal_certificate_moves_to_history(tmp_path: Path) -> None:
+    gimbal = load_gimbal_profile("demo_gimbal")
+    missing = [AxisOutcome(name=a.name, certificate=None, exit_code=4) for a in gimbal.axes]
+    first = build(gimbal, serial=SERIAL, folder=tmp_path, axes=missing)
+    write(first, tmp_path)
+    (tmp_path / "gimbal-certificate.html").write_text("<html></html>", encoding="utf-8")
+    second = build(gimbal, serial=SERIAL, folder=tmp_path, axes=missing)
+    write(second, tmp_path)
+    kept = tmp_path / "history" / first["certificate_id"]
+    assert sorted(p.name for p in kept.iterdir()) == [
+        "gimbal-certificate.html", "gimbal-certificate.json", "gimbal-certificate.txt"]
+    now = json.loads((tmp_path / "gimbal-certificate.json").read_text(encoding="utf-8"))
+    assert now["certificate_id"] == second["certificate_id"]

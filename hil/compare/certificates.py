@@ -16,11 +16,11 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Literal
 
+from hil.certificate.build import SCHEMA
 from hil.certificate.integrity import verify_document
 from hil.errors import InputError
 
 log = logging.getLogger(__name__)
-SCHEMA = "gimbal-hil/certificate/v1"
 CERTIFICATE_FILE = "certificate.json"
 DIRECTIONS = ("higher", "lower")
 # an emulator's endpoint is new in every run (a virtual CAN channel, a loopback port)

@@ -17,7 +17,7 @@ from typing import Any
 from hil.gimbal.profile import GimbalProfile
 from hil.gum import rounded_pair
 
-SCHEMA = "gimbal-hil/gimbal-certificate/1"
+SCHEMA = "gimbal-hil/gimbal-certificate/v1"
 #: worst last; an axis without a certificate (refused, crashed) is an ERROR
 RANKS = {"PASS": 0, "MARGINAL": 1, "INCOMPLETE": 2, "FAIL": 3, "ERROR": 4}
 NOT_STARTED = -1  # an axis's exit code when an earlier axis stopped the gimbal
@@ -111,8 +111,18 @@ def text(certificate: dict[str, Any]) -> str:
 
 
 def write(certificate: dict[str, Any], folder: Path) -> tuple[Path, Path]:
-    """``gimbal-certificate.json`` and ``.txt`` in ``folder``."""
+    """``gimbal-certificate.json`` and ``.txt`` in ``folder``; an earlier gimbal
+    certificate there (its four files) moves to ``history/ITS_ID/`` first."""
     json_path = folder / "gimbal-certificate.json"
+    if json_path.is_file():
+        try:
+            earlier = str(json.loads(json_path.read_bytes())["certificate_id"])
+        except (ValueError, KeyError, TypeError):
+            earlier = f"unreadable-{uuid.uuid4().hex[:8]}"
+        target = folder / "history" / earlier
+        target.mkdir(parents=True, exist_ok=True)
+        for old in folder.glob("gimbal-certificate.*"):
+            old.rename(target / old.name)
     json_path.write_text(json.dumps(certificate, indent=2) + "\n", encoding="utf-8")
     text_path = folder / "gimbal-certificate.txt"
     text_path.write_text(text(certificate) + "\n", encoding="utf-8")
