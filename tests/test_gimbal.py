@@ -9,6 +9,7 @@ import hashlib
 import json
 import re
 import shutil
+import signal
 import subprocess
 from pathlib import Path
 
@@ -18,6 +19,7 @@ from hil.characterise.processes import run_command
 from hil.errors import ProfileError
 from hil.gimbal.certificate import AxisOutcome, build, verdict, write
 from hil.gimbal.profile import load_gimbal_profile
+from tests.calibration_process import RunningCalibration
 from tests.helpers import subset_profile
 
 pytestmark = pytest.mark.slow(seconds=40)
@@ -151,3 +153,36 @@ def test_an_earlier_gimbal_certificate_moves_to_history(tmp_path: Path) -> None:
         "gimbal-certificate.html", "gimbal-certificate.json", "gimbal-certificate.txt"]
     now = json.loads((tmp_path / "gimbal-certificate.json").read_text(encoding="utf-8"))
     assert now["certificate_id"] == second["certificate_id"]
+
+
+@pytest.mark.realtime
+def test_a_stop_sent_to_the_gimbal_stops_the_running_axis_and_nothing_passes(
+    tmp_path: Path
+) -> None:
+    """SIGTERM to the gimbal's process alone (a line controller stopping it) while the
+    azimuth axis moves: passed on to that axis's calibration, which quick-stops, disables
+    and writes its aborted certificate; the elevation axis is not started; the gimbal
+    certificate says ERROR. Before, the axis ran on to its end with the gimbal gone."""
+    out = tmp_path / "out"
+    # the demo axes: the simulator is far faster than real time, so a short profile's
+    # motion ends before the signal could arrive (test_signals.py waits the same way)
+    run = RunningCalibration(tmp_path, ["--gimbal", "demo_gimbal", "--unit-serial", SERIAL,
+                                        "--out", str(out)])
+    run.wait_for_console("▶ protocol 2")
+    run.wait_for_log(r"sim: running", offset=run.log_size(), timeout_s=60)
+    logged = run.log_size()
+    code = run.stop_with(signal.SIGTERM)
+    assert code != 0, run.console
+    assert "Traceback" not in run.console, run.console
+    with run.log_file.open("rb") as stream:
+        stream.seek(logged)
+        after = stream.read().decode("utf-8", "replace")
+    assert re.search(r"sim: quick stop", after), after
+    assert re.search(r"sim: drive disabled", after), after
+    axis = json.loads((out / SERIAL / "azimuth" / SERIAL / "certificate.json").read_text(
+        encoding="utf-8"))
+    assert axis["aborted"] is True
+    issued = json.loads((out / SERIAL / "gimbal-certificate.json").read_text(encoding="utf-8"))
+    assert [a["outcome"] for a in issued["axes"]] == ["ERROR", "ERROR"]
+    assert issued["outcome"] == "ERROR"
+    assert not (out / SERIAL / "elevation").exists()

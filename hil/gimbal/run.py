@@ -11,8 +11,11 @@ from __future__ import annotations
 import signal
 import subprocess
 import sys
-from collections.abc import Sequence
+import threading
+from collections.abc import Iterator, Sequence
+from contextlib import contextmanager
 from pathlib import Path
+from types import FrameType
 
 from hil.gimbal import certificate
 from hil.gimbal.documents import write_documents
@@ -21,6 +24,8 @@ from hil.gimbal.profile import GimbalProfile
 #: pytest's exit codes after which the next axis is not started: interrupted, internal
 #: error, usage error (a refusal before motion)
 STOPS_THE_GIMBAL = (2, 3, 4)
+STOP_SIGNALS = ("SIGTERM", "SIGHUP")  # besides SIGINT: passed on to the running axis
+INTERRUPTED = 2  # pytest's exit code of an interrupted run
 
 
 def calibrate_gimbal(gimbal: GimbalProfile, *, serial: str, out: Path, store_url: str,
@@ -48,22 +53,25 @@ def calibrate_gimbal(gimbal: GimbalProfile, *, serial: str, out: Path, store_url
     folder.mkdir(parents=True, exist_ok=True)
     outcomes, codes = [], []
     try:
-        for index, axis in enumerate(gimbal.axes, start=1):
-            print(f"gimbal {serial}: axis {index} of {len(gimbal.axes)}, {axis.name}",
-                  flush=True)
-            written = folder / axis.name / serial / "certificate.json"
-            before = _stamp(written)
-            code = _calibrate_axis([
-                sys.executable, "-m", "hil.cli", "calibrate", "--profile",
-                str(axis.profile_path), "--unit-serial", serial, "--out",
-                str(folder / axis.name), "--store", store_url, *options])
-            codes.append(code)
-            # only a certificate this run wrote (a refused axis leaves the last one there)
-            fresh = written if _stamp(written) not in (None, before) else None
-            outcomes.append(certificate.AxisOutcome(name=axis.name, certificate=fresh,
-                                                    exit_code=code))
-            if code in STOPS_THE_GIMBAL:
-                break
+        with _stops_as_interrupts():
+            for index, axis in enumerate(gimbal.axes, start=1):
+                print(f"gimbal {serial}: axis {index} of {len(gimbal.axes)}, {axis.name}",
+                      flush=True)
+                written = folder / axis.name / serial / "certificate.json"
+                before = _stamp(written)
+                code = _calibrate_axis([
+                    sys.executable, "-m", "hil.cli", "calibrate", "--profile",
+                    str(axis.profile_path), "--unit-serial", serial, "--out",
+                    str(folder / axis.name), "--store", store_url, *options])
+                codes.append(code)
+                # only a certificate this run wrote (a refused axis leaves the last one)
+                fresh = written if _stamp(written) not in (None, before) else None
+                outcomes.append(certificate.AxisOutcome(name=axis.name, certificate=fresh,
+                                                        exit_code=code))
+                if code in STOPS_THE_GIMBAL:
+                    break
+    except KeyboardInterrupt:  # between two axes: the next is not started
+        codes.append(INTERRUPTED)
     finally:
         for axis in gimbal.axes[len(outcomes):]:
             outcomes.append(certificate.AxisOutcome(name=axis.name, certificate=None,
@@ -78,15 +86,35 @@ def calibrate_gimbal(gimbal: GimbalProfile, *, serial: str, out: Path, store_url
 
 
 def _calibrate_axis(argv: list[str]) -> int:
-    """Run one axis's calibration to its end, and its exit code. An interrupt (Ctrl-C) is
-    passed on and waited out: the axis's calibration stops the drive, disables it and
-    writes its aborted certificate (killing it would leave the drive as it was)."""
+    """Run one axis's calibration to its end, and its exit code. A stop (Ctrl-C, or SIGTERM
+    or SIGHUP sent to this process alone) is passed on and waited out: the axis's
+    calibration stops the drive, disables it and writes its aborted certificate (killing
+    it, or leaving it to run on, would not)."""
     process = subprocess.Popen(argv)
     while True:
         try:
             return process.wait()
-        except KeyboardInterrupt:  # a second SIGINT while it stops is ignored there
+        except KeyboardInterrupt:  # a second stop while it stops is ignored there
             process.send_signal(signal.SIGINT)
+
+
+@contextmanager
+def _stops_as_interrupts() -> Iterator[None]:
+    """SIGTERM and SIGHUP raise ``KeyboardInterrupt`` here, as SIGINT does (the
+    calibration treats the three alike); the earlier handlers come back after."""
+    def interrupt(signum: int, _frame: FrameType | None) -> None:
+        raise KeyboardInterrupt(signal.Signals(signum).name)
+
+    numbers = [getattr(signal, name) for name in STOP_SIGNALS if hasattr(signal, name)]
+    if threading.current_thread() is not threading.main_thread():
+        yield  # handlers can be set from the main thread only
+        return
+    previous = {number: signal.signal(number, interrupt) for number in numbers}
+    try:
+        yield
+    finally:
+        for number, handler in previous.items():
+            signal.signal(number, handler)
 
 
 def _stamp(path: Path) -> int | None:
