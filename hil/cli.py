@@ -372,9 +372,23 @@ def _verify(args: argparse.Namespace) -> int:
         read_document,
         verify_document,
     )
+    from hil.gimbal.verify import gimbal_certificate_path, verify_gimbal
 
     worst = 0
     for target in args.certificates:
+        gimbal = gimbal_certificate_path(target)
+        if gimbal is not None:  # a gimbal: each axis's certificate, as recorded
+            try:
+                problems, verified = verify_gimbal(gimbal)
+            except InputError as exc:
+                print(f"gimbal-hil: error: {exc}", file=sys.stderr)
+                worst = 2
+                continue
+            for line in problems:
+                print(f"{gimbal}: {line}")
+            print(f"{gimbal}: {'VERIFIED' if verified else 'NOT VERIFIED'}")
+            worst = max(worst, 0 if verified else 1)
+            continue
         path = certificate_path(target)
         try:
             document = read_document(path)

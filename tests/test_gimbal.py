@@ -80,6 +80,15 @@ def test_a_gimbal_is_one_serial_one_certificate_one_verdict(tmp_path: Path) -> N
     assert re.search(r"Moment of inertia +0\.00\d+ ± 0\.0000\d\d +kg·m²", person)
     done = run_command(["results", "units", "--out", str(out)])
     assert re.search(rf"{SERIAL} +gimbal: azimuth, elevation +2 ", done.stdout), done.stdout
+    verified = run_command(["verify", str(folder)])
+    assert verified.returncode == 0, verified.stdout + verified.stderr
+    assert verified.stdout.strip().endswith("gimbal-certificate.json: VERIFIED")
+    with (folder / issued["axes"][1]["certificate"]).open("a", encoding="utf-8") as edit:
+        edit.write(" ")  # one byte more in the elevation axis's record
+    tampered = run_command(["verify", str(folder)])
+    assert tampered.returncode == 1
+    assert "axis elevation: " in tampered.stdout
+    assert "(SHA-256 differs)" in tampered.stdout
 
 
 def test_a_failed_axis_fails_the_gimbal_and_the_other_axis_is_still_calibrated(

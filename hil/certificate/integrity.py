@@ -32,7 +32,7 @@ NO_DIGEST = ("no digest (written before gimbal-hil certificates carried one, iss
              "its content cannot be verified")
 # worst last, as CalibrationRun.overall_outcome orders them (INCOMPLETE: a required
 # declared result not measured, listed under "not_measured")
-_RANK = {"PASS": 0, "MARGINAL": 1, "INCOMPLETE": 2, "FAIL": 3, "ERROR": 4}
+OUTCOME_RANK = {"PASS": 0, "MARGINAL": 1, "INCOMPLETE": 2, "FAIL": 3, "ERROR": 4}
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -254,8 +254,8 @@ def _check_outcomes(document: Mapping[str, Any], problems: list[str]) -> None:
     if not isinstance(stated, str):
         problems.append("outcome is missing")
         return
-    if stated not in _RANK:
-        problems.append(f"outcome {stated!r} is not one of {', '.join(_RANK)}")
+    if stated not in OUTCOME_RANK:
+        problems.append(f"outcome {stated!r} is not one of {', '.join(OUTCOME_RANK)}")
         return
     implied = _implied(document, judged)
     if implied != stated:
@@ -334,7 +334,7 @@ def _implied(document: Mapping[str, Any], judged: list[str]) -> str:
     protocols = method.get("protocols") if isinstance(method, dict) else None
     for record in (protocols or {}).values() if isinstance(protocols, dict) else ():
         outcome = record.get("outcome") if isinstance(record, dict) else None
-        if outcome in _RANK:
+        if outcome in OUTCOME_RANK:
             outcomes.append(outcome)
         elif outcome == "NOT_COMPLETED":
             outcomes.append(Outcome.ERROR.value)
@@ -342,4 +342,4 @@ def _implied(document: Mapping[str, Any], judged: list[str]) -> str:
     if isinstance(missing, list) and any(isinstance(m, dict) and m.get("required")
                                          for m in missing):
         outcomes.append("INCOMPLETE")
-    return max(outcomes, key=_RANK.__getitem__)
+    return max(outcomes, key=OUTCOME_RANK.__getitem__)

@@ -14,12 +14,11 @@ from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
+from hil.certificate.integrity import OUTCOME_RANK
 from hil.gimbal.profile import GimbalProfile
 from hil.gum import rounded_pair
 
 SCHEMA = "gimbal-hil/gimbal-certificate/v1"
-#: worst last; an axis without a certificate (refused, crashed) is an ERROR
-RANKS = {"PASS": 0, "MARGINAL": 1, "INCOMPLETE": 2, "FAIL": 3, "ERROR": 4}
 NOT_STARTED = -1  # an axis's exit code when an earlier axis stopped the gimbal
 
 
@@ -34,8 +33,10 @@ class AxisOutcome:
 
 
 def verdict(outcomes: Sequence[str]) -> str:
-    """The gimbal's verdict: the worst of its axes' (unknown outcomes count as ERROR)."""
-    return max(outcomes, key=lambda o: RANKS.get(o, RANKS["ERROR"]), default="ERROR")
+    """The gimbal's verdict: the worst of its axes' (the certificate's order; unknown
+    outcomes count as ERROR, an axis without a certificate is one)."""
+    return max(outcomes, key=lambda o: OUTCOME_RANK.get(o, OUTCOME_RANK["ERROR"]),
+               default="ERROR")
 
 
 def build(gimbal: GimbalProfile, *, serial: str, folder: Path,
