@@ -26,7 +26,7 @@ if TYPE_CHECKING:  # loaded when a command runs: `gimbal-hil --help` stays fast
     from argparse import _FormatterClass  # typeshed's only
 
     from hil.store.engine import Store
-    from hil.store.query import Kind
+    from hil.store.query import Kind, StoredResult
 
 BASELINE_PREFIX = "spc:"
 EXPORT_FORMATS = ("csv", "parquet")
@@ -160,10 +160,13 @@ def run(args: argparse.Namespace, store: Store) -> int:
     names = (args.parameters.split(",") if args.parameters else _stored_names(store))
     # one section per result and kind of unit: "inertia_kg_m2 (GMB-2 azimuth axis)" when the
     # result is stored for several kinds
-    series, baselines = {}, {}
+    series: dict[str, list[StoredResult]] = {}
+    baselines: dict[str, dict[str, Any]] = {}
     for name in names:
         kinds = sorted(result_kinds(store, name, station=args.station, since=since,
                                     axis=args.axis, unit_type=args.unit_type))
+        if not kinds:
+            series[name] = []  # asked for, none stored: the report says so
         for kind in kinds:
             label = name if len(kinds) == 1 else f"{name} ({kind})"
             series[label] = result_series(store, name, station=args.station, since=since,
