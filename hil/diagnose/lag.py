@@ -220,6 +220,7 @@ class LagProblem:
             (noise_designer, noise_model, n, 1.0 / len(quantised)) for n in quantised]
         self._cache: dict[float, list[_Grams]] = {}
         self._full: dict[tuple[int, int], tuple[FloatArray, FloatArray]] = {}
+        self._taps: dict[tuple[int, int], list[tuple[FloatArray, FloatArray]]] = {}
         fs = signals.fs_hz
         self.lag_grid = np.geomspace(0.5 / fs, min(MAX_LAG_S, 100.0 / fs), 20)
 
@@ -238,8 +239,61 @@ class LagProblem:
         return (fractional_shift(full_columns, shift, self.rows),
                 fractional_shift(full_leads, shift, self.rows))
 
+    def _tap_grams(self, designer: Designer, model: Model, signals: Signals,
+                   ) -> list[tuple[FloatArray, FloatArray]]:
+        """Per group: the Gram matrix of the four cubic-interpolation taps of ``[columns,
+        leads]`` (rows ``r − 1 … r + 2``) and their products with the effort. Any alignment
+        in ``[0, 1]`` sample is a weighting of these taps, so its sums follow from them
+        without shifting the columns again."""
+        key = (id(model), id(signals))
+        if key not in self._taps:
+            self._pair(designer, model, signals, 0.0)  # the unshifted blocks, cached
+            full = np.hstack(self._full[key])
+            y = self.signals.effort_filtered
+            found = []
+            for part in self.parts:
+                rows = self.rows[part]
+                taps = np.hstack([np.take(full, np.clip(rows + k, 0, len(full) - 1), axis=0)
+                                  for k in (-1, 0, 1, 2)])
+                found.append((taps.T @ taps, taps.T @ y[rows]))
+            self._taps[key] = found
+        return self._taps[key]
+
+    def _grams_from_taps(self, shift: float) -> list[_Grams]:
+        """:meth:`grams` for ``0 ≤ shift ≤ 1`` from :meth:`_tap_grams`."""
+        u = shift
+        weights = np.array([-u * (u - 1) * (u - 2) / 6, (u + 1) * (u - 1) * (u - 2) / 2,
+                            -(u + 1) * u * (u - 2) / 2, (u + 1) * u * (u - 1) / 6])
+        p = len(self.model.labels)
+        mix = np.kron(weights[:, None], np.eye(2 * p))  # the taps → the shifted [a, b]
+
+        def blocks(gram: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
+            shifted = mix.T @ gram @ mix
+            return shifted[:p, :p], shifted[:p, p:], shifted[p:, p:]
+
+        y = self.signals.effort_filtered[self.rows]
+        main = self._tap_grams(self.designer, self.model, self.signals)
+        noise = [(self._tap_grams(d, m, n), w) for d, m, n, w in self.noise]
+        groups = []
+        for g, part in enumerate(self.parts):
+            gram, moment = main[g]
+            aa, ab, bb = blocks(gram)
+            ay_by = mix.T @ moment
+            saa, sab, sbb = np.zeros((p, p)), np.zeros((p, p)), np.zeros((p, p))
+            for taps, weight in noise:
+                naa, nab, nbb = blocks(taps[g][0])
+                saa += weight * naa
+                sab += weight * nab
+                sbb += weight * nbb
+            yp = y[part]
+            groups.append(_Grams(aa, ab, bb, ay_by[:p], ay_by[p:], float(yp @ yp),
+                                 saa, sab, sbb))
+        return groups
+
     def grams(self, shift: float) -> list[_Grams]:
         """Per-group sums at the alignment ``shift`` (sample periods), cached."""
+        if shift not in self._cache and 0.0 <= shift <= 1.0:
+            self._cache[shift] = self._grams_from_taps(shift)
         if shift not in self._cache:
             a, b = self._pair(self.designer, self.model, self.signals, shift)
             y = self.signals.effort_filtered[self.rows]
