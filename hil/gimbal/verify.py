@@ -54,7 +54,12 @@ def verify_gimbal(path: Path) -> tuple[list[str], bool]:
             problems.append(f"axis {name}: {file} is not the certificate this gimbal "
                             "certificate records (SHA-256 differs)")
             continue
-        found = verify_document(read_document(file), path=file, unit_dir=file.parent)
+        try:
+            own = read_document(file)
+        except InputError as exc:
+            problems.append(f"axis {name}: {exc}")
+            continue
+        found = verify_document(own, path=file, unit_dir=file.parent)
         problems += [f"axis {name}: {line}" for line in found.problems]
         if not found.digest:
             problems.append(f"axis {name}: its certificate has no digest")
