@@ -10,12 +10,14 @@ from __future__ import annotations
 import json
 from dataclasses import dataclass
 from datetime import UTC, datetime
-from typing import Any
+from typing import Any, TypeVar
 
-from sqlalchemy import and_, delete, func, insert, select
+from sqlalchemy import Select, and_, delete, func, insert, select
 
 from hil.store.engine import Store
 from hil.store.schema import results, runs, spc_baselines
+
+_Query = TypeVar("_Query", bound=Select[*tuple[Any, ...]])
 
 
 @dataclass(frozen=True, slots=True)
@@ -121,10 +123,7 @@ def result_series(
         .where(results.c.name == name)
         .order_by(runs.c.started_at, runs.c.run_id)
     )
-    if station is not None:
-        query = query.where(runs.c.station == station)
-    if since is not None:
-        query = query.where(runs.c.started_at >= utc(since))
+    query = _narrowed(query, station=station, since=since)
     if not include_aborted:
         query = query.where(runs.c.aborted.is_(False))
     if not include_reference:
@@ -158,10 +157,7 @@ def result_kinds(
         .where(results.c.name == name)
         .group_by(runs.c.unit_type, runs.c.axis)
     )
-    if station is not None:
-        query = query.where(runs.c.station == station)
-    if since is not None:
-        query = query.where(runs.c.started_at >= utc(since))
+    query = _narrowed(query, station=station, since=since)
     if axis is not None:
         query = query.where(runs.c.axis == axis)
     if unit_type is not None:
@@ -237,10 +233,7 @@ def run_summaries(
         Only runs started at or after it (naive times are taken as UTC).
     """
     query = select(*_summary_columns()).order_by(runs.c.started_at, runs.c.run_id)
-    if station is not None:
-        query = query.where(runs.c.station == station)
-    if since is not None:
-        query = query.where(runs.c.started_at >= utc(since))
+    query = _narrowed(query, station=station, since=since)
     with store.engine.connect() as connection:
         return [_summary(row) for row in connection.execute(query)]
 
@@ -282,6 +275,15 @@ def load_baseline(store: Store, name: str) -> dict[str, Any] | None:
         return None
     body: dict[str, Any] = json.loads(row.body)
     return body
+
+
+def _narrowed(query: _Query, *, station: str | None, since: datetime | None) -> _Query:
+    """``query`` kept to runs of ``station`` started at or after ``since`` (when given)."""
+    if station is not None:
+        query = query.where(runs.c.station == station)
+    if since is not None:
+        query = query.where(runs.c.started_at >= utc(since))
+    return query
 
 
 def _summary_columns() -> tuple[Any, ...]:
