@@ -38,6 +38,21 @@ def variant(text: str, *, serial: str, index: int, files: bool = False, **run: A
     return json.dumps(resealed(cert, files=files), indent=2)
 
 
+def with_value(text: str, *, name: str, value: float, serial: str, index: int, folder: Path,
+               **unit: str) -> Path:
+    """:func:`variant` of ``text`` with result ``name`` set to ``value`` (and the ``unit``
+    block's keys given, e.g. ``axis``), sealed and written to ``folder/u{index}/``."""
+    cert = json.loads(variant(text, serial=serial, index=index))
+    cert["unit"].update(unit)
+    for result in cert["results"]:
+        if result["parameter"] == name:
+            result["value"] = value
+    path = folder / f"u{index}" / "certificate.json"
+    path.parent.mkdir(parents=True)
+    path.write_text(json.dumps(resealed(cert)), encoding="utf-8")
+    return path
+
+
 def resealed(cert: dict[str, Any], *, files: bool = False) -> dict[str, Any]:
     """``cert`` as a certificate of its own run: outcomes as the decision rule states them,
     the recordings of the run it came from listed only with ``files`` (else not copied

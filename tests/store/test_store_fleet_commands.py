@@ -10,7 +10,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from store_variants import SERIAL, resealed, variant
+from store_variants import SERIAL, with_value
 
 from hil.cli import main
 
@@ -24,14 +24,8 @@ def _results(capsys: pytest.CaptureFixture[str], *args: str) -> tuple[int, str]:
 
 
 def _with_value(text: str, value: float, index: int, tmp: Path) -> Path:
-    cert = json.loads(variant(text, serial=f"FLT-{index:04d}", index=index))
-    for result in cert["results"]:
-        if result["parameter"] == NAME:
-            result["value"] = value
-    path = tmp / f"u{index}" / "certificate.json"
-    path.parent.mkdir(parents=True)
-    path.write_text(json.dumps(resealed(cert)), encoding="utf-8")
-    return path
+    return with_value(text, name=NAME, value=value, serial=f"FLT-{index:04d}", index=index,
+                      folder=tmp)
 
 
 def test_spc_gates_the_newest_unit_on_a_frozen_baseline(

@@ -11,7 +11,7 @@ from pathlib import Path
 
 import pytest
 from sqlalchemy import delete
-from store_variants import SERIAL, resealed, variant
+from store_variants import SERIAL, resealed, variant, with_value
 
 from hil.cli import main
 from hil.store import load_baseline, open_store, save_baseline
@@ -24,15 +24,8 @@ ELEVATION = 0.0036
 
 def _ingest(text: str, tmp: Path, index: int, *, axis: str, value: float,
             store: list[str]) -> None:
-    cert = json.loads(variant(text, serial=f"KND-{index:04d}", index=index))
-    cert["unit"]["axis"] = axis
-    cert["unit"]["type"] = f"GMB-2 {axis} axis"
-    for result in cert["results"]:
-        if result["parameter"] == NAME:
-            result["value"] = value
-    path = tmp / f"u{index}" / "certificate.json"
-    path.parent.mkdir(parents=True)
-    path.write_text(json.dumps(resealed(cert)), encoding="utf-8")
+    path = with_value(text, name=NAME, value=value, serial=f"KND-{index:04d}", index=index,
+                      folder=tmp, axis=axis, type=f"GMB-2 {axis} axis")
     assert main(["results", "ingest", str(path), *store]) == 0
 
 
