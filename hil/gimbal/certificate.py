@@ -8,7 +8,7 @@ from __future__ import annotations
 import hashlib
 import json
 import uuid
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from datetime import UTC, datetime
 from pathlib import Path
@@ -19,6 +19,7 @@ from hil.gimbal.profile import GimbalProfile
 from hil.gum import rounded_pair
 
 SCHEMA = "gimbal-hil/gimbal-certificate/v1"
+FILE = "gimbal-certificate.json"  # in the gimbal's folder; .txt, .html, .pdf beside it
 NOT_STARTED = -1  # an axis's exit code when an earlier axis stopped the gimbal
 
 
@@ -81,6 +82,19 @@ def _section(axis: AxisOutcome, folder: Path) -> dict[str, Any]:
     }
 
 
+def rounded_results(axis: Mapping[str, Any]) -> list[dict[str, str]]:
+    """An axis section's results as a person reads them: title, code name, value and U as
+    GUM asks (U to two significant digits, the value to the same decimal), unit, outcome."""
+    rows = []
+    for r in axis["results"]:
+        if r["value"] is None or r["expanded_uncertainty"] is None:
+            continue
+        value, u = rounded_pair(r["value"], r["expanded_uncertainty"])
+        rows.append({"title": r["title"] or r["parameter"], "name": r["parameter"],
+                     "value": value, "u": u, "unit": r["unit"], "outcome": r["outcome"]})
+    return rows
+
+
 def text(certificate: dict[str, Any]) -> str:
     """The certificate for a person: identity, verdict, then each axis's results (values
     and U as GUM asks: U to two significant digits, the value to the same decimal)."""
@@ -100,10 +114,8 @@ def text(certificate: dict[str, Any]) -> str:
             continue
         lines.append(f"  certificate {axis['certificate_id']} ({axis['certificate']}, "
                      f"SHA-256 {axis['certificate_sha256']})")
-        rows = [(r["title"] or r["parameter"],
-                 " ± ".join(rounded_pair(r["value"], r["expanded_uncertainty"])),
-                 r["unit"], r["outcome"]) for r in axis["results"]
-                if r["value"] is not None and r["expanded_uncertainty"] is not None]
+        rows = [(r["title"], f"{r['value']} ± {r['u']}", r["unit"], r["outcome"])
+                for r in rounded_results(axis)]
         widths = [max((len(row[i]) for row in rows), default=0) for i in range(3)]
         lines += [f"  {t:<{widths[0]}}  {v:>{widths[1]}}  {u:<{widths[2]}}  {o}"
                   for t, v, u, o in rows]
@@ -114,7 +126,7 @@ def text(certificate: dict[str, Any]) -> str:
 def write(certificate: dict[str, Any], folder: Path) -> tuple[Path, Path]:
     """``gimbal-certificate.json`` and ``.txt`` in ``folder``; an earlier gimbal
     certificate there (its four files) moves to ``history/ITS_ID/`` first."""
-    json_path = folder / "gimbal-certificate.json"
+    json_path = folder / FILE
     if json_path.is_file():
         try:
             earlier = str(json.loads(json_path.read_bytes())["certificate_id"])
@@ -122,9 +134,9 @@ def write(certificate: dict[str, Any], folder: Path) -> tuple[Path, Path]:
             earlier = f"unreadable-{uuid.uuid4().hex[:8]}"
         target = folder / "history" / earlier
         target.mkdir(parents=True, exist_ok=True)
-        for old in folder.glob("gimbal-certificate.*"):
+        for old in folder.glob(f"{Path(FILE).stem}.*"):
             old.rename(target / old.name)
     json_path.write_text(json.dumps(certificate, indent=2) + "\n", encoding="utf-8")
-    text_path = folder / "gimbal-certificate.txt"
+    text_path = json_path.with_suffix(".txt")
     text_path.write_text(text(certificate) + "\n", encoding="utf-8")
     return json_path, text_path

@@ -15,7 +15,7 @@ from importlib.resources import files
 from pathlib import Path
 from typing import Any
 
-from hil.gum import rounded_pair
+from hil.gimbal.certificate import rounded_results
 from hil.report.html import COLOURS, STYLE
 
 TEMPLATE = "gimbal_certificate.typ"
@@ -29,13 +29,7 @@ def gimbal_view(certificate: Mapping[str, Any]) -> dict[str, Any]:
     for axis in certificate["axes"]:
         document = (str(Path(axis["certificate"]).with_suffix(".pdf"))
                     if axis["certificate"] else None)
-        rows = []
-        for r in axis["results"]:
-            if r["value"] is None or r["expanded_uncertainty"] is None:
-                continue
-            value, u = rounded_pair(r["value"], r["expanded_uncertainty"])
-            rows.append({"title": r["title"] or r["parameter"], "name": r["parameter"],
-                         "value": value, "u": u, "unit": r["unit"], "outcome": r["outcome"]})
+        rows = rounded_results(axis)
         axes.append({"axis": axis["axis"], "outcome": axis["outcome"],
                      "certificate_id": axis.get("certificate_id") or "",
                      "document": document or "", "sha256": axis.get("certificate_sha256") or "",

@@ -82,7 +82,7 @@ def calibrate_gimbal(gimbal: GimbalProfile, *, serial: str, out: Path, store_url
             print(f"gimbal {serial}: {problem}")
         each = ", ".join(f"{a['axis']} {a['outcome']}" for a in issued["axes"])
         print(f"gimbal {serial}: {issued['outcome']} ({each}) -> {json_path}")
-    return max(codes, default=0) if any(codes) else 0
+    return max(codes, default=0)
 
 
 def _calibrate_axis(argv: list[str]) -> int:

@@ -9,9 +9,8 @@ from pathlib import Path
 
 from hil.certificate.integrity import read_document, verify_document
 from hil.errors import InputError
+from hil.gimbal.certificate import FILE as GIMBAL_CERTIFICATE
 from hil.gimbal.certificate import SCHEMA
-
-GIMBAL_CERTIFICATE = "gimbal-certificate.json"
 
 
 def gimbal_certificate_path(target: Path) -> Path | None:
