@@ -169,13 +169,17 @@ def _lock_unit_folder(config: pytest.Config, *, axis: str) -> None:
             f"own --out folder (e.g. --out {lock.path.parent.parent / axis})")
 
 
-STOP_SIGNALS = ("SIGTERM", "SIGHUP")  # handled as SIGINT is: quick stop, disable, aborted
+#: each a stop: quick stop, disable, an aborted certificate
+STOP_SIGNALS = ("SIGINT", "SIGTERM", "SIGHUP")
 
 
 def _stop_on_signals(config: pytest.Config) -> None:
-    """SIGTERM and SIGHUP raise ``KeyboardInterrupt``, as SIGINT does: the run stops on
-    pytest's interrupted path (the drive quick-stopped and disabled, an aborted certificate).
-    A repeated signal while stopping is ignored; the previous handlers return at the end."""
+    """SIGINT, SIGTERM and SIGHUP raise ``KeyboardInterrupt``: the run stops on pytest's
+    interrupted path (the drive quick-stopped and disabled, an aborted certificate). A
+    repeated signal while stopping is ignored (Ctrl-C under ``--gimbal`` reaches the axis
+    twice: from the terminal and passed on). SIGINT is honoured even when the process
+    started with it ignored (a background job of a script, an axis of a gimbal started
+    so): a stop request always stops the motion. The previous handlers return at the end."""
     if threading.current_thread() is not threading.main_thread():
         return  # signal handlers can only be set from the main thread
     stopping: list[str] = []

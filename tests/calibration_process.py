@@ -4,6 +4,7 @@ test watches for the moment to send a signal."""
 
 from __future__ import annotations
 
+import functools
 import os
 import re
 import signal
@@ -16,10 +17,12 @@ from pathlib import Path
 
 class RunningCalibration:
     """``gimbal-hil calibrate ARGS -- PYTEST_ARGS`` started in ``folder`` (no store, no
-    documents, INFO log to ``folder/calibrate.log``)."""
+    documents, INFO log to ``folder/calibrate.log``); with ``sigint_ignored`` as a script's
+    background job starts it (SIGINT ignored, as ``cmd &`` does without job control),
+    otherwise with SIGINT at its default whatever this test process has."""
 
-    def __init__(self, folder: Path, args: list[str], pytest_args: tuple[str, ...] = ()
-                 ) -> None:
+    def __init__(self, folder: Path, args: list[str], pytest_args: tuple[str, ...] = (),
+                 *, sigint_ignored: bool = False) -> None:
         self.log_file = folder / "calibrate.log"
         command = [sys.executable, "-m", "hil.cli", "calibrate", *args, "--",
                    "--store", "off", "--no-documents", "-p", "no:cacheprovider",
@@ -27,7 +30,9 @@ class RunningCalibration:
                    *pytest_args]
         self.process = subprocess.Popen(
             command, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
-            env={**os.environ, "PYTHONUNBUFFERED": "1"}, cwd=folder)
+            env={**os.environ, "PYTHONUNBUFFERED": "1"}, cwd=folder,
+            preexec_fn=functools.partial(signal.signal, signal.SIGINT,
+                                         signal.SIG_IGN if sigint_ignored else signal.SIG_DFL))
         self.lines: list[str] = []
         self._reader = threading.Thread(target=self._read, daemon=True)
         self._reader.start()

@@ -171,12 +171,14 @@ def test_a_stop_sent_to_the_gimbal_stops_the_running_axis_and_nothing_passes(
     """SIGTERM to the gimbal's process alone (a line controller stopping it) while the
     azimuth axis moves: passed on to that axis's calibration, which quick-stops, disables
     and writes its aborted certificate; the elevation axis is not started; the gimbal
-    certificate says ERROR. Before, the axis ran on to its end with the gimbal gone."""
+    certificate says ERROR. Before, the axis ran on to its end with the gimbal gone. The
+    gimbal is started as a line controller's script starts a job in the background (SIGINT
+    ignored, inherited by the axis): the stop passed on must still reach the axis."""
     out = tmp_path / "out"
     # the demo axes: the simulator is far faster than real time, so a short profile's
     # motion ends before the signal could arrive (test_signals.py waits the same way)
     run = RunningCalibration(tmp_path, ["--gimbal", "demo_gimbal", "--unit-serial", SERIAL,
-                                        "--out", str(out)])
+                                        "--out", str(out)], sigint_ignored=True)
     run.wait_for_console("▶ protocol 2")
     run.wait_for_log(r"sim: running", offset=run.log_size(), timeout_s=60)
     logged = run.log_size()

@@ -1,5 +1,6 @@
 """Issue 26, item 12: SIGTERM and SIGHUP stop a calibration as SIGINT does (quick stop,
-disable, an aborted certificate, never PASS), and a CANopen drive whose host stops its
+disable, an aborted certificate, never PASS), SIGINT too when the process started with it
+ignored (a script's background job), and a CANopen drive whose host stops its
 heartbeat stops the axis on its own (0x1016 consumer heartbeat, 0x6007 abort connection)."""
 
 from __future__ import annotations
@@ -34,12 +35,14 @@ STATE_LINES = {
 
 
 def _calibrate_and_signal(tmp_path: Path, kind: str, signum: signal.Signals, *,
-                          after_s: float) -> tuple[int, str, list[str], dict[str, object]]:
-    """Start a calibration, send ``signum`` ``after_s`` after protocol 2 started moving the
-    axis; its exit code, console output, the log lines written after the signal, the
-    certificate."""
+                          after_s: float, sigint_ignored: bool = False
+                          ) -> tuple[int, str, list[str], dict[str, object]]:
+    """Start a calibration (``sigint_ignored``: as a script's background job), send
+    ``signum`` ``after_s`` after protocol 2 started moving the axis; its exit code, console
+    output, the log lines written after the signal, the certificate."""
     run = RunningCalibration(tmp_path, ["--drive", kind, "--unit-serial", "SIG-1",
-                                        "--out", str(tmp_path / "out")])
+                                        "--out", str(tmp_path / "out")],
+                             sigint_ignored=sigint_ignored)
     run.wait_for_console("▶ protocol 2")
     run.wait_for_log(STATE_LINES[kind][0], offset=run.log_size(), timeout_s=60)
     time.sleep(after_s)  # the protocol's motion under way
@@ -53,16 +56,18 @@ def _calibrate_and_signal(tmp_path: Path, kind: str, signum: signal.Signals, *,
     return code, run.console, after, json.loads(certificate.read_text(encoding="utf-8"))
 
 
-@pytest.mark.parametrize(("kind", "signum", "after_s"), [
-    ("sim", signal.SIGTERM, 0.0),
-    ("sim", signal.SIGHUP, 0.0),
-    ("canopen-emulator", signal.SIGTERM, 0.3),
-    ("modbus-emulator", signal.SIGTERM, 0.3),
+@pytest.mark.parametrize(("kind", "signum", "after_s", "sigint_ignored"), [
+    ("sim", signal.SIGTERM, 0.0, False),
+    ("sim", signal.SIGHUP, 0.0, False),
+    ("sim", signal.SIGINT, 0.0, True),  # a background job's: ignored as it started
+    ("canopen-emulator", signal.SIGTERM, 0.3, False),
+    ("modbus-emulator", signal.SIGTERM, 0.3, False),
 ])
 def test_a_signal_mid_motion_aborts_stops_and_disables(
-    tmp_path: Path, kind: str, signum: int, after_s: float
+    tmp_path: Path, kind: str, signum: signal.Signals, after_s: float, sigint_ignored: bool
 ) -> None:
-    code, console, after, cert = _calibrate_and_signal(tmp_path, kind, signum, after_s=after_s)
+    code, console, after, cert = _calibrate_and_signal(tmp_path, kind, signum, after_s=after_s,
+                                                       sigint_ignored=sigint_ignored)
     assert code != 0, console
     assert "Traceback" not in console, console
     assert cert["aborted"] is True

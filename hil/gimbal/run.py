@@ -24,7 +24,7 @@ from hil.gimbal.profile import GimbalProfile
 #: pytest's exit codes after which the next axis is not started: interrupted, internal
 #: error, usage error (a refusal before motion)
 STOPS_THE_GIMBAL = (2, 3, 4)
-STOP_SIGNALS = ("SIGTERM", "SIGHUP")  # besides SIGINT: passed on to the running axis
+STOP_SIGNALS = ("SIGINT", "SIGTERM", "SIGHUP")  # each passed on to the running axis
 INTERRUPTED = 2  # pytest's exit code of an interrupted run
 
 
@@ -100,8 +100,9 @@ def _calibrate_axis(argv: list[str]) -> int:
 
 @contextmanager
 def _stops_as_interrupts() -> Iterator[None]:
-    """SIGTERM and SIGHUP raise ``KeyboardInterrupt`` here, as SIGINT does (the
-    calibration treats the three alike); the earlier handlers come back after."""
+    """SIGINT, SIGTERM and SIGHUP raise ``KeyboardInterrupt`` here (the calibration
+    treats the three alike), SIGINT even when this process started with it ignored; the
+    earlier handlers come back after."""
     def interrupt(signum: int, _frame: FrameType | None) -> None:
         raise KeyboardInterrupt(signal.Signals(signum).name)
 
