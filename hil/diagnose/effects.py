@@ -17,7 +17,6 @@ from collections.abc import Callable
 from dataclasses import replace
 
 import numpy as np
-from numba import njit
 from numpy.typing import NDArray
 from scipy.optimize import minimize_scalar
 from scipy.signal import bilinear, lfilter
@@ -26,6 +25,7 @@ from hil.diagnose import ripple
 from hil.diagnose.lag import search_lag
 from hil.diagnose.model import Designer, Fit, IndexArray, Model, Term, friction_direction
 from hil.diagnose.signals import Signals
+from hil.identify.gravity_cable import dahl_state
 from hil.identify.orders import PursuitLimits, Segment, matching_pursuit, order_range
 
 log = logging.getLogger(__name__)
@@ -298,21 +298,6 @@ def _gravity(ctx: Context) -> Model | None:
     return _extend(ctx.current.model, term)
 
 
-@njit(cache=True)
-def _dahl(position: FloatArray, angle: float) -> FloatArray:  # pragma: no cover - numba
-    """Normalised Dahl state: relaxes towards the direction of travel over ``angle``."""
-    out = np.empty_like(position)
-    z = 0.0
-    out[0] = 0.0
-    for i in range(1, position.shape[0]):
-        step = position[i] - position[i - 1]
-        if step != 0.0:
-            target = 1.0 if step > 0.0 else -1.0
-            z = target + (z - target) * math.exp(-abs(step) / angle)
-        out[i] = z
-    return out
-
-
 def _cable_term(angle: float | None, constant: bool) -> Term:
     """Spring ``k·θ`` (+ constant), with a Dahl hysteresis loop when ``angle`` is given."""
     labels: tuple[str, ...] = ("cable_stiffness",)
@@ -324,7 +309,7 @@ def _cable_term(angle: float | None, constant: bool) -> Term:
     def build(s: Signals) -> FloatArray:
         columns = [s.position]
         if angle is not None:
-            columns.append(_dahl(np.ascontiguousarray(s.position), angle))
+            columns.append(dahl_state(np.ascontiguousarray(s.position), angle))
         if constant:
             columns.append(np.ones(len(s)))
         return np.column_stack(columns)

@@ -32,6 +32,7 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+from numba import njit
 from numpy.typing import NDArray
 from scipy.optimize import minimize_scalar
 
@@ -239,15 +240,26 @@ def cable_loop_torque_nm(
     ndarray
         The hysteresis torque at each sample (N·m).
     """
-    steps = np.diff(position_rad, prepend=position_rad[0])
-    target = half_width_nm * np.sign(steps)
-    decay = np.exp(-np.abs(steps) / angle_rad)
-    torque = np.empty_like(position_rad)
-    state = 0.0
-    for k in range(len(steps)):
-        state = target[k] + (state - target[k]) * decay[k]
-        torque[k] = state
-    return torque
+    return half_width_nm * dahl_state(np.ascontiguousarray(position_rad, dtype=float),
+                                       angle_rad)
+
+
+@njit(cache=True)
+def dahl_state(position_rad: FloatArray, angle_rad: float) -> FloatArray:  # pragma: no cover
+    """The Dahl loop normalised to its half width (−1 … 1), from a relaxed (zero) state:
+    each step relaxes it towards the step's direction of travel by ``exp(−|step|/s₀)``; a
+    standstill keeps it. (Compiled: a sample-by-sample recursion.)"""
+    state = np.empty_like(position_rad)
+    z = 0.0
+    if position_rad.shape[0]:
+        state[0] = 0.0
+    for i in range(1, position_rad.shape[0]):
+        step = position_rad[i] - position_rad[i - 1]
+        if step != 0.0:
+            target = 1.0 if step > 0.0 else -1.0
+            z = target + (z - target) * math.exp(-abs(step) / angle_rad)
+        state[i] = z
+    return state
 
 
 def load_stiffness(
