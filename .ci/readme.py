@@ -10,6 +10,10 @@ numbers and dates masked, must appear in what the block printed (same words, col
 units and verdicts; values may differ from seed to seed); ``<word>`` in an excerpt stands
 for any one word (the station's host name).
 
+``run --rest`` runs two blocks at a time (each writes files of its own), each block's
+output printed whole, in the README's order; a block marked ``<!-- CI: after the blocks
+above -->`` (it reads what they wrote) starts when every block before it has ended.
+
     python .ci/readme.py list            the blocks, numbered, and which run
     python .ci/readme.py run N [N ...]   run these blocks (1-based)
     python .ci/readme.py run --rest      every run block but the first two (the set-up)
@@ -20,11 +24,14 @@ from __future__ import annotations
 import re
 import subprocess
 import sys
+from concurrent.futures import Future, ThreadPoolExecutor, wait
 from dataclasses import dataclass
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 SKIP = re.compile(r"<!--\s*not run in CI:\s*(?P<reason>.+?)\s*-->")
+AFTER = re.compile(r"<!--\s*CI: after the blocks above\b.*?-->")
+AT_ONCE = 2  # blocks run at a time by ``run --rest`` (CI's runner has two cores)
 EXIT = re.compile(r"#\s*exit (?P<code>\d+)\b")
 NUMBER = re.compile(r"[-+]?\d[\d:.\-T]*(?:e[-+]?\d+)?")
 SETUP_BLOCKS = 2
@@ -37,6 +44,7 @@ class Block:
     commands: tuple[str, ...]
     skip_reason: str | None
     excerpt: tuple[str, ...]
+    after_the_blocks_above: bool = False
 
 
 def blocks(text: str) -> list[Block]:
@@ -62,7 +70,8 @@ def blocks(text: str) -> list[Block]:
             excerpt = tuple(x for x in lines[after + 1:close] if x.strip())
             end = close
         found.append(Block(len(found) + 1, start + 1, commands,
-                           skip.group("reason") if skip else None, excerpt))
+                           skip.group("reason") if skip else None, excerpt,
+                           AFTER.search(previous) is not None))
         i = end + 1
     return found
 
@@ -92,15 +101,17 @@ def script(block: Block) -> str:
     return "\n".join(parts) + "\n"
 
 
-def run(block: Block) -> list[str]:
-    """Run ``block``, its output streamed as it comes; the problems found."""
+def run(block: Block, *, stream: bool = True) -> tuple[list[str], list[str]]:
+    """Run ``block`` (its output streamed as it comes, or only kept); what it printed and
+    the problems found."""
     process = subprocess.Popen(["bash", "-o", "pipefail", "-c", script(block)], cwd=ROOT,
                                stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
     assert process.stdout is not None
     printed = []
     for line in process.stdout:
-        sys.stdout.write(line)
-        sys.stdout.flush()
+        if stream:
+            sys.stdout.write(line)
+            sys.stdout.flush()
         printed.append(line.rstrip("\n"))
     returncode = process.wait()
     problems = [] if returncode == 0 else [
@@ -114,6 +125,23 @@ def run(block: Block) -> list[str]:
         if not any(pattern.match(x) for x in shown):
             problems.append(f"README.md:{block.line}: output excerpt line not printed "
                             f"(numbers masked): {line.strip()[:120]}")
+    return printed, problems
+
+
+def run_at_once(chosen: list[Block]) -> list[str]:
+    """Run ``chosen`` :data:`AT_ONCE` at a time (a block marked to run after the blocks
+    above waits for them); each block's output printed whole, in order; the problems."""
+    problems: list[str] = []
+    with ThreadPoolExecutor(max_workers=AT_ONCE) as pool:
+        started: list[Future[tuple[list[str], list[str]]]] = []
+        for block in chosen:
+            if block.after_the_blocks_above:
+                wait(started)
+            started.append(pool.submit(run, block, stream=False))
+        for future in started:
+            printed, found = future.result()
+            print("\n".join(printed), flush=True)
+            problems += found
     return problems
 
 
@@ -135,7 +163,8 @@ def main(argv: list[str]) -> int:
                 print(f"README.md:{block.line}: not run in CI: {block.skip_reason}")
     else:
         chosen = [found[int(n) - 1] for n in argv[1:]]
-    problems = [p for block in chosen for p in run(block)]
+    problems = (run_at_once(chosen) if argv[1:] == ["--rest"]
+                else [p for block in chosen for p in run(block)[1]])
     for problem in problems:
         print(problem, file=sys.stderr)
     print(f"README blocks: {len(chosen)} run, {len(problems)} problem(s)")
