@@ -20,6 +20,7 @@ from datetime import UTC, datetime
 from pathlib import Path
 
 from hil.budget import StorageError, storage_error
+from hil.details import Details
 from hil.drives.base import Drive, DriveInfo, Interrupted
 from hil.drives.station import StationIdentity
 from hil.errors import DriveError, InputError
@@ -174,7 +175,7 @@ class CalibrationRun:
         self.artifacts: list[Artifact] = []
         self.measurements: list[Measurement] = []
         self.protocols: dict[str, ProtocolRecord] = {}
-        self.details: dict[str, dict[str, object]] = {}
+        self.details: dict[str, Details] = {}  # by protocol (hil.details)
         # every result the profile declares → the protocol that measures it (the suite's
         # catalogue): what is missing at the end makes the run INCOMPLETE
         self.expected: dict[str, str] = {}

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
+from typing import Any, cast
 
 import numpy as np
 import pytest
@@ -28,6 +29,9 @@ from hil.suite.cogging import (
     NAME,
     NEEDS,
     SWEEP_PASSES,
+    CoggingDetails,
+    CoggingHarmonic,
+    RippleHarmonic,
     Spec,
     analyse,
     excitation,
@@ -102,23 +106,24 @@ def result(drive: Drive, calibration: CalibrationRun, profile: UnitProfile
         json.dumps(table, indent=2, ensure_ascii=False) + "\n",
         description="cogging and K_t ripple compensation table (format: hil/identify/cogging.py)",
     )
-    calibration.details[NAME] = {
+    calibration.details[NAME] = CoggingDetails(
         **runs.details(),
-        "compensation_table": str(path),
-        "passes": passes_from,
-        "recordings_analysed": analysed_elsewhere,
-        "pass_samples": spec.pass_samples,
-        "pass_first_sample": first_sample,
-        "speed_rad_s": spec.speed_rad_s,
-        "orders": [h.order for h in analysed.cogging],
-        "cogging": table["cogging"],
-        "kt_ripple": table["kt_ripple"],
-        "torque_levels_nm": list(analysed.torque_levels_nm),
-        "inertia_for_acceleration_correction_kg_m2": inertia,
-        "inertia_source": source,
-        "noise_rms_nm": analysed.noise_rms_nm,
-        "recorded_rows": rows,
-    }
+        compensation_table=str(path),
+        passes=passes_from,
+        recordings_analysed=analysed_elsewhere,
+        pass_samples=spec.pass_samples,
+        pass_first_sample=first_sample,
+        speed_rad_s=spec.speed_rad_s,
+        orders=tuple(h.order for h in analysed.cogging),
+        cogging=tuple(CoggingHarmonic(**h) for h in cast(list[dict[str, Any]], table["cogging"])),
+        kt_ripple=tuple(RippleHarmonic(**h)
+                        for h in cast(list[dict[str, Any]], table["kt_ripple"])),
+        torque_levels_nm=tuple(analysed.torque_levels_nm),
+        inertia_for_acceleration_correction_kg_m2=inertia,
+        inertia_source=source,
+        noise_rms_nm=analysed.noise_rms_nm,
+        recorded_rows=rows,
+    )
     return runs.estimates
 
 

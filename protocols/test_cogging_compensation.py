@@ -19,6 +19,7 @@ from hil.identify.estimate import Estimate
 from hil.measurement import Declared, declare
 from hil.motion import Mode
 from hil.profile import UnitProfile
+from hil.suite.cogging import CoggingDetails
 from hil.suite.cogging_compensation import (
     MEASUREMENTS,
     NAME,
@@ -26,6 +27,8 @@ from hil.suite.cogging_compensation import (
     REQUIRES,
     TABLE,
     TABLE_LINE,
+    CoggingCompensationDetails,
+    LargestOrder,
     Spec,
     analyse,
     excitation,
@@ -70,10 +73,11 @@ def result(cleared: Drive, calibration: CalibrationRun, profile: UnitProfile
            ) -> dict[str, Estimate]:
     drive = cleared
     note_fallbacks(calibration, NAME, NEEDS)
-    path = calibration.details.get(TABLE.protocol, {}).get(TABLE.result)
-    if not isinstance(path, str):
+    cogging = calibration.details.get(TABLE.protocol)
+    if not isinstance(cogging, CoggingDetails):
         pytest.skip("no cogging_compensation.json in this calibration (the cogging protocol "
                     "did not run before this one)")
+    path = cogging.compensation_table
     with open(path, encoding="utf-8") as handle:
         data = json.load(handle)
     table = table_from_json(data)
@@ -104,15 +108,15 @@ def result(cleared: Drive, calibration: CalibrationRun, profile: UnitProfile
     runs = run_repeated(run_once, lambda found: found[0], rule=spec.stop,
                         calibration=calibration, shared=(TABLE_LINE,))
     largest = runs.first[1]
-    calibration.details[NAME] = {
+    calibration.details[NAME] = CoggingCompensationDetails(
         **runs.details(),
-        "table": path,
-        "orders": orders(table),
-        "table_relative_uncertainty": {str(n): u for n, u in relative_u.items()},
-        "largest_order": {"cleared": largest[0], "loaded": largest[1]},
+        table=path,
+        orders=tuple(orders(table)),
+        table_relative_uncertainty={str(n): u for n, u in relative_u.items()},
+        largest_order=LargestOrder(cleared=largest[0], loaded=largest[1]),
         # for the plot: the analysed stretch of each pass, from its first sample
-        "analysed_s": [spec.ramp_s + spec.skip_s, spec.ramp_s + spec.pass_s],
-    }
+        analysed_s=(spec.ramp_s + spec.skip_s, spec.ramp_s + spec.pass_s),
+    )
     return runs.estimates
 
 

@@ -8,8 +8,6 @@ Library: :mod:`hil.suite.current_loop`.
 
 from __future__ import annotations
 
-import dataclasses
-
 import pytest
 
 from hil.calibration import CalibrationRun
@@ -22,7 +20,15 @@ from hil.identify.estimate import Estimate
 from hil.measurement import Declared, declare
 from hil.profile import UnitProfile
 from hil.recording import Recording
-from hil.suite.current_loop import MEASUREMENTS, NAME, Spec, analyse, excitation
+from hil.suite.current_loop import (
+    MEASUREMENTS,
+    NAME,
+    CurrentLoopDetails,
+    LagPoint,
+    Spec,
+    analyse,
+    excitation,
+)
 from hil.suite.rate import sample_rate_shortfall
 from hil.suite.stop_rule import run_repeated
 
@@ -58,22 +64,18 @@ def result(drive: Drive, calibration: CalibrationRun, profile: UnitProfile
     runs = run_repeated(run_once, lambda found: {MEASUREMENTS[0]: found[0].time_constant},
                         rule=spec.stop, calibration=calibration)
     analysed, recording = runs.first
-    calibration.details[NAME] = {
+    calibration.details[NAME] = CurrentLoopDetails(
         **runs.details(),
-        "torque_hold": dataclasses.asdict(torque_hold_s(recording.metadata, fs_hz=spec.fs_hz)),
-        "viscous_over_inertia_1_s": analysed.viscous_over_inertia_1_s,
-        "chi2_per_dof": analysed.chi2_per_dof,
-        "points": [
-            {
-                "frequency_hz": p.frequency_hz,
-                "lag_phase_rad": p.lag_phase_rad,
-                "lag_phase_u_rad": p.lag_phase_u_rad,
-                "inertia_kg_m2": p.inertia_kg_m2,
-                "torque_amplitude_nm": p.torque_amplitude_nm,
-            }
+        torque_hold=torque_hold_s(recording.metadata, fs_hz=spec.fs_hz),
+        viscous_over_inertia_1_s=analysed.viscous_over_inertia_1_s,
+        chi2_per_dof=analysed.chi2_per_dof,
+        points=tuple(
+            LagPoint(frequency_hz=p.frequency_hz, lag_phase_rad=p.lag_phase_rad,
+                     lag_phase_u_rad=p.lag_phase_u_rad, inertia_kg_m2=p.inertia_kg_m2,
+                     torque_amplitude_nm=p.torque_amplitude_nm)
             for p in analysed.points
-        ],
-    }
+        ),
+    )
     return runs.estimates
 
 

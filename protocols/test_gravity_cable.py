@@ -22,7 +22,14 @@ from hil.identify.gravity_cable import (
 )
 from hil.measurement import Declared, declare
 from hil.profile import UnitProfile
-from hil.suite.gravity_cable import MEASUREMENTS, NAME, Spec, analyse, excitation
+from hil.suite.gravity_cable import (
+    MEASUREMENTS,
+    NAME,
+    GravityCableDetails,
+    Spec,
+    analyse,
+    excitation,
+)
 from hil.suite.stop_rule import run_repeated
 from hil.suite.travel import on_command_grid
 
@@ -66,22 +73,22 @@ def result(drive: Drive, calibration: CalibrationRun, spec: Spec) -> dict[str, E
         found[0].mge, found[0].phase, found[0].stiffness, found[0].hysteresis)},
         rule=spec.stop, calibration=calibration)
     analysed, rows = runs.first
-    calibration.details[NAME] = {
+    calibration.details[NAME] = GravityCableDetails(
         **runs.details(),
-        "recorded_rows": rows,
-        "offset_nm": analysed.offset_nm,
-        "cable_hysteresis_angle_rad": analysed.hysteresis_angle_rad,
-        "cable_hysteresis_angle_u_rad": analysed.hysteresis_angle_u_rad,
-        "cable_hysteresis_covariance": analysed.hysteresis_covariance,
-        "loop_half_width_nm": analysed.loop_half_width_nm,
-        "sliding_friction_at_sweep_speed_nm": analysed.friction_nm,
-        "bins": analysed.bins,
-        "residual_rms_nm": analysed.residual_rms_nm,
-        "load_nm_by_elevation_rad": [
-            [float(c), float(v)]
+        recorded_rows=rows,
+        offset_nm=analysed.offset_nm,
+        cable_hysteresis_angle_rad=analysed.hysteresis_angle_rad,
+        cable_hysteresis_angle_u_rad=analysed.hysteresis_angle_u_rad,
+        cable_hysteresis_covariance=analysed.hysteresis_covariance,
+        loop_half_width_nm=analysed.loop_half_width_nm,
+        sliding_friction_at_sweep_speed_nm=analysed.friction_nm,
+        bins=analysed.bins,
+        residual_rms_nm=analysed.residual_rms_nm,
+        load_nm_by_elevation_rad=tuple(
+            (float(c), float(v))
             for c, v in zip(analysed.bin_centres_rad, analysed.load_nm, strict=True)
-        ],
-    }
+        ),
+    )
     return runs.estimates
 
 

@@ -27,6 +27,8 @@ from hil.suite.inertia_elevation import (
     NAME,
     NEEDS,
     REQUIRES,
+    ElevationPoint,
+    InertiaElevationDetails,
     Spec,
     inertia_at_elevation,
     motion,
@@ -95,27 +97,24 @@ def result(
     finally:
         drive.set_elevation(spec.park_elevation_rad)
     analysed, inertias = runs.first
-    calibration.details[NAME] = {
+    calibration.details[NAME] = InertiaElevationDetails(
         **runs.details(),
-        "model": "J(el) = J_zenith + ΔJ·cos²(el) + P·sin(2el)",
-        "travel_rad": list(analysed.travel_rad),
-        "largest_at_elevation_rad": analysed.extremes_rad[0],
-        "smallest_at_elevation_rad": analysed.extremes_rad[1],
-        "per_elevation": [
-            {
-                "elevation_rad": el,
-                "inertia_kg_m2": j.value,
-                "standard_uncertainty": j.standard_uncertainty,
-            }
+        model="J(el) = J_zenith + ΔJ·cos²(el) + P·sin(2el)",
+        travel_rad=analysed.travel_rad,
+        largest_at_elevation_rad=analysed.extremes_rad[0],
+        smallest_at_elevation_rad=analysed.extremes_rad[1],
+        per_elevation=tuple(
+            ElevationPoint(elevation_rad=el, inertia_kg_m2=j.value,
+                           standard_uncertainty=j.standard_uncertainty)
             for el, j in zip(spec.elevations_rad, inertias, strict=True)
-        ],
-        "torque_scale": (
+        ),
+        torque_scale=(
             "shaft torque (K_t protocol's gain applied)"
             if gain is not None
             else "reported torque (no K_t result)"
         ),
-        "chi2_per_dof": analysed.chi2_per_dof,
-    }
+        chi2_per_dof=analysed.chi2_per_dof,
+    )
     return runs.estimates
 
 

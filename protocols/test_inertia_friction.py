@@ -22,6 +22,9 @@ from hil.suite.inertia_friction import (
     MEASUREMENTS,
     NAME,
     NEEDS,
+    EarlierInputs,
+    InertiaFrictionDetails,
+    SineComponent,
     Spec,
     analyse_in_calibration,
     motion,
@@ -59,30 +62,30 @@ def result(
     for move in sequence[:len(sequence) - len(sines)]:  # once: a repeat stays at the centre
         calibration.run(drive, move, protocol=NAME)
 
-    def run_once() -> tuple[InertiaFrictionResult, dict[str, Estimate], dict[str, object]]:
+    def run_once() -> tuple[InertiaFrictionResult, dict[str, Estimate], EarlierInputs]:
         recordings = [calibration.run(drive, e, protocol=NAME) for e in sines]
         return analyse_in_calibration(recordings, spec, calibration)
 
     runs = run_repeated(run_once, lambda found: found[1], rule=spec.stop, calibration=calibration)
     analysed, _, corrections = runs.first  # the first run's fit and inputs, for the details
-    calibration.details[NAME] = {
+    calibration.details[NAME] = InertiaFrictionDetails(
         **runs.details(),
-        "method": spec.method,
-        "frequency_hz": spec.frequency_hz,
-        "settle_periods": spec.settle_periods,
-        **corrections,
-        "fit_pct": round(analysed.fit_pct, 2),
-        "noise_rms_nm": analysed.noise_rms_nm,
-        "components": [
-            {
-                "velocity_amplitude_rad_s": r.velocity_amplitude_rad_s,
-                "quadrature_c_nm": r.quadrature_nm,
-                "in_phase_s_nm": r.in_phase_nm,
-                "periods": r.periods,
-            }
+        method=spec.method,
+        frequency_hz=spec.frequency_hz,
+        settle_periods=spec.settle_periods,
+        centre_rad=corrections.centre_rad,
+        load_stiffness_nm_rad=corrections.load_stiffness_nm_rad,
+        cable_loop_removed=corrections.cable_loop_removed,
+        current_loop_lag_compensated_s=corrections.current_loop_lag_compensated_s,
+        fit_pct=round(analysed.fit_pct, 2),
+        noise_rms_nm=analysed.noise_rms_nm,
+        components=tuple(
+            SineComponent(velocity_amplitude_rad_s=r.velocity_amplitude_rad_s,
+                          quadrature_c_nm=r.quadrature_nm, in_phase_s_nm=r.in_phase_nm,
+                          periods=r.periods)
             for r in analysed.runs
-        ],
-    }
+        ),
+    )
     return runs.estimates
 
 

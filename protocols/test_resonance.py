@@ -27,7 +27,9 @@ from hil.suite.resonance import (
     MEASUREMENTS,
     NAME,
     NEEDS,
+    FrfPoint,
     MultisineSpec,
+    ResonanceDetails,
     analyse,
     excitation,
     measured_time_constant_s,
@@ -74,26 +76,22 @@ def result(drive: Drive, calibration: CalibrationRun, profile: UnitProfile) -> R
     recording = calibration.run(drive, measured, protocol=NAME)
     analysed = analyse(recording, spec, time_constant_s=measured_time_constant_s(calibration))
     m = analysed.model
-    calibration.details[NAME] = {
-        "excitation": "multisine" if isinstance(spec, MultisineSpec) else "stepped_sine",
-        "model": "P/T = (s²/ωa² + 2ζa s/ωa + 1)/(s²/ωr² + 2ζr s/ωr + 1) / (J s (s + B/J)(τ s + 1))",
-        "inertia_total_kg_m2": m.inertia_kg_m2,
-        "antiresonance_damping_ratio": m.antiresonance_damping,
-        "viscous_over_inertia_1_s": m.viscous_over_inertia_1_s,
-        "current_loop_time_constant_s": m.time_constant_s,
-        "velocity_loop_bandwidth_hz": analysed.bandwidth_hz,
-        "chi2_per_dof": analysed.chi2_per_dof,
-        "frf": [
-            {
-                "frequency_hz": p.frequency_hz,
-                "magnitude_rad_nm": abs(p.frf_rad_nm),
-                "phase_rad": math.atan2(p.frf_rad_nm.imag, p.frf_rad_nm.real),
-                "relative_u": p.relative_u,
-                "coherence": p.coherence,
-            }
+    calibration.details[NAME] = ResonanceDetails(
+        excitation="multisine" if isinstance(spec, MultisineSpec) else "stepped_sine",
+        model="P/T = (s²/ωa² + 2ζa s/ωa + 1)/(s²/ωr² + 2ζr s/ωr + 1) / (J s (s + B/J)(τ s + 1))",
+        inertia_total_kg_m2=m.inertia_kg_m2,
+        antiresonance_damping_ratio=m.antiresonance_damping,
+        viscous_over_inertia_1_s=m.viscous_over_inertia_1_s,
+        current_loop_time_constant_s=m.time_constant_s,
+        velocity_loop_bandwidth_hz=analysed.bandwidth_hz,
+        chi2_per_dof=analysed.chi2_per_dof,
+        frf=tuple(
+            FrfPoint(frequency_hz=p.frequency_hz, magnitude_rad_nm=abs(p.frf_rad_nm),
+                     phase_rad=math.atan2(p.frf_rad_nm.imag, p.frf_rad_nm.real),
+                     relative_u=p.relative_u, coherence=p.coherence)
             for p in analysed.points
-        ],
-    }
+        ),
+    )
     return analysed
 
 

@@ -18,6 +18,7 @@ from hil.suite.standstill import (
     MEASUREMENTS,
     NAME,
     Spec,
+    StandstillDetails,
     analyse,
     analysed_windows,
     excitation,
@@ -49,16 +50,16 @@ def result(drive: Drive, calibration: CalibrationRun, profile: UnitProfile
     runs = run_repeated(run_once, lambda found: found[0], rule=spec.stop,
                         calibration=calibration)
     _, blocks, hold = runs.first
-    calibration.details[NAME] = {
+    calibration.details[NAME] = StandstillDetails(
         **runs.details(),
-        "hold_positions_rad": [float(hold.command[stop - 1])
-                               for _, stop in analysed_windows(hold, spec)],
-        "hold_s": spec.hold_s,
+        hold_positions_rad=tuple(float(hold.command[stop - 1])
+                                 for _, stop in analysed_windows(hold, spec)),
+        hold_s=spec.hold_s,
         # for the plot: each block's samples in the recording
-        "block_windows": [list(w) for w in analysed_windows(hold, spec)],
-        "block_torque_rms_mnm": [float(v) * 1e3 for v in blocks.torque_rms_nm],
-        "block_position_rms_urad": [float(v) * 1e6 for v in blocks.position_rms_rad],
-    }
+        block_windows=tuple((int(a), int(b)) for a, b in analysed_windows(hold, spec)),
+        block_torque_rms_mnm=tuple(float(v) * 1e3 for v in blocks.torque_rms_nm),
+        block_position_rms_urad=tuple(float(v) * 1e6 for v in blocks.position_rms_rad),
+    )
     return runs.estimates
 
 

@@ -21,7 +21,9 @@ from hil.suite.stribeck import (
     MEASUREMENTS,
     NAME,
     NEEDS,
+    FrictionPoint,
     Spec,
+    StribeckDetails,
     analyse,
     cross_check,
     excitation,
@@ -64,29 +66,26 @@ def result(drive: Drive, calibration: CalibrationRun, profile: UnitProfile
                             found[0].stribeck_velocity)},
         rule=spec.stop, calibration=calibration)
     analysed, rows = runs.first
-    calibration.details[NAME] = {
+    calibration.details[NAME] = StribeckDetails(
         **runs.details(),
-        "recorded_rows": rows,
-        "coulomb_nm": analysed.coulomb.value,
-        "viscous_nm_s_rad": analysed.viscous.value,
-        "residual_rms_nm": analysed.residual_rms_nm,
-        "kt_ripple_correction": "cogging protocol's table" if ripple else "none",
-        "lowest_clean_speed_rad_s": analysed.lowest_clean_speed_rad_s,
-        "stick_slip_speeds_rad_s": [p.speed_rad_s for p in analysed.points if p.stick_slip],
-        "points": [
-            {
-                "speed_rad_s": p.speed_rad_s,
-                "friction_nm": finite_or_none(p.friction_nm),
-                "friction_u_nm": finite_or_none(p.friction_u_nm),
-                "stick_slip": p.stick_slip,
-            }
+        recorded_rows=rows,
+        coulomb_nm=analysed.coulomb.value,
+        viscous_nm_s_rad=analysed.viscous.value,
+        residual_rms_nm=analysed.residual_rms_nm,
+        kt_ripple_correction="cogging protocol's table" if ripple else "none",
+        lowest_clean_speed_rad_s=analysed.lowest_clean_speed_rad_s,
+        stick_slip_speeds_rad_s=tuple(p.speed_rad_s for p in analysed.points if p.stick_slip),
+        points=tuple(
+            FrictionPoint(speed_rad_s=p.speed_rad_s, friction_nm=finite_or_none(p.friction_nm),
+                          friction_u_nm=finite_or_none(p.friction_u_nm),
+                          stick_slip=p.stick_slip)
             for p in analysed.points
-        ],
-        "cross_check_sine": cross_check(analysed, calibration),
-        "note": "steady sliding friction includes the cable's hysteresis half-width "
+        ),
+        cross_check_sine=cross_check(analysed, calibration),
+        note="steady sliding friction includes the cable's hysteresis half-width "
         "(direction-dependent, not separable at constant speed): coulomb_nm here holds it, "
         "static_friction_nm has it taken out when gravity_cable measured it",
-    }
+    )
     return runs.estimates
 
 

@@ -31,7 +31,9 @@ from hil.suite.torque_constant import (
     NAME,
     NEEDS,
     REQUIRES,
+    LockedAngle,
     Spec,
+    TorqueConstantDetails,
     analyse_sweep,
     estimates,
     kt_ripple_from_cogging,
@@ -83,25 +85,21 @@ def result(
     runs = run_repeated(run_once, lambda found: estimates(found[0], spec), rule=spec.stop,
                         calibration=calibration)
     sweeps = runs.first[1]
-    calibration.details[NAME] = {
+    calibration.details[NAME] = TorqueConstantDetails(
         **runs.details(),
-        "kt_ripple_correction": "cogging protocol's table" if ripple else "none",
-        "angles": ("configured, each nudged so the largest K_t ripple harmonic averages out"
-                   if ripple else "configured"),
-        "per_angle": [
-            {
-                "angle_rad": s.angle_rad,
-                "slope_nm_a": s.slope_nm_a,
-                "intercept_nm": s.intercept_nm,
-                "gain": s.gain,
-                "max_residual_nm": s.max_residual_nm,
-            }
+        kt_ripple_correction="cogging protocol's table" if ripple else "none",
+        angles=("configured, each nudged so the largest K_t ripple harmonic averages out"
+                if ripple else "configured"),
+        per_angle=tuple(
+            LockedAngle(angle_rad=s.angle_rad, slope_nm_a=s.slope_nm_a,
+                        intercept_nm=s.intercept_nm, gain=s.gain,
+                        max_residual_nm=s.max_residual_nm)
             for s in sweeps
-        ],
-        "datasheet_torque_constant_nm_a": (
+        ),
+        datasheet_torque_constant_nm_a=(
             None if spec.kv_rpm_per_v is None else datasheet_torque_constant_nm_a(spec.kv_rpm_per_v)
         ),
-    }
+    )
     return runs.estimates
 
 

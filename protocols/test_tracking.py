@@ -26,7 +26,10 @@ from hil.suite.tracking import (
     MICRO,
     NAME,
     NEEDS,
+    Feedforward,
+    RunToRun,
     Spec,
+    TrackingDetails,
     analyse,
     excitation,
     feedforward_values,
@@ -73,17 +76,17 @@ def result(drive: Drive, calibration: CalibrationRun, profile: UnitProfile
     runs = run_repeated(run_once, lambda found: found[0], rule=spec.stop,
                         calibration=calibration, shared=(FEEDFORWARD_LINE,))
     _, f_off, f_on = runs.first
-    calibration.details[NAME] = {
+    calibration.details[NAME] = TrackingDetails(
         **runs.details(),
-        "feedforward": {"viscous_nm_s_rad": viscous, "coulomb_nm": coulomb,
-                        "relative_uncertainty": u_rel, "source": source,
-                        "sent_as": "torque offset (CiA 402 0x60B2)"},
-        "repeats": spec.repeats,
-        "run_to_run_sd_urad": {"no_ff": f_off.u_rms_rad * math.sqrt(f_off.runs) * MICRO,
-                               "ff": f_on.u_rms_rad * math.sqrt(f_on.runs) * MICRO},
-        "peak_error_no_ff_urad": f_off.peak_rad * MICRO,
-        "move_s": len(on.command) / on.fs_hz,
-    }
+        feedforward=Feedforward(viscous_nm_s_rad=viscous, coulomb_nm=coulomb,
+                                relative_uncertainty=u_rel, source=source,
+                                sent_as="torque offset (CiA 402 0x60B2)"),
+        repeats=spec.repeats,
+        run_to_run_sd_urad=RunToRun(no_ff=f_off.u_rms_rad * math.sqrt(f_off.runs) * MICRO,
+                                    ff=f_on.u_rms_rad * math.sqrt(f_on.runs) * MICRO),
+        peak_error_no_ff_urad=f_off.peak_rad * MICRO,
+        move_s=len(on.command) / on.fs_hz,
+    )
     return runs.estimates
 
 

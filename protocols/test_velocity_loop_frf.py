@@ -20,7 +20,14 @@ from hil.measurement import Declared, declare
 from hil.profile import UnitProfile
 from hil.suite.rate import sample_rate_shortfall
 from hil.suite.stop_rule import run_repeated
-from hil.suite.velocity_loop_frf import MEASUREMENTS, NAME, Spec, analyse, excitation
+from hil.suite.velocity_loop_frf import (
+    MEASUREMENTS,
+    NAME,
+    Spec,
+    VelocityLoopFrfDetails,
+    analyse,
+    excitation,
+)
 
 pytestmark = pytest.mark.protocol(NAME)
 
@@ -62,22 +69,22 @@ def result(drive: Drive, calibration: CalibrationRun, profile: UnitProfile
                         rule=spec.stop, calibration=calibration)
     analysed = runs.first
 
-    def db(values: np.ndarray) -> list[float]:
-        return [float(v) for v in 20 * np.log10(np.abs(values))]
+    def db(values: np.ndarray) -> tuple[float, ...]:
+        return tuple(float(v) for v in 20 * np.log10(np.abs(values)))
 
-    def deg(values: np.ndarray) -> list[float]:
-        return [float(v) for v in np.degrees(np.angle(values))]
+    def deg(values: np.ndarray) -> tuple[float, ...]:
+        return tuple(float(v) for v in np.degrees(np.angle(values)))
 
-    calibration.details[NAME] = {
+    calibration.details[NAME] = VelocityLoopFrfDetails(
         **runs.details(),
-        "frequencies_hz": [float(f) for f in analysed.frequencies_hz],
-        "closed_loop_db": db(analysed.closed_loop), "closed_loop_deg": deg(analysed.closed_loop),
-        "sensitivity_db": db(analysed.sensitivity),
-        "loop_gain_db": db(analysed.loop_gain), "loop_gain_deg": deg(analysed.loop_gain),
-        "controller_db": db(analysed.controller), "plant_db": db(analysed.plant),
-        "periods": analysed.periods,
-        "margins": "python-control stability_margins on frd(L = V/E)",
-    }
+        frequencies_hz=tuple(float(f) for f in analysed.frequencies_hz),
+        closed_loop_db=db(analysed.closed_loop), closed_loop_deg=deg(analysed.closed_loop),
+        sensitivity_db=db(analysed.sensitivity),
+        loop_gain_db=db(analysed.loop_gain), loop_gain_deg=deg(analysed.loop_gain),
+        controller_db=db(analysed.controller), plant_db=db(analysed.plant),
+        periods=analysed.periods,
+        margins="python-control stability_margins on frd(L = V/E)",
+    )
     return runs.estimates
 
 

@@ -19,7 +19,15 @@ from hil.measurement import Declared, declare
 from hil.profile import UnitProfile
 from hil.suite.rate import sample_rate_shortfall
 from hil.suite.stop_rule import run_repeated
-from hil.suite.velocity_step import MEASUREMENTS, NAME, Spec, analyse, excitation
+from hil.suite.velocity_step import (
+    MEASUREMENTS,
+    NAME,
+    SizedStep,
+    Spec,
+    VelocityStepDetails,
+    analyse,
+    excitation,
+)
 
 pytestmark = pytest.mark.protocol(NAME)
 
@@ -66,13 +74,13 @@ def result(drive: Drive, calibration: CalibrationRun, profile: UnitProfile
     runs = run_repeated(run_once, lambda found: found[0], rule=spec.stop,
                         calibration=calibration)
     steps = runs.first[1]
-    calibration.details[NAME] = {
+    calibration.details[NAME] = VelocityStepDetails(
         **runs.details(),
-        "velocity": f"encoder position, central difference, {spec.smooth_s * 1e3:g} ms "
-                    "zero-phase moving average",
-        "steps": [{"size": size, **dataclasses.asdict(f)} for size, f in steps],
-        "smooth_s": spec.smooth_s,  # for the plot: the velocity as analysed
-    }
+        velocity=f"encoder position, central difference, {spec.smooth_s * 1e3:g} ms "
+                 "zero-phase moving average",
+        steps=tuple(SizedStep(size=size, **dataclasses.asdict(f)) for size, f in steps),
+        smooth_s=spec.smooth_s,  # for the plot: the velocity as analysed
+    )
     return runs.estimates
 
 

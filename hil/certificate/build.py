@@ -107,7 +107,7 @@ def build_certificate(
             },
             "method_bias": {"file": Path(run.method_bias.source).name,
                             "sha256": run.method_bias.sha256},
-            "details": run.details,
+            "details": {name: found.to_json() for name, found in run.details.items()},
         },
         "machine_time": {
             "motion_time_s": round(sum(r.motion_time_s for r in run.protocols.values()), 3),

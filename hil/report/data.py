@@ -7,12 +7,17 @@ import math
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeVar
 
 import numpy as np
 
 from hil.calibration import CalibrationRun
+from hil.details import Details, DetailsError
 from hil.recording import Recording, read_recording
+from hil.suite.catalogue import CATALOGUE
+from hil.suite.cogging import CoggingDetails
+
+D = TypeVar("D", bound=Details)
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -23,8 +28,11 @@ class ProtocolData:
     ----------
     name : str
         The protocol (``inertia_friction``, ...).
-    details : mapping
-        The protocol's ``method.details`` entry of the certificate.
+    details : Details or None
+        The protocol's details (:mod:`hil.details`), read back from the certificate's
+        ``method.details`` entry; ``None`` when there are none or they do not read.
+    details_problem : str
+        Why ``details`` is ``None`` (empty when it is not).
     results : mapping
         Its judged results by parameter, as the certificate writes them.
     recordings : mapping
@@ -32,21 +40,31 @@ class ProtocolData:
     """
 
     name: str
-    details: Mapping[str, Any]
+    details: Details | None
     results: Mapping[str, Mapping[str, Any]]
     recordings: Mapping[str, Path]
+    details_problem: str = ""
 
     def value(self, parameter: str) -> float | None:
         """A result's value, or ``None`` when the run did not record it."""
         found = self.results.get(parameter)
         return None if found is None else float(found["value"])
 
-    def number(self, key: str, default: float | None = None) -> float | None:
-        """A finite number from the details, else ``default``."""
-        raw = self.details.get(key)
-        if isinstance(raw, int | float) and math.isfinite(raw):
-            return float(raw)
-        return default
+    def details_as(self, kind: type[D]) -> D | None:
+        """The details, as the protocol's declared type; ``None`` when the run recorded
+        none (it ended before).
+
+        Raises
+        ------
+        DetailsError
+            They did not read (saying why), or they are of another type.
+        """
+        if isinstance(self.details, kind):
+            return self.details
+        if self.details is None and not self.details_problem:
+            return None
+        raise DetailsError(self.details_problem or f"{self.name}: details are "
+                           f"{type(self.details).__name__}, not {kind.__name__}")
 
     def recording(self, excitation: str) -> Recording | None:
         """The raw recording of ``excitation``, read from its file."""
@@ -77,16 +95,38 @@ def from_certificate(cert: Mapping[str, Any], unit_dir: Path) -> list[ProtocolDa
     for name, protocol in cert["method"]["protocols"].items():
         if protocol["outcome"] == "SKIPPED":
             continue
+        details, problem = _read_details(name, cert["method"]["details"].get(name))
         out.append(ProtocolData(
             name=name,
-            details=cert["method"]["details"].get(name, {}),
+            details=details,
+            details_problem=problem,
             results={r["parameter"]: r for r in cert["results"] if r["protocol"] == name},
             recordings={**{f["excitation"]: unit_dir / f["file"] for f in cert["raw_data"]
                            if f["protocol"] == name and f["complete"]},
-                        **_analysed_elsewhere(cert["method"]["details"].get(name, {}),
-                                              unit_dir)},
+                        **_analysed_elsewhere(details, unit_dir)},
         ))
     return out
+
+
+def finite(value: float | None, default: float) -> float:
+    """``value`` when it is a finite number, else ``default``."""
+    return value if value is not None and math.isfinite(value) else default
+
+
+def _read_details(name: str, raw: object) -> tuple[Details | None, str]:
+    """A protocol's details read back as its declared type, or why they cannot be."""
+    protocol = CATALOGUE.get(name)
+    where = f"the certificate's details of {name}"
+    if protocol is None:
+        return None, f"{where}: no such protocol in this gimbal-hil"
+    if raw is None:
+        return None, ""  # the protocol ended before it recorded any
+    if not isinstance(raw, Mapping):
+        return None, f"{where}: an object expected, got {type(raw).__name__}"
+    try:
+        return protocol.details.from_json(raw, where=where), ""
+    except DetailsError as exc:
+        return None, str(exc)
 
 
 def from_run(run: CalibrationRun, name: str) -> ProtocolData:
@@ -105,22 +145,21 @@ def from_run(run: CalibrationRun, name: str) -> ProtocolData:
     """
     return ProtocolData(
         name=name,
-        details=run.details.get(name, {}),
+        details=run.details.get(name),
         results={m.spec.name: m.as_dict() for m in run.measurements if m.protocol == name},
         recordings={**{f.excitation: f.path for f in run.raw_files
                        if f.protocol == name and f.complete},
-                    **_analysed_elsewhere(run.details.get(name, {}), run.unit_dir)},
+                    **_analysed_elsewhere(run.details.get(name), run.unit_dir)},
     )
 
 
-def _analysed_elsewhere(details: Mapping[str, Any], unit_dir: Path) -> dict[str, Path]:
-    """Recordings another protocol made that this one analysed (its details'
-    ``recordings_analysed``: excitation name → file relative to the unit's directory), e.g.
-    the cogging protocol's passes when they are the gravity sweep's."""
-    found = details.get("recordings_analysed")
-    if not isinstance(found, Mapping):
+def _analysed_elsewhere(details: Details | None, unit_dir: Path) -> dict[str, Path]:
+    """Recordings another protocol made that this one analysed (excitation name → file
+    relative to the unit's directory): the cogging protocol's passes when they are the
+    gravity sweep's."""
+    if not isinstance(details, CoggingDetails):
         return {}
-    return {str(k): unit_dir / str(v) for k, v in found.items()}
+    return {k: unit_dir / v for k, v in details.recordings_analysed.items()}
 
 
 def sample_rate_hz(recording: Recording) -> float:

@@ -9,6 +9,7 @@ the run kept too little to draw (a protocol that stopped before its analysis).
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from functools import reduce
 
 import numpy as np
@@ -20,6 +21,10 @@ from hil.closed_loop.tracking import following_error
 from hil.recording import Recording
 from hil.report.data import ProtocolData, sample_rate_hz
 from hil.report.figures import COLOURS, MEASURED, MODEL, new_figure, thin
+from hil.suite.cogging_compensation import CoggingCompensationDetails
+from hil.suite.standstill import StandstillDetails
+from hil.suite.velocity_loop_frf import VelocityLoopFrfDetails
+from hil.suite.velocity_step import VelocityStepDetails
 
 FloatArray = NDArray[np.float64]
 MICRO = 1e6
@@ -38,10 +43,13 @@ def velocity_loop_frf(data: ProtocolData) -> Figure | None:
     """Bode plots of the measured closed loop ``T`` with the sensitivity ``|S|`` (−3 dB
     bandwidth and peak ``|S|`` marked) and of the loop gain ``L`` (gain and phase margins
     marked at their crossovers)."""
-    freqs = np.asarray(data.details.get("frequencies_hz") or [], dtype=float)
-    keys = ("closed_loop_db", "closed_loop_deg", "sensitivity_db", "loop_gain_db",
-            "loop_gain_deg")
-    series = [np.asarray(data.details.get(k) or [], dtype=float) for k in keys]
+    details = data.details_as(VelocityLoopFrfDetails)
+    if details is None:
+        return None
+    freqs = np.asarray(details.frequencies_hz, dtype=float)
+    series = [np.asarray(s, dtype=float) for s in (
+        details.closed_loop_db, details.closed_loop_deg, details.sensitivity_db,
+        details.loop_gain_db, details.loop_gain_deg)]
     figures = [data.value(f"velocity_{n}") for n in ("bandwidth_hz", "gain_margin_db",
                                                      "phase_margin_deg", "sensitivity_peak_db")]
     if freqs.size < 2 or any(s.size != freqs.size for s in series):
@@ -120,21 +128,21 @@ def velocity_step(data: ProtocolData) -> Figure | None:
     """Every step of the staircases, normalised to its size (``(v − v₀)/Δ``) against the
     time after the step, small and large apart: each step's 10 % and 90 % crossings, the
     2 % settling band, the mean overshoot and settling time."""
-    steps = data.details.get("steps") or []
-    smooth_s = data.number("smooth_s")
+    details = data.details_as(VelocityStepDetails)
     runs = [r for r in (data.recording("steps_forward"), data.recording("steps_backward"))
             if r is not None]
-    if not steps or smooth_s is None or not runs:
+    if details is None or not details.steps or not runs:
         return None
-    smallest = min(abs(float(s["target_rad_s"]) - float(s["start_rad_s"])) for s in steps)
+    steps, smooth_s = details.steps, details.smooth_s
+    smallest = min(abs(s.target_rad_s - s.start_rad_s) for s in steps)
     responses = [s for recording in runs
                  for s in _step_responses(recording, smooth_s, jump_rad_s=0.5 * smallest)]
     if len(responses) != len(steps):
         return None
     fig = new_figure()
-    settling_ms = max(float(s["settling_time_s"]) for s in steps) * MILLI
+    settling_ms = max(s.settling_time_s for s in steps) * MILLI
     for ax, size in zip(fig.axes, ("small", "large"), strict=True):
-        mine = [(s, r) for s, r in zip(steps, responses, strict=True) if s["size"] == size]
+        mine = [(s, r) for s, r in zip(steps, responses, strict=True) if s.size == size]
         rise, overshoot, settling = (data.value(f"step_{n}_{size}_{u}") for n, u in
                                      (("rise_time", "ms"), ("overshoot", "pct"),
                                       ("settling_time", "ms")))
@@ -148,7 +156,7 @@ def velocity_step(data: ProtocolData) -> Figure | None:
         for i, (step, (progress, fs_hz, lead)) in enumerate(mine):
             t_ms = (np.arange(len(progress)) - lead) / fs_hz * MILLI
             keep = t_ms <= span_ms
-            kind = _step_kind(float(step["start_rad_s"]), float(step["target_rad_s"]))
+            kind = _step_kind(step.start_rad_s, step.target_rad_s)
             colour = COLOURS[STEP_KINDS.index(kind) % len(COLOURS)]
             ax.plot(t_ms[keep], progress[keep], color=colour, lw=0.9, label=kind)
             crossings = [_first_crossing_ms(progress[lead:], fs_hz, level) for level in (0.1, 0.9)]
@@ -162,7 +170,7 @@ def velocity_step(data: ProtocolData) -> Figure | None:
                     fontsize=6, color=MODEL, va="center")
         figures = [f"{name} {value:.3g} {unit}" for name, value, unit in
                    (("rise", rise, "ms"), ("overshoot", overshoot, "%")) if value is not None]
-        delta = abs(float(mine[0][0]["target_rad_s"]) - float(mine[0][0]["start_rad_s"]))
+        delta = abs(mine[0][0].target_rad_s - mine[0][0].start_rad_s)
         ax.axvline(0.0, color=MEASURED, lw=0.6)
         ax.set(xlim=(-STEP_LEAD_S * MILLI, span_ms),
                xlabel=f"time after a step of Δ = {delta:.2g} rad/s (ms)",
@@ -266,13 +274,14 @@ def standstill(data: ProtocolData) -> Figure | None:
     the block's straight line (what the RMS is taken of), end to end, with each block's
     ± RMS."""
     hold = data.recording("move_and_hold")
-    windows = data.details.get("block_windows") or []
-    torque_rms = data.details.get("block_torque_rms_mnm") or []
-    jitter_rms = data.details.get("block_position_rms_urad") or []
+    details = data.details_as(StandstillDetails)
     ripple, jitter = data.value("standstill_torque_ripple_mnm"), data.value(
         "standstill_jitter_urad")
-    if hold is None or not windows or not (len(windows) == len(torque_rms) == len(jitter_rms)) \
-            or ripple is None or jitter is None:
+    if hold is None or details is None or ripple is None or jitter is None:
+        return None
+    windows, torque_rms = details.block_windows, details.block_torque_rms_mnm
+    jitter_rms = details.block_position_rms_urad
+    if not windows or not len(windows) == len(torque_rms) == len(jitter_rms):
         return None
     fs_hz = sample_rate_hz(hold)
     blocks = len(windows)
@@ -311,7 +320,7 @@ def standstill(data: ProtocolData) -> Figure | None:
     return fig
 
 
-def _block_detrended(values: FloatArray, windows: list[list[int]]) -> FloatArray:
+def _block_detrended(values: FloatArray, windows: Sequence[tuple[int, int]]) -> FloatArray:
     """Each block (``[start, stop]`` samples) less its mean and straight line, end to end
     (as the standstill analysis takes them)."""
     rows = np.stack([np.asarray(values[int(a):int(b)], dtype=float) for a, b in windows])
@@ -333,8 +342,9 @@ def cogging_compensation(data: ProtocolData) -> Figure | None:
     """The position ripple against the angle within one period of the table's orders with
     the table cleared and loaded (binned means and the fitted harmonics), and each order's
     ripple amplitude cleared and loaded."""
-    orders = [int(o) for o in data.details.get("orders") or []]
-    window = data.details.get("analysed_s") or []
+    details = data.details_as(CoggingCompensationDetails)
+    orders = [] if details is None else list(details.orders)
+    window = () if details is None else details.analysed_s
     runs = [(label, data.recording(name)) for label, name in
             (("table cleared", "pass_uncompensated"), ("table loaded", "pass_compensated"))]
     cleared, loaded = (data.value(f"cogging_ripple_{n}_urad")

@@ -16,8 +16,11 @@ from matplotlib.figure import Figure
 from hil.identify.current_loop import sampled_response
 from hil.identify.orders import MAX_ORDER, Segment, periodogram
 from hil.identify.resonance import TwoMassModel, two_mass_response
-from hil.report.data import ProtocolData, sample_rate_hz
+from hil.report.data import ProtocolData, finite, sample_rate_hz
 from hil.report.figures import COLOURS, MEASURED, MODEL, new_figure
+from hil.suite.cogging import CoggingDetails
+from hil.suite.current_loop import CurrentLoopDetails
+from hil.suite.resonance import ResonanceDetails
 
 #: Fraction of each cogging pass left out at its start (the speed settling).
 PASS_SETTLE = 0.1
@@ -28,16 +31,16 @@ MAP_BINS = 120
 
 def current_loop(data: ProtocolData) -> Figure | None:
     """The lag phase at each frequency (± 2u) and the sampled-data model with the fitted τ."""
-    points = data.details.get("points") or []
+    details = data.details_as(CurrentLoopDetails)
     tau_ms = data.value("current_loop_time_constant_ms")
     sines = data.recording("sines")
-    if not points or tau_ms is None or sines is None:
+    if details is None or not details.points or tau_ms is None or sines is None:
         return None
-    hold = data.details.get("torque_hold") or {}
-    mean_samples = int(hold.get("mean_samples", 1))
-    fs_hz = 1.0 / float(hold["hold_s"]) if hold.get("hold_s") else sample_rate_hz(sines)
-    b_over_j = data.number("viscous_over_inertia_1_s", 0.0) or 0.0
-    freqs = np.array([p["frequency_hz"] for p in points])
+    points, hold = details.points, details.torque_hold
+    mean_samples = hold.mean_samples
+    fs_hz = 1.0 / hold.hold_s if hold.hold_s else sample_rate_hz(sines)
+    b_over_j = finite(details.viscous_over_inertia_1_s, 0.0)
+    freqs = np.array([p.frequency_hz for p in points])
     grid = np.linspace(0.8 * freqs.min(), min(1.1 * freqs.max(), 0.45 * fs_hz), 300)
 
     def phase_deg(tau_s: float) -> np.ndarray:
@@ -51,8 +54,8 @@ def current_loop(data: ProtocolData) -> Figure | None:
 
     fig = new_figure(columns=1)
     (ax,) = fig.axes
-    ax.errorbar(freqs, np.degrees([p["lag_phase_rad"] for p in points]),
-                yerr=np.degrees([2 * p["lag_phase_u_rad"] for p in points]), fmt="o",
+    ax.errorbar(freqs, np.degrees([p.lag_phase_rad for p in points]),
+                yerr=np.degrees([2 * p.lag_phase_u_rad for p in points]), fmt="o",
                 color=COLOURS[0], ms=4, capsize=2, label="measured lag phase ± 2u")
     ax.plot(grid, phase_deg(tau_ms * 1e-3), color=MODEL, lw=1.4,
             label=f"sampled-data model, τ = {tau_ms:.4g} ms")
@@ -65,24 +68,25 @@ def current_loop(data: ProtocolData) -> Figure | None:
 
 def resonance(data: ProtocolData) -> Figure | None:
     """Bode plot of the measured FRF (± 2u) and the fitted two-mass model."""
-    frf = data.details.get("frf") or []
+    details = data.details_as(ResonanceDetails)
     f_r, f_a = data.value("resonance_frequency_hz"), data.value("antiresonance_frequency_hz")
     zeta_r = data.value("resonance_damping_ratio")
-    inertia = data.number("inertia_total_kg_m2")
     sine = data.recording("multisine") or data.recording("stepped_sine")
-    if not frf or sine is None or f_r is None or f_a is None or zeta_r is None or inertia is None:
+    if (details is None or not details.frf or not math.isfinite(details.inertia_total_kg_m2)
+            or sine is None or f_r is None or f_a is None or zeta_r is None):
         return None
+    frf = details.frf
     fs_hz = sample_rate_hz(sine)
     model = TwoMassModel(
-        inertia_kg_m2=inertia, antiresonance_hz=f_a,
-        antiresonance_damping=data.number("antiresonance_damping_ratio", 0.0) or 0.0,
+        inertia_kg_m2=details.inertia_total_kg_m2, antiresonance_hz=f_a,
+        antiresonance_damping=finite(details.antiresonance_damping_ratio, 0.0),
         resonance_hz=f_r, resonance_damping=zeta_r,
-        viscous_over_inertia_1_s=data.number("viscous_over_inertia_1_s", 0.0) or 0.0,
-        time_constant_s=data.number("current_loop_time_constant_s", 0.0) or 0.0,
+        viscous_over_inertia_1_s=finite(details.viscous_over_inertia_1_s, 0.0),
+        time_constant_s=finite(details.current_loop_time_constant_s, 0.0),
     )
-    freqs = np.array([p["frequency_hz"] for p in frf])
-    magnitude = np.array([p["magnitude_rad_nm"] for p in frf])
-    relative_u = np.array([p["relative_u"] for p in frf])
+    freqs = np.array([p.frequency_hz for p in frf])
+    magnitude = np.array([p.magnitude_rad_nm for p in frf])
+    relative_u = np.array([p.relative_u for p in frf])
     grid = np.geomspace(freqs.min(), freqs.max(), 500)
     fitted = two_mass_response(model, grid, fs_hz=fs_hz)
     fig = new_figure(columns=1, rows=2, height_in=4.2)
@@ -92,7 +96,7 @@ def resonance(data: ProtocolData) -> Figure | None:
     top.plot(grid, np.abs(fitted), color=MODEL, lw=1.3, label="two-mass fit")
     top.set(xscale="log", yscale="log", ylabel="|position / torque| (rad/N·m)",
             title=f"resonance: f_r = {f_r:.4g} Hz, f_a = {f_a:.4g} Hz, ζ_r = {zeta_r:.3g}")
-    phase = np.degrees(np.unwrap([p["phase_rad"] for p in frf]))
+    phase = np.degrees(np.unwrap([p.phase_rad for p in frf]))
     model_phase = np.degrees(np.unwrap(np.angle(fitted)))
     # same branch as the data: shift the model by whole turns to its first measured point
     model_phase += 360.0 * np.round((phase[0] - np.interp(freqs[0], grid, model_phase)) / 360)
@@ -110,15 +114,16 @@ def cogging(data: ProtocolData) -> Figure | None:
     """The order spectrum of the detrended torque of both passes, orders found marked, and
     the map: the residual against the position within one period of the orders found, with
     the compensation table's cogging + K_t ripple at each pass's torque level."""
+    details = data.details_as(CoggingDetails)
     passes = data.recording("passes")
-    orders = [int(o) for o in data.details.get("orders") or []]
-    if passes is None or not orders:
+    if details is None or passes is None or not details.orders:
         return None
+    orders = list(details.orders)
     position, torque = passes.position, passes.effort
     # one pass up, one down, of equal length (the gravity sweep's have a run-in and a
     # reference before them, a probe after)
-    half = int(data.number("pass_samples") or len(position) // 2)
-    first = int(data.number("pass_first_sample") or 0)
+    half = details.pass_samples or len(position) // 2
+    first = details.pass_first_sample
     segments, levels = [], []
     for start in (first, first + half):
         index = np.arange(start + int(PASS_SETTLE * half), start + half)
@@ -145,7 +150,7 @@ def cogging(data: ProtocolData) -> Figure | None:
     fig.legend(*left.get_legend_handles_labels(), loc="outside lower left")
     period_rad = 2 * math.pi / reduce(math.gcd, orders)
     grid = np.linspace(0.0, period_rad, 300)
-    levels_detail = data.details.get("torque_levels_nm") or levels
+    levels_detail = details.torque_levels_nm or levels
     for i, (segment, colour) in enumerate(zip(segments, COLOURS, strict=False)):
         phase = np.mod(segment.position_rad, period_rad)
         which = np.minimum((phase / period_rad * MAP_BINS).astype(int), MAP_BINS - 1)
@@ -155,7 +160,7 @@ def cogging(data: ProtocolData) -> Figure | None:
         label = "up" if i == 0 else "down"
         right.plot(np.degrees(centres[counts > 0]), 1e3 * mean[counts > 0], ".", ms=2.5,
                    color=colour, label=f"measured, pass {label}")
-        model = _table_torque(data, grid, level_nm=float(levels_detail[i]))
+        model = _table_torque(details, grid, level_nm=float(levels_detail[i]))
         right.plot(np.degrees(grid), 1e3 * model, color=colour, lw=1.2, ls="--",
                    label=f"table, pass {label}")
     right.set(xlabel=f"position within {math.degrees(period_rad):.3g}° (°)",
@@ -165,12 +170,13 @@ def cogging(data: ProtocolData) -> Figure | None:
     return fig
 
 
-def _table_torque(data: ProtocolData, theta: np.ndarray, *, level_nm: float) -> np.ndarray:
+def _table_torque(details: CoggingDetails, theta: np.ndarray, *, level_nm: float
+                  ) -> np.ndarray:
     """Σ cogging A·sin(nθ + φ) + level·Σ ripple a·sin(nθ + ψ), from the compensation table."""
     total = np.zeros_like(theta)
-    for h in data.details.get("cogging") or []:
-        total += h["amplitude_nm"] * np.sin(h["order"] * theta + h["phase_rad"])
-    for h in data.details.get("kt_ripple") or []:
-        total += level_nm * h["amplitude"] * np.sin(h["order"] * theta + h["phase_rad"])
+    for c in details.cogging:
+        total += c.amplitude_nm * np.sin(c.order * theta + c.phase_rad)
+    for r in details.kt_ripple:
+        total += level_nm * r.amplitude * np.sin(r.order * theta + r.phase_rad)
     return total
 

@@ -14,8 +14,13 @@ from matplotlib.figure import Figure
 
 from hil.identify.sine_run import analyse_sine_run
 from hil.identify.stribeck import stribeck_curve
-from hil.report.data import ProtocolData
+from hil.report.data import ProtocolData, finite
 from hil.report.figures import COLOURS, MEASURED, MODEL, new_figure, thin
+from hil.suite.gravity_cable import GravityCableDetails
+from hil.suite.inertia_elevation import InertiaElevationDetails
+from hil.suite.inertia_friction import InertiaFrictionDetails
+from hil.suite.stribeck import StribeckDetails
+from hil.suite.torque_constant import TorqueConstantDetails
 
 SINE_NAME = re.compile(r"sine_(?P<hz>[0-9.]+)hz")
 
@@ -27,13 +32,15 @@ def inertia_friction(data: ProtocolData) -> Figure | None:
     runs = data.recordings_named("sine_")
     if j is None or b is None or tc is None or not runs:
         return None
+    details = data.details_as(InertiaFrictionDetails)
     fig = new_figure()
     left, right = fig.axes
-    settle = int(data.number("settle_periods", 2) or 2)
+    settle = 2 if details is None else details.settle_periods
     top_speed = 0.0
     for i, (name, recording) in enumerate(runs):
         match = SINE_NAME.match(name)
-        frequency_hz = data.number("frequency_hz") or (float(match["hz"]) if match else None)
+        frequency_hz = (details.frequency_hz if details is not None
+                        else float(match["hz"]) if match else None)
         if frequency_hz is None:
             continue
         run = analyse_sine_run(recording, frequency_hz=frequency_hz, settle_periods=settle,
@@ -68,22 +75,23 @@ def inertia_friction(data: ProtocolData) -> Figure | None:
 
 def stribeck(data: ProtocolData) -> Figure | None:
     """The staircase's speed points (± 2u; stick-slip speeds marked) and the fitted curve."""
-    points = data.details.get("points") or []
+    details = data.details_as(StribeckDetails)
     static, vs = data.value("static_friction_nm"), data.value("stribeck_velocity_rad_s")
-    coulomb, viscous = data.number("coulomb_nm"), data.number("viscous_nm_s_rad")
-    if not points or static is None or vs is None or coulomb is None or viscous is None:
+    if details is None or not details.points or static is None or vs is None:
         return None
+    points, coulomb, viscous = details.points, details.coulomb_nm, details.viscous_nm_s_rad
     fig = new_figure(columns=1)
     (ax,) = fig.axes
     for stick, marker, label in ((False, "o", "speed point ± 2u"),
                                  (True, "x", "stick-slip (left out)")):
-        chosen = [p for p in points if p["stick_slip"] == stick and p["friction_nm"] is not None]
+        chosen = [(p, p.friction_nm) for p in points
+                  if p.stick_slip == stick and p.friction_nm is not None]
         if not chosen:
             continue
-        ax.errorbar([p["speed_rad_s"] for p in chosen], [p["friction_nm"] for p in chosen],
-                    yerr=[2 * (p["friction_u_nm"] or 0.0) for p in chosen], fmt=marker,
+        ax.errorbar([p.speed_rad_s for p, _ in chosen], [friction for _, friction in chosen],
+                    yerr=[2 * (p.friction_u_nm or 0.0) for p, _ in chosen], fmt=marker,
                     color=MEASURED if stick else COLOURS[0], ms=4, capsize=2, label=label)
-    speeds = [p["speed_rad_s"] for p in points]
+    speeds = [p.speed_rad_s for p in points]
     grid = np.geomspace(min(speeds) / 1.5, max(speeds) * 1.5, 300)
     ax.plot(grid, stribeck_curve(grid, coulomb_nm=coulomb, static_nm=static,
                                  stribeck_velocity_rad_s=vs, viscous_nm_s_rad=viscous),
@@ -100,14 +108,15 @@ def stribeck(data: ProtocolData) -> Figure | None:
 def gravity_cable(data: ProtocolData) -> Figure | None:
     """The raw two-way sweep (torque against position: the hysteresis loop) with the load
     model ± the loop's half width, and the load per position bin with its fit."""
+    details = data.details_as(GravityCableDetails)
     sweep = data.recording("sweep")
-    if sweep is None or "load_nm_by_elevation_rad" not in data.details:
+    if sweep is None or details is None:
         return None
     # an axis without gravity (azimuth) declares no m·g·e: its load is the cable's alone
     mge, phase = data.value("gravity_mge_nm") or 0.0, data.value("gravity_phase_rad") or 0.0
     stiffness = data.value("cable_stiffness_nm_rad") or 0.0
-    offset = data.number("offset_nm", 0.0) or 0.0
-    half_width = data.number("loop_half_width_nm", 0.0) or 0.0
+    offset = finite(details.offset_nm, 0.0)
+    half_width = finite(details.loop_half_width_nm, 0.0)
 
     def load(theta: np.ndarray) -> np.ndarray:
         return mge * np.cos(theta + phase) + stiffness * theta + offset
@@ -130,7 +139,7 @@ def gravity_cable(data: ProtocolData) -> Figure | None:
              title="two-way sweep: the hysteresis loop")
     fig.legend(*left.get_legend_handles_labels(), loc="outside lower left", ncols=2,
                markerscale=8)
-    bins = np.asarray(data.details.get("load_nm_by_elevation_rad") or [], dtype=float)
+    bins = np.asarray(details.load_nm_by_elevation_rad, dtype=float)
     if bins.size:
         right.plot(bins[:, 0], bins[:, 1], "o", ms=2.5, color=COLOURS[2],
                    label="half sum of the passes, per bin")
@@ -145,26 +154,26 @@ def gravity_cable(data: ProtocolData) -> Figure | None:
 def inertia_elevation(data: ProtocolData) -> Figure | None:
     """J at each elevation (± 2u) and ``J(el) = J_zenith + ΔJ·cos²(el) + P·sin(2el)``, the
     travel's largest and smallest J marked."""
-    per = data.details.get("per_elevation") or []
+    details = data.details_as(InertiaElevationDetails)
     level, zenith = data.value("azimuth_inertia_level_kg_m2"), data.value(
         "azimuth_inertia_zenith_kg_m2")
     product = data.value("azimuth_inertia_product_kg_m2") or 0.0
     ratio = data.value("azimuth_inertia_ratio")
-    if not per or level is None or zenith is None or ratio is None:
+    if (details is None or not details.per_elevation or level is None or zenith is None
+            or ratio is None):
         return None
+    per = details.per_elevation
     fig = new_figure(columns=1)
     (ax,) = fig.axes
-    ax.errorbar([p["elevation_rad"] for p in per], [p["inertia_kg_m2"] for p in per],
-                yerr=[2 * p["standard_uncertainty"] for p in per], fmt="o", color=COLOURS[0],
+    ax.errorbar([p.elevation_rad for p in per], [p.inertia_kg_m2 for p in per],
+                yerr=[2 * p.standard_uncertainty for p in per], fmt="o", color=COLOURS[0],
                 capsize=3, label="J at an elevation ± 2u")
-    low, high = data.details.get("travel_rad") or (-np.pi / 2, np.pi / 2)
+    low, high = details.travel_rad
     grid = np.linspace(low, high, 200)
     ax.plot(grid, zenith + (level - zenith) * np.cos(grid) ** 2 + product * np.sin(2 * grid),
             color=MODEL, label="J_zenith + ΔJ·cos²(el) + P·sin(2el)")
-    extremes = [data.details.get(k) for k in ("largest_at_elevation_rad",
-                                               "smallest_at_elevation_rad")]
-    if all(isinstance(e, float) for e in extremes):
-        at = np.array(extremes, dtype=float)
+    at = np.array([details.largest_at_elevation_rad, details.smallest_at_elevation_rad])
+    if np.all(np.isfinite(at)):
         ax.plot(at, zenith + (level - zenith) * np.cos(at) ** 2 + product * np.sin(2 * at),
                 "v", color=COLOURS[1], label="largest, smallest on the travel")
     ax.set(xlabel="elevation (rad)", ylabel="azimuth inertia (kg·m²)",
@@ -176,18 +185,20 @@ def inertia_elevation(data: ProtocolData) -> Figure | None:
 def torque_constant(data: ProtocolData) -> Figure | None:
     """Shaft torque against current at each locked angle with its line, and what the line
     leaves (the linearity)."""
-    per_angle = data.details.get("per_angle") or []
+    details = data.details_as(TorqueConstantDetails)
     sweeps = data.recordings_named("locked_sweep")
     kt = data.value("torque_constant_nm_a")
-    if not per_angle or len(sweeps) != len(per_angle) or kt is None:
+    if details is None or not details.per_angle or len(sweeps) != len(details.per_angle) \
+            or kt is None:
         return None
+    per_angle = details.per_angle
     fig = new_figure()
     left, right = fig.axes
     for i, ((_, recording), line) in enumerate(zip(sweeps, per_angle, strict=True)):
         current, shaft = recording.columns["current_a"], recording.columns["load_torque_nm"]
-        fitted = line["slope_nm_a"] * current + line["intercept_nm"]
+        fitted = line.slope_nm_a * current + line.intercept_nm
         colour = COLOURS[i % len(COLOURS)]
-        label = f"{line['angle_rad']:+.2f} rad"
+        label = f"{line.angle_rad:+.2f} rad"
         left.plot(*thin(current, shaft), ".", ms=1.2, color=colour, alpha=0.5)
         order = np.argsort(current)
         left.plot(current[order], fitted[order], color=colour, lw=1.0, label=label)

@@ -23,6 +23,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from hil.calibration import CalibrationRun
+from hil.details import RunDetails
 from hil.drives.base import Capability, DriveInfo
 from hil.errors import IdentificationError
 from hil.identify.cogging import CoggingResult, identify_cogging
@@ -302,5 +303,47 @@ def planned_motion(profile: UnitProfile, info: DriveInfo, at: Position) -> Itera
     return excitation(Spec.from_profile(profile, info), position_rad=at())
 
 
+@dataclass(frozen=True, slots=True, kw_only=True)
+class CoggingHarmonic:
+    """One order of the cogging torque (the compensation table's line)."""
+
+    order: int
+    amplitude_nm: float
+    phase_rad: float
+    amplitude_u_nm: float
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class RippleHarmonic:
+    """One order of the K_t ripple (relative amplitude)."""
+
+    order: int
+    amplitude: float
+    phase_rad: float
+    amplitude_u: float
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class CoggingDetails(RunDetails):
+    """The certificate's details: the table written, where its passes came from, the
+    harmonics (the K_t ripple is what the Stribeck and torque-constant protocols take)."""
+
+    compensation_table: str
+    passes: str
+    recordings_analysed: dict[str, str]  # excitation → file (relative to the unit folder)
+    pass_samples: int
+    pass_first_sample: int
+    speed_rad_s: float
+    orders: tuple[int, ...]
+    cogging: tuple[CoggingHarmonic, ...]
+    kt_ripple: tuple[RippleHarmonic, ...]
+    torque_levels_nm: tuple[float, ...]
+    inertia_for_acceleration_correction_kg_m2: float | None
+    inertia_source: str
+    noise_rms_nm: float
+    recorded_rows: int
+
+
 PROTOCOL = Protocol(name=NAME, measurements=tuple(MEASUREMENTS), needs=NEEDS,
-                    requires=REQUIRES, planned_motion=planned_motion)
+                    requires=REQUIRES, planned_motion=planned_motion,
+                    details=CoggingDetails)

@@ -20,6 +20,7 @@ from typing import Any
 import numpy as np
 
 from hil.closed_loop.ripple import position_ripple, ripple_estimate
+from hil.details import RunDetails
 from hil.drives.base import Capability, DriveInfo
 from hil.errors import IdentificationError
 from hil.identify.estimate import Component, Estimate, with_budget
@@ -207,5 +208,26 @@ def planned_motion(profile: UnitProfile, info: DriveInfo, at: Position) -> Itera
     return motion(spec, excitation(spec), position=at)
 
 
+@dataclass(frozen=True, slots=True, kw_only=True)
+class LargestOrder:
+    """The order with the largest position ripple, table cleared and loaded."""
+
+    cleared: int
+    loaded: int
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class CoggingCompensationDetails(RunDetails):
+    """The certificate's details: the table loaded, its orders and their uncertainty, the
+    largest order before and after, and the analysed stretch of each pass (for the plot)."""
+
+    table: str
+    orders: tuple[int, ...]
+    table_relative_uncertainty: dict[str, float]  # order → u of its amplitude, relative
+    largest_order: LargestOrder
+    analysed_s: tuple[float, float]
+
+
 PROTOCOL = Protocol(name=NAME, measurements=tuple(MEASUREMENTS), needs=NEEDS,
-                    requires=REQUIRES, planned_motion=planned_motion)
+                    requires=REQUIRES, planned_motion=planned_motion,
+                    details=CoggingCompensationDetails)

@@ -13,9 +13,11 @@ import math
 from collections.abc import Iterable
 from dataclasses import dataclass
 
+from hil.details import RunDetails
 from hil.drives.base import Capability, DriveInfo
 from hil.identify.current_loop import (
     CurrentLoopResult,
+    TorqueHold,
     analyse_frequency,
     fit_current_loop_lag,
     torque_hold_s,
@@ -168,5 +170,27 @@ def planned_motion(profile: UnitProfile, info: DriveInfo, at: Position) -> Itera
     return excitation(Spec.from_profile(profile, info), position_rad=at())
 
 
+@dataclass(frozen=True, slots=True, kw_only=True)
+class LagPoint:
+    """One frequency's lag phase and what it was fitted with."""
+
+    frequency_hz: float
+    lag_phase_rad: float
+    lag_phase_u_rad: float
+    inertia_kg_m2: float
+    torque_amplitude_nm: float
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class CurrentLoopDetails(RunDetails):
+    """The certificate's details: how the drive held its torque, the fit, each point."""
+
+    torque_hold: TorqueHold
+    viscous_over_inertia_1_s: float
+    chi2_per_dof: float
+    points: tuple[LagPoint, ...]
+
+
 PROTOCOL = Protocol(name=NAME, measurements=tuple(MEASUREMENTS), needs=NEEDS,
-                    requires=REQUIRES, planned_motion=planned_motion)
+                    requires=REQUIRES, planned_motion=planned_motion,
+                    details=CurrentLoopDetails)

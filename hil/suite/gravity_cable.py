@@ -18,6 +18,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from hil.details import RunDetails
 from hil.drives.base import Capability, DriveInfo
 from hil.identify.gravity_cable import (
     GravityCableResult,
@@ -183,5 +184,23 @@ def planned_motion(profile: UnitProfile, info: DriveInfo, at: Position) -> Itera
     return excitation(Spec.from_profile(profile, info), position_rad=at())
 
 
+@dataclass(frozen=True, slots=True, kw_only=True)
+class GravityCableDetails(RunDetails):
+    """The certificate's details: the sweep's fit, its cable loop (which the sine and
+    Stribeck protocols take out) and the load per position for the plot."""
+
+    recorded_rows: int
+    offset_nm: float
+    cable_hysteresis_angle_rad: float | None
+    cable_hysteresis_angle_u_rad: float
+    cable_hysteresis_covariance: float
+    loop_half_width_nm: float
+    sliding_friction_at_sweep_speed_nm: float
+    bins: int
+    residual_rms_nm: float
+    load_nm_by_elevation_rad: tuple[tuple[float, float], ...]  # (bin centre, load)
+
+
 PROTOCOL = Protocol(name=NAME, measurements=tuple(MEASUREMENTS), needs=NEEDS,
-                    requires=REQUIRES, planned_motion=planned_motion)
+                    requires=REQUIRES, planned_motion=planned_motion,
+                    details=GravityCableDetails)

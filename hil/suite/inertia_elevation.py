@@ -25,6 +25,7 @@ from dataclasses import dataclass, replace
 
 from hil.calibration import CalibrationRun
 from hil.config import ConfigTable
+from hil.details import RunDetails
 from hil.drives.base import Capability, DriveInfo
 from hil.identify.estimate import Estimate
 from hil.identify.inertia_elevation import HALF_TURN_RAD, scale_by_gain
@@ -203,5 +204,29 @@ def planned_motion(profile: UnitProfile, info: DriveInfo, at: Position) -> Itera
     return motion(Spec.from_profile(profile, info), position=at)
 
 
+@dataclass(frozen=True, slots=True, kw_only=True)
+class ElevationPoint:
+    """The azimuth inertia measured at one elevation."""
+
+    elevation_rad: float
+    inertia_kg_m2: float
+    standard_uncertainty: float
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class InertiaElevationDetails(RunDetails):
+    """The certificate's details: the model, the travel and where J_az is extreme, each
+    elevation's inertia, the torque's scale."""
+
+    model: str
+    travel_rad: tuple[float, float]
+    largest_at_elevation_rad: float
+    smallest_at_elevation_rad: float
+    per_elevation: tuple[ElevationPoint, ...]
+    torque_scale: str
+    chi2_per_dof: float
+
+
 PROTOCOL = Protocol(name=NAME, measurements=tuple(MEASUREMENTS), needs=NEEDS,
-                    requires=REQUIRES, planned_motion=planned_motion)
+                    requires=REQUIRES, planned_motion=planned_motion,
+                    details=InertiaElevationDetails)

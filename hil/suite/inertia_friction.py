@@ -14,6 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from hil.calibration import CalibrationRun
+from hil.details import RunDetails
 from hil.drives.base import Capability, DriveInfo
 from hil.identify.estimate import Component, Estimate
 from hil.identify.gravity_cable import CableLoop, load_stiffness
@@ -29,6 +30,7 @@ from hil.identify.sine_run import analyse_sine_run, torque_hold_samples, without
 from hil.motion import Excitation, Mode
 from hil.profile import UnitProfile
 from hil.recording import Recording
+from hil.suite.gravity_cable import GravityCableDetails
 from hil.suite.needs import Need
 from hil.suite.protocol import Position, Protocol
 from hil.suite.stop_rule import StopRule
@@ -247,17 +249,16 @@ def measured_cable_loop(calibration: CalibrationRun) -> CableLoop | None:
         measured.
     """
     h = CABLE.read(calibration)
-    details = calibration.details.get("gravity_cable", {})
-    angle = details.get("cable_hysteresis_angle_rad")
-    if h is None or not isinstance(angle, float):
+    sweep = calibration.details.get(CABLE.protocol)
+    if (h is None or not isinstance(sweep, GravityCableDetails)
+            or sweep.cable_hysteresis_angle_rad is None):
         return None
-    angle_u = details.get("cable_hysteresis_angle_u_rad", 0.0)
-    covariance = details.get("cable_hysteresis_covariance", 0.0)
+    angle_u, covariance = sweep.cable_hysteresis_angle_u_rad, sweep.cable_hysteresis_covariance
     return CableLoop(
-        half_width_nm=h.value, half_width_u_nm=h.standard_uncertainty, angle_rad=angle,
-        angle_u_rad=angle_u if isinstance(angle_u, float) and math.isfinite(angle_u) else 0.0,
-        covariance=(covariance if isinstance(covariance, float) and math.isfinite(covariance)
-                    else 0.0),
+        half_width_nm=h.value, half_width_u_nm=h.standard_uncertainty,
+        angle_rad=sweep.cable_hysteresis_angle_rad,
+        angle_u_rad=angle_u if math.isfinite(angle_u) else 0.0,
+        covariance=covariance if math.isfinite(covariance) else 0.0,
     )
 
 
@@ -411,9 +412,19 @@ def measured_current_loop_lag(calibration: CalibrationRun) -> Estimate | None:
                                standard_uncertainty=tau.standard_uncertainty / 1000)
 
 
+@dataclass(frozen=True, slots=True, kw_only=True)
+class EarlierInputs:
+    """What :func:`analyse_in_calibration` took out with earlier protocols' results."""
+
+    centre_rad: float  # the sines' centre
+    load_stiffness_nm_rad: float | None  # there (gravity and cable), None: not measured
+    cable_loop_removed: CableLoop | None
+    current_loop_lag_compensated_s: float
+
+
 def analyse_in_calibration(
     recordings: list[Recording], spec: Spec, calibration: CalibrationRun
-) -> tuple[InertiaFrictionResult, dict[str, Estimate], dict[str, object]]:
+) -> tuple[InertiaFrictionResult, dict[str, Estimate], EarlierInputs]:
     """J, B, T_c and the amplitude spread with what earlier protocols measured taken out:
     the current loop's lag and the cable's hysteresis loop (their uncertainties as budget
     lines, :func:`with_earlier_inputs`) and the load's stiffness at the sines' centre.
@@ -435,7 +446,7 @@ def analyse_in_calibration(
     estimates : dict of str to Estimate
         The protocol's results by name, J stiffness-corrected when the load's stiffness
         is known.
-    applied : dict of str to object
+    applied : EarlierInputs
         The centre, the load stiffness, the cable loop and the lag taken out.
 
     Raises
@@ -454,12 +465,11 @@ def analyse_in_calibration(
         estimates["inertia_kg_m2"] = stiffness_corrected_inertia(
             estimates["inertia_kg_m2"], stiffness=stiffness, frequency_hz=spec.frequency_hz
         )
-    return analysed, estimates, {
-        "centre_rad": centre_rad,
-        "load_stiffness_nm_rad": None if stiffness is None else stiffness.value,
-        "cable_loop_removed": None if loop is None else dataclasses.asdict(loop),
-        "current_loop_lag_compensated_s": lag_s,
-    }
+    return analysed, estimates, EarlierInputs(
+        centre_rad=centre_rad,
+        load_stiffness_nm_rad=None if stiffness is None else stiffness.value,
+        cable_loop_removed=loop, current_loop_lag_compensated_s=lag_s,
+    )
 
 
 def planned_motion(profile: UnitProfile, info: DriveInfo, at: Position) -> Iterable[Excitation]:
@@ -467,5 +477,33 @@ def planned_motion(profile: UnitProfile, info: DriveInfo, at: Position) -> Itera
     return motion(Spec.from_profile(profile, info), position=at)
 
 
+@dataclass(frozen=True, slots=True, kw_only=True)
+class SineComponent:
+    """One amplitude's torque at the sine's frequency: cos (inertia) and sin (friction)."""
+
+    velocity_amplitude_rad_s: float
+    quadrature_c_nm: float
+    in_phase_s_nm: float
+    periods: int
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class InertiaFrictionDetails(RunDetails):
+    """The certificate's details: the method, what earlier protocols' results were taken
+    out (:func:`analyse_in_calibration`), the fit and each amplitude's components."""
+
+    method: str
+    frequency_hz: float
+    settle_periods: int
+    centre_rad: float
+    load_stiffness_nm_rad: float | None
+    cable_loop_removed: CableLoop | None
+    current_loop_lag_compensated_s: float  # these four: EarlierInputs
+    fit_pct: float
+    noise_rms_nm: float
+    components: tuple[SineComponent, ...]
+
+
 PROTOCOL = Protocol(name=NAME, measurements=tuple(MEASUREMENTS), needs=NEEDS,
-                    requires=REQUIRES, planned_motion=planned_motion)
+                    requires=REQUIRES, planned_motion=planned_motion,
+                    details=InertiaFrictionDetails)

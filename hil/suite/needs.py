@@ -17,13 +17,14 @@ class Need:
     """One input from an earlier protocol of the same calibration."""
 
     protocol: str  # the protocol that provides it
-    result: str  # a declared measurement, or a key of that protocol's details
+    result: str  # a declared measurement, or a field of that protocol's details
     without: str  # what the protocol does when it is missing (its fallback)
 
     def met(self, calibration: CalibrationRun) -> bool:
         """The earlier protocol left it in this calibration."""
+        details = calibration.details.get(self.protocol)
         return (calibration.result(self.result) is not None
-                or self.result in calibration.details.get(self.protocol, {}))
+                or (details is not None and hasattr(details, self.result)))
 
     def read(self, calibration: CalibrationRun) -> Estimate | None:
         """The judged result, ``None`` when the earlier protocol has not measured it."""

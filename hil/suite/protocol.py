@@ -12,6 +12,7 @@ from __future__ import annotations
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 
+from hil.details import Details
 from hil.drives.base import Capability, DriveInfo
 from hil.motion import Excitation
 from hil.profile import UnitProfile
@@ -42,6 +43,9 @@ class Protocol:
         Its excitations as the run will command them, built from the profile alone (a value
         only an earlier protocol measures, such as the feedforward's size, at a stand-in
         that does not change the timing).
+    details : type of Details
+        The type of what it tells the certificate besides its results
+        (:mod:`hil.details`: one writer, one reader).
     """
 
     name: str
@@ -49,3 +53,4 @@ class Protocol:
     needs: tuple[Need, ...]
     requires: tuple[Capability, ...]
     planned_motion: Motion
+    details: type[Details]

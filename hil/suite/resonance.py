@@ -24,6 +24,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from hil.calibration import CalibrationRun
+from hil.details import Details
 from hil.drives.base import Capability, DriveInfo
 from hil.errors import ProfileError
 from hil.identify.multisine import log_harmonics, multisine, schroeder_phases_for
@@ -428,5 +429,33 @@ def planned_motion(profile: UnitProfile, info: DriveInfo, at: Position) -> Itera
     return excitation(spec_from_profile(profile, info), position_rad=at())
 
 
+@dataclass(frozen=True, slots=True, kw_only=True)
+class FrfPoint:
+    """One frequency of the measured response (rad/N·m)."""
+
+    frequency_hz: float
+    magnitude_rad_nm: float
+    phase_rad: float
+    relative_u: float
+    coherence: float
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class ResonanceDetails(Details):
+    """The certificate's details: the excitation, the two-mass model and its fit, the
+    response it was fitted to."""
+
+    excitation: str
+    model: str
+    inertia_total_kg_m2: float
+    antiresonance_damping_ratio: float
+    viscous_over_inertia_1_s: float
+    current_loop_time_constant_s: float
+    velocity_loop_bandwidth_hz: float
+    chi2_per_dof: float
+    frf: tuple[FrfPoint, ...]
+
+
 PROTOCOL = Protocol(name=NAME, measurements=tuple(MEASUREMENTS), needs=NEEDS,
-                    requires=REQUIRES, planned_motion=planned_motion)
+                    requires=REQUIRES, planned_motion=planned_motion,
+                    details=ResonanceDetails)

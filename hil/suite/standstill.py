@@ -22,6 +22,7 @@ from hil.closed_loop.standstill import (
     hold_windows,
     standstill_blocks,
 )
+from hil.details import RunDetails
 from hil.drives.base import Capability, DriveInfo
 from hil.identify.estimate import Estimate
 from hil.identify.quantisation import quantisation_step
@@ -136,5 +137,18 @@ def planned_motion(profile: UnitProfile, info: DriveInfo, at: Position) -> Itera
     return [excitation(Spec.from_profile(profile, info), position_rad=at())]
 
 
+@dataclass(frozen=True, slots=True, kw_only=True)
+class StandstillDetails(RunDetails):
+    """The certificate's details: the holds and, for the plot, each block's samples and
+    RMS."""
+
+    hold_positions_rad: tuple[float, ...]
+    hold_s: float
+    block_windows: tuple[tuple[int, int], ...]  # each block's samples in the recording
+    block_torque_rms_mnm: tuple[float, ...]
+    block_position_rms_urad: tuple[float, ...]
+
+
 PROTOCOL = Protocol(name=NAME, measurements=tuple(MEASUREMENTS), needs=NEEDS,
-                    requires=REQUIRES, planned_motion=planned_motion)
+                    requires=REQUIRES, planned_motion=planned_motion,
+                    details=StandstillDetails)

@@ -29,6 +29,7 @@ from typing import Generic, TypeVar
 
 from hil.calibration import CalibrationRun
 from hil.config import ConfigTable
+from hil.details import RunsFields
 from hil.errors import IdentificationError, ProfileError
 from hil.identify.estimate import Component, Estimate, with_budget
 from hil.measurement import MethodBiasMap, with_method_terms
@@ -279,8 +280,9 @@ class Repeated(Generic[T]):
     first: T  # the first run's analysis, for the certificate's details
     decision: StopDecision
 
-    def details(self) -> dict[str, object]:
-        """The certificate's lines: how many runs, and why the protocol stopped."""
+    def details(self) -> RunsFields:
+        """The certificate's lines: how many runs, and why the protocol stopped
+        (``RunDetails(**repeated.details(), ...)``)."""
         return {"runs": self.decision.runs, "stop_rule": self.decision.reason}
 
 

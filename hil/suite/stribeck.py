@@ -14,6 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from hil.calibration import CalibrationRun
+from hil.details import RunDetails
 from hil.drives.base import Capability, DriveInfo
 from hil.identify.estimate import Component, Estimate
 from hil.identify.stribeck import Staircase, StribeckResult, identify_stribeck, staircase
@@ -227,7 +228,7 @@ def finite_or_none(value: float) -> float | None:
     return value if math.isfinite(value) else None
 
 
-def cross_check(result: StribeckResult, calibration: CalibrationRun) -> dict[str, object]:
+def cross_check(result: StribeckResult, calibration: CalibrationRun) -> dict[str, CrossCheck]:
     """Compare T_c and B with the sine protocol's, when it ran: normalised error
     ``|Δ| / √(U₁² + U₂²)`` (≤ 1: consistent within the expanded uncertainties). The sine's
     T_c excludes the cable loop's half-width h (taken out there), the staircase's sliding
@@ -243,13 +244,13 @@ def cross_check(result: StribeckResult, calibration: CalibrationRun) -> dict[str
 
     Returns
     -------
-    dict of str to object
+    dict of str to CrossCheck
         Per sine result measured (``coulomb_nm``, ``viscous_nm_s_rad``): the staircase's
         value, the sine's and the normalised error; empty when the sine did not run.
     """
     ours = {e.name: e for e in (result.coulomb, result.viscous)}
     loop = CABLE.read(calibration)
-    checks: dict[str, object] = {}
+    checks: dict[str, CrossCheck] = {}
     for other, mine in CROSS_CHECK:
         b = calibration.result(other)
         if b is None:
@@ -261,7 +262,7 @@ def cross_check(result: StribeckResult, calibration: CalibrationRun) -> dict[str
             b_expanded = float(np.hypot(b_expanded, loop.expanded_uncertainty))
         expanded = float(np.hypot(a.expanded_uncertainty, b_expanded))
         error = abs(a.value - b_value) / expanded
-        checks[other] = {"stribeck": a.value, "sine": b_value, "normalised_error": error}
+        checks[other] = CrossCheck(stribeck=a.value, sine=b_value, normalised_error=error)
         if error > 1:
             log.warning(
                 "%s: staircase %.4g vs sine %.4g differ by %.1f expanded uncertainties",
@@ -278,5 +279,42 @@ def planned_motion(profile: UnitProfile, info: DriveInfo, at: Position) -> Itera
     return excitation(Spec.from_profile(profile, info), position_rad=at())
 
 
+@dataclass(frozen=True, slots=True, kw_only=True)
+class FrictionPoint:
+    """One staircase speed's steady friction (``None``: not finite there)."""
+
+    speed_rad_s: float
+    friction_nm: float | None
+    friction_u_nm: float | None
+    stick_slip: bool
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class CrossCheck:
+    """The staircase's value against the sine protocol's, and ``|Δ|/√(U₁² + U₂²)``."""
+
+    stribeck: float
+    sine: float
+    normalised_error: float
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class StribeckDetails(RunDetails):
+    """The certificate's details: the fit, each speed's friction, the cross-check with the
+    sine protocol, and what the sliding friction holds."""
+
+    recorded_rows: int
+    coulomb_nm: float
+    viscous_nm_s_rad: float
+    residual_rms_nm: float
+    kt_ripple_correction: str
+    lowest_clean_speed_rad_s: float
+    stick_slip_speeds_rad_s: tuple[float, ...]
+    points: tuple[FrictionPoint, ...]
+    cross_check_sine: dict[str, CrossCheck]
+    note: str
+
+
 PROTOCOL = Protocol(name=NAME, measurements=tuple(MEASUREMENTS), needs=NEEDS,
-                    requires=REQUIRES, planned_motion=planned_motion)
+                    requires=REQUIRES, planned_motion=planned_motion,
+                    details=StribeckDetails)

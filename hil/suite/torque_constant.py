@@ -13,11 +13,11 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import dataclass
-from typing import Any, cast
 
 import numpy as np
 
 from hil.calibration import CalibrationRun
+from hil.details import RunDetails
 from hil.drives.base import Capability, DriveInfo
 from hil.identify.estimate import Estimate
 from hil.identify.torque_constant import (
@@ -30,6 +30,7 @@ from hil.identify.torque_constant import (
 from hil.motion import Excitation, Mode
 from hil.profile import UnitProfile
 from hil.recording import Recording
+from hil.suite.cogging import CoggingDetails
 from hil.suite.needs import Need
 from hil.suite.protocol import Position, Protocol
 from hil.suite.stop_rule import StopRule
@@ -272,8 +273,8 @@ def kt_ripple_from_cogging(calibration: CalibrationRun) -> list[tuple[int, float
     Parameters
     ----------
     calibration : CalibrationRun
-        The calibration in progress; the cogging protocol leaves its table in
-        ``calibration.details["cogging"]["kt_ripple"]``.
+        The calibration in progress; the cogging protocol leaves its table in its
+        details (:class:`hil.suite.cogging.CoggingDetails`).
 
     Returns
     -------
@@ -281,9 +282,10 @@ def kt_ripple_from_cogging(calibration: CalibrationRun) -> list[tuple[int, float
         ``(order, amplitude, phase_rad)`` per harmonic of
         ``K_t(θ) = K_t·(1 + Σ a_n·sin(n·θ + ψ_n))``; empty when cogging did not run.
     """
-    table = cast(list[dict[str, Any]],
-                 calibration.details.get(RIPPLE.protocol, {}).get(RIPPLE.result, []))
-    return [(int(h["order"]), float(h["amplitude"]), float(h["phase_rad"])) for h in table]
+    cogging = calibration.details.get(RIPPLE.protocol)
+    if not isinstance(cogging, CoggingDetails):
+        return []
+    return [(h.order, h.amplitude, h.phase_rad) for h in cogging.kt_ripple]
 
 
 def planned_motion(profile: UnitProfile, info: DriveInfo, at: Position) -> Iterable[Excitation]:
@@ -294,5 +296,27 @@ def planned_motion(profile: UnitProfile, info: DriveInfo, at: Position) -> Itera
     return motion(spec, angles_rad=locked_angles(spec, ()), position=at)
 
 
+@dataclass(frozen=True, slots=True, kw_only=True)
+class LockedAngle:
+    """One locked angle's current sweep: shaft torque against current."""
+
+    angle_rad: float
+    slope_nm_a: float
+    intercept_nm: float
+    gain: float
+    max_residual_nm: float
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class TorqueConstantDetails(RunDetails):
+    """The certificate's details: the ripple correction, the angles, each sweep."""
+
+    kt_ripple_correction: str
+    angles: str
+    per_angle: tuple[LockedAngle, ...]
+    datasheet_torque_constant_nm_a: float | None
+
+
 PROTOCOL = Protocol(name=NAME, measurements=tuple(MEASUREMENTS), needs=NEEDS,
-                    requires=REQUIRES, planned_motion=planned_motion)
+                    requires=REQUIRES, planned_motion=planned_motion,
+                    details=TorqueConstantDetails)

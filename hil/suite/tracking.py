@@ -32,6 +32,7 @@ from hil.closed_loop.tracking import (
     reduction,
     repeated,
 )
+from hil.details import RunDetails
 from hil.drives.base import Capability, Drive, DriveInfo
 from hil.identify.estimate import Component, Estimate
 from hil.identify.quantisation import quantisation_step
@@ -222,5 +223,36 @@ def planned_motion(profile: UnitProfile, info: DriveInfo, at: Position) -> Itera
     return motion(spec, excitation(spec, viscous_nm_s_rad=0.0, coulomb_nm=0.0), position=at)
 
 
+@dataclass(frozen=True, slots=True, kw_only=True)
+class Feedforward:
+    """The friction feedforward the move sent, and where its values came from."""
+
+    viscous_nm_s_rad: float
+    coulomb_nm: float
+    relative_uncertainty: float
+    source: str
+    sent_as: str
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class RunToRun:
+    """The run-to-run standard deviation of the RMS error (µrad), without and with it."""
+
+    no_ff: float
+    ff: float
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class TrackingDetails(RunDetails):
+    """The certificate's details: the feedforward, the repeats and their spread."""
+
+    feedforward: Feedforward
+    repeats: int
+    run_to_run_sd_urad: RunToRun
+    peak_error_no_ff_urad: float
+    move_s: float
+
+
 PROTOCOL = Protocol(name=NAME, measurements=tuple(MEASUREMENTS), needs=NEEDS,
-                    requires=REQUIRES, planned_motion=planned_motion)
+                    requires=REQUIRES, planned_motion=planned_motion,
+                    details=TrackingDetails)

@@ -15,6 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from hil.closed_loop.frf import FrfResult, analyse_frf
+from hil.details import RunDetails
 from hil.drives.base import Capability, DriveInfo
 from hil.errors import ProfileError
 from hil.identify.multisine import multisine
@@ -165,5 +166,23 @@ def planned_motion(profile: UnitProfile, info: DriveInfo, at: Position) -> Itera
     return excitation(Spec.from_profile(profile, info), position_rad=at())
 
 
+@dataclass(frozen=True, slots=True, kw_only=True)
+class VelocityLoopFrfDetails(RunDetails):
+    """The certificate's details: the responses per frequency (dB, degrees) for the Bode
+    plot, the periods analysed, how the margins were computed."""
+
+    frequencies_hz: tuple[float, ...]
+    closed_loop_db: tuple[float, ...]
+    closed_loop_deg: tuple[float, ...]
+    sensitivity_db: tuple[float, ...]
+    loop_gain_db: tuple[float, ...]
+    loop_gain_deg: tuple[float, ...]
+    controller_db: tuple[float, ...]
+    plant_db: tuple[float, ...]
+    periods: int
+    margins: str
+
+
 PROTOCOL = Protocol(name=NAME, measurements=tuple(MEASUREMENTS), needs=NEEDS,
-                    requires=REQUIRES, planned_motion=planned_motion)
+                    requires=REQUIRES, planned_motion=planned_motion,
+                    details=VelocityLoopFrfDetails)

@@ -15,6 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from hil.closed_loop.step import StepFigures, mean_estimate, smoothed_velocity, step_figures
+from hil.details import RunDetails
 from hil.drives.base import Capability, DriveInfo
 from hil.identify.estimate import Estimate
 from hil.motion import Excitation, Mode
@@ -166,5 +167,22 @@ def planned_motion(profile: UnitProfile, info: DriveInfo, at: Position) -> Itera
     return excitation(Spec.from_profile(profile, info), position_rad=at())
 
 
+@dataclass(frozen=True, slots=True, kw_only=True)
+class SizedStep(StepFigures):
+    """One step's figures and its size (``small``, ``large``)."""
+
+    size: str
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class VelocityStepDetails(RunDetails):
+    """The certificate's details: how the velocity was taken, every step's figures."""
+
+    velocity: str
+    steps: tuple[SizedStep, ...]
+    smooth_s: float  # for the plot: the velocity as analysed
+
+
 PROTOCOL = Protocol(name=NAME, measurements=tuple(MEASUREMENTS), needs=NEEDS,
-                    requires=REQUIRES, planned_motion=planned_motion)
+                    requires=REQUIRES, planned_motion=planned_motion,
+                    details=VelocityStepDetails)

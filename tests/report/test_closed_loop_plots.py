@@ -23,6 +23,9 @@ from hil.profile import builtin_profile_path
 from hil.report.data import ProtocolData, from_certificate
 from hil.report.figures import png_bytes
 from hil.report.plots import CAPTIONS, PLOTTERS, protocol_figure
+from hil.suite.cogging_compensation import CoggingCompensationDetails
+from hil.suite.velocity_loop_frf import VelocityLoopFrfDetails
+from hil.suite.velocity_step import VelocityStepDetails
 from tests.helpers import subset_profile
 from tests.report.runs import Run
 
@@ -90,7 +93,9 @@ def test_velocity_loop_frf_plot_marks_bandwidth_and_margins(
         closed_loop: dict[str, ProtocolData]) -> None:
     data = closed_loop["velocity_loop_frf"]
     fig = drawn(data)
-    lines = len(data.details["frequencies_hz"])
+    details = data.details_as(VelocityLoopFrfDetails)
+    assert details is not None
+    lines = len(details.frequencies_hz)
     assert [sum(np.size(line.get_xdata()) == lines for line in ax.lines) for ax in fig.axes] \
         == [2, 1, 1, 1]  # |T| and |S|; |L|; ∠T; ∠L
     titles = " ".join(ax.get_title() for ax in fig.axes)
@@ -103,15 +108,16 @@ def test_velocity_step_plot_draws_every_step_with_its_rise(
         closed_loop: dict[str, ProtocolData]) -> None:
     data = closed_loop["velocity_step"]
     fig = drawn(data)
-    steps = data.details["steps"]
+    details = data.details_as(VelocityStepDetails)
+    assert details is not None
     for ax, size in zip(fig.axes, ("small", "large"), strict=True):
-        mine = [s for s in steps if s["size"] == size]
+        mine = [s for s in details.steps if s.size == size]
         traces = [line for line in ax.lines if "rotation" in str(line.get_label())]
         assert len(traces) == len(mine) == 4
         crossings = [np.asarray(line.get_xdata(), dtype=float) for line in ax.lines
                      if line.get_marker() == "|"]
         rises_ms = [float(x[1] - x[0]) for x in crossings]
-        assert rises_ms == pytest.approx([1e3 * s["rise_time_s"] for s in mine], rel=1e-4)
+        assert rises_ms == pytest.approx([1e3 * s.rise_time_s for s in mine], rel=1e-4)
 
 
 def test_tracking_plot_draws_the_error_the_results_measure(
@@ -139,7 +145,9 @@ def test_cogging_compensation_plot_shows_the_ripple_cleared_and_loaded(
         closed_loop: dict[str, ProtocolData]) -> None:
     data = closed_loop["cogging_compensation"]
     left, right = drawn(data).axes
-    orders = data.details["orders"]
+    details = data.details_as(CoggingCompensationDetails)
+    assert details is not None
+    orders = details.orders
     heights = np.array([p.get_height() for p in right.patches if isinstance(p, Rectangle)]
                        ).reshape(2, len(orders))
     assert heights.max(axis=1) == pytest.approx(
