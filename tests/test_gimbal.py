@@ -15,6 +15,7 @@ from pathlib import Path
 
 import pytest
 
+from hil.calibration import LOCK_NAME, UnitLock
 from hil.characterise.processes import run_command
 from hil.errors import ProfileError
 from hil.gimbal.certificate import AxisOutcome, build, verdict, write
@@ -197,3 +198,26 @@ def test_a_stop_sent_to_the_gimbal_stops_the_running_axis_and_nothing_passes(
     assert [a["outcome"] for a in issued["axes"]] == ["ERROR", "ERROR"]
     assert issued["outcome"] == "ERROR"
     assert not (out / SERIAL / "elevation").exists()
+
+
+def test_a_second_calibration_of_the_gimbal_at_once_is_refused_before_motion(
+        tmp_path: Path) -> None:
+    """The gimbal folder is locked for the whole run (the axes lock their own folders
+    only): a second ``calibrate --gimbal`` of the serial into the same folder is refused in
+    one line naming the holder, no axis starts and no gimbal certificate is written; a
+    serial that is no serial is refused before a folder is made."""
+    out = tmp_path / "certs"
+    held = UnitLock.acquire(out / SERIAL)  # another gimbal calibration, under way
+    try:
+        code, text = _calibrate(_gimbal(tmp_path), out)
+    finally:
+        held.release()
+    assert code == 2, text
+    (line,) = text.strip().splitlines()
+    assert "another calibration is writing this unit folder" in line, line
+    assert sorted(p.name for p in (out / SERIAL).iterdir()) == [LOCK_NAME]
+    done = run_command(["calibrate", "--gimbal", str(_gimbal(tmp_path)), "--unit-serial",
+                        "../GMB-0042", "--out", str(out)], timeout_s=600)
+    assert done.returncode == 2, done.stdout + done.stderr
+    assert "is not a unit serial" in done.stderr
+    assert sorted(p.name for p in tmp_path.iterdir() if p.is_dir()) == ["certs"]

@@ -8,6 +8,7 @@ stays whole)."""
 
 from __future__ import annotations
 
+import re
 import signal
 import subprocess
 import sys
@@ -17,6 +18,8 @@ from contextlib import contextmanager
 from pathlib import Path
 from types import FrameType
 
+from hil.calibration import SERIAL_PATTERN, UnitLock
+from hil.errors import InputError
 from hil.gimbal import certificate
 from hil.gimbal.documents import write_documents
 from hil.gimbal.profile import GimbalProfile
@@ -48,9 +51,28 @@ def calibrate_gimbal(gimbal: GimbalProfile, *, serial: str, out: Path, store_url
     -------
     int
         0 when every axis's calibration returned 0; else the largest of their codes.
+
+    Raises
+    ------
+    InputError
+        ``serial`` is no unit serial, or another gimbal calibration of it is writing
+        ``out/serial`` (its lock, :class:`hil.calibration.UnitLock`): before any axis moves.
     """
+    if not re.fullmatch(SERIAL_PATTERN, serial):
+        raise InputError(f"{serial!r} is not a unit serial: 1-64 letters, digits, '.', '_' "
+                         "or '-', starting with a letter or digit", source="--unit-serial")
     folder = out / serial
-    folder.mkdir(parents=True, exist_ok=True)
+    lock = UnitLock.acquire(folder)  # one gimbal calibration per serial and folder at once
+    try:
+        return _each_axis(gimbal, serial=serial, folder=folder, store_url=store_url,
+                          options=options)
+    finally:
+        lock.release()
+
+
+def _each_axis(gimbal: GimbalProfile, *, serial: str, folder: Path, store_url: str,
+               options: Sequence[str]) -> int:
+    """Every axis in order, then the gimbal certificate (:func:`calibrate_gimbal`)."""
     outcomes, codes = [], []
     try:
         with _stops_as_interrupts():
