@@ -227,10 +227,10 @@ def test_cross_check_adds_the_cable_loop_to_the_sines_coulomb(tmp_path: Path) ->
     without = protocol.cross_check(staircase, run)  # type: ignore[arg-type]
     run.record("gravity_cable", estimate("cable_hysteresis_nm", 0.0010, 0.0001))
     with_loop = protocol.cross_check(staircase, run)  # type: ignore[arg-type]
-    assert with_loop["coulomb_nm"]["sine"] == pytest.approx(0.0210)  # type: ignore[index]
-    assert with_loop["coulomb_nm"]["normalised_error"] < 0.2  # type: ignore[index]
-    assert without["coulomb_nm"]["sine"] == pytest.approx(0.0200)  # type: ignore[index]
-    assert without["coulomb_nm"]["normalised_error"] > 0.4  # type: ignore[index]
+    assert with_loop["coulomb_nm"].sine == pytest.approx(0.0210)
+    assert with_loop["coulomb_nm"].normalised_error < 0.2
+    assert without["coulomb_nm"].sine == pytest.approx(0.0200)
+    assert without["coulomb_nm"].normalised_error > 0.4
 
 
 def test_passes_overlapping_by_a_few_encoder_steps_are_not_a_clean_point() -> None:
