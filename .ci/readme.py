@@ -17,13 +17,20 @@ above -->`` (it reads what they wrote) starts when every block before it has end
     python .ci/readme.py list            the blocks, numbered, and which run
     python .ci/readme.py run N [N ...]   run these blocks (1-based)
     python .ci/readme.py run --rest      every run block but the first two (the set-up)
+    python .ci/readme.py run --rest --after REGEX
+                                         the same, once a process whose command line
+                                         matches REGEX runs (read from /proc: a fresh
+                                         machine may have no pgrep); not at all if the
+                                         process that started this one ends first
 """
 
 from __future__ import annotations
 
+import os
 import re
 import subprocess
 import sys
+import time
 from concurrent.futures import Future, ThreadPoolExecutor, wait
 from dataclasses import dataclass
 from pathlib import Path
@@ -145,6 +152,22 @@ def run_at_once(chosen: list[Block]) -> list[str]:
     return problems
 
 
+def wait_for_process(pattern: re.Pattern[str], poll_s: float = 1.0) -> bool:
+    """Until a process's command line (its arguments joined by spaces) matches ``pattern``:
+    ``True``; ``False`` when this process's parent ends first."""
+    parent = os.getppid()
+    while os.getppid() == parent:
+        for cmdline in Path("/proc").glob("[0-9]*/cmdline"):
+            try:
+                words = cmdline.read_bytes().split(b"\0")
+            except OSError:  # ended while read
+                continue
+            if pattern.search(" ".join(w.decode("utf-8", "replace") for w in words if w)):
+                return True
+        time.sleep(poll_s)
+    return False
+
+
 def main(argv: list[str]) -> int:
     found = blocks((ROOT / "README.md").read_text(encoding="utf-8"))
     if not argv or argv[0] == "list":
@@ -156,6 +179,12 @@ def main(argv: list[str]) -> int:
     if argv[0] != "run" or len(argv) < 2:
         print(__doc__, file=sys.stderr)
         return 2
+    if argv[1:3] == ["--rest", "--after"] and len(argv) == 4:
+        if not wait_for_process(re.compile(argv[3])):
+            print("README blocks: not run, the script that started them ended first",
+                  file=sys.stderr)
+            return 1
+        argv = argv[:2]
     if argv[1:] == ["--rest"]:
         chosen = [b for b in found[SETUP_BLOCKS:] if b.skip_reason is None]
         for block in found[SETUP_BLOCKS:]:
