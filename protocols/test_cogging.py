@@ -76,8 +76,8 @@ def result(drive: Drive, calibration: CalibrationRun, profile: UnitProfile
     if spec.passes == SWEEP_PASSES:  # the sweep's one recording: the spec refuses a rule
         position, torque, passes_from, first_sample = sweep_passes(calibration, profile,
                                                                    drive.info)
-        analysed_elsewhere["passes"] = Path(passes_from).relative_to(calibration.unit_dir
-                                                                      ).as_posix()
+        passes_from = Path(passes_from).relative_to(calibration.unit_dir).as_posix()
+        analysed_elsewhere["passes"] = passes_from
     else:
         passes_from = "passes (this protocol's own)"
         first_sample = 0
@@ -108,7 +108,7 @@ def result(drive: Drive, calibration: CalibrationRun, profile: UnitProfile
     )
     calibration.details[NAME] = CoggingDetails(
         **runs.details(),
-        compensation_table=str(path),
+        compensation_table=path.relative_to(calibration.unit_dir).as_posix(),
         passes=passes_from,
         recordings_analysed=analysed_elsewhere,
         pass_samples=spec.pass_samples,

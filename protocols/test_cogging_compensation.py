@@ -77,8 +77,8 @@ def result(cleared: Drive, calibration: CalibrationRun, profile: UnitProfile
     if not isinstance(cogging, CoggingDetails):
         pytest.skip("no cogging_compensation.json in this calibration (the cogging protocol "
                     "did not run before this one)")
-    path = cogging.compensation_table
-    with open(path, encoding="utf-8") as handle:
+    path = cogging.compensation_table  # in the unit's folder
+    with (calibration.unit_dir / path).open(encoding="utf-8") as handle:
         data = json.load(handle)
     table = table_from_json(data)
     spec = Spec.from_profile(profile, drive.info)

@@ -328,8 +328,8 @@ class CoggingDetails(RunDetails):
     """The certificate's details: the table written, where its passes came from, the
     harmonics (the K_t ripple is what the Stribeck and torque-constant protocols take)."""
 
-    compensation_table: str
-    passes: str
+    compensation_table: str  # the table's file, relative to the unit's folder
+    passes: str  # the recording analysed (relative to the unit's folder), or its own
     recordings_analysed: dict[str, str]  # excitation → file (relative to the unit folder)
     pass_samples: int
     pass_first_sample: int

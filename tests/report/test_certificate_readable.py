@@ -221,6 +221,11 @@ def test_no_python_literals_machine_paths_or_trailing_points(elevation_run: Run)
         assert found is None, (name, text[max(found.start() - 60, 0):found.end() + 20])
         assert "simulated: yes" in text, name
         assert "demo_gimbal_elevation.toml (SHA-256 " in text, name
+    # the record too: the files it names (the compensation table, the passes analysed)
+    # are named within the unit's folder, not where the folder lay on this machine
+    record = (elevation_run.unit_dir / "certificate.json").read_text(encoding="utf-8")
+    assert str(elevation_run.unit_dir.parent) not in record
+    assert not re.search(r'": "/', record), re.search(r'.{60}": "/.{60}', record)
     accreditation = next(line for line in txt(elevation_run).splitlines()
                          if "none claimed" in line)
     assert accreditation.startswith("Accreditation")
