@@ -17,7 +17,6 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from hil import __version__
 from hil.characterise.cli import add_arguments as add_characterise_arguments
 from hil.compare.cli import add_arguments as add_compare_arguments
 from hil.diagnose.cli import add_arguments as add_diagnose_arguments
@@ -79,7 +78,7 @@ def build_parser() -> argparse.ArgumentParser:
                                      formatter_class=HelpFormatter)
     parser.add_argument("-v", "--verbose", action="store_true",
                         help="log at INFO level (default: warnings only)")
-    parser.add_argument("--version", action="version", version=f"gimbal-hil {__version__}",
+    parser.add_argument("--version", action=_Version, nargs=0,
                         help="print gimbal-hil's version and exit")
     commands = parser.add_subparsers(
         dest="subcommand", required=True, title="commands", metavar="COMMAND",
@@ -149,6 +148,17 @@ def build_parser() -> argparse.ArgumentParser:
     add_compare_arguments(subs["compare"])
     add_characterise_arguments(subs["characterise"])
     return parser
+
+
+class _Version(argparse.Action):
+    """``--version``: the installed version, read only when asked for."""
+
+    def __call__(self, parser: argparse.ArgumentParser, namespace: argparse.Namespace,
+                 values: object, option_string: str | None = None) -> None:
+        from hil import __version__
+
+        print(f"gimbal-hil {__version__}")
+        parser.exit()
 
 
 def main(argv: Sequence[str] | None = None) -> int:
