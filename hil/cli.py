@@ -78,7 +78,7 @@ def build_parser() -> argparse.ArgumentParser:
                                      formatter_class=HelpFormatter)
     parser.add_argument("-v", "--verbose", action="store_true",
                         help="log at INFO level (default: warnings only)")
-    parser.add_argument("--version", action=_Version, nargs=0,
+    parser.add_argument("--version", action=_Version,
                         help="print gimbal-hil's version and exit")
     commands = parser.add_subparsers(
         dest="subcommand", required=True, title="commands", metavar="COMMAND",
@@ -150,7 +150,7 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
-class _Version(argparse.Action):
+class _Version(argparse._VersionAction):
     """``--version``: the installed version, read only when asked for."""
 
     def __call__(self, parser: argparse.ArgumentParser, namespace: argparse.Namespace,
