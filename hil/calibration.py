@@ -43,6 +43,19 @@ SERIAL_PATTERN = r"[A-Za-z0-9][A-Za-z0-9._-]{0,63}"
 LOCK_NAME = ".gimbal-hil.lock"  # in the unit folder; never archived, never removed
 
 
+
+def check_serial(serial: str) -> None:
+    """Refuse ``serial`` unless it is a unit serial (:data:`SERIAL_PATTERN`: a folder name).
+
+    Raises
+    ------
+    InputError
+        Naming the serial and ``--unit-serial``.
+    """
+    if not re.fullmatch(SERIAL_PATTERN, serial):
+        raise InputError(f"{serial!r} is not a unit serial: 1-64 letters, digits, '.', '_' "
+                         "or '-', starting with a letter or digit", source="--unit-serial")
+
 class UnitLock:
     """One writer per unit folder: ``fcntl.flock`` on ``SERIAL/.gimbal-hil.lock``, held by
     the calibration from before its first write to its end (the system drops it when the

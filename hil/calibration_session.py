@@ -31,7 +31,13 @@ from hil.budget import (
     check_memory,
     storage_error,
 )
-from hil.calibration import SERIAL_PATTERN, CalibrationRun, UnitLock, certificate_axis
+from hil.calibration import (
+    SERIAL_PATTERN,
+    CalibrationRun,
+    UnitLock,
+    certificate_axis,
+    check_serial,
+)
 from hil.certificate import write_certificate
 from hil.drives.base import Capability, Drive, DriveInfo
 from hil.drives.connect import open_drive
@@ -116,9 +122,8 @@ def _check_run_options(config: pytest.Config, profile: UnitProfile, kind: str) -
         Naming the option or the file.
     """
     serial = config.getoption("--unit-serial")
-    if serial is not None and not re.fullmatch(SERIAL_PATTERN, serial):
-        raise InputError(f"{serial!r} is not a unit serial: 1-64 letters, digits, '.', '_' "
-                         "or '-', starting with a letter or digit", source="--unit-serial")
+    if serial is not None:
+        check_serial(serial)
     if kind_named(kind).simulated and profile.plant is None:
         raise InputError(f"--drive {kind} simulates the unit from the profile's [plant] "
                          "table, and it has none", source=profile.source)

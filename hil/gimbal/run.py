@@ -8,7 +8,6 @@ stays whole)."""
 
 from __future__ import annotations
 
-import re
 import signal
 import subprocess
 import sys
@@ -18,8 +17,7 @@ from contextlib import contextmanager
 from pathlib import Path
 from types import FrameType
 
-from hil.calibration import SERIAL_PATTERN, UnitLock
-from hil.errors import InputError
+from hil.calibration import UnitLock, check_serial
 from hil.gimbal import certificate
 from hil.gimbal.documents import write_documents
 from hil.gimbal.profile import GimbalProfile
@@ -58,9 +56,7 @@ def calibrate_gimbal(gimbal: GimbalProfile, *, serial: str, out: Path, store_url
         ``serial`` is no unit serial, or another gimbal calibration of it is writing
         ``out/serial`` (its lock, :class:`hil.calibration.UnitLock`): before any axis moves.
     """
-    if not re.fullmatch(SERIAL_PATTERN, serial):
-        raise InputError(f"{serial!r} is not a unit serial: 1-64 letters, digits, '.', '_' "
-                         "or '-', starting with a letter or digit", source="--unit-serial")
+    check_serial(serial)
     folder = out / serial
     lock = UnitLock.acquire(folder)  # one gimbal calibration per serial and folder at once
     try:
