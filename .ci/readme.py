@@ -22,14 +22,23 @@ above -->`` (it reads what they wrote) starts when every block before it has end
                                          matches REGEX runs (read from /proc: a fresh
                                          machine may have no pgrep); not at all if the
                                          process that started this one ends first
+    python .ci/readme.py run --rest --after REGEX --pause-while REGEX
+                                         the same, and while a process matching the second
+                                         REGEX runs its blocks are stopped (SIGSTOP to each
+                                         block's process group, SIGCONT after) and none
+                                         starts: tests that time a field bus against the
+                                         wall clock run alone, as the README says
 """
 
 from __future__ import annotations
 
+import contextlib
 import os
 import re
+import signal
 import subprocess
 import sys
+import threading
 import time
 from concurrent.futures import Future, ThreadPoolExecutor, wait
 from dataclasses import dataclass
@@ -42,6 +51,71 @@ AT_ONCE = 2  # blocks run at a time by ``run --rest`` (CI's runner has two cores
 EXIT = re.compile(r"#\s*exit (?P<code>\d+)\b")
 NUMBER = re.compile(r"[-+]?\d[\d:.\-T]*(?:e[-+]?\d+)?")
 SETUP_BLOCKS = 2
+
+
+class Pauser:
+    """Stops the running blocks while a process matching ``pattern`` runs, and lets none
+    start (a block is its own process group: bash, and every process its commands start)."""
+
+    def __init__(self, pattern: re.Pattern[str] | None, poll_s: float = 0.5) -> None:
+        self.pattern, self.poll_s = pattern, poll_s
+        self.groups: set[int] = set()
+        self.lock = threading.Lock()
+        self.free = threading.Event()
+        self.free.set()
+        self.done = threading.Event()
+        self.paused_s = 0.0
+
+    def __enter__(self) -> Pauser:
+        if self.pattern is not None:
+            threading.Thread(target=self._watch, name="pause-while", daemon=True).start()
+        return self
+
+    def __exit__(self, *_: object) -> None:
+        self.done.set()
+        self._signal(signal.SIGCONT)  # never leave a block stopped
+
+    def start(self, command: list[str]) -> subprocess.Popen[str]:
+        """``command`` in a process group of its own, once nothing asks for a pause."""
+        while True:
+            self.free.wait()
+            with self.lock:
+                if self.free.is_set():
+                    process = subprocess.Popen(command, cwd=ROOT, stdout=subprocess.PIPE,
+                                               stderr=subprocess.STDOUT, text=True,
+                                               start_new_session=True)
+                    self.groups.add(process.pid)
+                    return process
+
+    def ended(self, process: subprocess.Popen[str]) -> None:
+        with self.lock:
+            self.groups.discard(process.pid)
+
+    def _signal(self, number: signal.Signals) -> None:
+        with self.lock:
+            for group in self.groups:
+                with contextlib.suppress(ProcessLookupError):  # the block ended meanwhile
+                    os.killpg(group, number)
+
+    def _watch(self) -> None:
+        assert self.pattern is not None
+        since = 0.0
+        while not self.done.wait(self.poll_s):
+            asked = process_running(self.pattern)
+            if asked and self.free.is_set():
+                with self.lock:
+                    self.free.clear()
+                self._signal(signal.SIGSTOP)
+                since = time.monotonic()
+                print("README blocks: stopped while the realtime tests run", flush=True)
+            elif not asked and not self.free.is_set():
+                self._signal(signal.SIGCONT)
+                self.free.set()
+                self.paused_s += time.monotonic() - since
+                print(f"README blocks: go on after {self.paused_s:.0f} s stopped", flush=True)
+
+
+NO_PAUSE = Pauser(None)
 
 
 @dataclass(frozen=True)
@@ -108,11 +182,11 @@ def script(block: Block) -> str:
     return "\n".join(parts) + "\n"
 
 
-def run(block: Block, *, stream: bool = True) -> tuple[list[str], list[str]]:
+def run(block: Block, *, stream: bool = True,
+        pauser: Pauser = NO_PAUSE) -> tuple[list[str], list[str]]:
     """Run ``block`` (its output streamed as it comes, or only kept); what it printed and
     the problems found."""
-    process = subprocess.Popen(["bash", "-o", "pipefail", "-c", script(block)], cwd=ROOT,
-                               stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    process = pauser.start(["bash", "-o", "pipefail", "-c", script(block)])
     assert process.stdout is not None
     printed = []
     for line in process.stdout:
@@ -121,6 +195,7 @@ def run(block: Block, *, stream: bool = True) -> tuple[list[str], list[str]]:
             sys.stdout.flush()
         printed.append(line.rstrip("\n"))
     returncode = process.wait()
+    pauser.ended(process)
     problems = [] if returncode == 0 else [
         line for line in printed if line.startswith(f"README.md:{block.line}: exited")
     ] or [f"README.md:{block.line}: block exited {returncode}"]
@@ -135,7 +210,7 @@ def run(block: Block, *, stream: bool = True) -> tuple[list[str], list[str]]:
     return printed, problems
 
 
-def run_at_once(chosen: list[Block]) -> list[str]:
+def run_at_once(chosen: list[Block], pauser: Pauser = NO_PAUSE) -> list[str]:
     """Run ``chosen`` :data:`AT_ONCE` at a time (a block marked to run after the blocks
     above waits for them); each block's output printed whole, in order; the problems."""
     problems: list[str] = []
@@ -144,7 +219,7 @@ def run_at_once(chosen: list[Block]) -> list[str]:
         for block in chosen:
             if block.after_the_blocks_above:
                 wait(started)
-            started.append(pool.submit(run, block, stream=False))
+            started.append(pool.submit(run, block, stream=False, pauser=pauser))
         for future in started:
             printed, found = future.result()
             print("\n".join(printed), flush=True)
@@ -152,18 +227,26 @@ def run_at_once(chosen: list[Block]) -> list[str]:
     return problems
 
 
+def process_running(pattern: re.Pattern[str]) -> bool:
+    """Whether a process's command line (its arguments joined by spaces) matches
+    ``pattern`` (read from /proc: a fresh machine may have no pgrep)."""
+    for cmdline in Path("/proc").glob("[0-9]*/cmdline"):
+        try:
+            words = cmdline.read_bytes().split(b"\0")
+        except OSError:  # ended while read
+            continue
+        if pattern.search(" ".join(w.decode("utf-8", "replace") for w in words if w)):
+            return True
+    return False
+
+
 def wait_for_process(pattern: re.Pattern[str], poll_s: float = 1.0) -> bool:
-    """Until a process's command line (its arguments joined by spaces) matches ``pattern``:
-    ``True``; ``False`` when this process's parent ends first."""
+    """Until a process matching ``pattern`` runs: ``True``; ``False`` when this process's
+    parent ends first."""
     parent = os.getppid()
     while os.getppid() == parent:
-        for cmdline in Path("/proc").glob("[0-9]*/cmdline"):
-            try:
-                words = cmdline.read_bytes().split(b"\0")
-            except OSError:  # ended while read
-                continue
-            if pattern.search(" ".join(w.decode("utf-8", "replace") for w in words if w)):
-                return True
+        if process_running(pattern):
+            return True
         time.sleep(poll_s)
     return False
 
@@ -179,6 +262,9 @@ def main(argv: list[str]) -> int:
     if argv[0] != "run" or len(argv) < 2:
         print(__doc__, file=sys.stderr)
         return 2
+    pause_while = None
+    if argv[-2:-1] == ["--pause-while"]:
+        pause_while, argv = re.compile(argv[-1]), argv[:-2]
     if argv[1:3] == ["--rest", "--after"] and len(argv) == 4:
         if not wait_for_process(re.compile(argv[3])):
             print("README blocks: not run, the script that started them ended first",
@@ -192,8 +278,9 @@ def main(argv: list[str]) -> int:
                 print(f"README.md:{block.line}: not run in CI: {block.skip_reason}")
     else:
         chosen = [found[int(n) - 1] for n in argv[1:]]
-    problems = (run_at_once(chosen) if argv[1:] == ["--rest"]
-                else [p for block in chosen for p in run(block)[1]])
+    with Pauser(pause_while) as pauser:
+        problems = (run_at_once(chosen, pauser) if argv[1:] == ["--rest"]
+                    else [p for block in chosen for p in run(block, pauser=pauser)[1]])
     for problem in problems:
         print(problem, file=sys.stderr)
     print(f"README blocks: {len(chosen)} run, {len(problems)} problem(s)")

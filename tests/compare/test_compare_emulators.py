@@ -36,6 +36,9 @@ def calibrate(document: dict[str, Any], out: Path, *, drive: str, only: str,
     )
     path = out / "EMU-1" / "certificate.json"
     assert path.is_file(), done.stdout + done.stderr
+    certificate = json.loads(path.read_text(encoding="utf-8"))
+    # a refused run (the host fell behind its field bus) says why here, not as a NEW later
+    assert certificate["outcome"] == "PASS", (certificate["not_measured"], done.stderr[-2000:])
     return path
 
 
