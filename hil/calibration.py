@@ -120,6 +120,7 @@ class RawFile:
     samples: int
     motion_time_s: float
     complete: bool
+    held_axes: str = ""  # where a gimbal's other axes stood, held by their drives
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -409,6 +410,7 @@ class CalibrationRun:
                 samples=len(recording),
                 motion_time_s=recording.duration_s,
                 complete=complete,
+                held_axes=recording.metadata.get("held_axes", ""),
             )
         )
 

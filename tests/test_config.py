@@ -24,10 +24,13 @@ PROFILES = ("demo_gimbal_elevation.toml", "demo_gimbal_azimuth.toml")
 STATIONS = (
     "station_canopen_emulator.toml",
     "station_canopen_example.toml",
+    "station_canopen_gimbal_emulator.toml",
     "station_modbus_emulator.toml",
 )
 REGISTER_MAPS = ("regmap_gimbal_hil_servo.toml",)
-FREE_FORM = {("canopen", "options")}  # python-can's own keyword arguments
+# python-can's own keyword arguments; a gimbal's axis names (a misspelt one is refused at
+# bring-up: the profile's axis has no node, the names there listed)
+FREE_FORM = {("canopen", "options"), ("canopen", "axes"), ("canopen", "emulated_profiles")}
 
 Path_ = tuple[str | int, ...]
 

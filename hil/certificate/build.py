@@ -130,6 +130,7 @@ def build_certificate(
                 "sha256": f.sha256,
                 "samples": f.samples,
                 "complete": f.complete,
+                **({"held_axes": f.held_axes} if f.held_axes else {}),
             }
             for f in run.raw_files
         ],
@@ -163,6 +164,7 @@ def _environment(run: CalibrationRun) -> dict[str, Any]:
 def _drive_info(info: Any) -> dict[str, Any]:
     data = asdict(info)
     data["modes"] = [mode.value for mode in info.modes]
+    data["capabilities"] = sorted(c.name.lower() for c in info.capabilities)
     return data
 
 

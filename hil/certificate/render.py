@@ -201,7 +201,9 @@ def render_text(cert: dict[str, Any]) -> str:
         lines.append(f"  {name:<24}{p['outcome']:<14}motion {p['motion_time_s']:.1f} s")
         lines += [f"      {message}" for message in protocol_messages(p["messages"])]
     lines += ["", "Raw data (SHA-256):"]
-    lines += [f"  {f['file']}  {f['sha256']}" for f in cert["raw_data"]]
+    lines += [f"  {f['file']}  {f['sha256']}"
+              + (f"  (held: {f['held_axes']})" if f.get("held_axes") else "")
+              for f in cert["raw_data"]]
     if cert["artifacts"]:
         lines += ["", "Derived files (SHA-256):"]
         lines += [f"  {a['file']}  {a['sha256']}  {a['description']}" for a in cert["artifacts"]]

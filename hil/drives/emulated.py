@@ -5,7 +5,7 @@ from __future__ import annotations
 import dataclasses
 import uuid
 from collections.abc import Iterator
-from contextlib import contextmanager
+from contextlib import ExitStack, contextmanager
 from pathlib import Path
 from typing import Any
 
@@ -13,7 +13,7 @@ from hil.config import builtin_fixture
 from hil.drives.emulator_faults import CanFaults, ModbusFaults
 from hil.drives.station import CanOpenStation, ModbusStation, load_station
 from hil.errors import ProfileError
-from hil.profile import UnitProfile
+from hil.profile import UnitProfile, load_profile
 from plant_sim.params import PlantParams
 
 CANOPEN_STATION = "station_canopen_emulator.toml"
@@ -46,29 +46,58 @@ def canopen_emulator(
     **emulator_options: Any,
 ) -> Iterator[tuple[Any, CanOpenStation]]:
     """A running CiA 402 emulator on a private virtual channel, and its station (the
-    built-in emulator station's settings, or ``base_station``'s, on that channel)."""
+    built-in emulator station's settings, or ``base_station``'s, on that channel).
+
+    A station naming a gimbal's axes (``[canopen.axes]``) gets one emulated node per axis
+    on that channel: ``profile``'s axis is the node under test, every other axis a node
+    emulating the plant of its ``[canopen.emulated_profiles]`` profile; the elevation
+    node's position is the azimuth plant's elevation (J_az(el)).
+    """
     from hil.drives.cia402.emulator import Cia402Emulator
 
     station = base_station or load_station(builtin_station(CANOPEN_STATION))
     assert isinstance(station, CanOpenStation)
     channel = f"gimbal-hil-{uuid.uuid4().hex[:12]}"
-    station = dataclasses.replace(station, channel=channel, **(station_changes or {}))
-    emulator = Cia402Emulator(
-        _plant(profile, "canopen-emulator"),
-        firmware=profile.firmware,
-        fs_hz=profile.sample_rate_hz,
-        seed=seed,
-        channel=channel,
-        interface=station.interface,
-        node_id=station.node_id,
-        rated_torque_nm=rated_torque_nm(profile),
-        serial_number=serial,
-        faults=faults,
-        eds_path=station.eds_path,
-        **emulator_options,
-    )
-    with emulator:
-        yield emulator, station
+    station = dataclasses.replace(station, channel=channel,
+                                  **(station_changes or {})).for_axis(profile.axis)
+    with ExitStack() as running:
+        held = {name: running.enter_context(Cia402Emulator(
+            _plant(other, "canopen-emulator"), firmware=other.firmware,
+            fs_hz=other.sample_rate_hz, seed=seed + 1000 * (n + 1), channel=channel,
+            interface=station.interface, node_id=node_id,
+            rated_torque_nm=rated_torque_nm(other), serial_number=serial + n + 1,
+            eds_path=station.eds_path))
+            for n, (name, node_id) in enumerate(station.held.items())
+            for other in (_emulated_profile(station, name),)}
+        elevation = held.get("elevation")
+        emulator = Cia402Emulator(
+            _plant(profile, "canopen-emulator"),
+            firmware=profile.firmware,
+            fs_hz=profile.sample_rate_hz,
+            seed=seed,
+            channel=channel,
+            interface=station.interface,
+            node_id=station.node_id,
+            rated_torque_nm=rated_torque_nm(profile),
+            serial_number=serial,
+            faults=faults,
+            eds_path=station.eds_path,
+            elevation_of=None if elevation is None else lambda: elevation.plant.position_rad,
+            **emulator_options,
+        )
+        emulator.held_nodes = held  # the bus's other emulated nodes, by axis name
+        with emulator:
+            yield emulator, station
+
+
+def _emulated_profile(station: CanOpenStation, axis: str) -> UnitProfile:
+    """The profile whose plant the emulator runs on the node of ``axis``."""
+    path = station.emulated_profiles.get(axis)
+    if path is None:
+        raise ProfileError(f"the emulator needs [canopen.emulated_profiles] '{axis}' (the "
+                           f"profile whose [plant] node {station.axes[axis]} emulates)",
+                           source=station.source)
+    return load_profile(path)
 
 
 @contextmanager

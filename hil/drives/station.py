@@ -12,7 +12,7 @@ file name that does not exist there is looked up in the built-in ``fixtures/``.
 from __future__ import annotations
 
 from collections.abc import Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -22,6 +22,24 @@ from hil.errors import ProfileError
 SYNC_PACINGS = ("realtime", "lockstep")
 ACQUISITIONS = ("stream", "recorder", "auto")
 TORQUE_SAMPLES = ("auto", "mean", "instantaneous")
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class HoldSettings:
+    """How the station moves and holds a gimbal's other axes (``[canopen.hold]``): each is
+    a node on the same bus, in profile position mode (CiA 402 mode 1, its own position
+    loop), moved between the runs of the axis under test and holding its angle during them.
+
+    ``speed_rad_s`` (0x6081), ``accel_rad_s2`` (0x6083 and 0x6084), ``window_rad``
+    (0x6067: "target reached" within it), ``settle_s`` (waited after it is reached, the
+    axis under test still), ``timeout_s`` (beyond the move's own time: not reached is an
+    error naming the node)."""
+
+    speed_rad_s: float = 0.5
+    accel_rad_s2: float = 2.0
+    window_rad: float = 0.002
+    settle_s: float = 0.2
+    timeout_s: float = 5.0
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -73,6 +91,30 @@ class CanOpenStation:
     host_heartbeat_timeout_s: float = 1.0
     abort_connection_option_code: int = 3  # 0x6007: 1 fault, 2 disable voltage, 3 quick stop
     can_options: Mapping[str, Any] = field(default_factory=dict)
+    # a gimbal on this bus ([canopen.axes]): node per axis name; the axis under test is
+    # node_id, the others (held) are moved and held by their own drives (hold)
+    axes: Mapping[str, int] = field(default_factory=dict)
+    held: Mapping[str, int] = field(default_factory=dict)
+    hold: HoldSettings = field(default_factory=HoldSettings)
+    # read by the emulator kinds only: the profile whose [plant] each axis's node emulates
+    emulated_profiles: Mapping[str, Path] = field(default_factory=dict)
+
+    def for_axis(self, axis: str) -> CanOpenStation:
+        """This station as the calibration of ``axis`` uses it: its node under test, every
+        other axis of ``[canopen.axes]`` held (a station without axes: itself).
+
+        Raises
+        ------
+        ProfileError
+            The station names axes and ``axis`` is not one of them.
+        """
+        if not self.axes:
+            return self
+        if axis not in self.axes:
+            raise ProfileError(f"[canopen.axes] has no node for the profile's axis '{axis}' "
+                               f"(it names {', '.join(sorted(self.axes))})", source=self.source)
+        held = {name: node for name, node in self.axes.items() if name != axis}
+        return replace(self, node_id=self.axes[axis], held=held)
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -251,6 +293,12 @@ def _canopen(table: ConfigTable, scaling: ConfigTable, base_dir: Path) -> CanOpe
         host_heartbeat_timeout_s=table.positive("host_heartbeat_timeout_s", 1.0),
         abort_connection_option_code=table.integer("abort_connection_option_code", 3),
         can_options=dict(table.table_at("options", required=False).values),  # python-can's
+        axes=_axes(table.table_at("axes", required=False)),
+        hold=_hold(table.table_at("hold", required=False)),
+        emulated_profiles={
+            name: resolve_fixture(path, base_dir=base_dir, source=table.source)
+            for name, path in _strings(table.table_at("emulated_profiles", required=False))
+        },
     )
     table.done()
     scaling.done()
@@ -260,9 +308,42 @@ def _canopen(table: ConfigTable, scaling: ConfigTable, base_dir: Path) -> CanOpe
     return station
 
 
+def _axes(table: ConfigTable) -> dict[str, int]:
+    """``[canopen.axes]``: axis name = node id, each 1..127 and each once."""
+    axes = {name: table.integer(name) for name in table.values}
+    for name, node in axes.items():
+        if not 1 <= node <= 127:
+            raise table.error(name, f"is a node id, 1..127, got {node}")
+    if len(set(axes.values())) != len(axes):
+        raise ProfileError(f"{table.table} gives two axes one node: {axes}", source=table.source)
+    table.done()
+    return axes
+
+
+def _hold(table: ConfigTable) -> HoldSettings:
+    default = HoldSettings()
+    hold = HoldSettings(
+        speed_rad_s=table.positive("speed_rad_s", default.speed_rad_s),
+        accel_rad_s2=table.positive("accel_rad_s2", default.accel_rad_s2),
+        window_rad=table.positive("window_rad", default.window_rad),
+        settle_s=table.non_negative("settle_s", default.settle_s),
+        timeout_s=table.positive("timeout_s", default.timeout_s),
+    )
+    table.done()
+    return hold
+
+
+def _strings(table: ConfigTable) -> list[tuple[str, str]]:
+    pairs = [(name, table.string(name)) for name in table.values]
+    table.done()
+    return pairs
+
+
 def _check_host_watch(table: ConfigTable, station: CanOpenStation) -> None:
     """The host's heartbeat and the drive's reaction to its loss must be what CiA 301/402
     can express, and the drive must be allowed to miss a few heartbeats."""
+    if station.host_node_id in station.axes.values():
+        raise table.error("host_node_id", f"is node {station.host_node_id} of [canopen.axes]")
     if not 1 <= station.host_node_id <= 127 or station.host_node_id == station.node_id:
         raise table.error("host_node_id", f"must be 1..127 and not the drive's node_id "
                                           f"{station.node_id}, got {station.host_node_id}")

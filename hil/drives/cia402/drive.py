@@ -25,6 +25,7 @@ from hil.drives.base import (
     interrupted,
 )
 from hil.drives.cia402.acquire import RunSetup, recorder_upload, run_recorder, run_stream
+from hil.drives.cia402.held_axis import HeldAxis, bus_load
 from hil.drives.cia402.link import CanLink
 from hil.drives.cia402.protocol import (
     COMPENSATION_TABLE,
@@ -39,6 +40,7 @@ from hil.drives.cia402.protocol import (
     max_stream_rate_hz,
     pack_harmonics,
     state_of,
+    stream_frame_bytes,
 )
 from hil.drives.cia402.state_machine import Cia402StateMachine
 from hil.drives.station import CanOpenStation
@@ -78,9 +80,12 @@ class CanOpenDrive(Drive):
         self.command_interpolation = INTERPOLATION_UNKNOWN
         self.torque_sample = "instantaneous"  # or "mean": 0x2077 over the SYNC period
         self._period_us = round(station.sync_period_s * 1e6)
+        self.held: dict[str, HeldAxis] = {}  # the gimbal's other axes on this bus, by name
+        self.bus_load = 0.0  # the fraction of the bus the stream and the heartbeats take
         try:
             self._bring_up()
         except BaseException:
+            self._release_held()
             self.link.close()
             raise
 
@@ -89,11 +94,16 @@ class CanOpenDrive(Drive):
         st, link = self.station, self.link
         rate = 1.0 / st.sync_period_s
         bus_max = max_stream_rate_hz(st.bitrate, st.max_bus_load)
-        if rate > bus_max:
+        rpdo_bytes, tpdo_bytes = stream_frame_bytes()
+        load = bus_load(st, rpdo_bytes=rpdo_bytes, tpdo_bytes=tpdo_bytes)
+        if rate > bus_max or load > st.max_bus_load:
+            held = f" with {len(st.held)} held axis node(s)" if st.held else ""
             raise DriveStateError(
-                f"SYNC at {rate:.0f} Hz needs more than {st.max_bus_load:.0%} of a "
-                f"{st.bitrate / 1e3:.0f} kbit/s bus (limit {bus_max:.0f} Hz); {st.source}"
+                f"SYNC at {rate:.0f} Hz{held} needs {load:.0%} of a {st.bitrate / 1e3:.0f} "
+                f"kbit/s bus, more than the station's max_bus_load {st.max_bus_load:.0%} "
+                f"(limit {bus_max:.0f} Hz); {st.source}"
             )
+        self.bus_load = load
         link.open()
         # many drives power up with no heartbeat (0x1017 = 0, a common factory default):
         # PRE-OPERATIONAL commanded, the heartbeat set by SDO (its answer proves the node is
@@ -127,6 +137,9 @@ class CanOpenDrive(Drive):
         link.nmt("OPERATIONAL")
         status = link.tick_until("first SYNC answer", lambda sw, mode: True)
         log.info("node %d operational, %s", st.node_id, state_of(status[0]))
+        for name, node_id in st.held.items():  # the gimbal's other axes: hold where they are
+            self.held[name] = HeldAxis(link, name=name, node_id=node_id)
+            self.held[name].enable()
 
     def _scaling(self) -> Scaling:
         st, link = self.station, self.link
@@ -295,9 +308,10 @@ class CanOpenDrive(Drive):
             limits=self.limits,
             modes=self.states.modes(),
             max_sample_rate_hz=max(rate_hz, self.recorder_rate_hz),
-            capabilities=frozenset({Capability.COMPENSATION_TABLE}
-                                   if self.node_od is not None
-                                   and COMPENSATION_TABLE in self.node_od else ()),
+            capabilities=frozenset(
+                ({Capability.COMPENSATION_TABLE} if self.node_od is not None
+                 and COMPENSATION_TABLE in self.node_od else set())
+                | ({Capability.ELEVATION_AXIS} if "elevation" in st.held else set())),
             transport=f"canopen {st.interface}:{st.channel} node {st.node_id}",
         )
 
@@ -365,10 +379,34 @@ class CanOpenDrive(Drive):
         self.link.write(COMPENSATION_TABLE, 1, pack_harmonics(cogging))
         self.link.write(COMPENSATION_TABLE, 2, pack_harmonics(ripple))
 
+    def set_elevation(self, elevation_rad: float) -> None:
+        """Move the gimbal's elevation axis (a held node on this bus) to ``elevation_rad``
+        and hold it there, the axis under test holding still meanwhile.
+
+        Raises
+        ------
+        DriveStateError
+            The station holds no elevation axis, or it did not reach the angle in time.
+        """
+        held = self.held.get("elevation")
+        if held is None:
+            super().set_elevation(elevation_rad)
+            return
+        held.move_to(elevation_rad)
+
+    def held_positions_rad(self) -> dict[str, float]:
+        """Where each held axis stands (read by SDO)."""
+        return {name: axis.position_rad for name, axis in self.held.items()}
+
+    def _release_held(self) -> None:
+        for axis in self.held.values():
+            axis.disable()
+
     def close(self) -> None:
-        """Disable, return the node to PRE-OPERATIONAL, stop watching our heartbeat (a
-        clean end is no lost host), release the bus."""
+        """Disable (the held axes first), return the node to PRE-OPERATIONAL, stop watching
+        our heartbeat (a clean end is no lost host), release the bus."""
         try:
+            self._release_held()
             self.disable()
             if self.link.connected:
                 try:
@@ -453,6 +491,12 @@ class CanOpenDrive(Drive):
                         self.station.node_id, excitation.name, exc)
             return None
 
+    def _held_text(self) -> str:
+        """``elevation node 6 at +0.6000 rad``, one per held axis: the certificate states
+        where the gimbal's other axes stood."""
+        return "; ".join(f"{name} node {axis.node_id} at {axis.position_rad:+.4f} rad"
+                         for name, axis in self.held.items())
+
     def _run_setup(self) -> RunSetup:
         assert self.scaling is not None
         info, st = self.info, self.station
@@ -475,6 +519,7 @@ class CanOpenDrive(Drive):
                 "firmware": info.firmware_version,
                 "serial": info.serial,
                 "transport": info.transport,
+                **({"held_axes": self._held_text()} if self.held else {}),
             },
             operation_mode="" if mode_code is None else str(mode_code),
         )

@@ -35,6 +35,7 @@ import math
 import struct
 import threading
 import time
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -164,6 +165,7 @@ class Cia402Emulator:
         exact_torque_hold: bool = True,
         interpolation: int = 0,
         power_on_heartbeat_ms: int | None = None,
+        elevation_of: Callable[[], float] | None = None,
     ) -> None:
         if exact_torque_hold and not plant.exact_torque_hold:
             plant = plant.with_changes(exact_torque_hold=True)  # the same physics as SimDrive
@@ -213,6 +215,14 @@ class Cia402Emulator:
         self._next_sample = dict(self._sample)
         self._previous_target: dict[int, float] = {}
         self._raw_cache: dict[tuple[int, int], int] = {}
+        # profile position (mode 1): the latched target, the profile's position and speed
+        self._pp_target = self._pp_position = self._pp_velocity = 0.0
+        self._setpoint_acknowledged = False
+        # another node's position is this axis's elevation (a gimbal on one bus: the
+        # azimuth inertia follows the elevation axis, J_az(el))
+        self._elevation_of = elevation_of
+        self.held_nodes: dict[str, Cia402Emulator] = {}  # other nodes started beside it
+        self._elevation_rad = plant.elevation_rad
         self._steps = 0
         self._compensation: dict[int, tuple[PositionHarmonic, ...]] = {1: (), 2: ()}
         self.limit_active = False  # stopped at 0x607D/0x6080 (statusword bit 11)
@@ -294,6 +304,9 @@ class Cia402Emulator:
             word |= SW_INTERNAL_LIMIT
         if self.state == ENABLED and self.mode_display in (8, 9, 10):
             word |= 0x1000  # drive follows the command value
+        if self.state == ENABLED and self.mode_display == 1:
+            word |= 0x1000 if self._setpoint_acknowledged else 0
+            word |= 0x0400 if self._target_reached() else 0
         if self.state == SWITCH_ON_DISABLED:
             word &= ~0x20 & 0xFFFF
         return word
@@ -406,7 +419,12 @@ class Cia402Emulator:
     # -- state machine -----------------------------------------------------------------
     def _apply_controlword(self, word: int) -> None:
         rising_reset = bool(word & 0x80) and not self.controlword & 0x80
+        new_setpoint = bool(word & 0x10) and not self.controlword & 0x10
         self.controlword = word
+        self._setpoint_acknowledged = bool(word & 0x10) and self._setpoint_acknowledged
+        if new_setpoint and self.state == ENABLED and self.mode_display == 1:
+            self._pp_target = self.targets[0x607A] / self._counts_per_rad
+            self._setpoint_acknowledged = True
         state = self.state
         if state in (FAULT, FAULT_REACTION):
             if rising_reset and state == FAULT and not self.faults.fault_persists:
@@ -446,6 +464,8 @@ class Cia402Emulator:
             self.limit_active = False
             self._previous_target = {}
             self.plant.hold()
+            self._pp_target = self._pp_position = self.plant.position_rad  # holds where it is
+            self._pp_velocity = 0.0
             self._profile_velocity = self.plant.velocity_rad_s
             self._profile_torque = 0.0
         self._enable_countdown = -1
@@ -671,6 +691,7 @@ class Cia402Emulator:
         """One communication period of the plant with the latched target held."""
         steps = self.steps_per_sync()
         period_s = steps / self.fs_hz
+        self._follow_elevation()
         mode, command = self._command(steps, period_s)
         offset = None
         if self.state == ENABLED and mode is Mode.VELOCITY:  # 0x60B2, held over the period
@@ -714,6 +735,8 @@ class Cia402Emulator:
             return Mode.TORQUE, np.zeros(steps)
         waveform = self.recorder.waveform_block(steps)
         mode = _MODES[self.mode_display]
+        if waveform is None and self.mode_display == 1:
+            return mode, self._profile_position(steps)
         if waveform is None and self.mode_display in (8, 9, 10):
             # cyclic synchronous modes: the target latched at this SYNC is reached at the
             # next one; 0x60C0 = 0 (CiA 402 linear interpolation) ramps to it over the period,
@@ -750,6 +773,52 @@ class Cia402Emulator:
         raw = self.targets[0x607A] if waveform is None else waveform
         value = np.asarray(raw, dtype=np.float64) * 2 * math.pi / cpr
         return mode, np.broadcast_to(value, (steps,)).copy()
+
+    @property
+    def _counts_per_rad(self) -> float:
+        return self.counts_per_rev / (2 * math.pi)
+
+    def _profile_position(self, steps: int) -> np.ndarray:
+        """Profile position (mode 1): toward the latched target at the profile velocity
+        0x6081, accelerating at 0x6083 and braking at 0x6084 (increments/s, /s²), one
+        position per control period; the position loop follows it."""
+        scale, dt = self._counts_per_rad, 1.0 / self.fs_hz
+        top = self._raw(0x6081) / scale
+        accel, brake = self._raw(0x6083) / scale, max(self._raw(0x6084) / scale, 1e-9)
+        path = np.empty(steps)
+        position, velocity, target = self._pp_position, self._pp_velocity, self._pp_target
+        for i in range(steps):
+            remaining = target - position
+            if velocity * remaining < 0:  # heading away (a new target behind): brake first
+                velocity -= math.copysign(min(brake * dt, abs(velocity)), velocity)
+            else:
+                speed = min(top, math.sqrt(2.0 * brake * abs(remaining)),
+                            abs(velocity) + accel * dt)
+                velocity = math.copysign(speed, remaining)
+            if abs(remaining) <= abs(velocity) * dt:
+                position, velocity = target, 0.0
+            else:
+                position += velocity * dt
+            path[i] = position
+        self._pp_position, self._pp_velocity = position, velocity
+        return path
+
+    def _target_reached(self) -> bool:
+        """Statusword bit 10 in profile position: the profile at its target and the axis
+        within the position window 0x6067 of it."""
+        window = self._raw(0x6067) / self._counts_per_rad
+        return (self._pp_position == self._pp_target
+                and abs(self.plant.position_rad - self._pp_target) <= window)
+
+    def _follow_elevation(self) -> None:
+        """The elevation node's position as this plant's elevation (changes below 0.1 mrad
+        are a holding axis's jitter: the plant is not rebuilt for them)."""
+        if self._elevation_of is None:
+            return
+        elevation = self._elevation_of()
+        if abs(elevation - self._elevation_rad) > 1e-4:
+            self._elevation_rad = elevation
+            self.plant.set_elevation(elevation)
 
     # -- fault injection -------------------------------------------------------------------
     def _inject_bus_error(self) -> None:

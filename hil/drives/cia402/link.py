@@ -238,19 +238,7 @@ class CanLink:
     def _sdo(self, action: Callable[[Any], Any], index: int, subindex: int, *,
              raw: bool = False) -> Any:
         assert self.node is not None
-        what = f"node {self.node_id} object 0x{index:04X}:{subindex:02X}"
-        try:
-            if raw:  # not in the EDS: no variable to look up
-                return action(None)
-            obj = self.node.sdo[index]
-            var = obj if subindex == 0 and not hasattr(obj, "values") else obj[subindex]
-            return action(var)
-        except SdoAbortedError as exc:
-            raise DriveStateError(f"{what}: SDO aborted ({exc})") from exc
-        except SdoCommunicationError as exc:
-            raise DriveCommunicationError(f"{what}: {exc}") from exc
-        except can.CanError as exc:
-            raise DriveCommunicationError(f"{what}: CAN error {exc}") from exc
+        return sdo_access(self.node, action, index, subindex, raw=raw)
 
     # -- NMT -------------------------------------------------------------------------
     def command_nmt(self, state: str) -> None:
@@ -465,6 +453,33 @@ class CanLink:
         self.rx1.clear()
         self.rx2.clear()
         self.sync_sent_s.clear()
+
+
+def sdo_access(node: canopen.RemoteNode, action: Callable[[Any], Any], index: int,
+               subindex: int, *, raw: bool = False) -> Any:
+    """``action`` on ``node``'s variable ``index:subindex`` (``raw``: on ``None``, for an
+    object the EDS does not declare), the SDO's failures as the drive errors.
+
+    Raises
+    ------
+    DriveStateError
+        The node aborted the transfer.
+    DriveCommunicationError
+        No answer within the SDO timeout, or a CAN error.
+    """
+    what = f"node {node.id} object 0x{index:04X}:{subindex:02X}"
+    try:
+        if raw:  # not in the EDS: no variable to look up
+            return action(None)
+        obj = node.sdo[index]
+        var = obj if subindex == 0 and not hasattr(obj, "values") else obj[subindex]
+        return action(var)
+    except SdoAbortedError as exc:
+        raise DriveStateError(f"{what}: SDO aborted ({exc})") from exc
+    except SdoCommunicationError as exc:
+        raise DriveCommunicationError(f"{what}: {exc}") from exc
+    except can.CanError as exc:
+        raise DriveCommunicationError(f"{what}: CAN error {exc}") from exc
 
 
 def _sleep_until(deadline: float) -> None:

@@ -121,14 +121,19 @@ def cycle_bits(rpdo_bytes: int, tpdo_bytes: tuple[int, ...]) -> int:
     return frame_bits(0) + frame_bits(rpdo_bytes) + sum(frame_bits(n) for n in tpdo_bytes)
 
 
-def max_stream_rate_hz(bitrate: int, max_bus_load: float) -> float:
-    """Highest SYNC rate at which our PDO layout keeps the bus below ``max_bus_load``."""
+def stream_frame_bytes() -> tuple[int, tuple[int, ...]]:
+    """Data bytes of our largest RPDO and of each TPDO (the larger of its two layouts)."""
     rpdo = max(sum(bits for _, bits in entries) for _, entries in RPDO_LAYOUT.values()) // 8
     tpdos = tuple(
         max(sum(bits for _, bits in entries) // 8 for _, entries in (one, two))
         for one, two in zip(TPDO_LAYOUT, TPDO_LAYOUT_MEAN, strict=True)
     )
-    return bitrate * max_bus_load / cycle_bits(rpdo, tpdos)
+    return rpdo, tpdos
+
+
+def max_stream_rate_hz(bitrate: int, max_bus_load: float) -> float:
+    """Highest SYNC rate at which our PDO layout keeps the bus below ``max_bus_load``."""
+    return bitrate * max_bus_load / cycle_bits(*stream_frame_bytes())
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)

@@ -1,0 +1,136 @@
+"""A gimbal on one CAN bus: the axis under test streams, the other axis's drive holds it
+(profile position) and moves it for real between runs; one SYNC producer, the bus load
+checked with every node's heartbeat before any motion."""
+
+from __future__ import annotations
+
+import json
+import re
+import subprocess
+import sys
+import tomllib
+from pathlib import Path
+
+import numpy as np
+import pytest
+import tomli_w
+
+from hil.config import builtin_fixture
+from hil.drives.base import Capability
+from hil.drives.cia402.drive import CanOpenDrive
+from hil.drives.cia402.emulator import ENABLED
+from hil.drives.emulated import canopen_emulator
+from hil.drives.station import CanOpenStation, load_station
+from hil.errors import DriveStateError, ProfileError
+from hil.profile import load_profile
+from tests.drives.conftest import sine
+
+STATION = builtin_fixture("station_canopen_gimbal_emulator.toml")
+
+
+def _station_file(tmp_path: Path, **canopen: object) -> Path:
+    document = tomllib.loads(STATION.read_text(encoding="utf-8"))
+    document["canopen"].update(canopen)
+    path = tmp_path / "station.toml"
+    path.write_text(tomli_w.dumps(document), encoding="utf-8")
+    return path
+
+
+def test_each_axis_is_its_node_and_the_others_are_held() -> None:
+    station = load_station(STATION)
+    assert isinstance(station, CanOpenStation)
+    azimuth, elevation = station.for_axis("azimuth"), station.for_axis("elevation")
+    assert (azimuth.node_id, dict(azimuth.held)) == (5, {"elevation": 6})
+    assert (elevation.node_id, dict(elevation.held)) == (6, {"azimuth": 5})
+    with pytest.raises(ProfileError, match=r"no node for the profile's axis 'roll' "
+                                           r"\(it names azimuth, elevation\)") as caught:
+        station.for_axis("roll")
+    assert str(STATION) in str(caught.value)
+
+
+@pytest.mark.parametrize(("axes", "message"), [
+    ({"azimuth": 5, "elevation": 5}, "two axes one node"),
+    ({"azimuth": 5, "elevation": 128}, r"'elevation': is a node id, 1\.\.127, got 128"),
+    ({"azimuth": 5, "elevation": 127}, r"'host_node_id': is node 127 of \[canopen.axes\]"),
+])
+def test_a_bus_that_cannot_be_is_refused_at_load(tmp_path: Path, axes: dict[str, int],
+                                                 message: str) -> None:
+    with pytest.raises(ProfileError, match=message):
+        load_station(_station_file(tmp_path, axes=axes))
+
+
+def test_the_elevation_drive_moves_for_real_and_is_left_disabled() -> None:
+    profile = load_profile("demo_gimbal_azimuth")
+    station = load_station(STATION)
+    assert isinstance(station, CanOpenStation)
+    with canopen_emulator(profile, seed=5, base_station=station) as (azimuth, on_bus):
+        elevation = azimuth.held_nodes["elevation"]
+        with CanOpenDrive(on_bus, limits=profile.limits) as drive:
+            assert Capability.ELEVATION_AXIS in drive.info.capabilities
+            assert elevation.state == ENABLED  # held from bring-up on
+            drive.enable()
+            for angle in (0.7, -1.1):
+                drive.set_elevation(angle)
+                # the elevation node's own plant stands there, and the azimuth's inertia
+                # follows it: the coupling goes through the bus, not through a parameter
+                assert elevation.plant.position_rad == pytest.approx(angle, abs=0.002)
+                assert azimuth.plant.params.elevation_rad == pytest.approx(angle, abs=0.002)
+            recording = drive.run(sine(0.3, fs_hz=1000.0, periods=1))
+            held = re.fullmatch(r"elevation node 6 at ([-+.0-9]+) rad",
+                                recording.metadata["held_axes"])
+            assert held is not None
+            assert float(held[1]) == pytest.approx(-1.1, abs=0.002)
+            assert elevation.plant.position_rad == pytest.approx(-1.1, abs=0.002)
+        assert elevation.state != ENABLED
+        assert azimuth.state != ENABLED
+
+
+def test_a_bus_load_beyond_the_budget_is_refused_before_motion() -> None:
+    profile = load_profile("demo_gimbal_azimuth")
+    station = load_station(STATION)
+    assert isinstance(station, CanOpenStation)
+    with canopen_emulator(profile, seed=6, base_station=station,
+                          station_changes={"max_bus_load": 0.4}) as (azimuth, on_bus):
+        with pytest.raises(DriveStateError, match=r"SYNC at 1000 Hz with 1 held axis node\(s\) "
+                                                  r"needs 45% of a 1000 kbit/s bus, more than "
+                                                  r"the station's max_bus_load 40%"):
+            CanOpenDrive(on_bus, limits=profile.limits)
+        assert azimuth.sync_count == 0
+        assert azimuth.held_nodes["elevation"].sync_count == 0
+
+
+@pytest.mark.slow
+def test_a_hidden_product_of_inertia_is_found_over_the_bus(tmp_path: Path) -> None:
+    """The azimuth plant's elevation stage drawn here (not the profile's P or ΔJ), the
+    elevation drive moved for real over CANopen: P within its stated U."""
+    rng = np.random.default_rng(20261128)
+    product = float(rng.choice([-1.0, 1.0]) * rng.uniform(1e-4, 5e-4))
+    delta = float(rng.uniform(1e-3, 2e-3))
+    document = tomllib.loads(builtin_fixture("demo_gimbal_azimuth.toml").read_text("utf-8"))
+    document["plant"].update(inertia_product_kg_m2=product, inertia_elevation_kg_m2=delta)
+    profile = tmp_path / "azimuth.toml"
+    profile.write_text(tomli_w.dumps(document), encoding="utf-8")
+    station = tmp_path / "station.toml"
+    station_document = tomllib.loads(STATION.read_text(encoding="utf-8"))
+    station_document["canopen"]["emulated_profiles"]["azimuth"] = str(profile)
+    station.write_text(tomli_w.dumps(station_document), encoding="utf-8")
+    done = subprocess.run(
+        [sys.executable, "-m", "hil.cli", "calibrate", "--drive", "canopen-emulator",
+         "--station", str(station), "--profile", str(profile), "--unit-serial", "GMB-H1",
+         "--seed", "3", "--out", str(tmp_path), "--", "-k", "inertia_elevation",
+         "--no-documents", "--store", "off"],
+        capture_output=True, text=True, timeout=600, check=False)
+    certificate = tmp_path / "GMB-H1" / "certificate.json"
+    assert certificate.is_file(), done.stdout + done.stderr
+    document = json.loads(certificate.read_text("utf-8"))
+    results = {r["parameter"]: r for r in document["results"]}
+    found = results["azimuth_inertia_product_kg_m2"]
+    assert abs(found["value"] - product) <= found["expanded_uncertainty"], (found, product)
+    # the certificate states where the elevation stood for each sine (read from its drive)
+    sines = [f for f in document["raw_data"] if "_el" in f["excitation"]]
+    assert len(sines) == 8
+    for entry in sines:
+        commanded = float(re.search(r"_el([-+.0-9]+)rad", entry["excitation"])[1])  # type: ignore[index]
+        held = re.fullmatch(r"elevation node 6 at ([-+.0-9]+) rad", entry["held_axes"])
+        assert held is not None
+        assert float(held[1]) == pytest.approx(commanded, abs=0.003)
