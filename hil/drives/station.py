@@ -33,13 +33,15 @@ class HoldSettings:
     ``speed_rad_s`` (0x6081), ``accel_rad_s2`` (0x6083 and 0x6084), ``window_rad``
     (0x6067: "target reached" within it), ``settle_s`` (waited after it is reached, the
     axis under test still), ``timeout_s`` (beyond the move's own time: not reached is an
-    error naming the node)."""
+    error naming the node), ``at_rad`` (the angle each held axis is moved to at bring-up,
+    by axis name; an axis not named is held where it stands)."""
 
     speed_rad_s: float = 0.5
     accel_rad_s2: float = 2.0
     window_rad: float = 0.002
     settle_s: float = 0.2
     timeout_s: float = 5.0
+    at_rad: Mapping[str, float] = field(default_factory=dict)
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -305,6 +307,13 @@ def _canopen(table: ConfigTable, scaling: ConfigTable, base_dir: Path) -> CanOpe
     if station.max_bus_load > 1:
         raise table.error("max_bus_load", "is a fraction (0..1]")
     _check_host_watch(table, station)
+    for where, names in (("[canopen.hold.at_rad]", station.hold.at_rad),
+                         ("[canopen.emulated_profiles]", station.emulated_profiles)):
+        unknown = sorted(set(names) - set(station.axes))
+        if unknown:
+            raise ProfileError(f"{where} names axis '{unknown[0]}', not one of [canopen.axes] "
+                               f"({', '.join(sorted(station.axes)) or 'none'})",
+                               source=station.source)
     return station
 
 
@@ -328,9 +337,16 @@ def _hold(table: ConfigTable) -> HoldSettings:
         window_rad=table.positive("window_rad", default.window_rad),
         settle_s=table.non_negative("settle_s", default.settle_s),
         timeout_s=table.positive("timeout_s", default.timeout_s),
+        at_rad=_angles(table.table_at("at_rad", required=False)),
     )
     table.done()
     return hold
+
+
+def _angles(table: ConfigTable) -> dict[str, float]:
+    angles = {name: table.number(name) for name in table.values}
+    table.done()
+    return angles
 
 
 def _strings(table: ConfigTable) -> list[tuple[str, str]]:

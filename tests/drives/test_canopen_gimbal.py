@@ -52,6 +52,8 @@ def test_each_axis_is_its_node_and_the_others_are_held() -> None:
     ({"azimuth": 5, "elevation": 5}, "two axes one node"),
     ({"azimuth": 5, "elevation": 128}, r"'elevation': is a node id, 1\.\.127, got 128"),
     ({"azimuth": 5, "elevation": 127}, r"'host_node_id': is node 127 of \[canopen.axes\]"),
+    ({"azimuth": 5, "roll": 6}, r"\[canopen.hold.at_rad\] names axis 'elevation', not one "
+                                r"of \[canopen.axes\] \(azimuth, roll\)"),
 ])
 def test_a_bus_that_cannot_be_is_refused_at_load(tmp_path: Path, axes: dict[str, int],
                                                  message: str) -> None:

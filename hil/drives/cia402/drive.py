@@ -137,9 +137,11 @@ class CanOpenDrive(Drive):
         link.nmt("OPERATIONAL")
         status = link.tick_until("first SYNC answer", lambda sw, mode: True)
         log.info("node %d operational, %s", st.node_id, state_of(status[0]))
-        for name, node_id in st.held.items():  # the gimbal's other axes: hold where they are
+        for name, node_id in st.held.items():  # the gimbal's other axes, held by their drives
             self.held[name] = HeldAxis(link, name=name, node_id=node_id)
             self.held[name].enable()
+            if name in st.hold.at_rad:
+                self.held[name].move_to(st.hold.at_rad[name])
 
     def _scaling(self) -> Scaling:
         st, link = self.station, self.link
