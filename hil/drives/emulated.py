@@ -90,13 +90,14 @@ def canopen_emulator(
             yield emulator, station
 
 
-def _emulated_profile(station: CanOpenStation, axis: str) -> UnitProfile:
-    """The profile whose plant the emulator runs on the node of ``axis``."""
-    path = station.emulated_profiles.get(axis)
+def _emulated_profile(station: CanOpenStation | ModbusStation, axis: str) -> UnitProfile:
+    """The profile whose plant the emulator runs at the address of ``axis``."""
+    path = station.gimbal.emulated_profiles.get(axis)
     if path is None:
-        raise ProfileError(f"the emulator needs [canopen.emulated_profiles] '{axis}' (the "
-                           f"profile whose [plant] node {station.axes[axis]} emulates)",
-                           source=station.source)
+        bus = "canopen" if isinstance(station, CanOpenStation) else "modbus"
+        raise ProfileError(f"the emulator needs [{bus}.emulated_profiles] '{axis}' (the "
+                           f"profile whose [plant] address {station.gimbal.axes[axis]} "
+                           "emulates)", source=station.source)
     return load_profile(path)
 
 

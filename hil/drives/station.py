@@ -45,6 +45,32 @@ class HoldSettings:
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
+class GimbalBus:
+    """A gimbal's drives on one bus (``[BUS.axes]``: axis name = node or unit id): the
+    axis under test is the station's own address, every other axis is ``held`` (moved and
+    held by its own drive, ``hold``). ``emulated_profiles`` (``[BUS.emulated_profiles]``)
+    is read by the emulator kinds only: the profile whose ``[plant]`` each axis emulates."""
+
+    axes: Mapping[str, int] = field(default_factory=dict)
+    held: Mapping[str, int] = field(default_factory=dict)
+    hold: HoldSettings = field(default_factory=HoldSettings)
+    emulated_profiles: Mapping[str, Path] = field(default_factory=dict)
+
+    def under_test(self, axis: str, *, source: str, table: str) -> tuple[int, dict[str, int]]:
+        """The address of ``axis`` and the held axes' addresses, by name.
+
+        Raises
+        ------
+        ProfileError
+            ``axis`` has no address among :attr:`axes`.
+        """
+        if axis not in self.axes:
+            raise ProfileError(f"{table} has no address for the profile's axis '{axis}' "
+                               f"(it names {', '.join(sorted(self.axes))})", source=source)
+        return self.axes[axis], {n: a for n, a in self.axes.items() if n != axis}
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
 class CanOpenStation:
     """A CiA 402 drive on a CAN bus reached through python-can.
 
@@ -93,13 +119,11 @@ class CanOpenStation:
     host_heartbeat_timeout_s: float = 1.0
     abort_connection_option_code: int = 3  # 0x6007: 1 fault, 2 disable voltage, 3 quick stop
     can_options: Mapping[str, Any] = field(default_factory=dict)
-    # a gimbal on this bus ([canopen.axes]): node per axis name; the axis under test is
-    # node_id, the others (held) are moved and held by their own drives (hold)
-    axes: Mapping[str, int] = field(default_factory=dict)
-    held: Mapping[str, int] = field(default_factory=dict)
-    hold: HoldSettings = field(default_factory=HoldSettings)
-    # read by the emulator kinds only: the profile whose [plant] each axis's node emulates
-    emulated_profiles: Mapping[str, Path] = field(default_factory=dict)
+    gimbal: GimbalBus = field(default_factory=GimbalBus)  # [canopen.axes], [canopen.hold]
+
+    @property
+    def held(self) -> Mapping[str, int]:
+        return self.gimbal.held
 
     def for_axis(self, axis: str) -> CanOpenStation:
         """This station as the calibration of ``axis`` uses it: its node under test, every
@@ -110,13 +134,10 @@ class CanOpenStation:
         ProfileError
             The station names axes and ``axis`` is not one of them.
         """
-        if not self.axes:
+        if not self.gimbal.axes:
             return self
-        if axis not in self.axes:
-            raise ProfileError(f"[canopen.axes] has no node for the profile's axis '{axis}' "
-                               f"(it names {', '.join(sorted(self.axes))})", source=self.source)
-        held = {name: node for name, node in self.axes.items() if name != axis}
-        return replace(self, node_id=self.axes[axis], held=held)
+        node, held = self.gimbal.under_test(axis, source=self.source, table="[canopen.axes]")
+        return replace(self, node_id=node, gimbal=replace(self.gimbal, held=held))
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -150,6 +171,25 @@ class ModbusStation:
     watchdog_s: float = 0.5
     torque_sample: str = "auto"
     setpoint_lead_periods: int = 3
+    gimbal: GimbalBus = field(default_factory=GimbalBus)  # [modbus.axes], [modbus.hold]
+
+    @property
+    def held(self) -> Mapping[str, int]:
+        return self.gimbal.held
+
+    def for_axis(self, axis: str) -> ModbusStation:
+        """This station as the calibration of ``axis`` uses it: its unit id under test,
+        every other axis of ``[modbus.axes]`` held (a station without axes: itself).
+
+        Raises
+        ------
+        ProfileError
+            The station names axes and ``axis`` is not one of them.
+        """
+        if not self.gimbal.axes:
+            return self
+        unit, held = self.gimbal.under_test(axis, source=self.source, table="[modbus.axes]")
+        return replace(self, unit_id=unit, gimbal=replace(self.gimbal, held=held))
 
 
 Station = CanOpenStation | ModbusStation
@@ -295,34 +335,44 @@ def _canopen(table: ConfigTable, scaling: ConfigTable, base_dir: Path) -> CanOpe
         host_heartbeat_timeout_s=table.positive("host_heartbeat_timeout_s", 1.0),
         abort_connection_option_code=table.integer("abort_connection_option_code", 3),
         can_options=dict(table.table_at("options", required=False).values),  # python-can's
-        axes=_axes(table.table_at("axes", required=False)),
-        hold=_hold(table.table_at("hold", required=False)),
-        emulated_profiles={
-            name: resolve_fixture(path, base_dir=base_dir, source=table.source)
-            for name, path in _strings(table.table_at("emulated_profiles", required=False))
-        },
+        gimbal=_gimbal(table, base_dir, largest_address=127),
     )
     table.done()
     scaling.done()
     if station.max_bus_load > 1:
         raise table.error("max_bus_load", "is a fraction (0..1]")
     _check_host_watch(table, station)
-    for where, names in (("[canopen.hold.at_rad]", station.hold.at_rad),
-                         ("[canopen.emulated_profiles]", station.emulated_profiles)):
-        unknown = sorted(set(names) - set(station.axes))
-        if unknown:
-            raise ProfileError(f"{where} names axis '{unknown[0]}', not one of [canopen.axes] "
-                               f"({', '.join(sorted(station.axes)) or 'none'})",
-                               source=station.source)
     return station
 
 
-def _axes(table: ConfigTable) -> dict[str, int]:
-    """``[canopen.axes]``: axis name = node id, each 1..127 and each once."""
+def _gimbal(table: ConfigTable, base_dir: Path, *, largest_address: int) -> GimbalBus:
+    """``axes``, ``hold`` and ``emulated_profiles`` of a bus table; every name they use is
+    an axis of ``axes``."""
+    gimbal = GimbalBus(
+        axes=_axes(table.table_at("axes", required=False), largest_address),
+        hold=_hold(table.table_at("hold", required=False)),
+        emulated_profiles={
+            name: resolve_fixture(path, base_dir=base_dir, source=table.source)
+            for name, path in _strings(table.table_at("emulated_profiles", required=False))
+        },
+    )
+    for where, names in (("hold.at_rad", gimbal.hold.at_rad),
+                         ("emulated_profiles", gimbal.emulated_profiles)):
+        unknown = sorted(set(names) - set(gimbal.axes))
+        if unknown:
+            raise ProfileError(f"{table.table[:-1]}.{where}] names axis '{unknown[0]}', not one "
+                               f"of {table.table[:-1]}.axes] "
+                               f"({', '.join(sorted(gimbal.axes)) or 'none'})",
+                               source=table.source)
+    return gimbal
+
+
+def _axes(table: ConfigTable, largest: int) -> dict[str, int]:
+    """``[BUS.axes]``: axis name = node or unit id, each 1..``largest`` and each once."""
     axes = {name: table.integer(name) for name in table.values}
-    for name, node in axes.items():
-        if not 1 <= node <= 127:
-            raise table.error(name, f"is a node id, 1..127, got {node}")
+    for name, address in axes.items():
+        if not 1 <= address <= largest:
+            raise table.error(name, f"is a bus address, 1..{largest}, got {address}")
     if len(set(axes.values())) != len(axes):
         raise ProfileError(f"{table.table} gives two axes one node: {axes}", source=table.source)
     table.done()
@@ -358,7 +408,7 @@ def _strings(table: ConfigTable) -> list[tuple[str, str]]:
 def _check_host_watch(table: ConfigTable, station: CanOpenStation) -> None:
     """The host's heartbeat and the drive's reaction to its loss must be what CiA 301/402
     can express, and the drive must be allowed to miss a few heartbeats."""
-    if station.host_node_id in station.axes.values():
+    if station.host_node_id in station.gimbal.axes.values():
         raise table.error("host_node_id", f"is node {station.host_node_id} of [canopen.axes]")
     if not 1 <= station.host_node_id <= 127 or station.host_node_id == station.node_id:
         raise table.error("host_node_id", f"must be 1..127 and not the drive's node_id "
@@ -397,6 +447,7 @@ def _modbus(table: ConfigTable, base_dir: Path) -> ModbusStation:
         watchdog_s=table.positive("watchdog_s", 0.5),
         torque_sample=table.choice("torque_sample", TORQUE_SAMPLES, "auto"),
         setpoint_lead_periods=table.integer("setpoint_lead_periods", 3),
+        gimbal=_gimbal(table, base_dir, largest_address=247),
     )
     table.done()
     if station.setpoint_lead_periods < 1:

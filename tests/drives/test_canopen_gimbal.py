@@ -42,7 +42,7 @@ def test_each_axis_is_its_node_and_the_others_are_held() -> None:
     azimuth, elevation = station.for_axis("azimuth"), station.for_axis("elevation")
     assert (azimuth.node_id, dict(azimuth.held)) == (5, {"elevation": 6})
     assert (elevation.node_id, dict(elevation.held)) == (6, {"azimuth": 5})
-    with pytest.raises(ProfileError, match=r"no node for the profile's axis 'roll' "
+    with pytest.raises(ProfileError, match=r"no address for the profile's axis 'roll' "
                                            r"\(it names azimuth, elevation\)") as caught:
         station.for_axis("roll")
     assert str(STATION) in str(caught.value)
@@ -50,7 +50,7 @@ def test_each_axis_is_its_node_and_the_others_are_held() -> None:
 
 @pytest.mark.parametrize(("axes", "message"), [
     ({"azimuth": 5, "elevation": 5}, "two axes one node"),
-    ({"azimuth": 5, "elevation": 128}, r"'elevation': is a node id, 1\.\.127, got 128"),
+    ({"azimuth": 5, "elevation": 128}, r"'elevation': is a bus address, 1\.\.127, got 128"),
     ({"azimuth": 5, "elevation": 127}, r"'host_node_id': is node 127 of \[canopen.axes\]"),
     ({"azimuth": 5, "roll": 6}, r"\[canopen.hold.at_rad\] names axis 'elevation', not one "
                                 r"of \[canopen.axes\] \(azimuth, roll\)"),

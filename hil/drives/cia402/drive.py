@@ -140,8 +140,8 @@ class CanOpenDrive(Drive):
         for name, node_id in st.held.items():  # the gimbal's other axes, held by their drives
             self.held[name] = HeldAxis(link, name=name, node_id=node_id)
             self.held[name].enable()
-            if name in st.hold.at_rad:
-                self.held[name].move_to(st.hold.at_rad[name])
+            if name in st.gimbal.hold.at_rad:
+                self.held[name].move_to(st.gimbal.hold.at_rad[name])
 
     def _scaling(self) -> Scaling:
         st, link = self.station, self.link

@@ -94,7 +94,7 @@ class HeldAxis:
                    raw=True)
 
     def _bring_up(self) -> None:
-        st, hold = self.station, self.station.hold
+        st, hold = self.station, self.station.gimbal.hold
         self.node.nmt.state = "PRE-OPERATIONAL"
         self.write(0x1017, 0, round(st.heartbeat_period_s * 1e3))
         if not int(self.read(0x6502)) & 0x01:
@@ -159,7 +159,7 @@ class HeldAxis:
         """Move to ``angle_rad`` and hold it (reached within the window, then settled)."""
         if not self.enabled:
             self.enable()
-        hold = self.station.hold
+        hold = self.station.gimbal.hold
         distance = abs(angle_rad - self.position_rad)
         self.write(0x607A, 0, self._counts(angle_rad))
         self.write(0x6040, 0, CW_ENABLE_OPERATION | CW_NEW_SETPOINT)
