@@ -118,6 +118,7 @@ def pack_params(params: PlantParams, firmware: Firmware) -> FloatArray:
 
 LOOP_NOISE_STREAM = 0x100B  # the in-loop noise's own stream of the seed (the reported
 # torque's noise keeps the stream it always had, so a seed's measurement noise is unchanged)
+ELEVATION_STEP_RAD = 1e-4  # the other axis moved less than this: the plant is not rebuilt
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -229,6 +230,12 @@ class Plant:
         self._packed = pack_params(self.params, self.firmware)
         self._substeps = substeps_for(self.params, self.fs_hz)
         self._set_loop_noise()
+
+    def follow_elevation(self, elevation_rad: float) -> None:
+        """:meth:`set_elevation` when the other axis moved more than 0.1 mrad since it was
+        last set (a holding axis's jitter does not rebuild the plant at every period)."""
+        if abs(elevation_rad - self.params.elevation_rad) > ELEVATION_STEP_RAD:
+            self.set_elevation(elevation_rad)
 
     def _set_loop_noise(self) -> None:
         self._loop_noise = loop_noise_scale(self.params, self.fs_hz)

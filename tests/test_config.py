@@ -26,11 +26,13 @@ STATIONS = (
     "station_canopen_example.toml",
     "station_canopen_gimbal_emulator.toml",
     "station_modbus_emulator.toml",
+    "station_modbus_gimbal_emulator.toml",
 )
 REGISTER_MAPS = ("regmap_gimbal_hil_servo.toml",)
 # python-can's own keyword arguments; a gimbal's axis names (a misspelt one is refused at
 # bring-up: the profile's axis has no node, the names there listed)
-FREE_FORM = {("canopen", "options"), ("canopen", "axes"), ("canopen", "emulated_profiles")}
+FREE_FORM = {("canopen", "options"), *((bus, table) for bus in ("canopen", "modbus")
+                                       for table in ("axes", "emulated_profiles"))}
 
 Path_ = tuple[str | int, ...]
 

@@ -114,11 +114,27 @@ def modbus_emulator(
 ) -> Iterator[tuple[Any, ModbusStation]]:
     """A running Modbus emulator on 127.0.0.1 (TCP, or RTU framing over ``socket://``),
     and its station (the built-in emulator station's settings, or ``base_station``'s,
-    at the emulator's port)."""
+    at the emulator's port).
+
+    A station naming a gimbal's axes (``[modbus.axes]``) gets one emulated drive per axis
+    behind that server, each at its unit id: ``profile``'s axis under test, every other
+    axis emulating the plant of its ``[modbus.emulated_profiles]`` profile; the elevation
+    drive's position is the azimuth plant's elevation (J_az(el)).
+    """
     from hil.drives.modbus.emulator import ModbusEmulator
 
     station = base_station or load_station(builtin_station(MODBUS_STATION))
     assert isinstance(station, ModbusStation)
+    station = station.for_axis(profile.axis)
+    held = {
+        name: ModbusEmulator(
+            _plant(other, "modbus-emulator"), firmware=other.firmware,
+            fs_hz=other.sample_rate_hz, seed=seed + 1000 * (n + 1),
+            register_map=station.register_map_path, rated_torque_nm=rated_torque_nm(other),
+            serial_number=n + 2)
+        for n, (name, _) in enumerate(station.held.items())
+        for other in (_emulated_profile(station, name),)}
+    elevation = held.get("elevation")
     emulator = ModbusEmulator(
         _plant(profile, "modbus-emulator"),
         firmware=profile.firmware,
@@ -128,8 +144,12 @@ def modbus_emulator(
         rated_torque_nm=rated_torque_nm(profile),
         framing="rtu" if transport == "rtu" else "tcp",
         faults=faults,
+        unit_id=station.unit_id if held else None,
+        neighbours={station.held[name]: drive for name, drive in held.items()},
+        elevation_of=None if elevation is None else lambda: elevation.plant.position_rad,
         **emulator_options,
     )
+    emulator.held_drives = held  # the server's other emulated drives, by axis name
     with emulator:
         changes: dict[str, Any] = {"transport": transport, "port": emulator.port}
         if transport == "rtu":

@@ -222,7 +222,6 @@ class Cia402Emulator:
         # azimuth inertia follows the elevation axis, J_az(el))
         self._elevation_of = elevation_of
         self.held_nodes: dict[str, Cia402Emulator] = {}  # other nodes started beside it
-        self._elevation_rad = plant.elevation_rad
         self._steps = 0
         self._compensation: dict[int, tuple[PositionHarmonic, ...]] = {1: (), 2: ()}
         self.limit_active = False  # stopped at 0x607D/0x6080 (statusword bit 11)
@@ -811,16 +810,9 @@ class Cia402Emulator:
                 and abs(self.plant.position_rad - self._pp_target) <= window)
 
     def _follow_elevation(self) -> None:
-        """The elevation node's position as this plant's elevation (changes below 0.1 mrad
-        are a holding axis's jitter: the plant is not rebuilt for them)."""
-        if self._elevation_of is None:
-            return
-        elevation = self._elevation_of()
-        if abs(elevation - self._elevation_rad) > 1e-4:
-            self._elevation_rad = elevation
-            self.plant.set_elevation(elevation)
+        if self._elevation_of is not None:
+            self.plant.follow_elevation(self._elevation_of())
 
-    # -- fault injection -------------------------------------------------------------------
     def _inject_bus_error(self) -> None:
         after = self.faults.bus_error_after_s
         if after is None or self._bus_error_fired or self.state != ENABLED:

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import math
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -110,10 +111,12 @@ class PolledRun:
 
 
 def poll(excitation: Excitation, run: PolledRun, feedback: Feedback,
-         envelope: MotionEnvelope | None = None) -> None:
+         envelope: MotionEnvelope | None = None,
+         keepalive: Callable[[], None] = lambda: None) -> None:
     """Write the setpoint each sample period (see the module's docstring) and read the
     feedback half a period later, appending ``(host time, command sample due, values)`` rows
-    to ``run`` (kept when this raises).
+    to ``run`` (kept when this raises). ``keepalive`` runs after each row, in the time left
+    to the next sample (a gimbal's held axes: their watchdog, their state).
 
     Raises
     ------
@@ -190,6 +193,7 @@ def poll(excitation: Excitation, run: PolledRun, feedback: Feedback,
             raise DriveStateError(
                 f"{feedback.link.where}: drive disabled itself during '{excitation.name}'"
             )
+        keepalive()
         next_due = t0 + (index + 1) / fs
         delay = next_due - time.monotonic()
         if delay > 0:

@@ -22,10 +22,13 @@ from __future__ import annotations
 import logging
 import math
 import time
+from collections.abc import Callable
+from dataclasses import replace
 
 import numpy as np
 
 from hil.drives.base import (
+    Capability,
     Drive,
     DriveInfo,
     DriveState,
@@ -43,12 +46,13 @@ from hil.drives.modbus.acquire import (
     setpoint_holds,
     to_recording,
 )
+from hil.drives.modbus.held_axis import KEEPALIVE_S, HeldModbusAxis
 from hil.drives.modbus.link import ModbusLink
 from hil.drives.modbus.regmap import TORQUE_MEAN, TORQUE_OFFSET, RegisterMap, load_register_map
 from hil.drives.modbus.state_machine import ModbusStateMachine
 from hil.drives.realtime import collector_held
 from hil.drives.station import ModbusStation
-from hil.errors import DriveError, DriveStateError, ProfileError
+from hil.errors import DriveCommunicationError, DriveError, DriveStateError, ProfileError
 from hil.motion import Excitation, Limits, Mode
 from hil.recording import Recording
 
@@ -91,9 +95,18 @@ class ModbusDrive(Drive):
         self.feedback = Feedback(self.link, self.torque_sample)  # checks the map: no I/O
         self.states = ModbusStateMachine(self.link, self.feedback)
         self.link.connect()
+        self.held: dict[str, HeldModbusAxis] = {}  # the gimbal's other axes, by name
         try:
             self._info = self._read_info()
+            for name, unit_id in station.held.items():
+                self.held[name] = HeldModbusAxis(self.link, name=name, unit_id=unit_id,
+                                                 hold=station.gimbal.hold,
+                                                 others=self._keepalive_all_but(name))
+                self.held[name].enable()
+                if name in station.gimbal.hold.at_rad:
+                    self.held[name].move_to(station.gimbal.hold.at_rad[name])
         except BaseException:
+            self._release_held()
             self.link.close()
             raise
 
@@ -137,6 +150,8 @@ class ModbusDrive(Drive):
                 Mode(name) for name in self.map.modes if name in ("torque", "velocity", "position")
             ),
             max_sample_rate_hz=rate,
+            capabilities=frozenset({Capability.ELEVATION_AXIS}
+                                   if "elevation" in self.station.held else ()),
             transport=self.link.where,
         )
 
@@ -189,9 +204,53 @@ class ModbusDrive(Drive):
         """Quick stop by the drive's ramp, confirmed at rest (reconnecting if needed)."""
         self.states.quick_stop()
 
+    def set_elevation(self, elevation_rad: float) -> None:
+        """Move the gimbal's elevation axis (a held unit on this link) to ``elevation_rad``
+        and hold it there.
+
+        Raises
+        ------
+        DriveStateError
+            The station holds no elevation axis, or it did not reach the angle in time.
+        """
+        held = self.held.get("elevation")
+        if held is None:
+            super().set_elevation(elevation_rad)
+            return
+        held.move_to(elevation_rad)
+
+    def _keepalive(self) -> None:
+        for axis in self.held.values():
+            axis.keepalive()
+
+    def _keepalive_all_but(self, moving: str) -> Callable[[], None]:
+        """While the held axis ``moving`` moves: a request to this drive and to every other
+        held axis at least every :data:`KEEPALIVE_S` (their watchdogs)."""
+        last = [time.monotonic()]
+
+        def keepalive() -> None:
+            if time.monotonic() - last[0] >= KEEPALIVE_S:
+                last[0] = time.monotonic()
+                self.link.read_values(("status_word",))
+            for name, axis in self.held.items():
+                if name != moving:
+                    axis.keepalive()
+
+        return keepalive
+
+    def _release_held(self) -> None:
+        for axis in self.held.values():
+            axis.disable()
+
+    def _held_text(self) -> str:
+        """``elevation unit 2 at +0.6000 rad``, one per held axis (read from its drive)."""
+        return "; ".join(f"{name} unit {axis.unit_id} at {axis.position_rad:+.4f} rad"
+                         for name, axis in self.held.items())
+
     def close(self) -> None:
-        """Disable, then close the connection."""
+        """Disable (the held axes first), then close the connection."""
         try:
+            self._release_held()
             self.disable()
         finally:
             self.link.close()
@@ -238,7 +297,8 @@ class ModbusDrive(Drive):
                  excitation.duration_s, excitation.fs_hz)
         try:
             with collector_held():
-                poll(excitation, run, self.feedback, MotionEnvelope.of(self.limits))
+                poll(excitation, run, self.feedback, MotionEnvelope.of(self.limits),
+                     keepalive=self._keepalive)
         except DriveError as exc:
             error = exc
         except KeyboardInterrupt as stop:  # a stop signal: quick stop, keep the rows so far
@@ -249,6 +309,9 @@ class ModbusDrive(Drive):
             states.quick_stop()
             raise
         recording = to_recording(excitation, run, self.feedback, self._info)
+        if self.held and not isinstance(error, DriveCommunicationError):
+            recording = replace(recording, metadata={**recording.metadata,
+                                                     "held_axes": self._held_text()})
         if error is None:
             error = rate_shortfall(excitation, run, self.link) or setpoint_holds(
                 excitation, run, self.link.station, self.link.where)

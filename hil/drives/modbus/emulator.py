@@ -27,6 +27,7 @@ import math
 import re
 import threading
 import time
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -122,6 +123,9 @@ class ModbusEmulator:
         faults: ModbusFaults | None = None,
         serial_number: int = 1,
         watchdog_s: float = 0.5,
+        unit_id: int | None = None,
+        neighbours: Mapping[int, ModbusEmulator] | None = None,
+        elevation_of: Callable[[], float] | None = None,
     ) -> None:
         self.firmware = firmware or Firmware()
         self.plant = Plant(plant, fs_hz=fs_hz, seed=seed, firmware=self.firmware)
@@ -155,6 +159,13 @@ class ModbusEmulator:
         self._server: ModbusTcpServer | None = None
         self._ready = threading.Event()
         self._stopping = False
+        # a gimbal on one server: this drive at unit_id (None: it answers every unit id),
+        # the other axes' drives (not started themselves) at theirs; the elevation
+        # drive's position is this plant's elevation (J_az(el))
+        self.unit_id = unit_id
+        self.neighbours = dict(neighbours or {})
+        self.held_drives: dict[str, ModbusEmulator] = {}  # the same drives, by axis name
+        self._elevation_of = elevation_of
         self._put("firmware_version", version_code(self.firmware.version))
         self._put("serial_number", serial_number)
         self._put("rated_torque", rated_torque_nm)
@@ -178,7 +189,12 @@ class ModbusEmulator:
         loop.close()
 
     async def _main(self) -> None:
-        context = ModbusServerContext(devices=_Context(self), single=True)  # type: ignore[no-untyped-call]
+        if self.unit_id is None:
+            context = ModbusServerContext(devices=_Context(self), single=True)  # type: ignore[no-untyped-call]
+        else:
+            devices = {self.unit_id: _Context(self),
+                       **{unit: _Context(other) for unit, other in self.neighbours.items()}}
+            context = ModbusServerContext(devices=devices, single=False)  # type: ignore[no-untyped-call]
         framer = FramerType.RTU if self.framing == "rtu" else FramerType.SOCKET
         server = ModbusTcpServer(context, framer=framer, address=("127.0.0.1", 0))
         self._server = server
@@ -188,10 +204,11 @@ class ModbusEmulator:
         self._tick = time.monotonic()
         while not self._stopping:
             await asyncio.sleep(TICK_S)
-            with self._lock:
-                self._credit_own_stall()
-                self._advance()
-                self._watchdog()
+            for drive in (self, *self.neighbours.values()):
+                with drive._lock:
+                    drive._credit_own_stall()
+                    drive._advance()
+                    drive._watchdog()
         await server.shutdown()  # type: ignore[no-untyped-call]
 
     def stop(self) -> None:
@@ -339,6 +356,7 @@ class ModbusEmulator:
             block = min(steps, int(self.fs_hz))
             self._clock += block / self.fs_hz
             steps -= block
+            self._follow_elevation()
             mode, command = self._command(block)
             offset = None
             if self.enabled and TORQUE_OFFSET in self.map.registers:
@@ -350,6 +368,10 @@ class ModbusEmulator:
             after = self.faults.drive_fault_after_s
             if after is not None and self.enabled and self.time_enabled_s >= after:
                 self._trip(self.faults.drive_fault_code)
+
+    def _follow_elevation(self) -> None:
+        if self._elevation_of is not None:
+            self.plant.follow_elevation(self._elevation_of())
 
     def _command(self, steps: int) -> tuple[Mode, np.ndarray]:
         if self.enabled and self.quick_stopping:

@@ -7,6 +7,7 @@ It knows the register map but nothing of the CiA-style state machine or of acqui
 from __future__ import annotations
 
 import time
+from dataclasses import replace
 from typing import Any
 
 from pymodbus.client import ModbusSerialClient, ModbusTcpClient
@@ -47,10 +48,16 @@ class ModbusLink:
         The drive answers a request with a Modbus exception (its code attached).
     """
 
-    def __init__(self, station: ModbusStation, register_map: RegisterMap) -> None:
+    def __init__(self, station: ModbusStation, register_map: RegisterMap, *,
+                 client: Any = None) -> None:
         self.station = station
         self.map = register_map
-        self._client = self._make_client()
+        self._client = client if client is not None else self._make_client()
+
+    def for_unit(self, unit_id: int) -> ModbusLink:
+        """The drive at ``unit_id`` on the same connection (a gimbal's other axis on this
+        line or server; the same register map)."""
+        return ModbusLink(replace(self.station, unit_id=unit_id), self.map, client=self._client)
 
     def _make_client(self) -> Any:
         st = self.station
