@@ -126,18 +126,10 @@ class CanOpenStation:
         return self.gimbal.held
 
     def for_axis(self, axis: str) -> CanOpenStation:
-        """This station as the calibration of ``axis`` uses it: its node under test, every
-        other axis of ``[canopen.axes]`` held (a station without axes: itself).
-
-        Raises
-        ------
-        ProfileError
-            The station names axes and ``axis`` is not one of them.
-        """
-        if not self.gimbal.axes:
-            return self
-        node, held = self.gimbal.under_test(axis, source=self.source, table="[canopen.axes]")
-        return replace(self, node_id=node, gimbal=replace(self.gimbal, held=held))
+        """This station as the calibration of ``axis`` uses it: its node that of ``axis``,
+        the other axes held (:func:`axis_under_test`)."""
+        found = axis_under_test(self, axis)
+        return self if found is None else replace(self, node_id=found[0], gimbal=found[1])
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -178,21 +170,30 @@ class ModbusStation:
         return self.gimbal.held
 
     def for_axis(self, axis: str) -> ModbusStation:
-        """This station as the calibration of ``axis`` uses it: its unit id under test,
-        every other axis of ``[modbus.axes]`` held (a station without axes: itself).
-
-        Raises
-        ------
-        ProfileError
-            The station names axes and ``axis`` is not one of them.
-        """
-        if not self.gimbal.axes:
-            return self
-        unit, held = self.gimbal.under_test(axis, source=self.source, table="[modbus.axes]")
-        return replace(self, unit_id=unit, gimbal=replace(self.gimbal, held=held))
+        """This station as the calibration of ``axis`` uses it: its unit id that of
+        ``axis``, the other axes held (:func:`axis_under_test`)."""
+        found = axis_under_test(self, axis)
+        return self if found is None else replace(self, unit_id=found[0], gimbal=found[1])
 
 
 Station = CanOpenStation | ModbusStation
+
+
+def axis_under_test(station: Station, axis: str) -> tuple[int, GimbalBus] | None:
+    """The bus address of ``axis`` and the gimbal part with every other axis held;
+    ``None`` for a station without axes (one axis on the bus).
+
+    Raises
+    ------
+    ProfileError
+        The station names axes and ``axis`` is not one of them.
+    """
+    gimbal = station.gimbal
+    if not gimbal.axes:
+        return None
+    bus = "canopen" if isinstance(station, CanOpenStation) else "modbus"
+    own, held = gimbal.under_test(axis, source=station.source, table=f"[{bus}.axes]")
+    return own, replace(gimbal, held=held)
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)

@@ -43,6 +43,7 @@ from hil.drives.cia402.protocol import (
     stream_frame_bytes,
 )
 from hil.drives.cia402.state_machine import Cia402StateMachine
+from hil.drives.held import HeldAxes
 from hil.drives.station import CanOpenStation
 from hil.errors import DriveError, DriveStateError
 from hil.motion import CompensationTable, Excitation, Limits, Mode
@@ -80,12 +81,12 @@ class CanOpenDrive(Drive):
         self.command_interpolation = INTERPOLATION_UNKNOWN
         self.torque_sample = "instantaneous"  # or "mean": 0x2077 over the SYNC period
         self._period_us = round(station.sync_period_s * 1e6)
-        self.held: dict[str, HeldAxis] = {}  # the gimbal's other axes on this bus, by name
+        self.held = HeldAxes()  # the gimbal's other axes on this bus
         self.bus_load = 0.0  # the fraction of the bus the stream and the heartbeats take
         try:
             self._bring_up()
         except BaseException:
-            self._release_held()
+            self.held.release()
             self.link.close()
             raise
 
@@ -138,10 +139,10 @@ class CanOpenDrive(Drive):
         status = link.tick_until("first SYNC answer", lambda sw, mode: True)
         log.info("node %d operational, %s", st.node_id, state_of(status[0]))
         for name, node_id in st.held.items():  # the gimbal's other axes, held by their drives
-            self.held[name] = HeldAxis(link, name=name, node_id=node_id)
-            self.held[name].enable()
+            axis = self.held.axes[name] = HeldAxis(link, name=name, node_id=node_id)
+            axis.enable()
             if name in st.gimbal.hold.at_rad:
-                self.held[name].move_to(st.gimbal.hold.at_rad[name])
+                axis.move_to(st.gimbal.hold.at_rad[name])
 
     def _scaling(self) -> Scaling:
         st, link = self.station, self.link
@@ -390,25 +391,14 @@ class CanOpenDrive(Drive):
         DriveStateError
             The station holds no elevation axis, or it did not reach the angle in time.
         """
-        held = self.held.get("elevation")
-        if held is None:
+        if not self.held.move("elevation", elevation_rad):
             super().set_elevation(elevation_rad)
-            return
-        held.move_to(elevation_rad)
-
-    def held_positions_rad(self) -> dict[str, float]:
-        """Where each held axis stands (read by SDO)."""
-        return {name: axis.position_rad for name, axis in self.held.items()}
-
-    def _release_held(self) -> None:
-        for axis in self.held.values():
-            axis.disable()
 
     def close(self) -> None:
         """Disable (the held axes first), return the node to PRE-OPERATIONAL, stop watching
         our heartbeat (a clean end is no lost host), release the bus."""
         try:
-            self._release_held()
+            self.held.release()
             self.disable()
             if self.link.connected:
                 try:
@@ -493,12 +483,6 @@ class CanOpenDrive(Drive):
                         self.station.node_id, excitation.name, exc)
             return None
 
-    def _held_text(self) -> str:
-        """``elevation node 6 at +0.6000 rad``, one per held axis: the certificate states
-        where the gimbal's other axes stood."""
-        return "; ".join(f"{name} node {axis.node_id} at {axis.position_rad:+.4f} rad"
-                         for name, axis in self.held.items())
-
     def _run_setup(self) -> RunSetup:
         assert self.scaling is not None
         info, st = self.info, self.station
@@ -521,7 +505,7 @@ class CanOpenDrive(Drive):
                 "firmware": info.firmware_version,
                 "serial": info.serial,
                 "transport": info.transport,
-                **({"held_axes": self._held_text()} if self.held else {}),
+                **({"held_axes": self.held.text()} if self.held.axes else {}),
             },
             operation_mode="" if mode_code is None else str(mode_code),
         )

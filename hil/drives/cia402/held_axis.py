@@ -116,6 +116,10 @@ class HeldAxis:
         self.write(0x6067, 0, max(1, self._counts(hold.window_rad)))
         self.node.nmt.state = "OPERATIONAL"
 
+    @property
+    def address(self) -> str:
+        return f"node {self.node_id}"
+
     def _counts(self, value_rad: float) -> int:
         return round(value_rad * self.counts_per_rad)
 

@@ -37,6 +37,7 @@ from hil.drives.base import (
     check_limits,
     interrupted,
 )
+from hil.drives.held import HeldAxes
 from hil.drives.modbus.acquire import (
     Feedback,
     PolledRun,
@@ -95,18 +96,20 @@ class ModbusDrive(Drive):
         self.feedback = Feedback(self.link, self.torque_sample)  # checks the map: no I/O
         self.states = ModbusStateMachine(self.link, self.feedback)
         self.link.connect()
-        self.held: dict[str, HeldModbusAxis] = {}  # the gimbal's other axes, by name
+        self.held = HeldAxes()  # the gimbal's other axes behind this link
+        self._holding: dict[str, HeldModbusAxis] = {}  # the same, with their keepalive
         try:
             self._info = self._read_info()
             for name, unit_id in station.held.items():
-                self.held[name] = HeldModbusAxis(self.link, name=name, unit_id=unit_id,
-                                                 hold=station.gimbal.hold,
-                                                 others=self._keepalive_all_but(name))
-                self.held[name].enable()
+                axis = HeldModbusAxis(self.link, name=name, unit_id=unit_id,
+                                      hold=station.gimbal.hold,
+                                      others=self._keepalive_all_but(name))
+                self.held.axes[name] = self._holding[name] = axis
+                axis.enable()
                 if name in station.gimbal.hold.at_rad:
-                    self.held[name].move_to(station.gimbal.hold.at_rad[name])
+                    axis.move_to(station.gimbal.hold.at_rad[name])
         except BaseException:
-            self._release_held()
+            self.held.release()
             self.link.close()
             raise
 
@@ -213,14 +216,11 @@ class ModbusDrive(Drive):
         DriveStateError
             The station holds no elevation axis, or it did not reach the angle in time.
         """
-        held = self.held.get("elevation")
-        if held is None:
+        if not self.held.move("elevation", elevation_rad):
             super().set_elevation(elevation_rad)
-            return
-        held.move_to(elevation_rad)
 
     def _keepalive(self) -> None:
-        for axis in self.held.values():
+        for axis in self._holding.values():
             axis.keepalive()
 
     def _keepalive_all_but(self, moving: str) -> Callable[[], None]:
@@ -232,25 +232,16 @@ class ModbusDrive(Drive):
             if time.monotonic() - last[0] >= KEEPALIVE_S:
                 last[0] = time.monotonic()
                 self.link.read_values(("status_word",))
-            for name, axis in self.held.items():
+            for name, axis in self._holding.items():
                 if name != moving:
                     axis.keepalive()
 
         return keepalive
 
-    def _release_held(self) -> None:
-        for axis in self.held.values():
-            axis.disable()
-
-    def _held_text(self) -> str:
-        """``elevation unit 2 at +0.6000 rad``, one per held axis (read from its drive)."""
-        return "; ".join(f"{name} unit {axis.unit_id} at {axis.position_rad:+.4f} rad"
-                         for name, axis in self.held.items())
-
     def close(self) -> None:
         """Disable (the held axes first), then close the connection."""
         try:
-            self._release_held()
+            self.held.release()
             self.disable()
         finally:
             self.link.close()
@@ -309,9 +300,9 @@ class ModbusDrive(Drive):
             states.quick_stop()
             raise
         recording = to_recording(excitation, run, self.feedback, self._info)
-        if self.held and not isinstance(error, DriveCommunicationError):
+        if self.held.axes and not isinstance(error, DriveCommunicationError):
             recording = replace(recording, metadata={**recording.metadata,
-                                                     "held_axes": self._held_text()})
+                                                     "held_axes": self.held.text()})
         if error is None:
             error = rate_shortfall(excitation, run, self.link) or setpoint_holds(
                 excitation, run, self.link.station, self.link.where)

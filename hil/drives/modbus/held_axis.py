@@ -80,6 +80,10 @@ class HeldModbusAxis:
         self._others = others  # keeps the other drives' watchdogs fed while this one moves
 
     @property
+    def address(self) -> str:
+        return f"unit {self.unit_id}"
+
+    @property
     def position_rad(self) -> float:
         return self.states.status().position_rad
 
