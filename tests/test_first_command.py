@@ -32,9 +32,10 @@ def _without_test_extras(tmp_path: Path) -> dict[str, str]:
 
 
 def _calibrate(
-    cwd: Path, env: dict[str, str], out: Path, *extra: str
+    cwd: Path, env: dict[str, str], out: Path, *extra: str, gimbal: str | None = None
 ) -> subprocess.CompletedProcess[str]:
-    command = [sys.executable, "-m", "hil.cli", "calibrate", "--drive", "sim",
+    command = [sys.executable, "-m", "hil.cli", "calibrate",
+               *(("--gimbal", gimbal) if gimbal else ()), "--drive", "sim",
                "--unit-serial", "DEMO-0001", "--out", str(out), "--",
                "-p", "no:hypothesispytest", *extra]
     return subprocess.run(command, cwd=cwd, env=env, capture_output=True, text=True,
@@ -50,11 +51,15 @@ def test_the_first_command_runs_from_the_repository_root_without_the_test_extras
                            capture_output=True, text=True, check=False)
     assert probe.returncode != 0, "the stand-in for missing test extras did not take"
     out = tmp_path / "certificates"
-    result = _calibrate(REPOSITORY, env, out, "--store", "off")
+    result = _calibrate(REPOSITORY, env, out, "--store", "off", gimbal="demo_gimbal")
     assert result.returncode == 0, result.stdout[-3000:] + result.stderr[-3000:]
-    certificate = json.loads((out / "DEMO-0001" / "certificate.json").read_text())
-    assert certificate["outcome"] == "PASS"
-    assert (out / "DEMO-0001" / "certificate.pdf").stat().st_size > 0
+    gimbal = json.loads((out / "DEMO-0001" / "gimbal-certificate.json").read_text())
+    assert gimbal["outcome"] == "PASS"
+    assert (out / "DEMO-0001" / "gimbal-certificate.pdf").stat().st_size > 0
+    for axis in ("azimuth", "elevation"):
+        unit = out / "DEMO-0001" / axis / "DEMO-0001"
+        assert json.loads((unit / "certificate.json").read_text())["outcome"] == "PASS"
+        assert (unit / "certificate.pdf").stat().st_size > 0
 
 
 def test_calibrate_reads_no_conftest_or_pytest_configuration_of_the_current_folder(
