@@ -12,7 +12,7 @@ import logging
 import math
 import re
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any, Literal
 
@@ -22,6 +22,7 @@ from hil.errors import InputError
 
 log = logging.getLogger(__name__)
 CERTIFICATE_FILE = "certificate.json"
+GIMBAL_FILE = "gimbal-certificate.json"  # hil.gimbal writes it; its axes' files are read
 DIRECTIONS = ("higher", "lower")
 # an emulator's endpoint is new in every run (a virtual CAN channel, a loopback port)
 _EPHEMERAL = ((re.compile(r"virtual:[\w-]+"), "virtual"),
@@ -81,6 +82,12 @@ class Certificate:
     results: Mapping[str, Result]
     certificate_id: str | None = None
     warnings: tuple[str, ...] = ()  # believed with these (no digest: written before one)
+    in_gimbal: bool = False  # an axis of a gimbal folder: paired by serial and axis
+
+    @property
+    def label(self) -> str:
+        """How it pairs and is shown: the serial, with the axis for a gimbal's axis."""
+        return f"{self.serial}/{self.axis}" if self.in_gimbal else self.serial
 
 
 def load_side(path: Path) -> dict[str, Certificate]:
@@ -89,12 +96,14 @@ def load_side(path: Path) -> dict[str, Certificate]:
     Parameters
     ----------
     path : Path
-        A ``certificate.json``, a unit directory holding one, or a directory of unit
-        directories (``DIR/SERIAL/certificate.json``; ``history/`` is not read).
+        A ``certificate.json``, a unit directory holding one, a gimbal's folder (its
+        ``gimbal-certificate.json`` names each axis's certificate), or a directory of unit
+        or gimbal directories (``DIR/SERIAL/``; ``history/`` is not read).
 
     Returns
     -------
     dict of str to Certificate
+        By :attr:`Certificate.label`: the serial, ``SERIAL/AXIS`` for a gimbal's axis.
 
     Raises
     ------
@@ -109,12 +118,12 @@ def load_side(path: Path) -> dict[str, Certificate]:
         raise InputError(f"no {CERTIFICATE_FILE} here nor in DIR/SERIAL/{CERTIFICATE_FILE}",
                          source=str(path))
     side: dict[str, Certificate] = {}
-    for file in files:
-        certificate = read_certificate(file)
-        if certificate.serial in side:
-            raise InputError(f"serial {certificate.serial} also in {side[certificate.serial].path}",
+    for file, in_gimbal in files:
+        certificate = replace(read_certificate(file), in_gimbal=in_gimbal)
+        if certificate.label in side:
+            raise InputError(f"serial {certificate.label} also in {side[certificate.label].path}",
                              source=str(file))
-        side[certificate.serial] = certificate
+        side[certificate.label] = certificate
     return side
 
 
@@ -199,20 +208,40 @@ def same_certificates(baseline: Path, candidate: Path) -> list[str]:
             "run is compared with itself" for same in sorted(set(ids[0]) & set(ids[1]))]
 
 
-def _files(path: Path) -> list[Path]:
-    """The certificates a side names: the file, the unit directory's, or each serial's."""
+def _files(path: Path) -> list[tuple[Path, bool]]:
+    """The certificates a side names (each with whether it is a gimbal's axis): the file,
+    the unit directory's, a gimbal's axes, or those of each serial's directory."""
     if path.is_file():
-        return [path]
+        return [(path, False)]
     if (path / CERTIFICATE_FILE).is_file():
-        return [path / CERTIFICATE_FILE]
-    return sorted(p / CERTIFICATE_FILE for p in path.iterdir()
-                  if (p / CERTIFICATE_FILE).is_file())
+        return [(path / CERTIFICATE_FILE, False)]
+    if (path / GIMBAL_FILE).is_file():
+        return [(file, True) for file in _gimbal_axes(path)]
+    found = [(p / CERTIFICATE_FILE, False) for p in sorted(path.iterdir())
+             if (p / CERTIFICATE_FILE).is_file()]
+    for folder in sorted(path.iterdir()):
+        if (folder / GIMBAL_FILE).is_file():
+            found += [(file, True) for file in _gimbal_axes(folder)]
+    return found
+
+
+def _gimbal_axes(folder: Path) -> list[Path]:
+    """Each axis's certificate a gimbal certificate names (an axis never certified is not
+    there: the comparison says MISSING or NEW for its results)."""
+    try:
+        document = json.loads((folder / GIMBAL_FILE).read_text(encoding="utf-8"))
+        axes = document["axes"]
+        files = [folder / axis["certificate"] for axis in axes if axis.get("certificate")]
+    except (OSError, ValueError, KeyError, TypeError) as exc:
+        raise InputError(f"not a gimbal certificate: {exc}",
+                         source=str(folder / GIMBAL_FILE)) from exc
+    return files
 
 
 def _ids(path: Path) -> dict[str, Path]:
     """Certificate id → file, for the certificates :func:`load_side` would read."""
     found: dict[str, Path] = {}
-    for file in _files(path):
+    for file, _ in _files(path):
         document = json.loads(file.read_bytes())
         if not isinstance(document, dict):
             raise ValueError(f"{file}: not a certificate")

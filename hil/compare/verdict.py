@@ -118,7 +118,7 @@ def compare_sides(baseline: Mapping[str, Certificate], candidate: Mapping[str, C
         same_unit = _check_pair(b, c, allow_different_units, warnings, notes)
         protocols = tuple({*b.protocols, *c.protocols})
         for name in [*b.results, *(n for n in c.results if n not in b.results)]:
-            rows.append(_row(b.serial if same_unit else f"{b.serial}→{c.serial}", name,
+            rows.append(_row(b.label if same_unit else f"{b.label}→{c.label}", name,
                              b.results.get(name), c.results.get(name), protocols, same_unit,
                              repeatability.entry(b.axis, name)))
     tested = [i for i, r in enumerate(rows) if r.p_value is not None]
@@ -128,16 +128,16 @@ def compare_sides(baseline: Mapping[str, Certificate], candidate: Mapping[str, C
     notes.append(f"repeatability map: {repeatability.source}"
                  + (f" (sha256 {repeatability.sha256[:12]}…)" if repeatability.sha256 else ""))
     return Comparison(alpha=alpha, rows=tuple(rows), warnings=tuple(warnings),
-                      notes=tuple(notes), pairs=tuple((b.serial, c.serial) for b, c in pairs))
+                      notes=tuple(notes), pairs=tuple((b.label, c.label) for b, c in pairs))
 
 
 def _pairs(baseline: Mapping[str, Certificate], candidate: Mapping[str, Certificate],
            allow: bool) -> list[tuple[Certificate, Certificate]]:
     if len(baseline) == 1 and len(candidate) == 1:
         ((_, b),), ((_, c),) = baseline.items(), candidate.items()
-        if b.serial != c.serial and not allow:
-            raise InputError(f"different units: baseline {b.serial} ({b.path}), candidate "
-                             f"{c.serial} ({c.path}); --allow-different-units to compare them")
+        if b.label != c.label and not allow:
+            raise InputError(f"different units: baseline {b.label} ({b.path}), candidate "
+                             f"{c.label} ({c.path}); --allow-different-units to compare them")
         return [(b, c)]
     unpaired = sorted(set(baseline) ^ set(candidate))
     if unpaired:
@@ -161,25 +161,25 @@ def _check_pair(b: Certificate, c: Certificate, allow: bool, warnings: list[str]
     if b_hash != c_hash:
         problems.append(f"{what} {b_hash[:12]}… vs {c_hash[:12]}…")
     if problems and not allow:
-        raise InputError(f"{b.serial}: different profiles ({'; '.join(problems)}) in {b.path} "
+        raise InputError(f"{b.label}: different profiles ({'; '.join(problems)}) in {b.path} "
                          f"and {c.path}; --allow-different-units to compare them")
     if problems:
-        warnings.append(f"{b.serial}: compared although {'; '.join(problems)}")
+        warnings.append(f"{b.label}: compared although {'; '.join(problems)}")
     if b.station != c.station:
         changed = ", ".join(f"{k} {b.station.get(k)!r} → {c.station.get(k)!r}"
                             for k in sorted({*b.station, *c.station})
                             if b.station.get(k) != c.station.get(k))
-        warnings.append(f"{b.serial}: station differs ({changed})")
+        warnings.append(f"{b.label}: station differs ({changed})")
     if (b.software_version, b.git_revision) != (c.software_version, c.git_revision):
-        warnings.append(f"{b.serial}: software differs (gimbal-hil {b.software_version} "
+        warnings.append(f"{b.label}: software differs (gimbal-hil {b.software_version} "
                         f"{b.git_revision or '?'} → {c.software_version} {c.git_revision or '?'})")
     if b.method_bias_sha256 != c.method_bias_sha256:
-        warnings.append(f"{b.serial}: method-bias maps differ: their lines do not pair "
+        warnings.append(f"{b.label}: method-bias maps differ: their lines do not pair "
                         "and count as independent")
     if b.firmware_version != c.firmware_version:
-        notes.append(f"{b.serial}: drive firmware {b.firmware_version} → {c.firmware_version}")
+        notes.append(f"{b.label}: drive firmware {b.firmware_version} → {c.firmware_version}")
     if c.outcome != "PASS" or b.outcome != "PASS":
-        notes.append(f"{b.serial}: certificate outcome {b.outcome} → {c.outcome}")
+        notes.append(f"{b.label}: certificate outcome {b.outcome} → {c.outcome}")
     return b.serial == c.serial
 
 
