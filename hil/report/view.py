@@ -65,7 +65,10 @@ def certificate_view(cert: Mapping[str, Any]) -> dict[str, Any]:
         "groups": _groups(results, cert["method"]["protocols"]),
         "budgets": [_budget(r) for r in cert["results"]],
         "protocols": [_protocol(name, p) for name, p in cert["method"]["protocols"].items()],
-        "raw_data": [{"file": f["file"], "sha256": f["sha256"]} for f in cert["raw_data"]],
+        # where a gimbal's other axes stood, held by their drives, beside each recording
+        "raw_data": [{"file": f["file"] + (f" (held: {f['held_axes']})"
+                                           if f.get("held_axes") else ""),
+                      "sha256": f["sha256"]} for f in cert["raw_data"]],
         "artifacts": [{"file": a["file"], "sha256": a["sha256"], "description": a["description"]}
                       for a in cert["artifacts"]],
         "decision_rule": cert["decision_rule"],
