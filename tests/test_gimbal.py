@@ -78,6 +78,15 @@ def test_a_gimbal_is_one_serial_one_certificate_one_verdict(tmp_path: Path) -> N
         assert "the worst of its 2 axes' verdicts" in shown
     person = (folder / "gimbal-certificate.txt").read_text(encoding="utf-8")
     assert "Verdict: PASS (the worst of its 2 axes)" in person
+    # the cycle time: each axis's motion time from its own certificate, one after the other
+    times = {a["axis"]: json.loads((folder / a["certificate"]).read_text(encoding="utf-8"))[
+        "machine_time"]["motion_time_s"] for a in issued["axes"]}
+    cycle = issued["cycle_time"]
+    assert cycle["motion_time_s"] == times
+    assert cycle["one_after_the_other_s"] == pytest.approx(sum(times.values()))
+    assert cycle["ratio_to_slowest"] == pytest.approx(sum(times.values()) / max(times.values()))
+    assert re.search(r"Motion time: azimuth \d+\.\d s, elevation \d+\.\d s; one after the "
+                     r"other \d+\.\d s, \d\.\d\d × the slowest axis", person)
     assert re.search(r"Moment of inertia +0\.00\d+ ± 0\.0000\d\d +kg·m²", person)
     done = run_command(["results", "units", "--out", str(out)])
     assert re.search(rf"{SERIAL} +gimbal: azimuth, elevation +2 ", done.stdout), done.stdout
@@ -126,6 +135,7 @@ def test_a_refused_axis_stops_the_gimbal_and_nothing_passes(tmp_path: Path) -> N
     assert issued["outcome"] == "ERROR"
     assert [a["outcome"] for a in issued["axes"]] == ["ERROR", "ERROR"]
     assert issued["axes"][1]["note"] == "not started: an earlier axis stopped the gimbal"
+    assert issued["cycle_time"] is None  # no motion time stated for an axis never run
     assert not (out / SERIAL / "elevation").exists()
 
 

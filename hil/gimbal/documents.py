@@ -15,7 +15,7 @@ from importlib.resources import files
 from pathlib import Path
 from typing import Any
 
-from hil.gimbal.certificate import rounded_results
+from hil.gimbal.certificate import cycle_time_text, rounded_results
 from hil.report.html import COLOURS, STYLE
 
 TEMPLATE = "gimbal_certificate.typ"
@@ -44,7 +44,8 @@ def gimbal_view(certificate: Mapping[str, Any]) -> dict[str, Any]:
                    ["Description", g["description"] or "-"],
                    ["Gimbal profile", f"{g['profile']} (SHA-256 {g['profile_sha256']})"],
                    ["Issued", certificate["issued"]],
-                   ["Axes", ", ".join(f"{a['axis']} {a['outcome']}" for a in axes)]],
+                   ["Axes", ", ".join(f"{a['axis']} {a['outcome']}" for a in axes)],
+                   ["Motion time", cycle_time_text(certificate.get("cycle_time"))]],
         "axes": axes,
     }
 
