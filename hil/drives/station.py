@@ -26,15 +26,17 @@ TORQUE_SAMPLES = ("auto", "mean", "instantaneous")
 
 @dataclass(frozen=True, slots=True, kw_only=True)
 class HoldSettings:
-    """How the station moves and holds a gimbal's other axes (``[canopen.hold]``): each is
-    a node on the same bus, in profile position mode (CiA 402 mode 1, its own position
-    loop), moved between the runs of the axis under test and holding its angle during them.
+    """How the station moves and holds a gimbal's other axes (``[canopen.hold]``,
+    ``[modbus.hold]``): each is a drive on the same bus under its own position control
+    (CiA 402 profile position; a Modbus map's position mode), moved between the runs of
+    the axis under test and holding its angle during them.
 
-    ``speed_rad_s`` (0x6081), ``accel_rad_s2`` (0x6083 and 0x6084), ``window_rad``
-    (0x6067: "target reached" within it), ``settle_s`` (waited after it is reached, the
-    axis under test still), ``timeout_s`` (beyond the move's own time: not reached is an
-    error naming the node), ``at_rad`` (the angle each held axis is moved to at bring-up,
-    by axis name; an axis not named is held where it stands)."""
+    ``speed_rad_s`` and ``accel_rad_s2`` (the move's profile: 0x6081, 0x6083/0x6084 on
+    CANopen; the host's setpoints on Modbus), ``window_rad`` (standing within it is
+    "reached"), ``settle_s`` (waited after that, the axis under test still),
+    ``timeout_s`` (beyond the move's own time: not reached is an error naming the axis),
+    ``at_rad`` (the angle each held axis is moved to at bring-up, by axis name; an axis
+    not named is held where it stands)."""
 
     speed_rad_s: float = 0.5
     accel_rad_s2: float = 2.0
