@@ -89,7 +89,7 @@ def test_a_gimbal_is_one_serial_one_certificate_one_verdict(tmp_path: Path) -> N
                      r"other \d+\.\d s, \d\.\d\d × the slowest axis", person)
     assert re.search(r"Moment of inertia +0\.00\d+ ± 0\.0000\d\d +kg·m²", person)
     done = run_command(["results", "units", "--out", str(out)])
-    assert re.search(rf"{SERIAL} +gimbal: azimuth, elevation +2 ", done.stdout), done.stdout
+    assert re.search(rf"{SERIAL} +GMB-2 rev B: azimuth, elevation +2 ", done.stdout), done.stdout
     verified = run_command(["verify", str(folder)])
     assert verified.returncode == 0, verified.stdout + verified.stderr
     assert verified.stdout.strip().endswith("gimbal-certificate.json: VERIFIED")

@@ -17,12 +17,12 @@ from pathlib import Path
 from typing import Any, Literal
 
 from hil.certificate.build import SCHEMA
+from hil.certificate.gimbal_file import GIMBAL_FILE
 from hil.certificate.integrity import verify_document
 from hil.errors import InputError
 
 log = logging.getLogger(__name__)
 CERTIFICATE_FILE = "certificate.json"
-GIMBAL_FILE = "gimbal-certificate.json"  # hil.gimbal writes it; its axes' files are read
 DIRECTIONS = ("higher", "lower")
 # an emulator's endpoint is new in every run (a virtual CAN channel, a loopback port)
 _EPHEMERAL = ((re.compile(r"virtual:[\w-]+"), "virtual"),

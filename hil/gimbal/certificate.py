@@ -14,12 +14,12 @@ from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
+from hil.certificate.gimbal_file import GIMBAL_FILE, GIMBAL_SCHEMA
 from hil.certificate.integrity import OUTCOME_RANK
 from hil.gimbal.profile import GimbalProfile
 from hil.gum import rounded_pair
 
-SCHEMA = "gimbal-hil/gimbal-certificate/v1"
-FILE = "gimbal-certificate.json"  # in the gimbal's folder; .txt, .html, .pdf beside it
+SCHEMA, FILE = GIMBAL_SCHEMA, GIMBAL_FILE
 NOT_STARTED = -1  # an axis's exit code when an earlier axis stopped the gimbal
 
 

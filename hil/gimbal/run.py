@@ -98,6 +98,10 @@ def _each_axis(gimbal: GimbalProfile, *, serial: str, folder: Path, store_url: s
         json_path, _ = certificate.write(issued, folder)
         for problem in write_documents(json_path):
             print(f"gimbal {serial}: {problem}")
+        if store_url != "off":  # the axes' runs are stored by each axis's calibration
+            from hil.store.record import record_run
+
+            print(f"gimbal {serial}: {record_run(json_path, out_dir=folder.parent, url=store_url)}")
         each = ", ".join(f"{a['axis']} {a['outcome']}" for a in issued["axes"])
         print(f"gimbal {serial}: {issued['outcome']} ({each}) -> {json_path}")
     return max(codes, default=0)

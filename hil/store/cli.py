@@ -10,7 +10,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from datetime import UTC, datetime
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -110,7 +110,7 @@ def _shown(url: str) -> str:
 def _run(args: argparse.Namespace, store: Store) -> int:
     from hil.store.ingest import ingest_tree
     from hil.store.outbox import sync_outbox
-    from hil.store.query import units
+    from hil.store.query import gimbal_identities, units
 
     command = args.results_command
     if command in WRITING_COMMANDS:
@@ -119,8 +119,9 @@ def _run(args: argparse.Namespace, store: Store) -> int:
         _emit(args, _ingested_json(done, store), _ingested_text(done, store, command))
         return 0
     if command == "units":
-        found = units(store)
-        _emit(args, [_summary_json(s) for s in found], _units_text(found))
+        found, identities = units(store), gimbal_identities(store)
+        _emit(args, [dict(_summary_json(s), **_identity_json(identities.get(s.serial)))
+                     for s in found], _units_text(found, identities))
         return 0
     if command == "history":
         return _history(args, store)
@@ -175,10 +176,23 @@ def _summary_json(s: RunSummary) -> dict[str, Any]:
             "is_reference": s.is_reference, "runs": s.runs_of_unit}
 
 
-def _units_text(found: Sequence[RunSummary]) -> str:
-    # a gimbal (several axes under one serial) shows its axes; its outcome is the worst of
-    # each axis's latest run
-    rows = [(s.serial, s.unit_type if "," not in s.axis else f"gimbal: {s.axis}",
+def _identity_json(identity: tuple[str, str] | None) -> dict[str, str | None]:
+    part, revision = identity or (None, None)
+    return {"part_number": part, "revision": revision}
+
+
+def _units_text(found: Sequence[RunSummary],
+                identities: Mapping[str, tuple[str, str]]) -> str:
+    # a gimbal (several axes under one serial) shows its axes, and its part number and
+    # revision once its gimbal certificate is stored; its outcome is the worst of each
+    # axis's latest run
+    def kind(s: RunSummary) -> str:
+        if s.serial in identities:
+            part, revision = identities[s.serial]
+            return f"{part}{f' rev {revision}' if revision else ''}: {s.axis}"
+        return s.unit_type if "," not in s.axis else f"gimbal: {s.axis}"
+
+    rows = [(s.serial, kind(s),
              str(s.runs_of_unit), s.started_at.strftime(TIME_FORMAT),
              s.station, s.outcome + (" (reference)" if s.is_reference else ""))
             for s in found]

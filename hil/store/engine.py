@@ -28,7 +28,7 @@ log = logging.getLogger(__name__)
 
 ENV_VAR = "GIMBAL_HIL_STORE"
 SQLITE_NAME = "results.sqlite"
-HEAD_REVISION = "0003"  # the newest migration in migrations/versions (a test checks it)
+HEAD_REVISION = "0004"  # the newest migration in migrations/versions (a test checks it)
 # How long a store may keep a calibration waiting (docs/store.md): past these, the run goes
 # to the outbox with one line saying why, instead of hanging the end of `calibrate`.
 SQLITE_BUSY_TIMEOUT_MS = 10_000  # a writer waits this long for another client's write lock

@@ -12,14 +12,17 @@ from pathlib import Path
 from sqlalchemy import Connection, func, insert, select
 from sqlalchemy.exc import DBAPIError, IntegrityError
 
+from hil.certificate.gimbal_file import GIMBAL_FILE
 from hil.certificate.integrity import verify_document
 from hil.errors import InputError
 from hil.store.engine import Store, store_failure
+from hil.store.gimbal_rows import gimbal_row, is_gimbal_certificate
 from hil.store.rows import CertificateRows, certificate_rows
-from hil.store.schema import protocol_outcomes, recordings, results, runs
+from hil.store.schema import gimbals, protocol_outcomes, recordings, results, runs
 
 log = logging.getLogger(__name__)
 CERTIFICATE_NAME = "certificate.json"
+GIMBAL_RUN = "gimbal"  # the run id an ingested gimbal certificate reports (it has none)
 
 
 @dataclass(frozen=True, slots=True)
@@ -59,6 +62,8 @@ def ingest_certificate(store: Store, path: Path) -> Ingested:
         raise InputError(f"cannot read: {exc.strerror}", source=str(path)) from None
     except UnicodeDecodeError as exc:
         raise InputError(f"not valid JSON: {exc}", source=str(path)) from None
+    if is_gimbal_certificate(text):
+        return _ingest_gimbal(store, text, source=str(path.resolve()), folder=path.parent)
     certificate_rows(text, source=str(path))  # its fields first: errors name the field
     _verify(text, path)
     return ingest_text(store, text, source=str(path.resolve()))
@@ -82,6 +87,8 @@ def _verify(text: str, path: Path) -> None:
 
 def ingest_text(store: Store, text: str, *, source: str) -> Ingested:
     """Store a certificate given as its JSON text (see :func:`ingest_certificate`)."""
+    if is_gimbal_certificate(text):
+        return _ingest_gimbal(store, text, source=source, folder=None)
     rows = certificate_rows(text, source=source)
     run = rows.run
     done = Ingested(run["certificate_id"], run["run_id"], run["serial"], new=False)
@@ -140,7 +147,31 @@ def ingest_tree(store: Store, directory: Path) -> list[Ingested]:
         raise InputError(f"no certificate under it could be stored: {refused[0]}{more}",
                          source=str(directory))
     texts.sort(key=lambda item: (item[0], item[1]))
-    return [ingest_text(store, text, source=source) for _, source, text in texts]
+    done = [ingest_text(store, text, source=source) for _, source, text in texts]
+    for path in sorted(directory.rglob(GIMBAL_FILE)):  # a gimbal's verdict over its axes
+        try:
+            done.append(ingest_certificate(store, path))
+        except InputError as exc:
+            log.warning("not stored: %s", exc)
+    return done
+
+
+def _ingest_gimbal(store: Store, text: str, *, source: str, folder: Path | None) -> Ingested:
+    """Store a gimbal certificate's row (nothing happens if it is stored already)."""
+    row = gimbal_row(text, source=source, folder=folder)
+    done = Ingested(row["certificate_id"], GIMBAL_RUN, row["serial"], new=False)
+    try:
+        with store.engine.begin() as connection:
+            if connection.execute(select(gimbals.c.serial).where(
+                    gimbals.c.certificate_id == row["certificate_id"])).first() is not None:
+                return done
+            connection.execute(insert(gimbals), [dict(row, ingested_at=datetime.now(UTC))])
+    except IntegrityError:  # another station stored the same certificate meanwhile
+        return done
+    except DBAPIError as exc:
+        raise store_failure(exc, store.url) from None
+    log.info("stored gimbal %s (%s)", row["serial"], row["certificate_id"])
+    return Ingested(row["certificate_id"], GIMBAL_RUN, row["serial"], new=True)
 
 
 def _stored(connection: Connection, certificate_id: str) -> bool:

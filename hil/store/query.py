@@ -15,7 +15,7 @@ from typing import Any, TypeVar
 from sqlalchemy import Select, and_, delete, func, insert, select
 
 from hil.store.engine import Store
-from hil.store.schema import results, runs, spc_baselines
+from hil.store.schema import gimbals, results, runs, spc_baselines
 
 _Query = TypeVar("_Query", bound=Select[*tuple[Any, ...]])
 
@@ -192,6 +192,15 @@ def units(store: Store) -> list[RunSummary]:
     # two runs started in the same second: the last run id; a gimbal (several axes under one
     # serial): its axes, and the worst of each axis's latest outcome
     return [_of_axes(summary, axes.get(serial, {})) for serial, summary in found.items()]
+
+
+def gimbal_identities(store: Store) -> dict[str, tuple[str, str]]:
+    """Part number and revision of each serial that has a gimbal certificate (its latest);
+    a serial without one is a one-axis unit."""
+    query = select(gimbals.c.serial, gimbals.c.part_number, gimbals.c.revision).order_by(
+        gimbals.c.issued_at, gimbals.c.certificate_id)
+    with store.engine.connect() as connection:
+        return {serial: (part, revision) for serial, part, revision in connection.execute(query)}
 
 
 def _of_axes(summary: RunSummary, latest: dict[str, str]) -> RunSummary:

@@ -25,7 +25,7 @@ from hil.store.engine import (
     store_failure,
     store_target,
 )
-from hil.store.ingest import ingest_certificate
+from hil.store.ingest import GIMBAL_RUN, ingest_certificate
 from hil.store.outbox import pending, to_outbox
 
 log = logging.getLogger(__name__)
@@ -71,7 +71,8 @@ def record_run(certificate: Path, *, out_dir: Path, url: str) -> str:
     waiting = len(pending(out_dir))
     later = (f"; {waiting} earlier run(s) wait in the outbox: {sync_hint(out_dir, url)}"
              if waiting else "")
-    return f"results store: run {done.run_id} stored in {store.url}{later}"
+    what = "gimbal certificate" if done.run_id == GIMBAL_RUN else f"run {done.run_id}"
+    return f"results store: {what} stored in {store.url}{later}"
 
 
 def sync_hint(out_dir: Path, url: str) -> str:

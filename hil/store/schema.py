@@ -108,3 +108,22 @@ spc_baselines = Table(
     Column("body", Text, nullable=False),  # JSON
     Column("frozen_at", DateTime(timezone=True), nullable=False),
 )
+
+# A gimbal certificate: the gimbal's identity and one verdict over its axes' runs (each a
+# row of ``runs`` under the same serial). A serial with runs and no gimbal row is a
+# one-axis unit: the runs stored before this table came are that, unchanged.
+gimbals = Table(
+    "gimbals",
+    metadata,
+    Column("certificate_id", String(160), primary_key=True),
+    Column("serial", String(64), nullable=False),
+    Column("part_number", String(120), nullable=False),
+    Column("revision", String(40), nullable=False),
+    Column("outcome", String(16), nullable=False),
+    Column("issued_at", DateTime(timezone=True), nullable=False),
+    Column("axes", Text, nullable=False),  # JSON: [{axis, certificate_id, outcome}]
+    Column("certificate_path", Text, nullable=False),
+    Column("certificate_sha256", String(64), nullable=False),
+    Column("ingested_at", DateTime(timezone=True), nullable=False),
+    Index("ix_gimbals_serial_issued", "serial", "issued_at"),
+)
