@@ -217,10 +217,11 @@ def _files(path: Path) -> list[tuple[Path, bool]]:
         return [(path / CERTIFICATE_FILE, False)]
     if (path / GIMBAL_FILE).is_file():
         return [(file, True) for file in _gimbal_axes(path)]
-    found = [(p / CERTIFICATE_FILE, False) for p in sorted(path.iterdir())
-             if (p / CERTIFICATE_FILE).is_file()]
+    found: list[tuple[Path, bool]] = []
     for folder in sorted(path.iterdir()):
-        if (folder / GIMBAL_FILE).is_file():
+        if (folder / CERTIFICATE_FILE).is_file():
+            found.append((folder / CERTIFICATE_FILE, False))
+        elif (folder / GIMBAL_FILE).is_file():
             found += [(file, True) for file in _gimbal_axes(folder)]
     return found
 

@@ -4,10 +4,7 @@ releasing them first on leaving)."""
 
 from __future__ import annotations
 
-import logging
-from typing import Protocol
-
-log = logging.getLogger(__name__)
+from typing import Generic, Protocol, TypeVar
 
 
 class Held(Protocol):
@@ -26,11 +23,15 @@ class Held(Protocol):
     def disable(self) -> None: ...
 
 
-class HeldAxes:
-    """The held axes by name, in the order the station names them."""
+H = TypeVar("H", bound=Held)
+
+
+class HeldAxes(Generic[H]):
+    """The held axes by name, in the order the station names them (``H``: the backend's
+    held-axis class)."""
 
     def __init__(self) -> None:
-        self.axes: dict[str, Held] = {}
+        self.axes: dict[str, H] = {}
 
     def move(self, name: str, angle_rad: float) -> bool:
         """Move the held axis ``name`` to ``angle_rad``; ``False`` when there is none."""

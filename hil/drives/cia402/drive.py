@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import logging
 import math
-import struct
 from typing import Any
 
 from hil.drives.base import (
@@ -81,7 +80,7 @@ class CanOpenDrive(Drive):
         self.command_interpolation = INTERPOLATION_UNKNOWN
         self.torque_sample = "instantaneous"  # or "mean": 0x2077 over the SYNC period
         self._period_us = round(station.sync_period_s * 1e6)
-        self.held = HeldAxes()  # the gimbal's other axes on this bus
+        self.held: HeldAxes[HeldAxis] = HeldAxes()  # the gimbal's other axes on this bus
         self.bus_load = 0.0  # the fraction of the bus the stream and the heartbeats take
         try:
             self._bring_up()
@@ -293,11 +292,7 @@ class CanOpenDrive(Drive):
                 f"node {st.node_id}: {what} is {value} in 0x{index:04X}:{sub:02X} ({kind}, "
                 f"{low}..{high}): the drive cannot represent it; {st.source}"
             )
-        od = self.node_od
-        if od is not None and index not in od:
-            self.link.download(index, sub, struct.pack("<" + code, value))
-        else:
-            self.link.write(index, sub, value)
+        self.link.write_standard(index, sub, code, value)
 
     def _read_info(self, rate_hz: float) -> DriveInfo:
         link, st = self.link, self.station

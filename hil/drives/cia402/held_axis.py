@@ -14,13 +14,12 @@ from __future__ import annotations
 
 import logging
 import math
-import struct
 import time
 from typing import Any
 
 import canopen
 
-from hil.drives.cia402.link import CanLink, sdo_access
+from hil.drives.cia402.link import CanLink, sdo_read, sdo_write, sdo_write_standard
 from hil.drives.cia402.protocol import (
     CW_DISABLE_VOLTAGE,
     CW_ENABLE_OPERATION,
@@ -75,23 +74,10 @@ class HeldAxis:
         self._bring_up()
 
     def read(self, index: int, subindex: int = 0) -> Any:
-        return sdo_access(self.node, lambda var: var.raw, index, subindex)
+        return sdo_read(self.node, index, subindex)
 
     def write(self, index: int, subindex: int, value: Any) -> None:
-        def set_raw(var: Any) -> None:
-            var.raw = value
-
-        sdo_access(self.node, set_raw, index, subindex)
-
-    def write_standard(self, index: int, subindex: int, code: str, value: int) -> None:
-        """A standard object the EDS may not declare (then by raw download, ``code`` its
-        struct type)."""
-        if index in self.node.object_dictionary:
-            self.write(index, subindex, value)
-            return
-        data, sdo = struct.pack("<" + code, value), self.node.sdo
-        sdo_access(self.node, lambda _: sdo.download(index, subindex, data), index, subindex,
-                   raw=True)
+        sdo_write(self.node, index, subindex, value)
 
     def _bring_up(self) -> None:
         st, hold = self.station, self.station.gimbal.hold
@@ -106,9 +92,9 @@ class HeldAxis:
             for comm in (0x1400 + n, 0x1800 + n):
                 if comm in self.node.object_dictionary:
                     self.write(comm, 1, int(self.read(comm, 1)) | 0x80000000)
-        self.write_standard(0x1016, 1, "I",
-                            st.host_node_id << 16 | round(st.host_heartbeat_timeout_s * 1e3))
-        self.write_standard(0x6007, 0, "h", st.abort_connection_option_code)
+        sdo_write_standard(self.node, 0x1016, 1, "I",
+                           st.host_node_id << 16 | round(st.host_heartbeat_timeout_s * 1e3))
+        sdo_write_standard(self.node, 0x6007, 0, "h", st.abort_connection_option_code)
         self.write(0x6060, 0, PROFILE_POSITION)
         self.write(0x6081, 0, self._counts(hold.speed_rad_s))
         self.write(0x6083, 0, self._counts(hold.accel_rad_s2))
@@ -188,7 +174,7 @@ class HeldAxis:
         self.enabled = False
         try:
             self.write(0x6040, 0, CW_DISABLE_VOLTAGE)
-            self.write_standard(0x1016, 1, "I", 0)  # a clean end is no lost host
+            sdo_write_standard(self.node, 0x1016, 1, "I", 0)  # a clean end is no lost host
             self.node.nmt.state = "PRE-OPERATIONAL"
         except Exception as exc:
             log.warning("node %d (%s axis): disabling reported %s", self.node_id, self.name,

@@ -209,36 +209,19 @@ class CanLink:
 
     # -- SDO -------------------------------------------------------------------------
     def read(self, index: int, subindex: int = 0) -> Any:
-        """An object's value by SDO upload.
-
-        Raises
-        ------
-        DriveStateError
-            The node aborted the transfer.
-        DriveCommunicationError
-            No answer within the SDO timeout, or a CAN error.
-        """
-        return self._sdo(lambda var: var.raw, index, subindex)
+        """An object's value by SDO upload (:func:`sdo_read`)."""
+        assert self.node is not None
+        return sdo_read(self.node, index, subindex)
 
     def write(self, index: int, subindex: int, value: Any) -> None:
-        """An object's value by SDO download (errors as :meth:`read`)."""
-
-        def set_raw(var: Any) -> None:
-            var.raw = value
-
-        self._sdo(set_raw, index, subindex)
-
-    def download(self, index: int, subindex: int, data: bytes) -> None:
-        """Raw bytes by SDO download, for a standard object the EDS does not declare
-        (errors as :meth:`read`)."""
+        """An object's value by SDO download (:func:`sdo_write`)."""
         assert self.node is not None
-        sdo = self.node.sdo
-        self._sdo(lambda _var: sdo.download(index, subindex, data), index, subindex, raw=True)
+        sdo_write(self.node, index, subindex, value)
 
-    def _sdo(self, action: Callable[[Any], Any], index: int, subindex: int, *,
-             raw: bool = False) -> Any:
+    def write_standard(self, index: int, subindex: int, code: str, value: int) -> None:
+        """A standard object the EDS may not declare (:func:`sdo_write_standard`)."""
         assert self.node is not None
-        return sdo_access(self.node, action, index, subindex, raw=raw)
+        sdo_write_standard(self.node, index, subindex, code, value)
 
     # -- NMT -------------------------------------------------------------------------
     def command_nmt(self, state: str) -> None:
@@ -480,6 +463,31 @@ def sdo_access(node: canopen.RemoteNode, action: Callable[[Any], Any], index: in
         raise DriveCommunicationError(f"{what}: {exc}") from exc
     except can.CanError as exc:
         raise DriveCommunicationError(f"{what}: CAN error {exc}") from exc
+
+
+def sdo_read(node: canopen.RemoteNode, index: int, subindex: int = 0) -> Any:
+    """An object's value by SDO upload (errors as :func:`sdo_access`)."""
+    return sdo_access(node, lambda var: var.raw, index, subindex)
+
+
+def sdo_write(node: canopen.RemoteNode, index: int, subindex: int, value: Any) -> None:
+    """An object's value by SDO download (errors as :func:`sdo_access`)."""
+
+    def set_raw(var: Any) -> None:
+        var.raw = value
+
+    sdo_access(node, set_raw, index, subindex)
+
+
+def sdo_write_standard(node: canopen.RemoteNode, index: int, subindex: int, code: str,
+                       value: int) -> None:
+    """A standard object by SDO download; one the node's EDS does not declare as raw bytes
+    (``code``: its struct type, little-endian). Errors as :func:`sdo_access`."""
+    if index in node.object_dictionary:
+        sdo_write(node, index, subindex, value)
+        return
+    data, sdo = struct.pack("<" + code, value), node.sdo
+    sdo_access(node, lambda _: sdo.download(index, subindex, data), index, subindex, raw=True)
 
 
 def _sleep_until(deadline: float) -> None:

@@ -96,15 +96,14 @@ class ModbusDrive(Drive):
         self.feedback = Feedback(self.link, self.torque_sample)  # checks the map: no I/O
         self.states = ModbusStateMachine(self.link, self.feedback)
         self.link.connect()
-        self.held = HeldAxes()  # the gimbal's other axes behind this link
-        self._holding: dict[str, HeldModbusAxis] = {}  # the same, with their keepalive
+        self.held: HeldAxes[HeldModbusAxis] = HeldAxes()  # the gimbal's other axes here
         try:
             self._info = self._read_info()
             for name, unit_id in station.held.items():
                 axis = HeldModbusAxis(self.link, name=name, unit_id=unit_id,
                                       hold=station.gimbal.hold,
                                       others=self._keepalive_all_but(name))
-                self.held.axes[name] = self._holding[name] = axis
+                self.held.axes[name] = axis
                 axis.enable()
                 if name in station.gimbal.hold.at_rad:
                     axis.move_to(station.gimbal.hold.at_rad[name])
@@ -220,7 +219,7 @@ class ModbusDrive(Drive):
             super().set_elevation(elevation_rad)
 
     def _keepalive(self) -> None:
-        for axis in self._holding.values():
+        for axis in self.held.axes.values():
             axis.keepalive()
 
     def _keepalive_all_but(self, moving: str) -> Callable[[], None]:
@@ -232,7 +231,7 @@ class ModbusDrive(Drive):
             if time.monotonic() - last[0] >= KEEPALIVE_S:
                 last[0] = time.monotonic()
                 self.link.read_values(("status_word",))
-            for name, axis in self._holding.items():
+            for name, axis in self.held.axes.items():
                 if name != moving:
                     axis.keepalive()
 
