@@ -305,6 +305,23 @@ def drive(request: pytest.FixtureRequest, drive_connection: Drive) -> Iterator[D
             drive_connection.disable()
 
 
+@pytest.fixture(scope="module")
+def drive_info(request: pytest.FixtureRequest, drive: Drive, profile: UnitProfile,
+               calibration: CalibrationRun) -> DriveInfo:
+    """The drive as this module's protocol sees it: streamed at the link's rate when one of
+    its runs would not fit the drive's recorder (the certificate says so)."""
+    from hil.suite.plan import acquisition_info
+
+    marker = request.node.get_closest_marker("protocol")
+    if marker is None:
+        return drive.info
+    name = str(marker.args[0])
+    info, why = acquisition_info(name, profile, drive.info)
+    if why is not None:
+        calibration.protocol(name).messages.append(why)
+    return info
+
+
 @pytest.fixture(autouse=True)
 def _allure_measurements(request: pytest.FixtureRequest) -> Iterator[None]:
     """With allure-pytest active, attach each protocol test's judged measurements."""

@@ -18,7 +18,7 @@ import numpy as np
 import pytest
 
 from hil.calibration import CalibrationRun
-from hil.drives.base import Drive
+from hil.drives.base import Drive, DriveInfo
 from hil.identify.cogging import CoggingResult, compensation_table
 from hil.identify.estimate import Estimate
 from hil.measurement import Declared, declare
@@ -39,6 +39,7 @@ from hil.suite.cogging import (
     sweep_passes,
 )
 from hil.suite.needs import note_fallbacks
+from hil.suite.plan import acquisition_info
 from hil.suite.rate import sample_rate_shortfall
 from hil.suite.stop_rule import run_repeated
 from hil.suite.travel import on_command_grid
@@ -57,12 +58,16 @@ DECLARED = declare(
 
 
 @pytest.fixture(scope="module")
-def result(drive: Drive, calibration: CalibrationRun, profile: UnitProfile
+def result(drive: Drive, calibration: CalibrationRun, profile: UnitProfile,
+           drive_info: DriveInfo
            ) -> dict[str, Estimate]:
-    spec = Spec.from_profile(profile, drive.info)
+    spec = Spec.from_profile(profile, drive_info)
+    if spec.passes == SWEEP_PASSES:  # the gravity sweep's recording: at the rate it ran
+        drive_info, _ = acquisition_info(SWEEP_PASSES, profile, drive.info)
+        spec = Spec.from_profile(profile, drive_info)
     shortfall = sample_rate_shortfall(
         spec.needed_sample_rate_hz,
-        drive.info,
+        drive_info,
         protocol=NAME,
         why=(
             f"4 × order {spec.max_order} at {spec.speed_rad_s:g} rad/s = "
@@ -75,7 +80,7 @@ def result(drive: Drive, calibration: CalibrationRun, profile: UnitProfile
     analysed_elsewhere: dict[str, str] = {}
     if spec.passes == SWEEP_PASSES:  # the sweep's one recording: the spec refuses a rule
         position, torque, passes_from, first_sample = sweep_passes(calibration, profile,
-                                                                   drive.info)
+                                                                   drive_info)
         passes_from = Path(passes_from).relative_to(calibration.unit_dir).as_posix()
         analysed_elsewhere["passes"] = passes_from
     else:

@@ -14,7 +14,7 @@ from collections.abc import Iterator
 import pytest
 
 from hil.calibration import CalibrationRun
-from hil.drives.base import Drive
+from hil.drives.base import Drive, DriveInfo
 from hil.identify.estimate import Estimate
 from hil.measurement import Declared, declare
 from hil.motion import Mode
@@ -69,7 +69,8 @@ def cleared(drive: Drive) -> Iterator[Drive]:
 
 
 @pytest.fixture(scope="module")
-def result(cleared: Drive, calibration: CalibrationRun, profile: UnitProfile
+def result(cleared: Drive, calibration: CalibrationRun, profile: UnitProfile,
+           drive_info: DriveInfo
            ) -> dict[str, Estimate]:
     drive = cleared
     note_fallbacks(calibration, NAME, NEEDS)
@@ -81,9 +82,9 @@ def result(cleared: Drive, calibration: CalibrationRun, profile: UnitProfile
     with (calibration.unit_dir / path).open(encoding="utf-8") as handle:
         data = json.load(handle)
     table = table_from_json(data)
-    spec = Spec.from_profile(profile, drive.info)
+    spec = Spec.from_profile(profile, drive_info)
     shortfall = sample_rate_shortfall(
-        spec.needed_sample_rate_hz, drive.info, protocol=NAME,
+        spec.needed_sample_rate_hz, drive_info, protocol=NAME,
         why=f"≥ {spec.min_samples_per_pass} samples in the {spec.pass_s - spec.skip_s:g} s "
             "analysed pass")
     if shortfall is not None:

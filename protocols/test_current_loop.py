@@ -11,7 +11,7 @@ from __future__ import annotations
 import pytest
 
 from hil.calibration import CalibrationRun
-from hil.drives.base import Drive
+from hil.drives.base import Drive, DriveInfo
 from hil.identify.current_loop import (
     CurrentLoopResult,
     torque_hold_s,
@@ -43,12 +43,13 @@ DECLARED = declare(
 
 
 @pytest.fixture(scope="module")
-def result(drive: Drive, calibration: CalibrationRun, profile: UnitProfile
+def result(drive: Drive, calibration: CalibrationRun, profile: UnitProfile,
+           drive_info: DriveInfo
            ) -> dict[str, Estimate]:
-    spec = Spec.from_profile(profile, drive.info)
+    spec = Spec.from_profile(profile, drive_info)
     shortfall = sample_rate_shortfall(
         spec.needed_sample_rate_hz,
-        drive.info,
+        drive_info,
         protocol=NAME,
         why=f"4 × its highest excitation frequency, {max(spec.frequencies_hz):g} Hz",
     )

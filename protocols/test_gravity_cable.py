@@ -14,7 +14,7 @@ from __future__ import annotations
 import pytest
 
 from hil.calibration import CalibrationRun
-from hil.drives.base import Drive
+from hil.drives.base import Drive, DriveInfo
 from hil.identify.estimate import Estimate
 from hil.identify.gravity_cable import (
     GravityCableResult,
@@ -55,8 +55,8 @@ DECLARED = declare(
 
 
 @pytest.fixture(scope="module")
-def spec(drive: Drive, profile: UnitProfile) -> Spec:
-    return Spec.from_profile(profile, drive.info)
+def spec(drive_info: DriveInfo, profile: UnitProfile) -> Spec:
+    return Spec.from_profile(profile, drive_info)
 
 
 @pytest.fixture(scope="module")

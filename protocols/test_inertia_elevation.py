@@ -15,7 +15,7 @@ from __future__ import annotations
 import pytest
 
 from hil.calibration import CalibrationRun
-from hil.drives.base import Drive
+from hil.drives.base import Drive, DriveInfo
 from hil.identify.estimate import Estimate
 from hil.identify.inertia_elevation import InertiaElevationResult, fit_inertia_elevation
 from hil.measurement import Declared, declare
@@ -60,13 +60,14 @@ DECLARED = declare(
 
 @pytest.fixture(scope="module")
 def result(
-    drive: Drive, calibration: CalibrationRun, profile: UnitProfile
+    drive: Drive, calibration: CalibrationRun, profile: UnitProfile,
+           drive_info: DriveInfo
 ) -> dict[str, Estimate]:
     if NAME not in profile.protocols:
         pytest.skip(f"the profile has no [protocols.{NAME}] table (not an azimuth axis)")
     if (lacking := drive.info.lacking(REQUIRES)) is not None:
         pytest.skip(lacking)
-    spec = Spec.from_profile(profile, drive.info)
+    spec = Spec.from_profile(profile, drive_info)
     note_fallbacks(calibration, NAME, NEEDS)
     gain = reported_torque_gain(calibration)
 

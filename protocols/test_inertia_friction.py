@@ -12,7 +12,7 @@ from __future__ import annotations
 import pytest
 
 from hil.calibration import CalibrationRun
-from hil.drives.base import Drive
+from hil.drives.base import Drive, DriveInfo
 from hil.identify.estimate import Estimate
 from hil.identify.inertia_friction import InertiaFrictionResult
 from hil.measurement import Declared, declare
@@ -52,9 +52,10 @@ DECLARED = declare(
 
 @pytest.fixture(scope="module")
 def result(
-    drive: Drive, calibration: CalibrationRun, profile: UnitProfile
+    drive: Drive, calibration: CalibrationRun, profile: UnitProfile,
+           drive_info: DriveInfo
 ) -> dict[str, Estimate]:
-    spec = Spec.from_profile(profile, drive.info)
+    spec = Spec.from_profile(profile, drive_info)
     note_fallbacks(calibration, NAME, NEEDS)
     # the protocol's one sequence (the planner sums the same): the centre move, the sines
     sequence = list(motion(spec, position=lambda: drive.status().position_rad))

@@ -16,7 +16,7 @@ import math
 import pytest
 
 from hil.calibration import CalibrationRun
-from hil.drives.base import Drive
+from hil.drives.base import Drive, DriveInfo
 from hil.identify.estimate import Estimate
 from hil.identify.resonance import ResonanceResult
 from hil.measurement import Declared, declare
@@ -54,16 +54,17 @@ DECLARED = declare(
 
 
 @pytest.fixture(scope="module")
-def result(drive: Drive, calibration: CalibrationRun, profile: UnitProfile) -> ResonanceResult:
+def result(drive: Drive, calibration: CalibrationRun, profile: UnitProfile,
+           drive_info: DriveInfo) -> ResonanceResult:
     if NAME not in profile.protocols:
         pytest.skip(
             f"the profile has no [protocols.{NAME}] table: a rigid axis, no shaft "
             "resonance to identify"
         )
-    spec = spec_from_profile(profile, drive.info)
+    spec = spec_from_profile(profile, drive_info)
     shortfall = sample_rate_shortfall(
         spec.needed_sample_rate_hz,
-        drive.info,
+        drive_info,
         protocol=NAME,
         why=f"4 × the top of its band, {max(spec.frequencies_hz):g} Hz",
     )

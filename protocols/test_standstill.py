@@ -9,7 +9,7 @@ import pytest
 
 from hil.calibration import CalibrationRun
 from hil.closed_loop.standstill import Standstill
-from hil.drives.base import Drive
+from hil.drives.base import Drive, DriveInfo
 from hil.identify.estimate import Estimate
 from hil.measurement import Declared, declare
 from hil.motion import Excitation
@@ -39,9 +39,10 @@ DECLARED = declare(
 
 
 @pytest.fixture(scope="module")
-def result(drive: Drive, calibration: CalibrationRun, profile: UnitProfile
+def result(drive: Drive, calibration: CalibrationRun, profile: UnitProfile,
+           drive_info: DriveInfo
            ) -> dict[str, Estimate]:
-    spec = Spec.from_profile(profile, drive.info)
+    spec = Spec.from_profile(profile, drive_info)
 
     def run_once() -> tuple[dict[str, Estimate], Standstill, Excitation]:
         hold = excitation(spec, position_rad=drive.status().position_rad)

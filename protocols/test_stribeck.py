@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from hil.calibration import CalibrationRun
-from hil.drives.base import Drive
+from hil.drives.base import Drive, DriveInfo
 from hil.identify.estimate import Estimate
 from hil.identify.stribeck import StribeckResult
 from hil.measurement import Declared, declare
@@ -46,9 +46,10 @@ DECLARED = declare(
 
 
 @pytest.fixture(scope="module")
-def result(drive: Drive, calibration: CalibrationRun, profile: UnitProfile
+def result(drive: Drive, calibration: CalibrationRun, profile: UnitProfile,
+           drive_info: DriveInfo
            ) -> dict[str, Estimate]:
-    spec = Spec.from_profile(profile, drive.info)
+    spec = Spec.from_profile(profile, drive_info)
     note_fallbacks(calibration, NAME, NEEDS)
     ripple = kt_ripple_from_cogging(calibration)
 

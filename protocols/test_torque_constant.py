@@ -13,7 +13,7 @@ from __future__ import annotations
 import pytest
 
 from hil.calibration import CalibrationRun
-from hil.drives.base import Drive
+from hil.drives.base import Drive, DriveInfo
 from hil.identify.estimate import Estimate
 from hil.identify.torque_constant import (
     LockedSweep,
@@ -60,11 +60,12 @@ DECLARED = declare(
 
 @pytest.fixture(scope="module")
 def result(
-    drive: Drive, calibration: CalibrationRun, profile: UnitProfile
+    drive: Drive, calibration: CalibrationRun, profile: UnitProfile,
+           drive_info: DriveInfo
 ) -> dict[str, Estimate]:
     if (lacking := drive.info.lacking(REQUIRES)) is not None:
         pytest.skip(lacking)
-    spec = Spec.from_profile(profile, drive.info)
+    spec = Spec.from_profile(profile, drive_info)
     note_fallbacks(calibration, NAME, NEEDS)
     ripple = kt_ripple_from_cogging(calibration)
     angles = locked_angles(spec, ripple)

@@ -13,7 +13,7 @@ import pytest
 
 from hil.calibration import CalibrationRun
 from hil.closed_loop.tracking import Repeated
-from hil.drives.base import Drive
+from hil.drives.base import Drive, DriveInfo
 from hil.identify.estimate import Estimate
 from hil.measurement import Declared, declare
 from hil.profile import UnitProfile
@@ -54,11 +54,12 @@ DECLARED = declare(
 
 
 @pytest.fixture(scope="module")
-def result(drive: Drive, calibration: CalibrationRun, profile: UnitProfile
+def result(drive: Drive, calibration: CalibrationRun, profile: UnitProfile,
+           drive_info: DriveInfo
            ) -> dict[str, Estimate]:
-    spec = Spec.from_profile(profile, drive.info)
+    spec = Spec.from_profile(profile, drive_info)
     shortfall = sample_rate_shortfall(
-        spec.min_sample_rate_hz, drive.info, protocol=NAME,
+        spec.min_sample_rate_hz, drive_info, protocol=NAME,
         why="the torque offset follows the command sample by sample; a polled link holds it "
             "a whole poll and writes it with the host's jitter")
     if shortfall is not None:

@@ -14,7 +14,7 @@ import pytest
 
 from hil.calibration import CalibrationRun
 from hil.closed_loop.frf import FrfResult
-from hil.drives.base import Drive
+from hil.drives.base import Drive, DriveInfo
 from hil.identify.estimate import Estimate
 from hil.measurement import Declared, declare
 from hil.profile import UnitProfile
@@ -50,11 +50,12 @@ DECLARED = declare(
 
 
 @pytest.fixture(scope="module")
-def result(drive: Drive, calibration: CalibrationRun, profile: UnitProfile
+def result(drive: Drive, calibration: CalibrationRun, profile: UnitProfile,
+           drive_info: DriveInfo
            ) -> dict[str, Estimate]:
-    spec = Spec.from_profile(profile, drive.info)
+    spec = Spec.from_profile(profile, drive_info)
     shortfall = sample_rate_shortfall(
-        spec.needed_sample_rate_hz, drive.info, protocol=NAME,
+        spec.needed_sample_rate_hz, drive_info, protocol=NAME,
         why=f"4 × its highest line, {max(spec.frequencies_hz):g} Hz")
     if shortfall is not None:
         pytest.skip(shortfall)

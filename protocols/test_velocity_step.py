@@ -13,7 +13,7 @@ import pytest
 
 from hil.calibration import CalibrationRun
 from hil.closed_loop.step import StepFigures
-from hil.drives.base import Drive
+from hil.drives.base import Drive, DriveInfo
 from hil.identify.estimate import Estimate
 from hil.measurement import Declared, declare
 from hil.profile import UnitProfile
@@ -56,10 +56,11 @@ DECLARED = declare(
 
 
 @pytest.fixture(scope="module")
-def result(drive: Drive, calibration: CalibrationRun, profile: UnitProfile
+def result(drive: Drive, calibration: CalibrationRun, profile: UnitProfile,
+           drive_info: DriveInfo
            ) -> dict[str, Estimate]:
-    spec = Spec.from_profile(profile, drive.info)
-    shortfall = sample_rate_shortfall(spec.min_sample_rate_hz, drive.info, protocol=NAME,
+    spec = Spec.from_profile(profile, drive_info)
+    shortfall = sample_rate_shortfall(spec.min_sample_rate_hz, drive_info, protocol=NAME,
                                       why="≥ 10 samples in a 10 ms rise")
     if shortfall is not None:
         pytest.skip(shortfall)

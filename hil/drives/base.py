@@ -7,6 +7,7 @@ counts, per-mille of rated torque or vendor units lives only inside a backend.
 from __future__ import annotations
 
 import abc
+import dataclasses
 import logging
 from collections.abc import Iterable
 from contextlib import AbstractContextManager
@@ -48,6 +49,34 @@ class Capability(Enum):
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
+class Recorder:
+    """A drive's own recorder: it samples faster than the link streams, but holds a bounded
+    run and plays no torque offset. A run above ``stream_rate_hz`` goes to it.
+
+    Attributes
+    ----------
+    stream_rate_hz : float
+        The fastest rate the link streams, for a run of any length.
+    samples : int
+        The most samples one run may have in the recorder.
+    """
+
+    stream_rate_hz: float
+    samples: int
+
+    def refuses(self, excitation: Excitation) -> str | None:
+        """``None`` when ``excitation`` streams or fits the recorder; else why it does not."""
+        if excitation.fs_hz <= self.stream_rate_hz * (1 + 1e-9):
+            return None
+        if excitation.torque_offset_nm is not None:
+            return f"'{excitation.name}' sends a torque offset; the drive recorder plays none"
+        if len(excitation.command) > self.samples:
+            return (f"'{excitation.name}' has {len(excitation.command):,} samples at "
+                    f"{excitation.fs_hz:g} Hz; the drive recorder holds {self.samples:,}")
+        return None
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
 class DriveInfo:
     """What the certificate records about the drive, and what protocols may rely on.
 
@@ -65,6 +94,9 @@ class DriveInfo:
         The fastest rate a recording can be sampled at over this transport.
     capabilities : frozenset of Capability
         What the station can do beyond the contract (a torque sensor, a fixture, ...).
+    recorder : Recorder or None
+        When ``max_sample_rate_hz`` is reached only by the drive's own recorder (bounded
+        runs): its limits and the rate the link streams.
     transport : str
         ``"sim"``, ``"canopen ..."``, ``"modbus tcp"``, ...: for messages and skips.
     """
@@ -78,7 +110,15 @@ class DriveInfo:
     modes: tuple[Mode, ...]
     max_sample_rate_hz: float
     capabilities: frozenset[Capability] = frozenset()
+    recorder: Recorder | None = None
     transport: str = "none"
+
+    def streamed(self) -> DriveInfo:
+        """This drive as one that streams every run (no recorder, its stream rate)."""
+        if self.recorder is None:
+            return self
+        return dataclasses.replace(self, max_sample_rate_hz=self.recorder.stream_rate_hz,
+                                   recorder=None)
 
     def lacking(self, required: Iterable[Capability]) -> str | None:
         """``None`` when the station has every one of ``required``, else one line naming

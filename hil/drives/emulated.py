@@ -58,7 +58,8 @@ def canopen_emulator(
     station = base_station or load_station(builtin_station(CANOPEN_STATION))
     assert isinstance(station, CanOpenStation)
     channel = f"gimbal-hil-{uuid.uuid4().hex[:12]}"
-    station = dataclasses.replace(station, channel=channel,
+    # the emulator's endpoint: a private channel of python-can's virtual bus
+    station = dataclasses.replace(station, interface="virtual", channel=channel,
                                   **(station_changes or {})).for_axis(profile.axis)
     with ExitStack() as running:
         held = {name: running.enter_context(Cia402Emulator(

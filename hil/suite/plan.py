@@ -41,6 +41,37 @@ class _Track:
         return out
 
 
+def acquisition_info(name: str, profile: UnitProfile, info: DriveInfo
+                     ) -> tuple[DriveInfo, str | None]:
+    """The drive as protocol ``name`` sees it, and why, if not as it is.
+
+    A drive whose highest rate is its own recorder's (:class:`hil.drives.base.Recorder`)
+    keeps it for a protocol whose every planned run fits the recorder; a protocol with one
+    that does not (too many samples, a torque offset) is planned and run streamed, at the
+    link's rate, so that it completes instead of stopping at that run.
+
+    Returns
+    -------
+    tuple
+        The drive info to build the protocol's spec from, and ``None`` or the line that
+        says why it streams.
+    """
+    protocol = CATALOGUE.get(name)
+    if info.recorder is None or protocol is None:
+        return info, None
+    track = _Track((info.limits.travel_min_rad + info.limits.travel_max_rad) / 2)
+    try:
+        excitations = track.walk(protocol.planned_motion(profile, info, track.position))
+    except (HilError, ValueError):
+        return info, None  # the protocol states its own error when it builds the spec
+    reasons = [r for e in excitations if (r := info.recorder.refuses(e)) is not None]
+    if not reasons:
+        return info, None
+    streamed = info.streamed()
+    return streamed, (f"streamed at {streamed.max_sample_rate_hz:g} Hz, not by the drive "
+                      f"recorder at {info.max_sample_rate_hz:g} Hz: {reasons[0]}")
+
+
 def planned_motion_s(profile: UnitProfile, info: DriveInfo) -> dict[str, float]:
     """Commanded motion time of each protocol the profile configures, in run order.
 
@@ -64,8 +95,9 @@ def planned_motion_s(profile: UnitProfile, info: DriveInfo) -> dict[str, float]:
     for name in profile.protocols:  # each from where the one before left the axis
         protocol = CATALOGUE.get(name)
         runs = protocol is not None and info.lacking(protocol.requires) is None
+        seen, _ = acquisition_info(name, profile, info)
         try:
-            excitations = track.walk(protocol.planned_motion(profile, info, track.position)
+            excitations = track.walk(protocol.planned_motion(profile, seen, track.position)
                                      ) if protocol is not None and runs else []
         except (HilError, ValueError) as exc:
             log.debug("no motion plan for %s: %s", name, exc)
@@ -90,6 +122,7 @@ def check_protocol_settings(profile: UnitProfile, info: DriveInfo) -> None:
         if protocol is None:
             continue
         try:
-            track.walk(protocol.planned_motion(profile, info, track.position))
+            track.walk(protocol.planned_motion(profile, acquisition_info(name, profile, info)[0],
+                                               track.position))
         except ValueError as exc:
             raise ProfileError(f"[protocols.{name}]: {exc}", source=profile.source) from None

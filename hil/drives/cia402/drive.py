@@ -20,6 +20,7 @@ from hil.drives.base import (
     DriveState,
     DriveStatus,
     MotionEnvelope,
+    Recorder,
     check_limits,
     interrupted,
 )
@@ -76,6 +77,7 @@ class CanOpenDrive(Drive):
         self.scaling: Scaling | None = None
         self.supported_modes = 0
         self.recorder_rate_hz = 0.0
+        self.recorder_samples = 0
         self.control_period_s: float | None = None  # the drive's control loop, if it says
         self.command_interpolation = INTERPOLATION_UNKNOWN
         self.torque_sample = "instantaneous"  # or "mean": 0x2077 over the SYNC period
@@ -123,6 +125,7 @@ class CanOpenDrive(Drive):
             loop_us = int(link.read(0x2200, 6))
             self.control_period_s = loop_us * 1e-6
             self.recorder_rate_hz = 1e6 / loop_us if st.acquisition != "stream" else 0.0
+            self.recorder_samples = int(link.read(0x2200, 5)) if self.recorder_rate_hz else 0
         except (DriveStateError, KeyError):
             self.recorder_rate_hz = 0.0
         self._check_control_period()
@@ -310,6 +313,8 @@ class CanOpenDrive(Drive):
                 ({Capability.COMPENSATION_TABLE} if self.node_od is not None
                  and COMPENSATION_TABLE in self.node_od else set())
                 | ({Capability.ELEVATION_AXIS} if "elevation" in st.held else set())),
+            recorder=Recorder(stream_rate_hz=rate_hz, samples=self.recorder_samples)
+            if self.recorder_rate_hz > rate_hz else None,
             transport=f"canopen {st.interface}:{st.channel} node {st.node_id}",
         )
 
