@@ -14,6 +14,7 @@ from hil.calibration import CalibrationRun
 from hil.drives.base import Drive, DriveInfo
 from hil.identify.current_loop import (
     CurrentLoopResult,
+    timing_problem,
     torque_hold_s,
 )
 from hil.identify.estimate import Estimate
@@ -55,6 +56,8 @@ def result(drive: Drive, calibration: CalibrationRun, profile: UnitProfile,
     )
     if shortfall is not None:
         pytest.skip(shortfall)
+    if (problem := timing_problem(drive_info.timing)) is not None:
+        pytest.skip(f"[protocols.{NAME}]: {problem}")
 
     def run_once() -> tuple[CurrentLoopResult, Recording]:
         move, sines = excitation(spec, position_rad=drive.status().position_rad)

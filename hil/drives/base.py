@@ -9,7 +9,7 @@ from __future__ import annotations
 import abc
 import dataclasses
 import logging
-from collections.abc import Iterable
+from collections.abc import Iterable, Mapping
 from contextlib import AbstractContextManager
 from dataclasses import dataclass
 from enum import Enum
@@ -97,6 +97,10 @@ class DriveInfo:
     recorder : Recorder or None
         When ``max_sample_rate_hz`` is reached only by the drive's own recorder (bounded
         runs): its limits and the rate the link streams.
+    timing : mapping of str to str
+        What this drive's recordings state about their timing and the drive's conventions
+        (torque sampling, control period, the object map's ``position_latch`` and
+        ``torque_reports``): a protocol checks before motion that its model applies.
     transport : str
         ``"sim"``, ``"canopen ..."``, ``"modbus tcp"``, ...: for messages and skips.
     """
@@ -111,6 +115,7 @@ class DriveInfo:
     max_sample_rate_hz: float
     capabilities: frozenset[Capability] = frozenset()
     recorder: Recorder | None = None
+    timing: Mapping[str, str] = dataclasses.field(default_factory=dict)
     transport: str = "none"
 
     def streamed(self) -> DriveInfo:

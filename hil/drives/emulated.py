@@ -10,6 +10,7 @@ from pathlib import Path
 from typing import Any
 
 from hil.config import builtin_fixture
+from hil.drives.canopen_map import ObjectMap
 from hil.drives.emulator_faults import CanFaults, ModbusFaults
 from hil.drives.station import CanOpenStation, ModbusStation, load_station
 from hil.errors import ProfileError
@@ -43,10 +44,14 @@ def canopen_emulator(
     faults: CanFaults | None = None,
     station_changes: dict[str, Any] | None = None,
     base_station: CanOpenStation | None = None,
+    emulated_map: ObjectMap | None = None,
     **emulator_options: Any,
 ) -> Iterator[tuple[Any, CanOpenStation]]:
     """A running CiA 402 emulator on a private virtual channel, and its station (the
     built-in emulator station's settings, or ``base_station``'s, on that channel).
+
+    The emulator presents itself as the drive model of the station's object map, or of
+    ``emulated_map`` when given (a station whose map does not match its drive).
 
     A station naming a gimbal's axes (``[canopen.axes]``) gets one emulated node per axis
     on that channel: ``profile``'s axis is the node under test, every other axis a node
@@ -67,7 +72,7 @@ def canopen_emulator(
             fs_hz=other.sample_rate_hz, seed=seed + 1000 * (n + 1), channel=channel,
             interface=station.interface, node_id=node_id,
             rated_torque_nm=rated_torque_nm(other), serial_number=serial + n + 1,
-            eds_path=station.eds_path))
+            eds_path=station.eds_path, object_map=station.object_map))
             for n, (name, node_id) in enumerate(station.held.items())
             for other in (_emulated_profile(station, name),)}
         elevation = held.get("elevation")
@@ -83,6 +88,7 @@ def canopen_emulator(
             serial_number=serial,
             faults=faults,
             eds_path=station.eds_path,
+            object_map=emulated_map or station.object_map,
             elevation_of=None if elevation is None else lambda: elevation.plant.position_rad,
             **emulator_options,
         )

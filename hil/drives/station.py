@@ -17,6 +17,7 @@ from pathlib import Path
 from typing import Any
 
 from hil.config import ConfigTable, builtin_fixture, read_toml
+from hil.drives.canopen_map import GENERIC_MAP, ObjectMap, load_object_map
 from hil.errors import ProfileError
 
 SYNC_PACINGS = ("realtime", "lockstep")
@@ -122,6 +123,7 @@ class CanOpenStation:
     abort_connection_option_code: int = 3  # 0x6007: 1 fault, 2 disable voltage, 3 quick stop
     can_options: Mapping[str, Any] = field(default_factory=dict)
     gimbal: GimbalBus = field(default_factory=GimbalBus)  # [canopen.axes], [canopen.hold]
+    object_map: ObjectMap = field(default_factory=lambda: load_object_map(GENERIC_MAP))
 
     @property
     def held(self) -> Mapping[str, int]:
@@ -339,6 +341,7 @@ def _canopen(table: ConfigTable, scaling: ConfigTable, base_dir: Path) -> CanOpe
         abort_connection_option_code=table.integer("abort_connection_option_code", 3),
         can_options=dict(table.table_at("options", required=False).values),  # python-can's
         gimbal=_gimbal(table, base_dir, largest_address=127),
+        object_map=_object_map(table, base_dir),
     )
     table.done()
     scaling.done()
@@ -346,6 +349,17 @@ def _canopen(table: ConfigTable, scaling: ConfigTable, base_dir: Path) -> CanOpe
         raise table.error("max_bus_load", "is a fraction (0..1]")
     _check_host_watch(table, station)
     return station
+
+
+def _object_map(table: ConfigTable, base_dir: Path) -> ObjectMap:
+    """The drive model's object map: a file beside the station, or a shipped map's name."""
+    name = table.string("object_map", GENERIC_MAP)
+    try:
+        return load_object_map(name, base_dir=base_dir)
+    except ProfileError as exc:
+        if exc.source:  # the map file itself is wrong: its own line
+            raise
+        raise table.error("object_map", exc.message) from None
 
 
 def _gimbal(table: ConfigTable, base_dir: Path, *, largest_address: int) -> GimbalBus:

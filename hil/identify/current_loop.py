@@ -102,6 +102,40 @@ class TorqueHold:
             raise ValueError(f"mean_samples must be ≥ 1, got {self.mean_samples}")
 
 
+def conventions_problem(metadata: Mapping[str, str]) -> str | None:
+    """Why the model cannot apply to a drive with the conventions ``metadata`` states
+    (its object map's ``position_latch`` and ``torque_reports``), or ``None``.
+
+    The model pairs the torque *commanded* over a control period with the position measured
+    at that period's start. A drive that reports its measured torque has the current loop's
+    lag inside the reported torque already (τ reads about zero), and one that latches the
+    position at the SYNC shifts the pair by a control period (τ reads about 80 % short);
+    a drive whose map does not say either cannot be told apart from them.
+    """
+    reports = metadata.get("torque_reports", "demand")
+    latch = metadata.get("position_latch", "control_period_before_sync")
+    where = f"the object map '{metadata.get('object_map', '?')}'"
+    if reports != "demand":
+        return (f"{where} says torque_reports = {reports!r}: τ is measured against the torque "
+                "the drive commands (\"demand\"), which this drive is not known to report")
+    if latch != "control_period_before_sync":
+        return (f"{where} says position_latch = {latch!r}: the model needs the position of "
+                "the control period's start, latched with that period's torque "
+                "(\"control_period_before_sync\")")
+    return None
+
+
+def timing_problem(timing: Mapping[str, str]) -> str | None:
+    """Before any motion: why the model cannot apply to the drive whose recordings will
+    state ``timing`` (:attr:`hil.drives.base.DriveInfo.timing`), or ``None``."""
+    problem = conventions_problem(timing)
+    if problem is None and "torque_sample" in timing and "control_period_s" not in timing:
+        problem = ("the drive's control period is not known (its object map gives no "
+                   "control_period; give control_period_s in the station file): the torque "
+                   "hold, and with it τ, cannot be modelled")
+    return problem
+
+
 def torque_hold_s(metadata: Mapping[str, str], *, fs_hz: float) -> TorqueHold:
     """How the drive held the torque a recording reports (module docstring, "Which hold").
 
@@ -136,6 +170,9 @@ def torque_hold_s(metadata: Mapping[str, str], *, fs_hz: float) -> TorqueHold:
         of control periods, or decimation without linear command interpolation.
     """
     sample_s = 1.0 / fs_hz
+    problem = conventions_problem(metadata)
+    if problem is not None:
+        raise IdentificationError(problem)
     if "torque_sample" not in metadata:
         return TorqueHold(hold_s=sample_s)
     sampling = metadata["torque_sample"]

@@ -3,12 +3,14 @@
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
 
 from conftest import sine
 from hil.drives.base import DriveState
+from hil.drives.canopen_map import load_object_map
 from hil.drives.cia402.drive import CanOpenDrive
 from hil.drives.cia402.emulator import ENABLED, SWITCH_ON_DISABLED
 from hil.drives.connect import open_drive
@@ -153,27 +155,6 @@ def test_station_errors_name_the_file(tmp_path: object, profile: UnitProfile) ->
         pass
 
 
-def _eds_without(tmp_path: object, *indices: str) -> object:
-    """The emulator's EDS with the given manufacturer objects removed (a drive that has no
-    0x2200 recorder, hence no 0x2200:6 loop period, and/or no averaged torque 0x2077)."""
-    from pathlib import Path
-
-    from hil.drives.cia402.emulator import default_eds_path
-
-    kept, skip = [], False
-    for line in default_eds_path().read_text().splitlines():
-        if line.startswith("["):
-            skip = any(line.startswith(f"[{i}") for i in indices)
-        listed = any(line.endswith(f"=0x{i}") for i in indices)  # [ManufacturerObjects]
-        if not skip and not listed:
-            kept.append(line)
-    text = "\n".join(kept) + "\n"
-    text = text.replace("SupportedObjects=3", f"SupportedObjects={3 - len(indices)}")
-    path = Path(str(tmp_path)) / "no_recorder.eds"
-    path.write_text(text)
-    return path
-
-
 def test_station_keys_torque_sample_and_control_period(tmp_path: object) -> None:
     from pathlib import Path
 
@@ -198,23 +179,30 @@ def test_station_keys_torque_sample_and_control_period(tmp_path: object) -> None
 
 @pytest.mark.parametrize("station_period_s", [None, 2.5e-4])
 def test_control_period_from_the_station_when_the_drive_has_none(
-    tmp_path: object, profile: UnitProfile, station_period_s: float | None
+    tmp_path: Path, profile: UnitProfile, station_period_s: float | None
 ) -> None:
-    """A drive without 0x2200:6 (and without 0x2077): the recording states the station's
+    """A drive whose object map gives no control period and no averaged torque (standard
+    objects only, its conventions known): the recording states the station's
     control_period_s, so the current-loop model can use it; without it, it refuses."""
+    from hil.config import builtin_fixture
     from hil.errors import IdentificationError
     from hil.identify.current_loop import torque_hold_s
 
-    eds = _eds_without(tmp_path, "2200", "2077")
-    changes = {"eds_path": eds, "control_period_s": station_period_s}
+    text = (builtin_fixture("canopen_maps") / "cia402_generic.toml").read_text()
+    known = tmp_path / "known_conventions.toml"
+    known.write_text(text.replace('position_latch = "unknown"',
+                                  'position_latch = "control_period_before_sync"')
+                     .replace('torque_reports = "unknown"', 'torque_reports = "demand"'))
+    changes = {"object_map": load_object_map(known), "control_period_s": station_period_s}
     with (
         canopen_emulator(profile, seed=5, station_changes=changes) as (_emulator, station),
         CanOpenDrive(station, limits=profile.limits) as drive,
     ):
-        assert drive.torque_sample == "instantaneous"  # no 0x2077 in this EDS
+        assert drive.torque_sample == "instantaneous"  # the map gives no torque_mean
         drive.enable()
         recording = drive.run(sine(0.2, fs_hz=1000.0, periods=1))
     assert recording.metadata["torque_sample"] == "instantaneous"
+    assert recording.metadata["torque_reports"] == "demand"
     if station_period_s is None:
         assert "control_period_s" not in recording.metadata
         with pytest.raises(IdentificationError, match="control period"):
@@ -224,9 +212,31 @@ def test_control_period_from_the_station_when_the_drive_has_none(
         assert torque_hold_s(recording.metadata, fs_hz=1000.0).hold_s == pytest.approx(2.5e-4)
 
 
+@pytest.mark.parametrize(("key", "value"), [("torque_reports", "measured"),
+                                            ("torque_reports", "unknown"),
+                                            ("position_latch", "sync")])
+def test_the_current_loop_model_refuses_conventions_it_does_not_fit(key: str,
+                                                                    value: str) -> None:
+    """A drive that reports measured torque (τ read 0.00 ± 0.27 ms) or latches the position
+    at the SYNC (τ read −79 %), or whose map does not say: refused, naming the map's key."""
+    from hil.errors import IdentificationError
+    from hil.identify.current_loop import timing_problem, torque_hold_s
+
+    metadata = {"object_map": "some drive", "torque_sample": "instantaneous",
+                "control_period_s": "0.00025", "command_interpolation": "linear",
+                "position_latch": "control_period_before_sync", "torque_reports": "demand"}
+    assert timing_problem(metadata) is None
+    metadata[key] = value
+    problem = timing_problem(metadata)
+    assert problem is not None
+    assert f"{key} = {value!r}" in problem
+    with pytest.raises(IdentificationError, match=key):
+        torque_hold_s(metadata, fs_hz=1000.0)
+
+
 def test_station_control_period_must_agree_with_the_drive(profile: UnitProfile) -> None:
     with (
-        pytest.raises(DriveStateError, match=r"0x2200:6 is 0\.00025 s"),
+        pytest.raises(DriveStateError, match=r"0x2200:06 UNSIGNED32 is 0\.00025 s"),
         canopen_emulator(profile, seed=6, station_changes={"control_period_s": 5e-4}) as (
             _emulator,
             station,
@@ -236,15 +246,51 @@ def test_station_control_period_must_agree_with_the_drive(profile: UnitProfile) 
         pass
 
 
-def test_mean_torque_required_but_not_offered(tmp_path: object, profile: UnitProfile) -> None:
-    eds = _eds_without(tmp_path, "2077")
-    changes = {"eds_path": eds, "torque_sample": "mean"}
+def test_mean_torque_required_but_not_offered(profile: UnitProfile) -> None:
+    changes = {"object_map": load_object_map("cia402_generic"), "torque_sample": "mean"}
     with (
-        pytest.raises(DriveStateError, match="0x2077"),
+        pytest.raises(DriveStateError, match="gives no torque_mean"),
         canopen_emulator(profile, seed=7, station_changes=changes) as (_emulator, station),
         CanOpenDrive(station, limits=profile.limits),
     ):
         pass
+
+
+def test_a_map_giving_an_object_the_drive_lacks_is_refused_before_motion(
+        profile: UnitProfile) -> None:
+    """The station's map says the drive has a recorder and an averaged torque; the drive
+    (the emulator as a standard-objects-only drive) has neither: one line naming the map,
+    the role and the drive's answer, and nothing enabled."""
+    with canopen_emulator(profile, seed=5,
+                          emulated_map=load_object_map("cia402_generic")) as (emulator, station):
+        with pytest.raises(DriveStateError) as refused:
+            CanOpenDrive(station, limits=profile.limits).__enter__()
+        assert emulator.state != ENABLED
+    message = str(refused.value)
+    assert "\n" not in message
+    assert "'gimbal-hil servo emulator'" in message
+    assert "0x2077" in message or "0x2200" in message
+    assert "does not match this drive" in message
+
+
+def test_a_map_whose_torque_scale_is_wrong_is_refused(tmp_path: object,
+                                                      profile: UnitProfile) -> None:
+    """The emulator's map with 0x6076 in µN·m (as an EPOS4's) against a drive in mN·m: its
+    rated torque would be 1000 times too small for the unit, refused before motion."""
+    from pathlib import Path
+
+    from hil.config import builtin_fixture
+
+    text = (builtin_fixture("canopen_maps") / "gimbal_hil_servo.toml").read_text()
+    wrong = Path(str(tmp_path)) / "wrong_scale.toml"
+    wrong.write_text(text.replace("rated_torque_per_nm = 1000 ", "rated_torque_per_nm = 1000000 "))
+    with (
+        canopen_emulator(profile, seed=5,
+                         station_changes={"object_map": load_object_map(wrong)},
+                         emulated_map=load_object_map("gimbal_hil_servo")) as (_, station),
+        pytest.raises(DriveStateError, match=r"scales 0x6076 at 1e\+06 per N·m"),
+    ):
+        CanOpenDrive(station, limits=profile.limits).__enter__()
 
 
 def test_a_drive_powered_up_without_a_heartbeat_is_brought_up(profile: UnitProfile) -> None:

@@ -3,8 +3,9 @@
 Streaming: command sample k travels in the RPDO sent before SYNC k, the drive applies it
 at SYNC k, and the TPDOs answering SYNC k are recording row k, timed ``k × period`` from
 the SYNC count (never from host clocks). The recorder path is for rates a bus cannot
-stream: the command is downloaded as a waveform table (0x2100), played by the drive at
-its loop rate and sampled by its trace recorder (0x2200), uploaded by segmented SDO.
+stream: the command is downloaded as a waveform table, played by the drive at its loop
+rate and sampled by its trace recorder, uploaded by segmented SDO (where the object map
+puts them: the emulator's 0x2100 and 0x2200).
 """
 
 from __future__ import annotations
@@ -23,7 +24,6 @@ from hil.drives.cia402.protocol import (
     RPDO_FORMAT,
     SW_FAULT,
     TARGET_OBJECT,
-    TORQUE_MEAN_PER_RATED,
     Scaling,
     state_of,
 )
@@ -64,13 +64,21 @@ class RunSetup:
         The motion monitor's bounds: a streamed run whose measured position or velocity
         leaves them stops (a :class:`LimitViolationError`; the drive is then quick-stopped).
     torque_sample : str
-        ``"mean"`` (0x2077, averaged over the SYNC period) or ``"instantaneous"`` (0x6077).
+        ``"mean"`` (the object map's ``torque_mean``, averaged over the SYNC period) or
+        ``"instantaneous"`` (0x6077).
+    torque_per_rated : float
+        Counts of the streamed torque object per rated torque (0x6077: 1000).
     command_interpolation : str
         How the drive moves between cyclic targets (0x60C0), for the metadata.
     control_period_s : float or None
         The drive's control period, if known.
     recorder_rate_hz : float
         The drive recorder's sample rate (0: no recorder).
+    recorder_index, waveform_index : int or None
+        The object map's recorder and waveform table objects.
+    conventions : dict of str to str
+        What the object map says of the drive (:meth:`ObjectMap.conventions`), for the
+        metadata.
     identity : dict of str to str
         The metadata naming the drive (drive, node, vendor, model, firmware, serial,
         transport).
@@ -84,9 +92,13 @@ class RunSetup:
     scaling: Scaling
     envelope: MotionEnvelope
     torque_sample: str
+    torque_per_rated: float
     command_interpolation: str
     control_period_s: float | None
     recorder_rate_hz: float
+    recorder_index: int | None
+    waveform_index: int | None
+    conventions: dict[str, str]
     identity: dict[str, str]
     operation_mode: str
 
@@ -142,6 +154,7 @@ def _raw_offset(setup: RunSetup, excitation: Excitation) -> np.ndarray | None:
 def _metadata(setup: RunSetup, excitation: Excitation, **extra: str) -> dict[str, str]:
     return {
         **setup.identity,
+        **setup.conventions,
         "excitation": excitation.name,
         "control_mode": excitation.mode.value,
         "operation_mode": setup.operation_mode,
@@ -312,7 +325,7 @@ def _stream_recording(
     current = np.asarray([r[2] for r in two], dtype=np.float64)
     period = 1.0 / excitation.fs_hz  # the SYNC period of this run (written by drive.run)
     mean = setup.torque_sample == "mean"
-    torque_per_rated = TORQUE_MEAN_PER_RATED if mean else 1e3  # 0x2077: 0.1 ‰, 0x6077: ‰
+    torque_per_rated = setup.torque_per_rated
     columns = {
         "time_s": k_arr * period,
         "position_rad": pos / sc.counts_per_rad,
@@ -326,7 +339,7 @@ def _stream_recording(
     timing = {
         # row k: the drive's last control-loop sample before SYNC k (position measured at
         # its start, torque commanded over it), or with "mean" the torque averaged over the
-        # control periods of the SYNC period before SYNC k (0x2077); the targets are
+        # control periods of the SYNC period before SYNC k (torque_mean); the targets are
         # interpolated as stated
         "torque_sample": setup.torque_sample,
         "command_interpolation": setup.command_interpolation,
@@ -375,17 +388,20 @@ def run_recorder(link: CanLink, setup: RunSetup, excitation: Excitation) -> Acqu
     if excitation.torque_offset_nm is not None:
         raise DriveStateError(f"'{excitation.name}' sends a torque offset (0x60B2): the drive "
                               "recorder plays no offset; stream it (at the SYNC rate)")
+    recorder, waveform = setup.recorder_index, setup.waveform_index
+    assert recorder is not None
+    assert waveform is not None
     divider = round(setup.recorder_rate_hz / excitation.fs_hz)
     wave = np.repeat(_raw_command(setup, excitation), divider).astype("<i4")
-    capacity = int(link.read(0x2200, 5))
+    capacity = int(link.read(recorder, 5))
     if len(excitation.command) > capacity:
         raise DriveStateError(
             f"'{excitation.name}' has {len(excitation.command)} samples; the drive recorder "
             f"holds {capacity}"
         )
-    link.write(0x2100, 1, wave.tobytes())
-    link.write(0x2200, 3, divider)
-    link.write(0x2200, 1, 1)
+    link.write(waveform, 1, wave.tobytes())
+    link.write(recorder, 3, divider)
+    link.write(recorder, 1, 1)
     loop_s = 1.0 / setup.recorder_rate_hz
     ticks = math.ceil(len(wave) * loop_s / st_period_s) + 1
     error: DriveError | None = None
@@ -405,7 +421,7 @@ def run_recorder(link: CanLink, setup: RunSetup, excitation: Excitation) -> Acqu
                     f"'{excitation.name}' (EMCY, drive recorder)",
                     code=(link.emcy[-1][0] if link.emcy else 0) or link.fault_code(),
                 )
-        if int(link.read(0x2200, 2)) != 2:
+        if int(link.read(recorder, 2)) != 2:
             raise DriveStateError(f"drive recorder did not finish '{excitation.name}'")
     except DriveError as exc:
         error = exc
@@ -418,7 +434,8 @@ def recorder_upload(link: CanLink, setup: RunSetup, excitation: Excitation,
     """What the drive recorder holds of ``excitation`` (all of it after a finished run,
     the samples up to the stop after an interrupted one), uploaded by segmented SDO."""
     sc = setup.scaling
-    data = bytes(link.read(0x2200, 7)) if link.connected else b""
+    recorder = setup.recorder_index
+    data = bytes(link.read(recorder, 7)) if link.connected and recorder is not None else b""
     samples = np.frombuffer(data[: len(data) // 12 * 12], dtype=RECORDER_SAMPLE)
     n = len(samples)
     columns = {

@@ -27,20 +27,21 @@ from hil.drives.base import (
 from hil.drives.cia402.acquire import RunSetup, recorder_upload, run_recorder, run_stream
 from hil.drives.cia402.held_axis import HeldAxis, bus_load
 from hil.drives.cia402.link import CanLink
+from hil.drives.cia402.map_check import (
+    check_objects,
+    check_torque_scale,
+    mismatch,
+    read_object,
+)
 from hil.drives.cia402.protocol import (
-    COMPENSATION_TABLE,
-    INTERPOLATION_CODES,
     INTERPOLATION_UNKNOWN,
-    TORQUE_MEAN_NAME,
-    TORQUE_MEAN_OBJECT,
-    TORQUE_MEAN_PER_RATED,
     TPDO_LAYOUT,
-    TPDO_LAYOUT_MEAN,
     Scaling,
     max_stream_rate_hz,
     pack_harmonics,
     state_of,
     stream_frame_bytes,
+    tpdo_layout_mean,
 )
 from hil.drives.cia402.state_machine import Cia402StateMachine
 from hil.drives.held import HeldAxes
@@ -80,7 +81,7 @@ class CanOpenDrive(Drive):
         self.recorder_samples = 0
         self.control_period_s: float | None = None  # the drive's control loop, if it says
         self.command_interpolation = INTERPOLATION_UNKNOWN
-        self.torque_sample = "instantaneous"  # or "mean": 0x2077 over the SYNC period
+        self.torque_sample = "instantaneous"  # or "mean": the map's torque_mean
         self._period_us = round(station.sync_period_s * 1e6)
         self.held: HeldAxes[HeldAxis] = HeldAxes()  # the gimbal's other axes on this bus
         self.bus_load = 0.0  # the fraction of the bus the stream and the heartbeats take
@@ -113,22 +114,24 @@ class CanOpenDrive(Drive):
         link.command_nmt("PRE-OPERATIONAL")
         link.write(0x1017, 0, round(st.heartbeat_period_s * 1e3))
         link.nmt("PRE-OPERATIONAL")
+        check_objects(link, st.object_map)  # the map against the drive, before anything else
         self.scaling = self._scaling()
         self.supported_modes = int(link.read(0x6502))
         self.torque_sample = self._choose_torque_sample()
-        link.configure_pdos(TPDO_LAYOUT_MEAN if self.torque_sample == "mean" else TPDO_LAYOUT)
+        mean = st.object_map.torque_mean
+        link.configure_pdos(tpdo_layout_mean(mean.index, mean.subindex)
+                            if self.torque_sample == "mean" and mean is not None else TPDO_LAYOUT)
         self._write_period(self._period_us)
         link.write(0x1019, 0, 0)  # SYNC without counter
         self._write_limits()
         self._watch_host()
-        try:
-            loop_us = int(link.read(0x2200, 6))
-            self.control_period_s = loop_us * 1e-6
-            self.recorder_rate_hz = 1e6 / loop_us if st.acquisition != "stream" else 0.0
-            self.recorder_samples = int(link.read(0x2200, 5)) if self.recorder_rate_hz else 0
-        except (DriveStateError, KeyError):
-            self.recorder_rate_hz = 0.0
+        self._read_control_period()
         self._check_control_period()
+        om = st.object_map
+        if om.has_recorder and st.acquisition != "stream" and self.control_period_s:
+            assert om.recorder_index is not None
+            self.recorder_rate_hz = 1.0 / self.control_period_s
+            self.recorder_samples = int(link.read(om.recorder_index, 5))
         self.command_interpolation = self._read_interpolation()
         self.states = Cia402StateMachine(
             link,
@@ -147,9 +150,9 @@ class CanOpenDrive(Drive):
                 axis.move_to(st.gimbal.hold.at_rad[name])
 
     def _scaling(self) -> Scaling:
-        st, link = self.station, self.link
-        rated_torque = int(link.read(0x6076)) / 1e3
-        rated_current = int(link.read(0x6075)) / 1e3
+        st, link, om = self.station, self.link, self.station.object_map
+        rated_torque = int(link.read(0x6076)) / om.rated_torque_per_nm
+        rated_current = int(link.read(0x6075)) / om.rated_current_per_a
         counts = int(link.read(0x608F, 1)) // max(1, int(link.read(0x608F, 2)))
         for name, drive_value, station_value in (
             ("rated torque 0x6076", rated_torque, st.rated_torque_nm),
@@ -163,40 +166,33 @@ class CanOpenDrive(Drive):
                     f"node {st.node_id}: {name} is {drive_value:g}, the station file "
                     f"{st.source} says {station_value:g}"
                 )
+        check_torque_scale(link, om, rated_torque_nm=rated_torque,
+                           torque_limit_nm=self.limits.torque_nm)
         return Scaling(
             counts_per_rev=counts,
-            velocity_units_per_rad_s=st.velocity_units_per_rad_s or counts / (2 * math.pi),
+            velocity_units_per_rad_s=(st.velocity_units_per_rad_s or om.velocity_per_rad_s
+                                      or counts / (2 * math.pi)),
             rated_torque_nm=rated_torque,
             rated_current_a=rated_current,
         )
 
     def _choose_torque_sample(self) -> str:
-        """``"mean"`` when the drive offers the SYNC-period torque average (0x2077 in its
-        EDS, by name and type: a manufacturer-specific index means something else on
-        another vendor's drive) and the station does not say otherwise; else
+        """``"mean"`` when the object map gives the SYNC-period torque average (16-bit, so
+        it takes 0x6077's place in TPDO2) and the station does not say otherwise; else
         ``"instantaneous"`` (0x6077)."""
         st = self.station
         if st.torque_sample == "instantaneous":
             return "instantaneous"
-        assert self.node_od is not None
         assert self.scaling is not None
-        obj = self.node_od.get(TORQUE_MEAN_OBJECT)
-        offered = (
-            obj is not None
-            and getattr(obj, "name", "") == TORQUE_MEAN_NAME
-            and getattr(obj, "data_type", None) == 0x0003  # INTEGER16
-            and bool(getattr(obj, "pdo_mappable", False))
-        )
-        # INTEGER16 at 0.1 ‰ spans ±3.28 × rated: the torque limit (0x6072) must fit
-        fits = self.limits.torque_nm / self.scaling.rated_torque_nm * TORQUE_MEAN_PER_RATED
+        ref = st.object_map.torque_mean
         reason = ""
-        if not offered:
-            reason = f"its EDS has no 0x{TORQUE_MEAN_OBJECT:04X} '{TORQUE_MEAN_NAME}'"
-        elif fits > 32767:
-            reason = (
-                f"the torque limit {self.limits.torque_nm:g} N·m exceeds the range of "
-                f"0x{TORQUE_MEAN_OBJECT:04X} (3.28 × rated)"
-            )
+        if ref is None:
+            reason = f"the object map '{st.object_map.name}' gives no torque_mean"
+        elif ref.bits != 16:
+            reason = f"{ref} is not 16-bit: TPDO2 holds velocity, a 16-bit torque and current"
+        elif self.limits.torque_nm / self.scaling.rated_torque_nm * ref.per_unit > 32767:
+            reason = (f"the torque limit {self.limits.torque_nm:g} N·m exceeds the range of "
+                      f"{ref} ({32767 / ref.per_unit:.3g} × rated)")
         if not reason:
             return "mean"
         if st.torque_sample == "mean":
@@ -211,9 +207,20 @@ class CanOpenDrive(Drive):
         """The node's object dictionary (from the station's EDS)."""
         return None if self.link.node is None else self.link.node.object_dictionary
 
+    def _read_control_period(self) -> None:
+        """The drive's control period, where the object map says it reports it."""
+        om = self.station.object_map
+        if om.control_period is None:
+            return
+        period_s = read_object(self.link, om.control_period, om) / om.control_period.per_unit
+        if not 1e-6 <= period_s <= 0.01:
+            raise mismatch(self.link, om, f"reads {om.control_period} as a control period of "
+                                          f"{period_s:g} s (plausible 1 µs to 10 ms)")
+        self.control_period_s = period_s
+
     def _check_control_period(self) -> None:
-        """The drive's control period: as it reports it (0x2200:6), else the station's
-        ``control_period_s``; both given must agree."""
+        """The drive's control period: as it reports it (the map's ``control_period``),
+        else the station's ``control_period_s``; both given must agree."""
         st = self.station
         if st.control_period_s is None:
             return
@@ -221,7 +228,8 @@ class CanOpenDrive(Drive):
             self.control_period_s = st.control_period_s
         elif not math.isclose(self.control_period_s, st.control_period_s, rel_tol=1e-6):
             raise DriveStateError(
-                f"node {st.node_id}: control period 0x2200:6 is {self.control_period_s:g} s, "
+                f"node {st.node_id}: control period {st.object_map.control_period} is "
+                f"{self.control_period_s:g} s, "
                 f"the station file {st.source} says {st.control_period_s:g} s"
             )
 
@@ -231,7 +239,8 @@ class CanOpenDrive(Drive):
             code = int(self.link.read(0x60C0))
         except (DriveStateError, KeyError):
             return INTERPOLATION_UNKNOWN
-        return INTERPOLATION_CODES.get(code, f"{INTERPOLATION_UNKNOWN} (0x60C0 = {code})")
+        codes = self.station.object_map.interpolation_codes
+        return codes.get(code, f"{INTERPOLATION_UNKNOWN} (0x60C0 = {code})")
 
     def _write_period(self, period_us: int) -> None:
         mantissa, exponent = period_us, -6
@@ -310,11 +319,14 @@ class CanOpenDrive(Drive):
             modes=self.states.modes(),
             max_sample_rate_hz=max(rate_hz, self.recorder_rate_hz),
             capabilities=frozenset(
-                ({Capability.COMPENSATION_TABLE} if self.node_od is not None
-                 and COMPENSATION_TABLE in self.node_od else set())
+                ({Capability.COMPENSATION_TABLE}
+                 if st.object_map.compensation_index is not None else set())
                 | ({Capability.ELEVATION_AXIS} if "elevation" in st.held else set())),
             recorder=Recorder(stream_rate_hz=rate_hz, samples=self.recorder_samples)
             if self.recorder_rate_hz > rate_hz else None,
+            timing={**st.object_map.conventions(), "torque_sample": self.torque_sample,
+                    **({} if self.control_period_s is None
+                       else {"control_period_s": f"{self.control_period_s:g}"})},
             transport=f"canopen {st.interface}:{st.channel} node {st.node_id}",
         )
 
@@ -366,21 +378,21 @@ class CanOpenDrive(Drive):
         self.states.quick_stop()
 
     def load_compensation(self, table: CompensationTable | None) -> None:
-        """Download a cogging compensation table into 0x2300 (``None``: an empty one).
+        """Download a cogging compensation table into the object map's compensation table
+        (``None``: an empty one).
 
         Raises
         ------
         DriveStateError
-            The drive's object dictionary has no 0x2300.
+            The object map gives no compensation table.
         """
-        od = self.node_od
-        if od is None or COMPENSATION_TABLE not in od:
-            raise DriveStateError(f"node {self.station.node_id} has no compensation table "
-                                  f"object 0x{COMPENSATION_TABLE:04X}")
+        index = self.station.object_map.compensation_index
+        if index is None:
+            raise self._without(Capability.COMPENSATION_TABLE)
         cogging = () if table is None else table.cogging_nm
         ripple = () if table is None else table.kt_ripple
-        self.link.write(COMPENSATION_TABLE, 1, pack_harmonics(cogging))
-        self.link.write(COMPENSATION_TABLE, 2, pack_harmonics(ripple))
+        self.link.write(index, 1, pack_harmonics(cogging))
+        self.link.write(index, 2, pack_harmonics(ripple))
 
     def set_elevation(self, elevation_rad: float) -> None:
         """Move the gimbal's elevation axis (a held node on this bus) to ``elevation_rad``
@@ -486,6 +498,7 @@ class CanOpenDrive(Drive):
     def _run_setup(self) -> RunSetup:
         assert self.scaling is not None
         info, st = self.info, self.station
+        om = st.object_map
         mode_code = self.states.mode_code
         return RunSetup(
             node_id=st.node_id,
@@ -494,9 +507,14 @@ class CanOpenDrive(Drive):
             scaling=self.scaling,
             envelope=MotionEnvelope.of(self.limits),
             torque_sample=self.torque_sample,
+            torque_per_rated=(om.torque_mean.per_unit if self.torque_sample == "mean"
+                              and om.torque_mean is not None else 1e3),
             command_interpolation=self.command_interpolation,
             control_period_s=self.control_period_s,
             recorder_rate_hz=self.recorder_rate_hz,
+            recorder_index=om.recorder_index,
+            waveform_index=om.waveform_index,
+            conventions=om.conventions(),
             identity={
                 "drive": f"canopen node {st.node_id}",
                 "node_id": str(st.node_id),

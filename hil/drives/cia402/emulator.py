@@ -53,8 +53,10 @@ from canopen.objectdictionary import (
 from canopen.sdo.exceptions import SdoAbortedError
 
 from hil.config import builtin_fixture
+from hil.drives.canopen_map import ObjectMap
+from hil.drives.cia402.emulator_map import COMPENSATION, Addresses, present_under
 from hil.drives.cia402.emulator_recorder import DriveRecorder
-from hil.drives.cia402.protocol import COMPENSATION_TABLE, TORQUE_OFFSET, unpack_harmonics
+from hil.drives.cia402.protocol import TORQUE_OFFSET, unpack_harmonics
 from hil.drives.emulator_faults import CanFaults
 from hil.motion import Mode, PositionHarmonic
 from plant_sim.firmware import Firmware
@@ -166,6 +168,7 @@ class Cia402Emulator:
         interpolation: int = 0,
         power_on_heartbeat_ms: int | None = None,
         elevation_of: Callable[[], float] | None = None,
+        object_map: ObjectMap | None = None,
     ) -> None:
         if exact_torque_hold and not plant.exact_torque_hold:
             plant = plant.with_changes(exact_torque_hold=True)  # the same physics as SimDrive
@@ -184,6 +187,16 @@ class Cia402Emulator:
         self.rated_current_a = rated_current_a or rated_torque_nm / plant.torque_constant_nm_a
         self._od = canopen.import_od(str(eds_path or default_eds_path()), node_id)
         _add_safety_objects(self._od)
+        # presented as the drive model the map describes (None: as its own EDS says)
+        self.object_map = object_map
+        self._addresses = present_under(self._od, object_map) if object_map else Addresses()
+        self._torque_mean_per_rated = (TORQUE_MEAN_PER_RATED if object_map is None or
+                                       object_map.torque_mean is None
+                                       else object_map.torque_mean.per_unit)
+        self._units = (1e3, 1e3) if object_map is None else (object_map.rated_torque_per_nm,
+                                                             object_map.rated_current_per_a)
+        velocity = None if object_map is None else object_map.velocity_per_rad_s
+        self.velocity_per_rad_s = velocity or self.counts_per_rev / (2 * math.pi)
         self._serial = serial_number
         self._interpolation_code = interpolation
         self._power_on_heartbeat_ms = power_on_heartbeat_ms  # 0x1017 at boot (None: the EDS)
@@ -234,6 +247,7 @@ class Cia402Emulator:
             capacity=16384,
             loop_period_us=round(1e6 / fs_hz),
             counts_per_rad=self.counts_per_rev / (2 * math.pi),
+            velocity_per_rad_s=self.velocity_per_rad_s,
             rated_torque_nm=self.rated_torque_nm,
             rated_current_a=self.rated_current_a,
         )
@@ -252,8 +266,11 @@ class Cia402Emulator:
         store = node.data_store
         store.setdefault(0x1018, {})[4] = struct.pack("<I", self._serial)
         store.setdefault(0x100A, {})[0] = self.firmware.version.encode("utf-8")
-        store.setdefault(0x6076, {})[0] = struct.pack("<I", round(self.rated_torque_nm * 1e3))
-        store.setdefault(0x6075, {})[0] = struct.pack("<I", round(self.rated_current_a * 1e3))
+        torque_per_nm, current_per_a = self._units
+        store.setdefault(0x6076, {})[0] = struct.pack("<I", round(self.rated_torque_nm
+                                                                  * torque_per_nm))
+        store.setdefault(0x6075, {})[0] = struct.pack("<I", round(self.rated_current_a
+                                                                  * current_per_a))
         store.setdefault(0x608F, {})[1] = struct.pack("<I", self.counts_per_rev)
         store.setdefault(0x60C0, {})[0] = struct.pack("<h", self._interpolation_code)
         if self._power_on_heartbeat_ms is not None:  # 0: no heartbeat until 0x1017 is set
@@ -312,6 +329,7 @@ class Cia402Emulator:
 
     # -- object access -----------------------------------------------------------------
     def _on_read(self, *, index: int, subindex: int, od: ODVariable) -> Any:
+        index, subindex = self._addresses.native(index, subindex)
         with self._lock:
             if index == 0x6041:
                 return self.statusword
@@ -337,7 +355,7 @@ class Cia402Emulator:
         if od.data_type in _FMT:
             value = struct.unpack("<" + _FMT[od.data_type], data)[0]
         with self._lock:
-            self._write_checked(index, subindex, value)
+            self._write_checked(*self._addresses.native(index, subindex), value)
             if od.data_type in _FMT:  # the store is written after this callback
                 self._raw_cache[(index, subindex)] = int(value)
 
@@ -363,7 +381,7 @@ class Cia402Emulator:
             self._consume_heartbeat(int(value))
         elif index in (0x2100, 0x2200):
             self.recorder.write(index, subindex, value, running=self.state == ENABLED)
-        elif index == COMPENSATION_TABLE and subindex in (1, 2):
+        elif index == COMPENSATION and subindex in (1, 2):
             try:
                 self._compensation[subindex] = unpack_harmonics(bytes(value))
             except (ValueError, struct.error):
@@ -550,7 +568,7 @@ class Cia402Emulator:
         """The latched actual values against 0x607D (counts) and 0x6080 (rpm): outside,
         the drive quick-stops and reports internal limit active (statusword bit 11)."""
         position, velocity = self._sample[0x6064], self._sample[0x606C]
-        rpm = abs(velocity) / self.counts_per_rev * 60.0
+        rpm = abs(velocity) / self.velocity_per_rad_s * 60.0 / (2 * math.pi)
         if self._raw(0x607D, 1) <= position <= self._raw(0x607D, 2) and rpm <= self._raw(0x6080):
             return
         log.warning("emulator node %d: at its own limit (position %d counts, %.1f rpm): "
@@ -588,7 +606,8 @@ class Cia402Emulator:
                     var = obj if isinstance(obj, ODVariable) else obj[subindex]
                     if bits != len(var):
                         raise SdoAbortedError(0x06040042)
-                    entries.append((index, subindex, _FMT[var.data_type]))  # type: ignore[index]
+                    own = self._addresses.native(index, subindex)
+                    entries.append((*own, _FMT[var.data_type]))  # type: ignore[index]
                 out.append((cob & 0x7FF, self._raw(comm + n, 2), entries))
         self._pdo_dirty = False
 
@@ -701,12 +720,13 @@ class Cia402Emulator:
         cpr = self.counts_per_rev
         self._next_sample = {
             0x6064: round(trace.position_rad[-1] * cpr / (2 * math.pi)),
-            0x606C: round(trace.velocity_rad_s[-1] * cpr / (2 * math.pi)),
+            0x606C: round(trace.velocity_rad_s[-1] * self.velocity_per_rad_s),
             0x6077: _clip16(trace.torque_nm[-1] / self.rated_torque_nm * 1e3),
             0x6078: _clip16(trace.current_a[-1] / self.rated_current_a * 1e3),
             # the mean over this SYNC period's control samples (each held over one period)
             TORQUE_MEAN: _clip16(
-                float(np.mean(trace.torque_nm)) / self.rated_torque_nm * TORQUE_MEAN_PER_RATED
+                float(np.mean(trace.torque_nm)) / self.rated_torque_nm
+                * self._torque_mean_per_rated
             ),
         }
         if self.state == ENABLED:
@@ -726,7 +746,7 @@ class Cia402Emulator:
     def _command(self, steps: int, period_s: float) -> tuple[Mode, np.ndarray]:
         cpr = self.counts_per_rev
         if self.state == QUICK_STOP:
-            decel = self._raw(0x6085) * 2 * math.pi / cpr
+            decel = self._raw(0x6085) / self.velocity_per_rad_s
             step = min(decel * period_s, abs(self._ramp_velocity))
             self._ramp_velocity -= math.copysign(step, self._ramp_velocity)
             return Mode.VELOCITY, np.full(steps, self._ramp_velocity)
@@ -750,7 +770,7 @@ class Cia402Emulator:
                 waveform = old + (new - old) * self._ramp
         if mode is Mode.VELOCITY:
             raw = self.targets[0x60FF] if waveform is None else waveform
-            value = np.asarray(raw, dtype=np.float64) * 2 * math.pi / cpr
+            value = np.asarray(raw, dtype=np.float64) / self.velocity_per_rad_s
             if self.mode_display == 3:  # profile velocity: ramp at 0x6083
                 accel = self._raw(0x6083) * 2 * math.pi / cpr * period_s
                 target = float(np.mean(value))

@@ -3,8 +3,8 @@
 Real servo drives carry a function generator and a recorder that samples at the control
 loop rate, far above what a fieldbus can stream; the master downloads the waveform,
 starts it, and uploads the trace afterwards by segmented SDO. Sample layout in 0x2200:7
-(little endian, 12 bytes): position (int32, increments), velocity (int32, increments/s),
-torque (int16, per-mille of rated), current (int16, per-mille of rated).
+(little endian, 12 bytes): position (int32, increments), velocity (int32, the drive's
+velocity units), torque (int16, per-mille of rated), current (int16, per-mille of rated).
 """
 
 from __future__ import annotations
@@ -27,12 +27,14 @@ class DriveRecorder:
         capacity: int,
         loop_period_us: int,
         counts_per_rad: float,
+        velocity_per_rad_s: float,
         rated_torque_nm: float,
         rated_current_a: float,
     ) -> None:
         self.capacity = capacity
         self.loop_period_us = loop_period_us
         self._counts_per_rad = counts_per_rad
+        self._velocity_per_rad_s = velocity_per_rad_s
         self._torque_scale = 1e3 / rated_torque_nm
         self._current_scale = 1e3 / rated_current_a
         self.status = IDLE
@@ -104,7 +106,7 @@ class DriveRecorder:
             idx = np.asarray(keep)
             chunk = np.empty(len(idx), dtype=SAMPLE)
             chunk["pos"] = np.round(trace.position_rad[idx] * self._counts_per_rad)
-            chunk["vel"] = np.round(trace.velocity_rad_s[idx] * self._counts_per_rad)
+            chunk["vel"] = np.round(trace.velocity_rad_s[idx] * self._velocity_per_rad_s)
             chunk["torque"] = np.clip(
                 np.round(trace.torque_nm[idx] * self._torque_scale), -32768, 32767
             )

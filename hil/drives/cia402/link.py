@@ -213,6 +213,13 @@ class CanLink:
         assert self.node is not None
         return sdo_read(self.node, index, subindex)
 
+    def upload(self, index: int, subindex: int) -> bytes:
+        """An object's bytes by SDO upload, by its address (whether or not the EDS has it)."""
+        assert self.node is not None
+        sdo = self.node.sdo
+        return bytes(sdo_access(self.node, lambda _: sdo.upload(index, subindex), index,
+                                subindex, raw=True))
+
     def write(self, index: int, subindex: int, value: Any) -> None:
         """An object's value by SDO download (:func:`sdo_write`)."""
         assert self.node is not None
@@ -247,7 +254,7 @@ class CanLink:
 
     def configure_pdos(self, tpdos: TpdoLayout = TPDO_LAYOUT) -> None:
         """Write our PDO layout (node must be PRE-OPERATIONAL; confirmed by the caller);
-        ``tpdos``: :data:`TPDO_LAYOUT`, or ``TPDO_LAYOUT_MEAN`` (torque averaged, 0x2077)."""
+        ``tpdos``: :data:`TPDO_LAYOUT`, or :func:`tpdo_layout_mean` (torque averaged)."""
         base = self.node_id
         for n, entries in [(*RPDO_LAYOUT[m],) for m in (Mode.VELOCITY, Mode.TORQUE, Mode.POSITION)]:
             self._map(0x1400 + n - 1, 0x1600 + n - 1, 0x200 + 0x100 * (n - 1) + base, entries)
@@ -258,12 +265,13 @@ class CanLink:
                 cob = self.read(0x1800 + n - 1, 1)
                 self.write(0x1800 + n - 1, 1, cob | 0x80000000)
 
-    def _map(self, comm: int, mapping: int, cob: int, entries: tuple[tuple[int, int], ...]) -> None:
+    def _map(self, comm: int, mapping: int, cob: int,
+             entries: tuple[tuple[int, int, int], ...]) -> None:
         self.write(comm, 1, cob | 0x80000000)  # invalidate while remapping
         self.write(comm, 2, 1)  # synchronous, every SYNC
         self.write(mapping, 0, 0)
-        for sub, (index, bits) in enumerate(entries, start=1):
-            self.write(mapping, sub, index << 16 | bits)
+        for sub, (index, subindex, bits) in enumerate(entries, start=1):
+            self.write(mapping, sub, index << 16 | subindex << 8 | bits)
         self.write(mapping, 0, len(entries))
         self.write(comm, 1, cob)
 

@@ -29,8 +29,7 @@ CW_ENABLE_OPERATION = 0x000F
 CW_FAULT_RESET = 0x0080
 
 # 0x60C0 interpolation sub mode select: 0 is CiA 402 linear interpolation; negative codes are
-# manufacturer-specific (-1: the emulator's "hold the target from the SYNC on")
-INTERPOLATION_CODES = {0: "linear", -1: "hold"}
+# manufacturer-specific (the object map's interpolation_codes)
 INTERPOLATION_UNKNOWN = "unknown"
 
 # (mode code, name) in order of preference for each excitation mode
@@ -50,18 +49,18 @@ TARGET_OBJECT = {
 # RPDO n+1 = controlword + the target of one mode (velocity: + the torque offset 0x60B2, the
 # feedforward a drive adds when its firmware has it); TPDO1/TPDO2 = the feedback.
 TORQUE_OFFSET = 0x60B2  # INTEGER16, per-mille of 0x6076 like the target torque
-RPDO_LAYOUT: dict[Mode, tuple[int, tuple[tuple[int, int], ...]]] = {
-    Mode.VELOCITY: (1, ((0x6040, 16), (0x60FF, 32), (TORQUE_OFFSET, 16))),
-    Mode.TORQUE: (2, ((0x6040, 16), (0x6071, 16))),
-    Mode.POSITION: (3, ((0x6040, 16), (0x607A, 32))),
+RPDO_LAYOUT: dict[Mode, tuple[int, tuple[tuple[int, int, int], ...]]] = {
+    Mode.VELOCITY: (1, ((0x6040, 0, 16), (0x60FF, 0, 32), (TORQUE_OFFSET, 0, 16))),
+    Mode.TORQUE: (2, ((0x6040, 0, 16), (0x6071, 0, 16))),
+    Mode.POSITION: (3, ((0x6040, 0, 16), (0x607A, 0, 32))),
 }
-COMPENSATION_TABLE = 0x2300  # manufacturer: sub 1 cogging, sub 2 K_t ripple harmonics
 _HARMONIC = struct.Struct("<Hff")
 
 
 def pack_harmonics(harmonics: tuple[PositionHarmonic, ...]) -> bytes:
-    """A 0x2300 DOMAIN: UNSIGNED16 count, then per harmonic UNSIGNED16 order, REAL32
-    amplitude (N·m, or relative for K_t ripple), REAL32 phase (rad)."""
+    """A compensation table's DOMAIN (the object map's ``compensation_table``, subs 1, 2):
+    UNSIGNED16 count, then per harmonic UNSIGNED16 order, REAL32 amplitude (N·m, or
+    relative for K_t ripple), REAL32 phase (rad)."""
     return struct.pack("<H", len(harmonics)) + b"".join(
         _HARMONIC.pack(h.order, h.amplitude, h.phase_rad) for h in harmonics)
 
@@ -76,27 +75,26 @@ def unpack_harmonics(data: bytes) -> tuple[PositionHarmonic, ...]:
     """
     (count,) = struct.unpack_from("<H", data)
     if len(data) != 2 + count * _HARMONIC.size:
-        raise ValueError(f"0x2300 data of {len(data)} bytes for {count} harmonics")
+        raise ValueError(f"compensation table data of {len(data)} bytes for {count} harmonics")
     return tuple(PositionHarmonic(order=o, amplitude=a, phase_rad=p)
                  for o, a, p in _HARMONIC.iter_unpack(data[2:]))
 
 
 RPDO_FORMAT: dict[Mode, str] = {Mode.VELOCITY: "<Hih", Mode.TORQUE: "<Hh", Mode.POSITION: "<Hi"}
 """struct format of each mode's RPDO (controlword, target[, torque offset])."""
-TpdoLayout = tuple[tuple[int, tuple[tuple[int, int], ...]], ...]
+TpdoLayout = tuple[tuple[int, tuple[tuple[int, int, int], ...]], ...]
 TPDO_LAYOUT: TpdoLayout = (
-    (1, ((0x6041, 16), (0x6064, 32), (0x6061, 8))),  # "<HIb" -> statusword, position, mode
-    (2, ((0x606C, 32), (0x6077, 16), (0x6078, 16))),  # "<ihh" -> velocity, torque, current
+    (1, ((0x6041, 0, 16), (0x6064, 0, 32), (0x6061, 0, 8))),  # "<HIb": statusword, position, mode
+    (2, ((0x606C, 0, 32), (0x6077, 0, 16), (0x6078, 0, 16))),  # "<ihh": velocity, torque, current
 )
-# The torque averaged over the SYNC period (manufacturer-specific, the emulator's EDS): it
-# takes 0x6077's place in TPDO2, so the frames and the bus load stay the same (8 bytes).
-TORQUE_MEAN_OBJECT = 0x2077
-TORQUE_MEAN_NAME = "Torque actual value averaged"  # its EDS ParameterName: what we trust
-TORQUE_MEAN_PER_RATED = 1e4  # INTEGER16 in 0.1 ‰ of 0x6076
-TPDO_LAYOUT_MEAN: TpdoLayout = (
-    TPDO_LAYOUT[0],
-    (2, ((0x606C, 32), (TORQUE_MEAN_OBJECT, 16), (0x6078, 16))),  # "<ihh"
-)
+
+
+def tpdo_layout_mean(index: int, subindex: int) -> TpdoLayout:
+    """:data:`TPDO_LAYOUT` with the SYNC-period torque average (the object map's 16-bit
+    ``torque_mean``) in 0x6077's place: the frames and the bus load stay the same."""
+    return (TPDO_LAYOUT[0], (2, ((0x606C, 0, 32), (index, subindex, 16), (0x6078, 0, 16))))
+
+
 TPDO1_FORMAT = "<Hib"
 TPDO2_FORMAT = "<ihh"
 
@@ -122,13 +120,9 @@ def cycle_bits(rpdo_bytes: int, tpdo_bytes: tuple[int, ...]) -> int:
 
 
 def stream_frame_bytes() -> tuple[int, tuple[int, ...]]:
-    """Data bytes of our largest RPDO and of each TPDO (the larger of its two layouts)."""
-    rpdo = max(sum(bits for _, bits in entries) for _, entries in RPDO_LAYOUT.values()) // 8
-    tpdos = tuple(
-        max(sum(bits for _, bits in entries) // 8 for _, entries in (one, two))
-        for one, two in zip(TPDO_LAYOUT, TPDO_LAYOUT_MEAN, strict=True)
-    )
-    return rpdo, tpdos
+    """Data bytes of our largest RPDO and of each TPDO."""
+    rpdo = max(sum(bits for *_, bits in entries) for _, entries in RPDO_LAYOUT.values()) // 8
+    return rpdo, tuple(sum(bits for *_, bits in entries) // 8 for _, entries in TPDO_LAYOUT)
 
 
 def max_stream_rate_hz(bitrate: int, max_bus_load: float) -> float:
