@@ -29,7 +29,8 @@ def test_every_shipped_map_loads_and_cites_its_document() -> None:
     for name in names:
         loaded = load_object_map(name)
         assert loaded.document.strip()
-        assert loaded.position_latch and loaded.torque_reports
+        assert loaded.position_latch
+        assert loaded.torque_reports
     generic = load_object_map("cia402_generic")
     assert generic.objects() == []
     assert not generic.has_recorder
