@@ -97,8 +97,9 @@ def torque_constant(
             position = drive.status().position_rad
             drive.run(torque_protocol.move(spec, position_rad=position, angle_rad=angle))
             with drive.locked_rotor():
-                rec = drive.run(torque_protocol.sweep(spec, angle_rad=angle))
-            sweep = torque_protocol.analyse_sweep(rec, spec, angle_rad=angle)
+                swept = torque_protocol.sweep(spec, angle_rad=angle)
+                rec = drive.run(swept)
+            sweep = torque_protocol.analyse_sweep(rec, spec, angle_rad=angle, excitation=swept)
             sweeps.append(sweep)
             levels = spec.torque_levels_nm
             current = level_means(

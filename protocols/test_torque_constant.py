@@ -80,7 +80,7 @@ def result(
             angle = angles[len(sweeps)]
             with drive.locked_rotor():
                 recording = calibration.run(drive, e, protocol=NAME)
-            sweeps.append(analyse_sweep(recording, spec, angle_rad=angle))
+            sweeps.append(analyse_sweep(recording, spec, angle_rad=angle, excitation=e))
         return identify_torque_constant(sweeps, ripple=ripple), sweeps
 
     runs = run_repeated(run_once, lambda found: estimates(found[0], spec), rule=spec.stop,

@@ -97,6 +97,12 @@ class DriveInfo:
     recorder : Recorder or None
         When ``max_sample_rate_hz`` is reached only by the drive's own recorder (bounded
         runs): its limits and the rate the link streams.
+    torque_sensor : str
+        The shaft torque sensor and its calibration certificate ("" : none, or the
+        simulator's own, exact).
+    torque_sensor_relative_u : float
+        The relative standard uncertainty of its sensitivity (its certificate's U over k):
+        a Type B line of every result scaled by it (K_t).
     timing : mapping of str to str
         What this drive's recordings state about their timing and the drive's conventions
         (torque sampling, control period, the object map's ``position_latch`` and
@@ -115,6 +121,8 @@ class DriveInfo:
     max_sample_rate_hz: float
     capabilities: frozenset[Capability] = frozenset()
     recorder: Recorder | None = None
+    torque_sensor: str = ""
+    torque_sensor_relative_u: float = 0.0
     timing: Mapping[str, str] = dataclasses.field(default_factory=dict)
     transport: str = "none"
 

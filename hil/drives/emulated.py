@@ -7,7 +7,7 @@ import uuid
 from collections.abc import Iterator
 from contextlib import ExitStack, contextmanager
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeVar
 
 from hil.config import builtin_fixture
 from hil.drives.canopen_map import ObjectMap
@@ -17,6 +17,7 @@ from hil.errors import ProfileError
 from hil.profile import UnitProfile, load_profile
 from plant_sim.params import PlantParams
 
+StationT = TypeVar("StationT", CanOpenStation, ModbusStation)
 CANOPEN_STATION = "station_canopen_emulator.toml"
 MODBUS_STATION = "station_modbus_emulator.toml"
 
@@ -89,12 +90,35 @@ def canopen_emulator(
             faults=faults,
             eds_path=station.eds_path,
             object_map=emulated_map or station.object_map,
+            clamp_output_bit=emulator_options.pop("clamp_output_bit", _clamp_bit(station)),
             elevation_of=None if elevation is None else lambda: elevation.plant.position_rad,
             **emulator_options,
         )
         emulator.held_nodes = held  # the bus's other emulated nodes, by axis name
-        with emulator:
-            yield emulator, station
+        running.enter_context(emulator)
+        yield emulator, _with_transducer(station, emulator, running)
+
+
+def _clamp_bit(station: CanOpenStation | ModbusStation) -> int | None:
+    fixture = station.equipment.locked_rotor
+    return None if fixture is None else fixture.output_bit
+
+
+def _with_transducer(station: StationT, emulator: Any, running: ExitStack) -> StationT:
+    """``station`` with its torque transducer (if it has one) emulated: an amplifier on
+    127.0.0.1 reading the emulated plant's shaft torque."""
+    transducer = station.equipment.torque_transducer
+    if transducer is None:
+        return station
+    from hil.drives.transducer_emulator import TransducerEmulator
+
+    amplifier = running.enter_context(TransducerEmulator(
+        lambda: emulator.shaft_torque_nm, address=transducer.address))
+    emulator.transducer = amplifier
+    emulated = dataclasses.replace(transducer, host="127.0.0.1", port=amplifier.port,
+                                   scale_nm=1.0, zero_nm=0.0)
+    return dataclasses.replace(station, equipment=dataclasses.replace(
+        station.equipment, torque_transducer=emulated))
 
 
 def _emulated_profile(station: CanOpenStation | ModbusStation, axis: str) -> UnitProfile:
@@ -154,12 +178,14 @@ def modbus_emulator(
         unit_id=station.unit_id if held else None,
         neighbours={station.held[name]: drive for name, drive in held.items()},
         elevation_of=None if elevation is None else lambda: elevation.plant.position_rad,
+        clamp_output_bit=emulator_options.pop("clamp_output_bit", _clamp_bit(station)),
         **emulator_options,
     )
     emulator.held_drives = held  # the server's other emulated drives, by axis name
-    with emulator:
+    with ExitStack() as running:
+        running.enter_context(emulator)
         changes: dict[str, Any] = {"transport": transport, "port": emulator.port}
         if transport == "rtu":
             changes["serial_port"] = f"socket://127.0.0.1:{emulator.port}"
         station = dataclasses.replace(station, **changes, **(station_changes or {}))
-        yield emulator, station
+        yield emulator, _with_transducer(station, emulator, running)

@@ -18,6 +18,7 @@ from typing import Any
 
 from hil.config import ConfigTable, builtin_fixture, read_toml
 from hil.drives.canopen_map import GENERIC_MAP, ObjectMap, load_object_map
+from hil.drives.equipment import Equipment, read_equipment
 from hil.errors import ProfileError
 
 SYNC_PACINGS = ("realtime", "lockstep")
@@ -124,6 +125,7 @@ class CanOpenStation:
     can_options: Mapping[str, Any] = field(default_factory=dict)
     gimbal: GimbalBus = field(default_factory=GimbalBus)  # [canopen.axes], [canopen.hold]
     object_map: ObjectMap = field(default_factory=lambda: load_object_map(GENERIC_MAP))
+    equipment: Equipment = field(default_factory=Equipment)  # [torque_transducer], ...
 
     @property
     def held(self) -> Mapping[str, int]:
@@ -168,6 +170,7 @@ class ModbusStation:
     torque_sample: str = "auto"
     setpoint_lead_periods: int = 3
     gimbal: GimbalBus = field(default_factory=GimbalBus)  # [modbus.axes], [modbus.hold]
+    equipment: Equipment = field(default_factory=Equipment)  # [torque_transducer], ...
 
     @property
     def held(self) -> Mapping[str, int]:
@@ -287,6 +290,7 @@ def station_from_mapping(data: Mapping[str, Any], *, source: str, base_dir: Path
         )
     else:
         station = _modbus(document.table_at("modbus"), base_dir)
+    station = replace(station, equipment=read_equipment(document))
     _identity(document.table_at("station", required=False))
     document.done()
     return station

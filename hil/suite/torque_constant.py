@@ -19,7 +19,7 @@ import numpy as np
 from hil.calibration import CalibrationRun
 from hil.details import RunDetails
 from hil.drives.base import Capability, DriveInfo
-from hil.identify.estimate import Estimate
+from hil.identify.estimate import Component, Estimate
 from hil.identify.torque_constant import (
     LockedSweep,
     TorqueConstantResult,
@@ -34,7 +34,7 @@ from hil.suite.cogging import CoggingDetails
 from hil.suite.needs import Need
 from hil.suite.protocol import Position, Protocol
 from hil.suite.stop_rule import StopRule
-from hil.suite.travel import move_excitation, move_speed_rad_s
+from hil.suite.travel import move_excitation, move_speed_rad_s, values_on_command_grid
 
 NAME = "torque_constant"
 #: the results this protocol measures, in the certificate's order
@@ -52,6 +52,13 @@ NEEDS: tuple[Need, ...] = (RIPPLE,)
 REQUIRES: tuple[Capability, ...] = (Capability.TORQUE_SENSOR, Capability.LOCKED_ROTOR)
 
 
+#: samples averaged per level at least, and discarded at its start at least: over a link
+#: polled at 100 Hz ``level_s`` alone left 4 samples a level, and the shaft torque, read
+#: beside the drive's rows, a row's placement away from its level's start
+MIN_LEVEL_SAMPLES = 20
+MIN_SETTLE_SAMPLES = 2
+
+
 @dataclass(frozen=True, slots=True, kw_only=True)
 class Spec:
     """Locked-rotor torque staircases, one per locked angle."""
@@ -65,6 +72,8 @@ class Spec:
     fs_hz: float
     kv_rpm_per_v: float | None
     stop: StopRule | None = None  # run again until U is reached (hil.suite.stop_rule)
+    sensor: str = ""  # the shaft torque sensor and its calibration (DriveInfo.torque_sensor)
+    sensor_relative_u: float = 0.0  # u of its sensitivity, relative (a Type B line)
 
     @classmethod
     def from_profile(cls, profile: UnitProfile, info: DriveInfo) -> Spec:
@@ -99,19 +108,22 @@ class Spec:
             fs_hz=min(profile.sample_rate_hz, info.max_sample_rate_hz),
             kv_rpm_per_v=None if kv is None else float(kv),
             stop=StopRule.from_settings(settings),
+            sensor=info.torque_sensor,
+            sensor_relative_u=info.torque_sensor_relative_u,
         )
         settings.done()
         return spec
 
     @property
     def level_samples(self) -> int:
-        """Samples per torque level."""
-        return round(self.level_s * self.fs_hz)
+        """Samples per torque level: ``level_s``, and at least :data:`MIN_LEVEL_SAMPLES`
+        beyond the settling (a slow polled link stretches each level in time)."""
+        return max(round(self.level_s * self.fs_hz), self.settle_samples + MIN_LEVEL_SAMPLES)
 
     @property
     def settle_samples(self) -> int:
         """Samples discarded at the start of each level (and of the closing zero level)."""
-        return math.ceil(self.settle_s * self.fs_hz)
+        return max(math.ceil(self.settle_s * self.fs_hz), MIN_SETTLE_SAMPLES)
 
     @property
     def torque_levels_nm(self) -> np.ndarray:
@@ -206,7 +218,8 @@ def sweep(spec: Spec, *, angle_rad: float) -> Excitation:
     )
 
 
-def analyse_sweep(recording: Recording, spec: Spec, *, angle_rad: float) -> LockedSweep:
+def analyse_sweep(recording: Recording, spec: Spec, *, angle_rad: float,
+                  excitation: Excitation) -> LockedSweep:
     """Level means of current, shaft and reported torque, and their lines, of one sweep.
 
     Parameters
@@ -217,6 +230,8 @@ def analyse_sweep(recording: Recording, spec: Spec, *, angle_rad: float) -> Lock
         The protocol's spec (levels, durations).
     angle_rad : float
         The locked angle.
+    excitation : Excitation
+        The sweep run: a polled drive's rows are put on its command grid first.
 
     Returns
     -------
@@ -228,13 +243,16 @@ def analyse_sweep(recording: Recording, spec: Spec, *, angle_rad: float) -> Lock
     KeyError
         The recording lacks the current or the shaft torque column.
     IdentificationError
-        Fewer than 4 levels of different current.
+        Fewer than 4 levels of different current, or a recording shorter than the sweep.
     """
     columns = recording.columns
+    current, shaft, reported = (
+        values_on_command_grid(recording, excitation, values)
+        for values in (columns["current_a"], columns["load_torque_nm"], recording.effort))
     return analyse_locked_sweep(
-        columns["current_a"],
-        columns["load_torque_nm"],
-        recording.effort,
+        current,
+        shaft,
+        reported,
         angle_rad=angle_rad,
         level_samples=spec.level_samples,
         settle_samples=spec.settle_samples,
@@ -259,10 +277,19 @@ def estimates(result: TorqueConstantResult, spec: Spec) -> dict[str, Estimate]:
         ``reported_torque_gain_error_pct`` and, when the datasheet KV is known,
         ``torque_constant_vs_datasheet_pct``.
     """
-    found = {e.name: e for e in (result.torque_constant, result.linearity, result.gain_error)}
+    kt, gain = result.torque_constant, result.gain_error
+    if spec.sensor_relative_u > 0:  # the sensor's sensitivity scales both
+        source = f"shaft torque sensor's sensitivity: {spec.sensor}"
+        line = Component(source=source, kind="B", standard_uncertainty=spec.sensor_relative_u,
+                         unit="1", sensitivity=kt.value)
+        kt = kt.with_components(line)
+        gain = gain.with_components(Component(
+            source=source, kind="B", standard_uncertainty=spec.sensor_relative_u, unit="1",
+            sensitivity=100.0 + gain.value))
+    found = {e.name: e for e in (kt, result.linearity, gain)}
     if spec.kv_rpm_per_v is not None:
         found["torque_constant_vs_datasheet_pct"] = datasheet_deviation(
-            result.torque_constant, kv_rpm_per_v=spec.kv_rpm_per_v
+            kt, kv_rpm_per_v=spec.kv_rpm_per_v
         )
     return found
 

@@ -95,19 +95,32 @@ def on_command_grid(
     IdentificationError
         The recording stops short of the excitation.
     """
+    position = values_on_command_grid(recording, excitation, recording.position)
+    torque = values_on_command_grid(recording, excitation, recording.effort)
+    return position, torque, len(recording)
+
+
+def values_on_command_grid(recording: Recording, excitation: Excitation,
+                           values: NDArray[np.float64]) -> NDArray[np.float64]:
+    """One of ``recording``'s columns at the excitation's sample instants (see
+    :func:`on_command_grid`).
+
+    Raises
+    ------
+    IdentificationError
+        The recording stops short of the excitation.
+    """
     samples = len(excitation.command)
     time_s = recording.time_s - recording.time_s[0]
     if len(time_s) == samples:
-        return recording.position, recording.effort, samples
+        return values
     grid = np.arange(samples) / excitation.fs_hz
     if time_s[-1] < grid[-1] - 2.0 / excitation.fs_hz:
         raise IdentificationError(
             f"{recording.source}: recording ends at {time_s[-1]:.3f} s, the excitation "
             f"'{excitation.name}' at {grid[-1]:.3f} s"
         )
-    position = np.interp(grid, time_s, recording.position)
-    torque = np.interp(grid, time_s, recording.effort)
-    return position, torque, len(time_s)
+    return np.interp(grid, time_s, values)
 
 
 def speed_ramp(speed_rad_s: float, *, ramp_s: float, fs_hz: float, up: bool) -> NDArray[np.float64]:

@@ -180,8 +180,10 @@ def test_hidden_payload_inertia_is_recovered_within_the_claimed_accuracy(
             drive.run(kt.move(KT_SPEC, position_rad=drive.status().position_rad,
                               angle_rad=angle))
             with drive.locked_rotor():
-                recording = drive.run(kt.sweep(KT_SPEC, angle_rad=angle))
-            sweeps.append(kt.analyse_sweep(recording, KT_SPEC, angle_rad=angle))
+                swept = kt.sweep(KT_SPEC, angle_rad=angle)
+                recording = drive.run(swept)
+            sweeps.append(kt.analyse_sweep(recording, KT_SPEC, angle_rad=angle,
+                                           excitation=swept))
         gain = identify_torque_constant(sweeps).gain_error
         inertias = []
         for elevation in SPEC.elevations_rad:

@@ -152,8 +152,10 @@ def test_hidden_torque_constant_is_recovered_within_the_claimed_accuracy(
             drive.run(torque_constant_suite.move(SPEC, position_rad=drive.status().position_rad,
                                                 angle_rad=angle))
             with drive.locked_rotor():
-                recording = drive.run(torque_constant_suite.sweep(SPEC, angle_rad=angle))
-            sweeps.append(torque_constant_suite.analyse_sweep(recording, SPEC, angle_rad=angle))
+                swept = torque_constant_suite.sweep(SPEC, angle_rad=angle)
+                recording = drive.run(swept)
+            sweeps.append(torque_constant_suite.analyse_sweep(recording, SPEC, angle_rad=angle,
+                                                              excitation=swept))
     result = identify_torque_constant(sweeps, ripple=table)
     truth = plant.torque_constant_nm_a * (1 + error)
     assert result.torque_constant.value == pytest.approx(truth, rel=ACCURACY)

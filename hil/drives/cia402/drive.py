@@ -11,6 +11,8 @@ from __future__ import annotations
 
 import logging
 import math
+from collections.abc import Iterator
+from contextlib import AbstractContextManager, contextmanager
 from typing import Any
 
 from hil.drives.base import (
@@ -44,8 +46,11 @@ from hil.drives.cia402.protocol import (
     tpdo_layout_mean,
 )
 from hil.drives.cia402.state_machine import Cia402StateMachine
+from hil.drives.equipment import sensor_fields
 from hil.drives.held import HeldAxes
+from hil.drives.locked import clamped
 from hil.drives.station import CanOpenStation
+from hil.drives.transducer import TransducerReader
 from hil.errors import DriveError, DriveStateError
 from hil.motion import CompensationTable, Excitation, Limits, Mode
 from hil.recording import Recording
@@ -85,6 +90,7 @@ class CanOpenDrive(Drive):
         self._period_us = round(station.sync_period_s * 1e6)
         self.held: HeldAxes[HeldAxis] = HeldAxes()  # the gimbal's other axes on this bus
         self.bus_load = 0.0  # the fraction of the bus the stream and the heartbeats take
+        self._shaft: TransducerReader | None = None  # read on each run while clamped
         try:
             self._bring_up()
         except BaseException:
@@ -318,12 +324,13 @@ class CanOpenDrive(Drive):
             limits=self.limits,
             modes=self.states.modes(),
             max_sample_rate_hz=max(rate_hz, self.recorder_rate_hz),
-            capabilities=frozenset(
+            capabilities=st.equipment.capabilities() | frozenset(
                 ({Capability.COMPENSATION_TABLE}
                  if st.object_map.compensation_index is not None else set())
                 | ({Capability.ELEVATION_AXIS} if "elevation" in st.held else set())),
             recorder=Recorder(stream_rate_hz=rate_hz, samples=self.recorder_samples)
             if self.recorder_rate_hz > rate_hz else None,
+            **sensor_fields(st.equipment),
             timing={**st.object_map.conventions(), "torque_sample": self.torque_sample,
                     **({} if self.control_period_s is None
                        else {"control_period_s": f"{self.control_period_s:g}"})},
@@ -464,6 +471,9 @@ class CanOpenDrive(Drive):
         if not use_recorder and round(1e6 / fs) != self._period_us:
             self._write_period(round(1e6 / fs))
         acquire = run_recorder if use_recorder else run_stream
+        shaft = self._shaft
+        if shaft is not None:
+            self._read_shaft(shaft, fs)
         try:
             acquired = acquire(self.link, self._run_setup(), excitation)
         except DriveError:
@@ -482,7 +492,52 @@ class CanOpenDrive(Drive):
             self.states.make_safe(acquired.failure)
             acquired.failure.partial_recording = acquired.recording
             raise acquired.failure
+        if shaft is not None:
+            self.link.in_step = None
+            return shaft.on_rows(acquired.recording)
         return acquired.recording
+
+    def _read_shaft(self, shaft: TransducerReader, fs_hz: float) -> None:
+        """The transducer read through the run, each reading stamped with the SYNCs since
+        its first row: in step with each SYNC in lockstep, else on its own thread."""
+        first = self.link.sync_index + 1
+        clock_s = lambda: (self.link.sync_index - first) / fs_hz  # noqa: E731
+        if self.station.sync_pacing == "lockstep":
+            shaft.begin(clock_s)
+            self.link.in_step = shaft.read_in_step
+        else:
+            shaft.start(clock_s)
+
+    def locked_rotor(self) -> AbstractContextManager[None]:
+        """The station's clamp engaged (drive output 0x60FE:01) and confirmed by a check
+        move, the shaft torque transducer read on each run inside the block.
+
+        Raises
+        ------
+        DriveStateError
+            The station lacks the fixture or the transducer, or the clamp did not hold.
+        """
+        return self._clamped()
+
+    @contextmanager
+    def _clamped(self) -> Iterator[None]:
+        with clamped(self, self.station.equipment, set_clamp=self._set_clamp,
+                     rate_hz=self.stream_rate_hz) as reader:
+            self._shaft = reader
+            try:
+                yield
+            finally:
+                self._shaft = None
+                self.link.in_step = None
+
+    def _set_clamp(self, engaged: bool) -> None:
+        """The fixture's drive output (CiA 402 digital outputs 0x60FE: sub 2 the mask of
+        the outputs written, sub 1 their state)."""
+        fixture = self.station.equipment.locked_rotor
+        assert fixture is not None
+        bit = 1 << fixture.output_bit
+        self.link.write_standard(0x60FE, 2, "I", bit)
+        self.link.write_standard(0x60FE, 1, "I", bit if engaged else 0)
 
     def _recorded(self, excitation: Excitation) -> Recording | None:
         """After a stop signal (the drive quick-stopped): what the drive recorder holds of

@@ -169,6 +169,7 @@ class Cia402Emulator:
         power_on_heartbeat_ms: int | None = None,
         elevation_of: Callable[[], float] | None = None,
         object_map: ObjectMap | None = None,
+        clamp_output_bit: int | None = None,
     ) -> None:
         if exact_torque_hold and not plant.exact_torque_hold:
             plant = plant.with_changes(exact_torque_hold=True)  # the same physics as SimDrive
@@ -189,6 +190,9 @@ class Cia402Emulator:
         _add_safety_objects(self._od)
         # presented as the drive model the map describes (None: as its own EDS says)
         self.object_map = object_map
+        # the bench's locked-rotor clamp, wired to this digital output (0x60FE:01)
+        self.clamp_output_bit = clamp_output_bit
+        self.shaft_torque_nm = 0.0  # what a shaft torque transducer reads (clamped)
         self._addresses = present_under(self._od, object_map) if object_map else Addresses()
         self._torque_mean_per_rated = (TORQUE_MEAN_PER_RATED if object_map is None or
                                        object_map.torque_mean is None
@@ -379,6 +383,8 @@ class Cia402Emulator:
             raise SdoAbortedError(ABORT_VALUE_RANGE)
         elif index == 0x1016 and subindex == 1:
             self._consume_heartbeat(int(value))
+        elif index == 0x60FE and subindex == 1 and self.clamp_output_bit is not None:
+            self.plant.set_locked_rotor(bool(int(value) >> self.clamp_output_bit & 1))
         elif index in (0x2100, 0x2200):
             self.recorder.write(index, subindex, value, running=self.state == ENABLED)
         elif index == COMPENSATION and subindex in (1, 2):
@@ -716,6 +722,8 @@ class Cia402Emulator:
             offset = np.full(steps, self.targets[TORQUE_OFFSET] * self.rated_torque_nm / 1e3)
         trace = self.plant.run(mode, command, offset)
         self.recorder.capture(trace, enabled=self.state == ENABLED)
+        shaft = trace.load_torque_nm  # the transducer between the clamp and the shaft
+        self.shaft_torque_nm = 0.0 if shaft is None else float(np.mean(shaft))
         # what the drive latches at the *next* SYNC: its most recent control-loop values
         cpr = self.counts_per_rev
         self._next_sample = {
@@ -861,7 +869,7 @@ class Cia402Emulator:
 def _add_safety_objects(od: ObjectDictionary) -> None:
     """The standard objects the drive's safety needs, where the EDS lacks them: 0x1016
     consumer heartbeat time (one entry), 0x6007 abort connection option code, 0x6080 max
-    motor speed (rpm)."""
+    motor speed (rpm); and 0x60FE digital outputs (a bench's clamp)."""
     def variable(name: str, index: int, sub: int, data_type: int, default: int,
                  access: str = "rw") -> ODVariable:
         var = ODVariable(name, index, sub)
@@ -877,6 +885,12 @@ def _add_safety_objects(od: ObjectDictionary) -> None:
         od.add_object(variable("Abort connection option code", 0x6007, 0, INTEGER16, 1))
     if 0x6080 not in od:
         od.add_object(variable("Max motor speed", 0x6080, 0, UNSIGNED32, 0xFFFFFFFF))
+    if 0x60FE not in od:
+        outputs = ODArray("Digital outputs", 0x60FE)
+        outputs.add_member(variable("Highest sub-index supported", 0x60FE, 0, UNSIGNED8, 2, "ro"))
+        outputs.add_member(variable("Physical outputs", 0x60FE, 1, UNSIGNED32, 0))
+        outputs.add_member(variable("Bit mask", 0x60FE, 2, UNSIGNED32, 0))
+        od.add_object(outputs)
 
 
 def _harmonics(table: tuple[PositionHarmonic, ...]) -> tuple[Harmonic, ...]:

@@ -78,6 +78,8 @@ class CanLink:
         self.sync_index = -1  # index of the last SYNC we sent
         self.sync_period_s = station.sync_period_s  # the drive's 0x1006, as last written
         self.sync_sent_s: list[float] = []  # monotonic time of each SYNC since forget()
+        # lockstep: called once per answered SYNC (a bench instrument read in step with it)
+        self.in_step: Callable[[], None] | None = None
         self.rx1: dict[int, bytes] = {}
         self.rx2: dict[int, bytes] = {}
         self.emcy: list[tuple[int, float]] = []
@@ -309,14 +311,18 @@ class CanLink:
                 self._next_deadline += period
                 self._wait(self._next_deadline - period / 2, until_answered=False)
                 return self.sync_index in self.rx1 and self.sync_index in self.rx2
-            if self._wait(time.monotonic() + self.station.pdo_timeout_s, until_answered=True):
-                return True
-            # lockstep: a drive (an emulator on a loaded host) answering later than the PDO
-            # timeout would have its TPDOs filed under the next SYNC, every row after it
-            # one SYNC late; it answers an SDO request after this SYNC's TPDOs, so the
-            # round trip collects them under this SYNC first (or proves them lost)
-            self._barrier()
-            return self.sync_index in self.rx1 and self.sync_index in self.rx2
+            answered = self._wait(time.monotonic() + self.station.pdo_timeout_s,
+                                  until_answered=True)
+            if not answered:
+                # lockstep: a drive (an emulator on a loaded host) answering later than the
+                # PDO timeout would have its TPDOs filed under the next SYNC, every row after
+                # it one SYNC late; it answers an SDO request after this SYNC's TPDOs, so
+                # the round trip collects them under this SYNC first (or proves them lost)
+                self._barrier()
+                answered = self.sync_index in self.rx1 and self.sync_index in self.rx2
+            if self.in_step is not None:  # lockstep: what is read once per SYNC, in step
+                self.in_step()
+            return answered
         except can.CanError as exc:
             raise DriveCommunicationError(f"CAN error on node {self.node_id}'s bus: {exc}") from exc
         except DriveCommunicationError:

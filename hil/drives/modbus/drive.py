@@ -22,7 +22,8 @@ from __future__ import annotations
 import logging
 import math
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
+from contextlib import AbstractContextManager, contextmanager
 from dataclasses import replace
 
 import numpy as np
@@ -37,7 +38,9 @@ from hil.drives.base import (
     check_limits,
     interrupted,
 )
+from hil.drives.equipment import Equipment, sensor_fields
 from hil.drives.held import HeldAxes
+from hil.drives.locked import clamped
 from hil.drives.modbus.acquire import (
     Feedback,
     PolledRun,
@@ -49,10 +52,17 @@ from hil.drives.modbus.acquire import (
 )
 from hil.drives.modbus.held_axis import KEEPALIVE_S, HeldModbusAxis
 from hil.drives.modbus.link import ModbusLink
-from hil.drives.modbus.regmap import TORQUE_MEAN, TORQUE_OFFSET, RegisterMap, load_register_map
+from hil.drives.modbus.regmap import (
+    DIGITAL_OUTPUTS,
+    TORQUE_MEAN,
+    TORQUE_OFFSET,
+    RegisterMap,
+    load_register_map,
+)
 from hil.drives.modbus.state_machine import ModbusStateMachine
 from hil.drives.realtime import collector_held
 from hil.drives.station import ModbusStation
+from hil.drives.transducer import TransducerReader
 from hil.errors import DriveCommunicationError, DriveError, DriveStateError, ProfileError
 from hil.motion import Excitation, Limits, Mode
 from hil.recording import Recording
@@ -97,6 +107,7 @@ class ModbusDrive(Drive):
         self.states = ModbusStateMachine(self.link, self.feedback)
         self.link.connect()
         self.held: HeldAxes[HeldModbusAxis] = HeldAxes()  # the gimbal's other axes here
+        self._shaft: TransducerReader | None = None  # read on each run while clamped
         try:
             self._info = self._read_info()
             for name, unit_id in station.held.items():
@@ -152,8 +163,9 @@ class ModbusDrive(Drive):
                 Mode(name) for name in self.map.modes if name in ("torque", "velocity", "position")
             ),
             max_sample_rate_hz=rate,
-            capabilities=frozenset({Capability.ELEVATION_AXIS}
-                                   if "elevation" in self.station.held else ()),
+            capabilities=self._equipment().capabilities() | frozenset(
+                {Capability.ELEVATION_AXIS} if "elevation" in self.station.held else ()),
+            **sensor_fields(self._equipment()),
             transport=self.link.where,
         )
 
@@ -282,13 +294,21 @@ class ModbusDrive(Drive):
             states.select(excitation.mode)
         set_interpolation(self.link, self.link.station.setpoint_lead_periods / excitation.fs_hz)
         run = PolledRun()
+        shaft, keepalive = self._shaft, self._keepalive
+        if shaft is not None:  # read once per row, in the time the row leaves
+            started = time.monotonic()  # the rows' time base starts here too
+            shaft.begin(lambda: time.monotonic() - started)
+
+            def keepalive() -> None:
+                self._keepalive()
+                shaft.read_in_step()
         error: DriveError | None = None
         log.info("%s: polling %s (%.2f s at %g Hz)", self.link.where, excitation.name,
                  excitation.duration_s, excitation.fs_hz)
         try:
             with collector_held():
                 poll(excitation, run, self.feedback, MotionEnvelope.of(self.limits),
-                     keepalive=self._keepalive)
+                     keepalive=keepalive)
         except DriveError as exc:
             error = exc
         except KeyboardInterrupt as stop:  # a stop signal: quick stop, keep the rows so far
@@ -312,4 +332,40 @@ class ModbusDrive(Drive):
             error.partial_recording = recording
             raise error
         states.hold(excitation.mode)
+        if shaft is not None:
+            return shaft.on_rows(recording)
         return recording
+
+    def _equipment(self) -> Equipment:
+        """The station's equipment the register map can serve (a clamp needs the map's
+        digital outputs)."""
+        equipment = self.station.equipment
+        if equipment.locked_rotor is not None and DIGITAL_OUTPUTS not in self.map.registers:
+            return Equipment(torque_transducer=equipment.torque_transducer)
+        return equipment
+
+    def locked_rotor(self) -> AbstractContextManager[None]:
+        """The station's clamp engaged (the register map's ``digital_outputs``) and
+        confirmed by a check move, the shaft torque transducer read on each run inside.
+
+        Raises
+        ------
+        DriveStateError
+            The station lacks the fixture or the transducer, or the clamp did not hold.
+        """
+        return self._clamped()
+
+    @contextmanager
+    def _clamped(self) -> Iterator[None]:
+        with clamped(self, self._equipment(), set_clamp=self._set_clamp,
+                     rate_hz=self.info.max_sample_rate_hz) as reader:
+            self._shaft = reader
+            try:
+                yield
+            finally:
+                self._shaft = None
+
+    def _set_clamp(self, engaged: bool) -> None:
+        fixture = self.station.equipment.locked_rotor
+        assert fixture is not None
+        self.link.write_value(DIGITAL_OUTPUTS, float(1 << fixture.output_bit if engaged else 0))

@@ -41,6 +41,7 @@ from pymodbus.server import ModbusTcpServer
 
 from hil.drives.emulator_faults import ModbusFaults
 from hil.drives.modbus.regmap import (
+    DIGITAL_OUTPUTS,
     FEEDBACK,
     SETPOINT_INTERPOLATION,
     TIMESTAMP,
@@ -126,6 +127,7 @@ class ModbusEmulator:
         unit_id: int | None = None,
         neighbours: Mapping[int, ModbusEmulator] | None = None,
         elevation_of: Callable[[], float] | None = None,
+        clamp_output_bit: int | None = None,
     ) -> None:
         self.firmware = firmware or Firmware()
         self.plant = Plant(plant, fs_hz=fs_hz, seed=seed, firmware=self.firmware)
@@ -166,6 +168,8 @@ class ModbusEmulator:
         self.neighbours = dict(neighbours or {})
         self.held_drives: dict[str, ModbusEmulator] = {}  # the same drives, by axis name
         self._elevation_of = elevation_of
+        self.clamp_output_bit = clamp_output_bit  # the bench's clamp, on this output
+        self.shaft_torque_nm = 0.0  # what a shaft torque transducer reads (clamped)
         self._put("firmware_version", version_code(self.firmware.version))
         self._put("serial_number", serial_number)
         self._put("rated_torque", rated_torque_nm)
@@ -272,6 +276,11 @@ class ModbusEmulator:
     def _write(self, address: int, values: list[int]) -> None:
         for offset, value in enumerate(values):
             self.regs[address + offset] = value
+        outputs = self.map.registers.get(DIGITAL_OUTPUTS)
+        if (outputs is not None and self.clamp_output_bit is not None
+                and address <= outputs.address < address + len(values)):
+            clamped = int(self._get(DIGITAL_OUTPUTS)) >> self.clamp_output_bit & 1
+            self.plant.set_locked_rotor(bool(clamped))
         control = self.map["control_word"]
         if address <= control.address < address + len(values):
             self._apply_control(int(self._get("control_word")))
@@ -362,6 +371,8 @@ class ModbusEmulator:
             if self.enabled and TORQUE_OFFSET in self.map.registers:
                 offset = np.full(block, self._get(TORQUE_OFFSET))  # held until written again
             trace = self.plant.run(mode, command, offset)
+            shaft = trace.load_torque_nm  # the transducer between the clamp and the shaft
+            self.shaft_torque_nm = 0.0 if shaft is None else float(np.mean(shaft))
             if self.enabled:
                 self.time_enabled_s += block / self.fs_hz
             self._sample(trace)

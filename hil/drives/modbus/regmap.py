@@ -48,6 +48,9 @@ SETPOINT_INTERPOLATION = "setpoint_interpolation_time"
 # optional: the torque offset (feedforward, signed, N·m, writable) a drive whose firmware has
 # feedforward adds to its torque command
 TORQUE_OFFSET = "torque_offset"
+# optional: the drive's digital outputs (unsigned, writable), bit n = output n: a bench's
+# locked-rotor clamp is wired to one ([locked_rotor] output_bit)
+DIGITAL_OUTPUTS = "digital_outputs"
 TORQUE_MEAN = "torque_mean"
 TORQUE_MEAN_WINDOW = "torque_mean_window"
 

@@ -1,0 +1,87 @@
+"""The locked-rotor fixture of a field-bus station: the clamp engaged by a drive output,
+confirmed by a check move before any current is driven against it, and the shaft torque
+transducer read on every run made while it holds."""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+
+import numpy as np
+
+from hil.drives.base import Capability, Drive
+from hil.drives.equipment import Equipment, LockedRotor
+from hil.drives.transducer import TransducerReader
+from hil.errors import DriveStateError
+from hil.motion import Excitation, Mode
+
+CHECK = "locked_rotor_check"
+
+
+@contextmanager
+def clamped(drive: Drive, equipment: Equipment, *, set_clamp: Callable[[bool], None],
+            rate_hz: float) -> Iterator[TransducerReader]:
+    """The clamp engaged and confirmed, the transducer open; released on leaving.
+
+    Parameters
+    ----------
+    drive : Drive
+        The enabled drive (the check move runs through it).
+    equipment : Equipment
+        The station's transducer and fixture.
+    set_clamp : callable
+        Engages (``True``) or releases the clamp (the drive's output).
+    rate_hz : float
+        The check move's sample rate (a rate the drive streams).
+
+    Raises
+    ------
+    DriveStateError
+        The station lacks the fixture or the transducer, or the check move moved the axis
+        (the clamp released, nothing else driven).
+    DriveCommunicationError
+        The transducer does not answer.
+    """
+    fixture, transducer = equipment.locked_rotor, equipment.torque_transducer
+    if fixture is None:
+        raise DriveStateError(f"the station lacks: {Capability.LOCKED_ROTOR.value}")
+    if transducer is None:
+        raise DriveStateError(f"the station lacks: {Capability.TORQUE_SENSOR.value}")
+    reader = TransducerReader(transducer)
+    reader.open()
+    try:
+        set_clamp(True)
+        try:
+            check_holds(drive, fixture, rate_hz=rate_hz)
+            yield reader
+        finally:
+            set_clamp(False)
+    finally:
+        reader.close()
+
+
+def check_holds(drive: Drive, fixture: LockedRotor, *, rate_hz: float) -> float:
+    """Ramp the torque to the fixture's check torque; the axis must not move.
+
+    Returns
+    -------
+    float
+        How far it moved (rad).
+
+    Raises
+    ------
+    DriveStateError
+        It moved more than the fixture's tolerance.
+    """
+    samples = max(2, round(fixture.check_s * rate_hz))
+    ramp = np.linspace(0.0, fixture.check_torque_nm, samples)
+    recording = drive.run(Excitation(name=CHECK, mode=Mode.TORQUE, fs_hz=rate_hz,
+                                     command=ramp))
+    moved = float(np.ptp(recording.columns["position_rad"]))
+    if moved > fixture.tolerance_rad:
+        raise DriveStateError(
+            f"the locked-rotor fixture did not hold: the axis moved {moved:.4g} rad under a "
+            f"torque ramp to {fixture.check_torque_nm:g} N·m over {fixture.check_s:g} s "
+            f"(tolerance {fixture.tolerance_rad:g} rad; [locked_rotor] output_bit "
+            f"{fixture.output_bit})")
+    return moved
