@@ -4,8 +4,9 @@ transducer read on every run made while it holds."""
 
 from __future__ import annotations
 
+import abc
 from collections.abc import Callable, Iterator
-from contextlib import contextmanager
+from contextlib import AbstractContextManager, contextmanager
 
 import numpy as np
 
@@ -85,3 +86,49 @@ def check_holds(drive: Drive, fixture: LockedRotor, *, rate_hz: float) -> float:
             f"(tolerance {fixture.tolerance_rad:g} rad; [locked_rotor] output_bit "
             f"{fixture.output_bit})")
     return moved
+
+
+class ClampedRotor(abc.ABC):
+    """A field-bus drive's :meth:`Drive.locked_rotor` from its station's equipment: mixed
+    into the backend, which says where the clamp is and at what rate the check runs, and
+    reads ``_shaft`` on each run while it is set."""
+
+    _shaft: TransducerReader | None = None
+
+    @abc.abstractmethod
+    def _clamp_equipment(self) -> Equipment:
+        """The station's transducer and fixture, as this drive can serve them."""
+
+    @abc.abstractmethod
+    def _set_clamp(self, engaged: bool) -> None:
+        """Engage or release the clamp (the drive's output)."""
+
+    @abc.abstractmethod
+    def _check_rate_hz(self) -> float:
+        """A rate the drive streams or polls at, for the check move."""
+
+    def _released(self) -> None:  # noqa: B027 - a hook: nothing by default
+        """After the block (a backend's own clean-up)."""
+
+    def locked_rotor(self) -> AbstractContextManager[None]:
+        """The station's clamp engaged and confirmed by a check move, the shaft torque
+        transducer read on each run inside the block.
+
+        Raises
+        ------
+        DriveStateError
+            The station lacks the fixture or the transducer, or the clamp did not hold.
+        """
+        return self._clamped()
+
+    @contextmanager
+    def _clamped(self) -> Iterator[None]:
+        assert isinstance(self, Drive)
+        with clamped(self, self._clamp_equipment(), set_clamp=self._set_clamp,
+                     rate_hz=self._check_rate_hz()) as reader:
+            self._shaft = reader
+            try:
+                yield
+            finally:
+                self._shaft = None
+                self._released()

@@ -11,8 +11,6 @@ from __future__ import annotations
 
 import logging
 import math
-from collections.abc import Iterator
-from contextlib import AbstractContextManager, contextmanager
 from typing import Any
 
 from hil.drives.base import (
@@ -46,9 +44,9 @@ from hil.drives.cia402.protocol import (
     tpdo_layout_mean,
 )
 from hil.drives.cia402.state_machine import Cia402StateMachine
-from hil.drives.equipment import sensor_fields
+from hil.drives.equipment import Equipment, sensor_fields
 from hil.drives.held import HeldAxes
-from hil.drives.locked import clamped
+from hil.drives.locked import ClampedRotor
 from hil.drives.station import CanOpenStation
 from hil.drives.transducer import TransducerReader
 from hil.errors import DriveError, DriveStateError
@@ -63,7 +61,7 @@ _RANGES = {"H": (0, 0xFFFF, "UNSIGNED16"), "I": (0, 0xFFFFFFFF, "UNSIGNED32"),
 RPM_PER_RAD_S = 60 / (2 * math.pi)  # 0x6080 max motor speed is in rpm
 
 
-class CanOpenDrive(Drive):
+class CanOpenDrive(ClampedRotor, Drive):
     """A CiA 402 drive: NMT bring-up, checked state machine, SYNC-clocked PDO streaming.
 
     Parameters
@@ -90,7 +88,6 @@ class CanOpenDrive(Drive):
         self._period_us = round(station.sync_period_s * 1e6)
         self.held: HeldAxes[HeldAxis] = HeldAxes()  # the gimbal's other axes on this bus
         self.bus_load = 0.0  # the fraction of the bus the stream and the heartbeats take
-        self._shaft: TransducerReader | None = None  # read on each run while clamped
         try:
             self._bring_up()
         except BaseException:
@@ -508,31 +505,18 @@ class CanOpenDrive(Drive):
         else:
             shaft.start(clock_s)
 
-    def locked_rotor(self) -> AbstractContextManager[None]:
-        """The station's clamp engaged (drive output 0x60FE:01) and confirmed by a check
-        move, the shaft torque transducer read on each run inside the block.
+    def _clamp_equipment(self) -> Equipment:
+        return self.station.equipment
 
-        Raises
-        ------
-        DriveStateError
-            The station lacks the fixture or the transducer, or the clamp did not hold.
-        """
-        return self._clamped()
+    def _check_rate_hz(self) -> float:
+        return self.stream_rate_hz
 
-    @contextmanager
-    def _clamped(self) -> Iterator[None]:
-        with clamped(self, self.station.equipment, set_clamp=self._set_clamp,
-                     rate_hz=self.stream_rate_hz) as reader:
-            self._shaft = reader
-            try:
-                yield
-            finally:
-                self._shaft = None
-                self.link.in_step = None
+    def _released(self) -> None:
+        self.link.in_step = None
 
     def _set_clamp(self, engaged: bool) -> None:
-        """The fixture's drive output (CiA 402 digital outputs 0x60FE: sub 2 the mask of
-        the outputs written, sub 1 their state)."""
+        """The fixture's drive output (CiA 402 digital outputs 0x60FE:01; sub 2 the mask
+        of the outputs written)."""
         fixture = self.station.equipment.locked_rotor
         assert fixture is not None
         bit = 1 << fixture.output_bit

@@ -22,8 +22,7 @@ from __future__ import annotations
 import logging
 import math
 import time
-from collections.abc import Callable, Iterator
-from contextlib import AbstractContextManager, contextmanager
+from collections.abc import Callable
 from dataclasses import replace
 
 import numpy as np
@@ -40,7 +39,7 @@ from hil.drives.base import (
 )
 from hil.drives.equipment import Equipment, sensor_fields
 from hil.drives.held import HeldAxes
-from hil.drives.locked import clamped
+from hil.drives.locked import ClampedRotor
 from hil.drives.modbus.acquire import (
     Feedback,
     PolledRun,
@@ -62,7 +61,6 @@ from hil.drives.modbus.regmap import (
 from hil.drives.modbus.state_machine import ModbusStateMachine
 from hil.drives.realtime import collector_held
 from hil.drives.station import ModbusStation
-from hil.drives.transducer import TransducerReader
 from hil.errors import DriveCommunicationError, DriveError, DriveStateError, ProfileError
 from hil.motion import Excitation, Limits, Mode
 from hil.recording import Recording
@@ -79,7 +77,7 @@ def nice_rate(rate_hz: float) -> float:
     return decade  # pragma: no cover
 
 
-class ModbusDrive(Drive):
+class ModbusDrive(ClampedRotor, Drive):
     """A drive on Modbus TCP or RTU, described by a register map.
 
     Parameters
@@ -107,7 +105,6 @@ class ModbusDrive(Drive):
         self.states = ModbusStateMachine(self.link, self.feedback)
         self.link.connect()
         self.held: HeldAxes[HeldModbusAxis] = HeldAxes()  # the gimbal's other axes here
-        self._shaft: TransducerReader | None = None  # read on each run while clamped
         try:
             self._info = self._read_info()
             for name, unit_id in station.held.items():
@@ -163,9 +160,9 @@ class ModbusDrive(Drive):
                 Mode(name) for name in self.map.modes if name in ("torque", "velocity", "position")
             ),
             max_sample_rate_hz=rate,
-            capabilities=self._equipment().capabilities() | frozenset(
+            capabilities=self._clamp_equipment().capabilities() | frozenset(
                 {Capability.ELEVATION_AXIS} if "elevation" in self.station.held else ()),
-            **sensor_fields(self._equipment()),
+            **sensor_fields(self._clamp_equipment()),
             transport=self.link.where,
         )
 
@@ -336,7 +333,7 @@ class ModbusDrive(Drive):
             return shaft.on_rows(recording)
         return recording
 
-    def _equipment(self) -> Equipment:
+    def _clamp_equipment(self) -> Equipment:
         """The station's equipment the register map can serve (a clamp needs the map's
         digital outputs)."""
         equipment = self.station.equipment
@@ -344,26 +341,8 @@ class ModbusDrive(Drive):
             return Equipment(torque_transducer=equipment.torque_transducer)
         return equipment
 
-    def locked_rotor(self) -> AbstractContextManager[None]:
-        """The station's clamp engaged (the register map's ``digital_outputs``) and
-        confirmed by a check move, the shaft torque transducer read on each run inside.
-
-        Raises
-        ------
-        DriveStateError
-            The station lacks the fixture or the transducer, or the clamp did not hold.
-        """
-        return self._clamped()
-
-    @contextmanager
-    def _clamped(self) -> Iterator[None]:
-        with clamped(self, self._equipment(), set_clamp=self._set_clamp,
-                     rate_hz=self.info.max_sample_rate_hz) as reader:
-            self._shaft = reader
-            try:
-                yield
-            finally:
-                self._shaft = None
+    def _check_rate_hz(self) -> float:
+        return self.info.max_sample_rate_hz
 
     def _set_clamp(self, engaged: bool) -> None:
         fixture = self.station.equipment.locked_rotor
