@@ -22,6 +22,9 @@ from hil.drives.equipment import Equipment, read_equipment
 from hil.errors import ProfileError
 
 SYNC_PACINGS = ("realtime", "lockstep")
+# who sends the SYNC: the host from its loop, or python-can's periodic send (the kernel's
+# broadcast manager on socketcan, else python-can's own thread), observed by the host
+SYNC_PRODUCERS = ("host", "periodic")
 ACQUISITIONS = ("stream", "recorder", "auto")
 TORQUE_SAMPLES = ("auto", "mean", "instantaneous")
 
@@ -81,13 +84,17 @@ class CanOpenStation:
     ``sync_pacing`` is ``"realtime"`` for a real bus (SYNC every ``sync_period_s`` of
     wall-clock time) or ``"lockstep"`` for a drive whose clock *is* the SYNC (an emulator
     or a drive in a SYNC-stepped simulation mode): the next SYNC goes out as soon as the
-    previous one was answered. Never use lockstep on a real axis.
+    previous one was answered. Never use lockstep on a real axis. ``sync_producer``: who
+    sends the SYNC in realtime pacing: ``"host"`` (its loop's sleeps) or ``"periodic"``
+    (python-can's periodic send: the kernel's broadcast manager on socketcan, else
+    python-can's own thread; the host counts the SYNCs it sees). ``max_sync_interval_sd_s``:
+    a streamed run whose SYNC intervals spread more is refused, naming the figure.
 
     ``torque_sample``: which torque a streamed row carries. ``"auto"`` (default): the torque
-    averaged over the SYNC period (0x2077, "Torque actual value averaged" in the EDS) when
-    the drive offers it, else 0x6077; ``"mean"`` requires 0x2077; ``"instantaneous"`` always
-    0x6077. ``control_period_s``: the drive's control-loop period, for a drive that does not
-    report it (the emulator's 0x2200:6); it goes into each recording's metadata.
+    averaged over the SYNC period (the object map's ``torque_mean``) when the drive offers
+    it, else 0x6077; ``"mean"`` requires it; ``"instantaneous"`` always 0x6077.
+    ``control_period_s``: the drive's control-loop period, for a drive that does not report
+    it (the object map's ``control_period``); it goes into each recording's metadata.
 
     A dead host stops the axis: the backend produces its own heartbeat (node
     ``host_node_id``, every ``heartbeat_period_s``) and sets the drive's consumer heartbeat
@@ -103,6 +110,8 @@ class CanOpenStation:
     eds_path: Path
     sync_period_s: float = 0.001
     sync_pacing: str = "realtime"
+    sync_producer: str = "host"
+    max_sync_interval_sd_s: float | None = None  # a streamed run whose SYNCs spread more: refused
     max_bus_load: float = 0.6
     sdo_timeout_s: float = 0.5
     pdo_timeout_s: float = 0.1
@@ -324,6 +333,8 @@ def _canopen(table: ConfigTable, scaling: ConfigTable, base_dir: Path) -> CanOpe
         eds_path=resolve_fixture(table.string("eds"), base_dir=base_dir, source=table.source),
         sync_period_s=table.positive("sync_period_s", 0.001),
         sync_pacing=table.choice("sync_pacing", SYNC_PACINGS, "realtime"),
+        sync_producer=table.choice("sync_producer", SYNC_PRODUCERS, "host"),
+        max_sync_interval_sd_s=table.optional_positive("max_sync_interval_sd_s"),
         max_bus_load=table.positive("max_bus_load", 0.6),
         sdo_timeout_s=table.positive("sdo_timeout_s", 0.5),
         pdo_timeout_s=table.positive("pdo_timeout_s", 0.1),
@@ -351,6 +362,9 @@ def _canopen(table: ConfigTable, scaling: ConfigTable, base_dir: Path) -> CanOpe
     scaling.done()
     if station.max_bus_load > 1:
         raise table.error("max_bus_load", "is a fraction (0..1]")
+    if station.sync_producer != "host" and station.sync_pacing == "lockstep":
+        raise table.error("sync_producer", "a producer other than the host needs sync_pacing "
+                                           "'realtime' (in lockstep the host's SYNC is the clock)")
     _check_host_watch(table, station)
     return station
 

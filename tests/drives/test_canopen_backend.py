@@ -324,3 +324,18 @@ def test_no_node_at_the_id_is_refused_in_one_line(profile: UnitProfile) -> None:
     message = str(refused.value)
     assert "\n" not in message
     assert f"node {absent.node_id}" in message
+
+
+def test_a_sync_producer_other_than_the_host_in_lockstep_is_refused(tmp_path: Path) -> None:
+    """In lockstep the host's SYNC is the emulator's clock: another producer cannot be."""
+    from hil.config import builtin_fixture
+    from hil.drives.station import load_station
+
+    text = builtin_fixture("station_canopen_emulator.toml").read_text(encoding="utf-8")
+    station = tmp_path / "station.toml"
+    station.write_text(text.replace('sync_pacing = "lockstep"',
+                                    'sync_pacing = "lockstep"\nsync_producer = "periodic"'))
+    with pytest.raises(ProfileError) as refused:
+        load_station(station)
+    assert "sync_producer" in str(refused.value)
+    assert "station.toml" in str(refused.value)

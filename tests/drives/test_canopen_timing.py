@@ -270,3 +270,52 @@ def test_the_sync_spread_is_what_the_intervals_show() -> None:
     lockstep = sync_timing(sent_s, 0.004, realtime=False)
     assert "lockstep" in lockstep["sync_producer"]
     assert "sync_interval_sd_s" not in lockstep
+
+
+def test_a_periodic_sync_producer_paces_the_run(profile: UnitProfile) -> None:
+    """The station chooses python-can's periodic send as the SYNC producer (the kernel's
+    broadcast manager on socketcan; on the virtual bus python-can's own thread): the host
+    counts the SYNCs it sees, the run takes its own duration, and the recording names the
+    producer and the spread the frames' own times show (issue 28)."""
+    changes = {"sync_pacing": "realtime", "sync_producer": "periodic",
+               "lost_sample_fraction": 0.5}
+    with (
+        canopen_emulator(profile, seed=5, station_changes=changes) as (_, station),
+        CanOpenDrive(station, limits=profile.limits) as drive,
+    ):
+        drive.enable()
+        fs_hz = drive.info.max_sample_rate_hz / 4
+        excitation = Excitation(name="periodic_sync", mode=Mode.VELOCITY, fs_hz=fs_hz,
+                                command=0.2 * np.sin(2 * math.pi * 2.0 * np.arange(
+                                    round(0.5 * fs_hz)) / fs_hz))
+        started = time.monotonic()
+        recording = drive.run(excitation)
+        took_s = time.monotonic() - started
+    assert 0.9 * excitation.duration_s < took_s < 3 * excitation.duration_s, took_s
+    assert recording.metadata["sync_producer"].startswith("python-can's periodic send")
+    spread_s = float(recording.metadata["sync_interval_sd_s"])
+    assert 0 < spread_s < 1 / fs_hz, spread_s
+    assert len(recording) > 0.5 * len(excitation.command)
+
+
+def test_a_sync_spread_beyond_the_station_limit_is_refused(profile: UnitProfile) -> None:
+    """A station that allows its SYNC intervals a spread no host achieves: the streamed run
+    is refused naming the figure and the key, its rows kept on the error."""
+    from hil.errors import DriveCommunicationError
+
+    changes = {"sync_pacing": "realtime", "lost_sample_fraction": 0.5,
+               "max_sync_interval_sd_s": 1e-9}
+    with (
+        canopen_emulator(profile, seed=5, station_changes=changes) as (_, station),
+        CanOpenDrive(station, limits=profile.limits) as drive,
+    ):
+        drive.enable()
+        fs_hz = drive.info.max_sample_rate_hz / 4
+        excitation = Excitation(name="too_uneven", mode=Mode.VELOCITY, fs_hz=fs_hz,
+                                command=np.zeros(round(0.2 * fs_hz)))
+        with pytest.raises(DriveCommunicationError) as refused:
+            drive.run(excitation)
+    message = str(refused.value)
+    assert "max_sync_interval_sd_s" in message
+    assert "'too_uneven'" in message
+    assert refused.value.partial_recording is not None

@@ -234,7 +234,27 @@ def run_stream(link: CanLink, setup: RunSetup, excitation: Excitation) -> Acquir
         )
         comm.partial_recording = recording
         raise comm
+    spread = spread_refusal(link, excitation)
+    if spread is not None:
+        spread.partial_recording = recording
+        raise spread
     return Acquired(recording)
+
+
+def spread_refusal(link: CanLink, excitation: Excitation) -> DriveCommunicationError | None:
+    """The refusal of a realtime run whose SYNC intervals spread more than the station's
+    ``max_sync_interval_sd_s`` (the rows are timed by the SYNC count, so the spread is
+    error in their time axis), or ``None``."""
+    st = link.station
+    limit = st.max_sync_interval_sd_s
+    spread = sync_spread_s(link.sync_sent_s, 1.0 / excitation.fs_hz)
+    if limit is None or st.sync_pacing != "realtime" or spread is None or spread[0] <= limit:
+        return None
+    return DriveCommunicationError(
+        f"node {st.node_id}: the SYNC intervals of '{excitation.name}' spread {spread[0]:.3g} s "
+        f"(sd; largest error {spread[1]:.3g} s, {st.sync_producer} producer), more than the "
+        f"station's max_sync_interval_sd_s {limit:g} s: the rows are timed by the SYNC count, "
+        "so the spread is error in their time axis")
 
 
 def _stream_loop(
@@ -292,18 +312,35 @@ def _stream_loop(
     return done
 
 
-def sync_timing(sent_s: list[float], period_s: float, *, realtime: bool) -> dict[str, str]:
+SYNC_PRODUCER_TEXT = {
+    "host": "host (python-can messages timed by the host's sleeps)",
+    "periodic": "python-can's periodic send (the kernel's broadcast manager on socketcan, "
+                "else python-can's own thread), times as the interface stamped the frames",
+}
+
+
+def sync_spread_s(sent_s: list[float], period_s: float) -> tuple[float, float] | None:
+    """The standard deviation and the largest error of the intervals between SYNCs (s);
+    ``None`` for fewer than three."""
+    if len(sent_s) < 3:
+        return None
+    error = np.diff(np.asarray(sent_s, dtype=np.float64)) - period_s
+    return float(np.std(error)), float(np.max(np.abs(error)))
+
+
+def sync_timing(sent_s: list[float], period_s: float, *, realtime: bool,
+                producer: str = "host") -> dict[str, str]:
     """Who produced the SYNCs and, paced by the wall clock, how evenly: the standard
     deviation and the largest error of the intervals between them. The recording's time
     base is the SYNC count (``k · period``), so this spread is error in its time axis."""
     if not realtime:
         return {"sync_producer": "host, in lockstep with the drive's answers (a simulated "
                                  "drive's clock: no wall-clock spread)"}
-    timing = {"sync_producer": "host (python-can messages timed by the host's sleeps)"}
-    if len(sent_s) > 2:
-        error = np.diff(np.asarray(sent_s, dtype=np.float64)) - period_s
-        timing["sync_interval_sd_s"] = f"{float(np.std(error)):.3g}"
-        timing["sync_interval_max_error_s"] = f"{float(np.max(np.abs(error))):.3g}"
+    timing = {"sync_producer": SYNC_PRODUCER_TEXT[producer]}
+    spread = sync_spread_s(sent_s, period_s)
+    if spread is not None:
+        timing["sync_interval_sd_s"] = f"{spread[0]:.3g}"
+        timing["sync_interval_max_error_s"] = f"{spread[1]:.3g}"
     return timing
 
 
@@ -353,7 +390,8 @@ def _stream_recording(
         excitation,
         acquisition="sync stream",
         sync_period_s=f"{period:g}",
-        **sync_timing(link.sync_sent_s, period, realtime=link.station.sync_pacing == "realtime"),
+        **sync_timing(link.sync_sent_s, period, realtime=link.station.sync_pacing == "realtime",
+                      producer=link.station.sync_producer),
         lost_samples=str(done - len(rows)),
         **timing,
     )

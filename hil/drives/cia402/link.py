@@ -92,6 +92,11 @@ class CanLink:
         self._heartbeat_seen = threading.Event()
         self._host_heartbeat: Any = None  # our own heartbeat (a periodic task)
         self._next_deadline = 0.0
+        # a SYNC producer other than this loop: the SYNCs are counted as they are seen
+        self._observed = station.sync_producer != "host"
+        self._sync_task: Any = None  # python-can's periodic SYNC, and its period
+        self._sync_task_period_s = 0.0
+        self._progress = threading.Event()  # a SYNC or a TPDO seen (observed SYNCs)
         self._connected = False
         self._direct = False
         self.network.NOTIFIER_CYCLE = 0.05  # so the receive thread stops promptly
@@ -106,9 +111,12 @@ class CanLink:
             The CAN interface cannot be opened.
         """
         st = self.station
+        options = dict(st.can_options)
+        if self._observed:  # the host counts the periodic task's SYNCs as they go out
+            options.setdefault("receive_own_messages", True)
         try:
             self.network.connect(
-                interface=st.interface, channel=st.channel, bitrate=st.bitrate, **st.can_options
+                interface=st.interface, channel=st.channel, bitrate=st.bitrate, **options
             )
         except (can.CanError, OSError, ValueError, ImportError) as exc:
             raise DriveCommunicationError(
@@ -124,6 +132,8 @@ class CanLink:
         self.network.subscribe(0x700 + base, self._on_heartbeat)
         self.network.subscribe(0x180 + base, self._on_tpdo1)
         self.network.subscribe(0x280 + base, self._on_tpdo2)
+        if self._observed:
+            self.network.subscribe(0x80, self._on_sync)
 
     def start_host_heartbeat(self) -> None:
         """Produce the host's heartbeat (node ``host_node_id``, state OPERATIONAL, every
@@ -146,6 +156,7 @@ class CanLink:
     def close(self) -> None:
         """Disconnect from the bus (a receive thread that died is logged, not raised)."""
         self.stop_host_heartbeat()
+        self._stop_sync_task()
         if self._connected:
             self._connected = False
             try:
@@ -175,12 +186,34 @@ class CanLink:
         self.rx1[index] = bytes(data)
         if index in self.rx2:
             self._answered.set()
+        self._progress.set()
 
     def _on_tpdo2(self, can_id: int, data: bytearray, timestamp: float) -> None:
         index = self.sync_index
         self.rx2[index] = bytes(data)
         if index in self.rx1:
             self._answered.set()
+        self._progress.set()
+
+    def _on_sync(self, can_id: int, data: bytearray, timestamp: float) -> None:
+        """A SYNC of the periodic producer, seen: the TPDOs after it are its answer (frames
+        arrive in order, so this index moves before they are filed)."""
+        self.sync_index += 1
+        self.sync_sent_s.append(timestamp)  # the interface's time of the frame
+        self._progress.set()
+
+    def _start_sync_task(self) -> None:
+        """python-can's periodic SYNC at the present period (restarted when it changed)."""
+        if self._sync_task is not None and self._sync_task_period_s == self.sync_period_s:
+            return
+        self._stop_sync_task()
+        self._sync_task = self.network.send_periodic(0x80, b"", self.sync_period_s)
+        self._sync_task_period_s = self.sync_period_s
+
+    def _stop_sync_task(self) -> None:
+        task, self._sync_task = self._sync_task, None
+        if task is not None:
+            task.stop()
 
     # -- health ----------------------------------------------------------------------
     def check(self) -> None:
@@ -294,6 +327,8 @@ class CanLink:
         """
         if cob is None or payload is None:
             cob, payload = self.rpdo_payload(self.mode, self.controlword, self.target)
+        if self._observed:
+            return self._observed_tick(cob, payload)
         period = self.sync_period_s
         realtime = self.station.sync_pacing == "realtime"
         try:
@@ -329,6 +364,53 @@ class CanLink:
             raise
         except Exception as exc:  # network.check() re-raises what killed the receiver
             raise DriveCommunicationError(f"CAN receive thread stopped: {exc}") from exc
+
+    def _observed_tick(self, cob: int, payload: bytes) -> bool:
+        """One cycle under a SYNC producer other than this loop: the RPDO, then the next
+        SYNC seen, then its TPDOs awaited up to half a period.
+
+        Raises
+        ------
+        DriveCommunicationError
+            No SYNC within three periods, or the RPDO missed the SYNC it was meant for (a
+            SYNC went by meanwhile: the rows would no longer match the commands).
+        """
+        period = self.sync_period_s
+        try:
+            self._start_sync_task()
+            seen = self.sync_index
+            self.network.send_message(cob, payload)
+            if not self._wait_until(time.monotonic() + 3 * period + 0.05,
+                                    lambda: self.sync_index > seen):
+                raise DriveCommunicationError(
+                    f"node {self.node_id}: no SYNC from the periodic producer for "
+                    f"{3 * period + 0.05:.3g} s")
+            if self.sync_index > seen + 1:
+                raise DriveCommunicationError(
+                    f"node {self.node_id}: SYNC {seen + 1} of the periodic producer went by "
+                    "before the host's RPDO for it (the host fell behind its bus)")
+            index = self.sync_index
+            return self._wait_until(time.monotonic() + period / 2,
+                                    lambda: index in self.rx1 and index in self.rx2)
+        except can.CanError as exc:
+            raise DriveCommunicationError(f"CAN error on node {self.node_id}'s bus: {exc}") from exc
+
+    def _wait_until(self, until: float, done: Callable[[], bool]) -> bool:
+        """Receive (ourselves in direct mode) until ``done()`` or ``until``."""
+        while not done():
+            remaining = until - time.monotonic()
+            if remaining <= 0:
+                return False
+            if not self._direct:
+                self._progress.wait(min(remaining, 0.002))
+                self._progress.clear()
+                continue
+            bus = self.network.bus
+            assert bus is not None
+            msg = bus.recv(remaining)
+            if msg is not None and not (msg.is_error_frame or msg.is_remote_frame):
+                self.network.notify(msg.arbitration_id, msg.data, msg.timestamp)
+        return True
 
     def _wait(self, until: float, *, until_answered: bool) -> bool:
         """Wait for this SYNC's TPDOs (or just for ``until``), receiving ourselves when in
