@@ -22,9 +22,10 @@ from hil.drives.equipment import Equipment, read_equipment
 from hil.errors import ProfileError
 
 SYNC_PACINGS = ("realtime", "lockstep")
-# who sends the SYNC: the host from its loop, or python-can's periodic send (the kernel's
-# broadcast manager on socketcan, else python-can's own thread), observed by the host
-SYNC_PRODUCERS = ("host", "periodic")
+# who sends the SYNC: the host from its loop, python-can's periodic send (the kernel's
+# broadcast manager on socketcan, else python-can's own thread), or the drive itself
+# (CiA 301 0x1005 bit 30); the last two are observed by the host
+SYNC_PRODUCERS = ("host", "periodic", "node")
 ACQUISITIONS = ("stream", "recorder", "auto")
 TORQUE_SAMPLES = ("auto", "mean", "instantaneous")
 
@@ -85,9 +86,10 @@ class CanOpenStation:
     wall-clock time) or ``"lockstep"`` for a drive whose clock *is* the SYNC (an emulator
     or a drive in a SYNC-stepped simulation mode): the next SYNC goes out as soon as the
     previous one was answered. Never use lockstep on a real axis. ``sync_producer``: who
-    sends the SYNC in realtime pacing: ``"host"`` (its loop's sleeps) or ``"periodic"``
+    sends the SYNC in realtime pacing: ``"host"`` (its loop's sleeps), ``"periodic"``
     (python-can's periodic send: the kernel's broadcast manager on socketcan, else
-    python-can's own thread; the host counts the SYNCs it sees). ``max_sync_interval_sd_s``:
+    python-can's own thread) or ``"node"`` (the drive under test, 0x1005 bit 30, at its
+    0x1006); under the last two the host counts the SYNCs it sees. ``max_sync_interval_sd_s``:
     a streamed run whose SYNC intervals spread more is refused, naming the figure.
 
     ``torque_sample``: which torque a streamed row carries. ``"auto"`` (default): the torque

@@ -272,27 +272,33 @@ def test_the_sync_spread_is_what_the_intervals_show() -> None:
     assert "sync_interval_sd_s" not in lockstep
 
 
-def test_a_periodic_sync_producer_paces_the_run(profile: UnitProfile) -> None:
-    """The station chooses python-can's periodic send as the SYNC producer (the kernel's
-    broadcast manager on socketcan; on the virtual bus python-can's own thread): the host
-    counts the SYNCs it sees, the run takes its own duration, and the recording names the
-    producer and the spread the frames' own times show (issue 28)."""
-    changes = {"sync_pacing": "realtime", "sync_producer": "periodic",
+@pytest.mark.parametrize(("producer", "named"), [
+    ("periodic", "python-can's periodic send"), ("node", "the drive (CiA 301 0x1005")])
+def test_a_sync_producer_other_than_the_host_paces_the_run(profile: UnitProfile, producer: str,
+                                                          named: str) -> None:
+    """The station chooses who sends the SYNC: python-can's periodic send (the kernel's
+    broadcast manager on socketcan; on the virtual bus python-can's own thread) or the drive
+    itself (0x1005 bit 30). The host counts the SYNCs it sees, the run takes its own
+    duration, and the recording names the producer and the spread the frames' own times
+    show (issue 28); the drive stops producing when the host leaves."""
+    changes = {"sync_pacing": "realtime", "sync_producer": producer,
                "lost_sample_fraction": 0.5}
-    with (
-        canopen_emulator(profile, seed=5, station_changes=changes) as (_, station),
-        CanOpenDrive(station, limits=profile.limits) as drive,
-    ):
-        drive.enable()
-        fs_hz = drive.info.max_sample_rate_hz / 4
-        excitation = Excitation(name="periodic_sync", mode=Mode.VELOCITY, fs_hz=fs_hz,
-                                command=0.2 * np.sin(2 * math.pi * 2.0 * np.arange(
-                                    round(0.5 * fs_hz)) / fs_hz))
-        started = time.monotonic()
-        recording = drive.run(excitation)
-        took_s = time.monotonic() - started
+    with canopen_emulator(profile, seed=5, station_changes=changes) as (emulator, station):
+        with CanOpenDrive(station, limits=profile.limits) as drive:
+            drive.enable()
+            fs_hz = drive.info.max_sample_rate_hz / 4
+            excitation = Excitation(name="other_sync", mode=Mode.VELOCITY, fs_hz=fs_hz,
+                                    command=0.2 * np.sin(2 * math.pi * 2.0 * np.arange(
+                                        round(0.5 * fs_hz)) / fs_hz))
+            started = time.monotonic()
+            recording = drive.run(excitation)
+            took_s = time.monotonic() - started
+        syncs = emulator.sync_count
+        time.sleep(0.05)
+        stopped = emulator.sync_count == syncs
     assert 0.9 * excitation.duration_s < took_s < 3 * excitation.duration_s, took_s
-    assert recording.metadata["sync_producer"].startswith("python-can's periodic send")
+    assert recording.metadata["sync_producer"].startswith(named)
+    assert stopped  # no producer left running after the host closed
     spread_s = float(recording.metadata["sync_interval_sd_s"])
     assert 0 < spread_s < 1 / fs_hz, spread_s
     assert len(recording) > 0.5 * len(excitation.command)

@@ -192,8 +192,6 @@ def run_stream(link: CanLink, setup: RunSetup, excitation: Excitation) -> Acquir
     cob, _ = link.rpdo_payload(mode, CW_ENABLE_OPERATION, 0)
     packer = struct.Struct(RPDO_FORMAT[mode])
     offset = _raw_offset(setup, excitation)
-    link.forget()
-    first = link.sync_index + 1
     error: DriveError | None = None
     stop: KeyboardInterrupt | None = None
     log.info(
@@ -203,8 +201,11 @@ def run_stream(link: CanLink, setup: RunSetup, excitation: Excitation) -> Acquir
         len(raw),
         1 / setup.sync_period_s,
     )
+    first = link.sync_index + 1
     try:
-        with link.direct_receive(), collector_held():
+        with link.direct_receive(), collector_held(), link.aligned_to_sync():
+            link.forget()
+            first = link.sync_index + 1  # (a SYNC producer other than the host runs on)
             done = _stream_loop(link, setup, excitation, raw, offset, cob, packer)
     except _FaultedError as fault:
         # 0x603F by SDO: only now that the Notifier receives again
@@ -316,6 +317,8 @@ SYNC_PRODUCER_TEXT = {
     "host": "host (python-can messages timed by the host's sleeps)",
     "periodic": "python-can's periodic send (the kernel's broadcast manager on socketcan, "
                 "else python-can's own thread), times as the interface stamped the frames",
+    "node": "the drive (CiA 301 0x1005 bit 30, at its 0x1006), times as the interface "
+            "stamped the frames",
 }
 
 

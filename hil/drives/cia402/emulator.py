@@ -68,6 +68,7 @@ log = logging.getLogger(__name__)
 EDS_NAME = "gimbal_hil_servo.eds"
 ABORT_VALUE_RANGE = 0x06090030
 ABORT_NOT_NOW = 0x08000022  # data cannot be transferred because of the device state
+SYNC_GENERATE = 0x40000000  # 0x1005 bit 30: the node generates the SYNC
 INTERPOLATION_LINEAR, INTERPOLATION_HOLD = 0, -1  # 0x60C0 (negative: manufacturer-specific)
 TORQUE_MEAN = 0x2077  # mean torque over the last SYNC period, 0.1 ‰ of 0x6076
 TORQUE_MEAN_PER_RATED = 1e4  # 0x2077 counts per rated torque
@@ -247,6 +248,8 @@ class Cia402Emulator:
         self._host_seen: float | None = None  # monotonic time of its last heartbeat
         self._watch_stop = threading.Event()
         self._watcher: threading.Thread | None = None
+        self._producing = threading.Event()  # 0x1005 bit 30: this node sends the SYNC
+        self._producer: threading.Thread | None = None
         self.recorder = DriveRecorder(
             capacity=16384,
             loop_period_us=round(1e6 / fs_hz),
@@ -296,7 +299,39 @@ class Cia402Emulator:
         self._watcher.start()
         log.info("CiA 402 emulator node %d up on %s", self.node_id, self.channel)
 
+    def _produce_sync(self, on: bool) -> None:
+        """Start or stop sending the SYNC (CiA 301 0x1005 bit 30) every 0x1006 µs, on the
+        wall clock, this node answering its own SYNC as the others do."""
+        if not on:
+            self._producing.clear()
+            return
+        if self._producing.is_set():
+            return
+        self._producing.set()
+        self._producer = threading.Thread(target=self._send_syncs, name="cia402-sync-producer",
+                                          daemon=True)
+        self._producer.start()
+
+    def _send_syncs(self) -> None:
+        deadline = time.monotonic()
+        while self._producing.is_set() and self._network is not None:
+            deadline += max(self._raw(0x1006), 100) * 1e-6
+            delay = deadline - time.monotonic()
+            if delay > 0:
+                time.sleep(delay)
+            else:
+                deadline = time.monotonic()  # behind: resynchronise
+            network = self._network
+            if network is None or not self._producing.is_set():
+                return
+            network.send_message(0x80, b"")
+            self._on_sync(0x80, bytearray(), time.time())
+
     def stop(self) -> None:
+        self._producing.clear()
+        if self._producer is not None:
+            self._producer.join(1.0)
+            self._producer = None
         self._watch_stop.set()
         if self._watcher is not None:
             self._watcher.join(1.0)
@@ -383,6 +418,8 @@ class Cia402Emulator:
             raise SdoAbortedError(ABORT_VALUE_RANGE)
         elif index == 0x1016 and subindex == 1:
             self._consume_heartbeat(int(value))
+        elif index == 0x1005:
+            self._produce_sync(bool(int(value) & SYNC_GENERATE))
         elif index == 0x60FE and subindex == 1 and self.clamp_output_bit is not None:
             self.plant.set_locked_rotor(bool(int(value) >> self.clamp_output_bit & 1))
         elif index in (0x2100, 0x2200):

@@ -40,13 +40,14 @@ from hil.drives.cia402.protocol import (
     state_of,
 )
 from hil.drives.station import CanOpenStation
-from hil.errors import DriveCommunicationError, DriveFaultError, DriveStateError
+from hil.errors import DriveCommunicationError, DriveError, DriveFaultError, DriveStateError
 from hil.motion import Mode
 
 log = logging.getLogger(__name__)
 
 _TPDO1 = struct.Struct(TPDO1_FORMAT)
 _TPDO2 = struct.Struct(TPDO2_FORMAT)
+SYNC_GENERATE = 0x40000000  # CiA 301 0x1005 bit 30: the node generates the SYNC
 _UPLOAD_STATUSWORD = bytes((0x40, 0x41, 0x60, 0x00, 0, 0, 0, 0))  # SDO initiate upload 0x6041:00
 NMT_NAMES = {0: "INITIALISING", 4: "STOPPED", 5: "OPERATIONAL", 127: "PRE-OPERATIONAL"}
 
@@ -97,6 +98,7 @@ class CanLink:
         self._sync_task: Any = None  # python-can's periodic SYNC, and its period
         self._sync_task_period_s = 0.0
         self._progress = threading.Event()  # a SYNC or a TPDO seen (observed SYNCs)
+        self._aligned = False  # a streamed run: each tick's RPDO must meet the next SYNC
         self._connected = False
         self._direct = False
         self.network.NOTIFIER_CYCLE = 0.05  # so the receive thread stops promptly
@@ -203,7 +205,14 @@ class CanLink:
         self._progress.set()
 
     def _start_sync_task(self) -> None:
-        """python-can's periodic SYNC at the present period (restarted when it changed)."""
+        """The SYNC producer started: python-can's periodic SYNC at the present period
+        (restarted when it changed), or the drive told to produce it (0x1005 bit 30; its
+        period is the 0x1006 the drive was given)."""
+        if self.station.sync_producer == "node":
+            if self._sync_task is None:
+                self.write_standard(0x1005, 0, "I", SYNC_GENERATE | 0x80)
+                self._sync_task = "node"
+            return
         if self._sync_task is not None and self._sync_task_period_s == self.sync_period_s:
             return
         self._stop_sync_task()
@@ -212,7 +221,12 @@ class CanLink:
 
     def _stop_sync_task(self) -> None:
         task, self._sync_task = self._sync_task, None
-        if task is not None:
+        if task == "node":
+            try:
+                self.write_standard(0x1005, 0, "I", 0x80)
+            except DriveError as exc:  # closing: the node may be gone
+                log.warning("node %d: SYNC production not stopped: %s", self.node_id, exc)
+        elif task is not None:
             task.stop()
 
     # -- health ----------------------------------------------------------------------
@@ -383,17 +397,44 @@ class CanLink:
             if not self._wait_until(time.monotonic() + 3 * period + 0.05,
                                     lambda: self.sync_index > seen):
                 raise DriveCommunicationError(
-                    f"node {self.node_id}: no SYNC from the periodic producer for "
-                    f"{3 * period + 0.05:.3g} s")
-            if self.sync_index > seen + 1:
+                    f"node {self.node_id}: no SYNC from the {self.station.sync_producer} "
+                    f"producer for {3 * period + 0.05:.3g} s")
+            if self._aligned and self.sync_index > seen + 1:
                 raise DriveCommunicationError(
-                    f"node {self.node_id}: SYNC {seen + 1} of the periodic producer went by "
+                    f"node {self.node_id}: SYNC {seen + 1} of the {self.station.sync_producer} "
+                    "producer went by "
                     "before the host's RPDO for it (the host fell behind its bus)")
             index = self.sync_index
             return self._wait_until(time.monotonic() + period / 2,
                                     lambda: index in self.rx1 and index in self.rx2)
         except can.CanError as exc:
             raise DriveCommunicationError(f"CAN error on node {self.node_id}'s bus: {exc}") from exc
+
+    @contextmanager
+    def aligned_to_sync(self) -> Iterator[None]:
+        """A streamed run under a SYNC producer other than the host (inside
+        :meth:`direct_receive`): it starts right after a SYNC and its answer, so that the
+        first RPDO meets the next SYNC, and every tick must meet the SYNC after the last
+        (no-op under the host's SYNC)."""
+        if not self._observed:
+            yield
+            return
+        self._start_sync_task()
+        seen = self.sync_index
+        period = self.sync_period_s
+        if not self._wait_until(time.monotonic() + 3 * period + 0.05,
+                                lambda: self.sync_index > seen):
+            raise DriveCommunicationError(
+                f"node {self.node_id}: no SYNC from the {self.station.sync_producer} producer "
+                f"for {3 * period + 0.05:.3g} s")
+        index = self.sync_index
+        self._wait_until(time.monotonic() + period / 2,
+                         lambda: index in self.rx1 and index in self.rx2)
+        self._aligned = True
+        try:
+            yield
+        finally:
+            self._aligned = False
 
     def _wait_until(self, until: float, done: Callable[[], bool]) -> bool:
         """Receive (ourselves in direct mode) until ``done()`` or ``until``."""
