@@ -19,6 +19,7 @@ from typing import Any
 from hil.config import ConfigTable, builtin_fixture, read_toml
 from hil.drives.canopen_map import GENERIC_MAP, ObjectMap, load_object_map
 from hil.drives.equipment import Equipment, read_equipment
+from hil.drives.odrive.station import OdriveStation, read_odrive
 from hil.errors import ProfileError
 
 SYNC_PACINGS = ("realtime", "lockstep")
@@ -194,10 +195,11 @@ class ModbusStation:
         return self if found is None else replace(self, unit_id=found[0], gimbal=found[1])
 
 
-Station = CanOpenStation | ModbusStation
+Station = CanOpenStation | ModbusStation | OdriveStation
 
 
-def axis_under_test(station: Station, axis: str) -> tuple[int, GimbalBus] | None:
+def axis_under_test(station: CanOpenStation | ModbusStation, axis: str
+                    ) -> tuple[int, GimbalBus] | None:
     """The bus address of ``axis`` and the gimbal part with every other axis held;
     ``None`` for a station without axes (one axis on the bus).
 
@@ -290,12 +292,16 @@ def load_station(path: str | Path) -> Station:
 
 
 def station_from_mapping(data: Mapping[str, Any], *, source: str, base_dir: Path) -> Station:
-    """Build a station from a parsed station file (one of ``[canopen]`` or ``[modbus]``)."""
+    """Build a station from a parsed station file (one of ``[canopen]``, ``[modbus]`` or
+    ``[odrive]``)."""
     document = ConfigTable.root(data, source=source)
-    if ("canopen" in document) == ("modbus" in document):
-        raise ProfileError("a station has one table [canopen] or [modbus]", source=source)
+    if sum(bus in document for bus in ("canopen", "modbus", "odrive")) != 1:
+        raise ProfileError("a station has one table [canopen], [modbus] or [odrive]",
+                           source=source)
     station: Station
-    if "canopen" in document:
+    if "odrive" in document:
+        station = read_odrive(document.table_at("odrive"))
+    elif "canopen" in document:
         station = _canopen(
             document.table_at("canopen"), document.table_at("scaling", required=False), base_dir
         )

@@ -12,8 +12,10 @@ from hil.drives.cia402.link import CanLink
 from hil.errors import DriveError, DriveStateError
 
 #: the unit's torque limit over the drive's rated torque, outside which a map's torque
-#: scale (0x6076 counts per N·m) is taken for wrong: a factor of 1000 lands far outside
-TORQUE_LIMIT_OVER_RATED = (0.01, 100.0)
+#: scale (0x6076 counts per N·m) is taken for wrong: a factor of 1000 (µN·m for mN·m)
+#: lands outside from any sane unit, while a limit a few hundred times the rated torque is
+#: left to the check that the drive can represent it (0x6072)
+TORQUE_LIMIT_OVER_RATED = (0.002, 500.0)
 
 
 def mismatch(link: CanLink, object_map: ObjectMap, what: str) -> DriveStateError:
