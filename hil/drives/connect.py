@@ -57,6 +57,11 @@ def _open_field_drive(
     from hil.drives.station import CanOpenStation, ModbusStation, load_station
 
     bus = kind.station_kind
+    if bus == "odrive":
+        with _open_odrive(kind, profile=profile, unit_serial=unit_serial, station=station,
+                          seed=seed) as odrive:
+            yield odrive
+        return
     loaded = None
     if station is not None:  # an emulator takes the file's settings, at its own endpoint
         loaded = load_station(station)
@@ -98,3 +103,35 @@ def _backend(station: object, profile: UnitProfile) -> Iterator[Drive]:
         drive = ModbusDrive(station, limits=profile.limits)  # type: ignore[arg-type]
     with drive:
         yield drive
+
+
+@contextmanager
+def _open_odrive(
+    kind: DriveKind, *, profile: UnitProfile, unit_serial: str, station: Path | None, seed: int
+) -> Iterator[Drive]:
+    """An ODrive over CANSimple from ``station``, or an emulated one of ``profile.plant``
+    (reached with ``station``'s settings when one is given, at its own virtual channel)."""
+    from hil.drives.odrive.drive import OdriveDrive
+    from hil.drives.odrive.station import OdriveStation
+    from hil.drives.station import load_station
+
+    loaded: OdriveStation | None = None
+    if station is not None:
+        read = load_station(station)
+        if not isinstance(read, OdriveStation):
+            raise ProfileError("not an odrive station file (no [odrive] table)",
+                               source=str(station))
+        loaded = read
+    if kind.needs_station:
+        if loaded is None:
+            raise ProfileError(f"--drive {kind.name} needs --station FILE (a station TOML)")
+        with OdriveDrive(loaded, limits=profile.limits) as drive:
+            yield drive
+        return
+    from hil.drives.emulated import odrive_emulator
+
+    serial = int.from_bytes(unit_serial.encode()[-4:].rjust(4, b"\0"), "big")
+    with odrive_emulator(profile, seed=seed, serial=serial,  # noqa: SIM117
+                         base_station=loaded) as (_, emulated):
+        with OdriveDrive(emulated, limits=profile.limits) as drive:
+            yield drive

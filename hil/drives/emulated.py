@@ -12,6 +12,7 @@ from typing import Any, TypeVar
 from hil.config import builtin_fixture
 from hil.drives.canopen_map import ObjectMap
 from hil.drives.emulator_faults import CanFaults, ModbusFaults
+from hil.drives.odrive.station import OdriveStation
 from hil.drives.station import CanOpenStation, ModbusStation, load_station
 from hil.errors import ProfileError
 from hil.profile import UnitProfile, load_profile
@@ -20,6 +21,7 @@ from plant_sim.params import PlantParams
 StationT = TypeVar("StationT", CanOpenStation, ModbusStation)
 CANOPEN_STATION = "station_canopen_emulator.toml"
 MODBUS_STATION = "station_modbus_emulator.toml"
+ODRIVE_STATION = "station_odrive_emulator.toml"
 
 
 def builtin_station(name: str) -> Path:
@@ -189,3 +191,48 @@ def modbus_emulator(
             changes["serial_port"] = f"socket://127.0.0.1:{emulator.port}"
         station = dataclasses.replace(station, **changes, **(station_changes or {}))
         yield emulator, _with_transducer(station, emulator, running)
+
+
+@contextmanager
+def odrive_emulator(
+    profile: UnitProfile,
+    *,
+    seed: int,
+    serial: int = 1,
+    faults: Any = None,
+    station_changes: dict[str, Any] | None = None,
+    base_station: OdriveStation | None = None,
+) -> Iterator[tuple[Any, OdriveStation]]:
+    """A running ODrive emulator (CANSimple 0.6) on a private virtual channel, and its
+    station (the built-in emulator station's settings, or ``base_station``'s, on that
+    channel; the control period that of the profile's plant, K_t its nominal one).
+
+    ``faults`` : :class:`hil.drives.odrive.emulator.OdriveFaults` or None.
+    """
+    from hil.drives.odrive.emulator import OdriveEmulator
+
+    plant = _plant(profile, "odrive-emulator")
+    station = base_station or load_station(builtin_station(ODRIVE_STATION))
+    if not isinstance(station, OdriveStation):
+        raise ProfileError("not an odrive station file", source=station.source)
+    channel = f"gimbal-hil-{uuid.uuid4().hex[:12]}"
+    station = dataclasses.replace(
+        station, interface="virtual", channel=channel, can_options={},
+        control_period_s=1.0 / profile.sample_rate_hz,
+        torque_constant_nm_a=plant.torque_constant_nm_a, **(station_changes or {}))
+    with OdriveEmulator(
+        plant,
+        firmware=profile.firmware,
+        fs_hz=profile.sample_rate_hz,
+        seed=seed,
+        channel=channel,
+        node_id=station.node_id,
+        pacing=station.pacing,
+        feedback_period_ms=station.encoder_period_ms,
+        heartbeat_period_ms=station.heartbeat_period_ms,
+        error_period_ms=station.error_period_ms,
+        serial_number=serial,
+        watchdog_timeout_s=station.watchdog_timeout_s,
+        faults=faults,
+    ) as emulator:
+        yield emulator, station

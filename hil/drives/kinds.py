@@ -14,8 +14,9 @@ from hil.errors import ProfileError
 
 #: how a kind opens: the built-in simulator, an emulator started here, a real drive
 Opener = Literal["simulator", "emulator", "station"]
-#: the station file's table a kind reads (``[canopen]`` or ``[modbus]``); None: no file
-StationKind = Literal["canopen", "modbus"]
+#: the station file's table a kind reads (``[canopen]``, ``[modbus]``, ``[odrive]``);
+#: None: no file
+StationKind = Literal["canopen", "modbus", "odrive"]
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -43,6 +44,9 @@ KINDS: dict[str, DriveKind] = {
                   station_kind="modbus"),
         DriveKind(name="canopen", simulated=False, opens="station", station_kind="canopen"),
         DriveKind(name="modbus", simulated=False, opens="station", station_kind="modbus"),
+        DriveKind(name="odrive-emulator", simulated=True, opens="emulator",
+                  station_kind="odrive"),
+        DriveKind(name="odrive", simulated=False, opens="station", station_kind="odrive"),
     )
 }
 #: the names, in ``--help`` order (argparse's choices)
