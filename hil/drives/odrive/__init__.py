@@ -1,0 +1,1 @@
+"""ODrive over CANSimple: protocol, link, acquisition, axis state machine, drive, emulator."""
