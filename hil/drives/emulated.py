@@ -7,7 +7,7 @@ import uuid
 from collections.abc import Iterator
 from contextlib import ExitStack, contextmanager
 from pathlib import Path
-from typing import Any, TypeVar
+from typing import TYPE_CHECKING, Any, TypeVar
 
 from hil.config import builtin_fixture
 from hil.drives.canopen_map import ObjectMap
@@ -17,6 +17,9 @@ from hil.drives.station import CanOpenStation, ModbusStation, load_station
 from hil.errors import ProfileError
 from hil.profile import UnitProfile, load_profile
 from plant_sim.params import PlantParams
+
+if TYPE_CHECKING:
+    from hil.drives.odrive.emulator import OdriveEmulator, OdriveFaults
 
 StationT = TypeVar("StationT", CanOpenStation, ModbusStation)
 CANOPEN_STATION = "station_canopen_emulator.toml"
@@ -199,16 +202,14 @@ def odrive_emulator(
     *,
     seed: int,
     serial: int = 1,
-    faults: Any = None,
+    faults: OdriveFaults | None = None,
     station_changes: dict[str, Any] | None = None,
     base_station: OdriveStation | None = None,
-) -> Iterator[tuple[Any, OdriveStation]]:
+) -> Iterator[tuple[OdriveEmulator, OdriveStation]]:
     """A running ODrive emulator (CANSimple 0.6) on a private virtual channel, and its
     station (the built-in emulator station's settings, or ``base_station``'s, on that
-    channel; the control period that of the profile's plant, K_t its nominal one).
-
-    ``faults`` : :class:`hil.drives.odrive.emulator.OdriveFaults` or None.
-    """
+    channel; the control period that of the profile's plant, K_t its nominal one). The
+    emulator paces itself as the station says (``lockstep``: the emulator only)."""
     from hil.drives.odrive.emulator import OdriveEmulator
 
     plant = _plant(profile, "odrive-emulator")
