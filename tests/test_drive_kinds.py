@@ -20,9 +20,12 @@ pytestmark = pytest.mark.realtime
 
 
 def test_each_kind_knows_what_it_is() -> None:
-    assert DRIVE_KINDS == ("sim", "canopen-emulator", "modbus-emulator", "canopen", "modbus")
-    assert SIMULATED_KINDS == ("sim", "canopen-emulator", "modbus-emulator")
-    assert {k.name for k in KINDS.values() if k.needs_station} == {"canopen", "modbus"}
+    assert DRIVE_KINDS == ("sim", "canopen-emulator", "modbus-emulator", "canopen", "modbus",
+                           "odrive-emulator", "odrive")
+    assert SIMULATED_KINDS == ("sim", "canopen-emulator", "modbus-emulator", "odrive-emulator")
+    assert {k.name for k in KINDS.values() if k.needs_station} == {"canopen", "modbus",
+                                                                    "odrive"}
+    assert drive_kind("odrive-emulator").station_kind == "odrive"
     assert drive_kind("canopen-emulator") == DriveKind(
         name="canopen-emulator", simulated=True, opens="emulator", station_kind="canopen")
     assert drive_kind("modbus").station_kind == "modbus"
