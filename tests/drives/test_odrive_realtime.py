@@ -4,6 +4,7 @@ emulator's own timer sends the feedback, the host answers each set half a period
 from __future__ import annotations
 
 import dataclasses
+import time
 import uuid
 
 import numpy as np
@@ -24,12 +25,16 @@ pytestmark = pytest.mark.realtime
 
 
 def test_a_sine_on_the_drives_own_clock(profile: UnitProfile) -> None:
-    changes = {"pacing": "realtime", "frame_timeout_s": 0.2}
+    """With the ODrive's watchdog (0.1 s) on, the host's hold setpoint feeds it between
+    runs: a pause of three watchdog times does not trip it."""
+    changes = {"pacing": "realtime", "frame_timeout_s": 0.2, "watchdog_timeout_s": 0.1}
     with odrive_emulator(profile, seed=1, station_changes=changes) as (emulator, station):
         with OdriveDrive(station, limits=profile.limits) as drive:
             assert drive.info.max_sample_rate_hz == 500.0
             drive.enable()
+            time.sleep(0.3)  # the host analysing between runs
             recording = drive.run(sine(0.5, fs_hz=500.0, periods=2))
+            assert emulator.active_errors == 0
         assert emulator.axis_state == AxisState.IDLE
     lost = int(recording.metadata["lost_samples"])
     assert len(recording) + lost == 500

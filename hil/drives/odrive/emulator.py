@@ -183,6 +183,7 @@ class OdriveEmulator:
         self._stopping = threading.Event()
         self._threads: list[threading.Thread] = []
         self._bus: Any = None
+        self._epoch_s = 0.0  # wall-clock time of plant step 0 (realtime frame stamps)
 
     # -- life cycle ------------------------------------------------------------------------
     def start(self) -> None:
@@ -190,8 +191,11 @@ class OdriveEmulator:
         # done on a copy before going on the bus, the plant itself untouched
         copy.deepcopy(self.plant).run(Mode.TORQUE, np.zeros(1))
         self._latch(self.plant.run(Mode.TORQUE, np.zeros(1)))
+        options: dict[str, Any] = ({"preserve_timestamps": True}
+                                   if self.interface == "virtual" else {})
         self._bus = can.Bus(interface=self.interface, channel=self.channel,
-                            receive_own_messages=False)
+                            receive_own_messages=False, **options)
+        self._epoch_s = time.time() - self._steps_done / self.fs_hz
         self._stopping.clear()
         self._threads = [threading.Thread(target=self._serve, name="odrive-emulator-rx",
                                           daemon=True)]
@@ -220,12 +224,16 @@ class OdriveEmulator:
         self.stop()
 
     # -- the bus ---------------------------------------------------------------------------
-    def _send(self, cmd: int, data: bytes) -> None:
+    def _send(self, cmd: int, data: bytes, stamp_s: float | None = None) -> None:
+        """One frame, stamped ``stamp_s`` (its period's end on the emulated ODrive's clock)
+        or now: on python-can's virtual bus the stamp travels with the frame, as a real
+        interface's receive stamp shows the ODrive's timer, not the emulator thread's lag."""
         bus = self._bus
         if bus is None:
             return
         message = can.Message(arbitration_id=arbitration_id(self.node_id, cmd), data=data,
-                              is_extended_id=False)
+                              is_extended_id=False,
+                              timestamp=time.time() if stamp_s is None else stamp_s)
         with self._send_lock:
             bus.send(message)
 
@@ -363,8 +371,9 @@ class OdriveEmulator:
         with self._lock:
             self.periods += 1
             frames = self._due(self._steps_done - self.steps_per_period, self._steps_done)
+            stamp_s = self._epoch_s + self._steps_done / self.fs_hz
         for cmd, data in frames:
-            self._send(cmd, data)
+            self._send(cmd, data, stamp_s if self.pacing == "realtime" else None)
 
     def _advance(self, steps: int) -> None:
         with self._lock:

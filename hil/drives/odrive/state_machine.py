@@ -159,6 +159,7 @@ class OdriveStateMachine:
             code = beat.axis_error
             before = link.heartbeats
             link.send(Cmd.CLEAR_ERRORS, b"\0")
+            link.errors = None  # a Get_Error sent before the clear is stale
             self._await("clearing the axis errors", lambda: link.heartbeats > before,
                         self.station.state_timeout_s)
             self.raise_if_faulted("that Clear_Errors did not clear")
