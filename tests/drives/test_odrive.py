@@ -17,6 +17,7 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from conftest import sine
+from hil.drives.base import Interrupted
 from hil.drives.emulated import builtin_station, odrive_emulator
 from hil.drives.odrive import protocol as p
 from hil.drives.odrive.drive import OdriveDrive
@@ -303,3 +304,29 @@ def test_a_heartbeat_other_than_the_stations_is_refused(profile: UnitProfile) ->
             with pytest.raises(ProfileError, match=message):
                 OdriveDrive(station, limits=profile.limits)
             assert emulator.axis_state == p.AxisState.IDLE
+
+
+def test_a_stop_signal_brakes_the_axis_and_keeps_the_rows(
+        profile: UnitProfile, monkeypatch: pytest.MonkeyPatch) -> None:
+    with odrive_emulator(profile, seed=1) as (emulator, station):  # noqa: SIM117
+        with OdriveDrive(station, limits=profile.limits) as drive:
+            drive.enable()
+            send = drive.link.command
+            sent = [0]
+
+            def command(cmd: int, data: bytes) -> None:  # SIGINT arrives at the 300th setpoint
+                sent[0] += 1
+                if sent[0] == 300:
+                    raise KeyboardInterrupt
+                send(cmd, data)
+
+            monkeypatch.setattr(drive.link, "command", command)
+            with pytest.raises(Interrupted) as caught:
+                drive.run(sine(1.0, fs_hz=FS_HZ, periods=2, frequency_hz=1.0))
+            monkeypatch.undo()
+            partial = caught.value.partial_recording
+            assert partial is not None
+            assert len(partial) == 300
+            assert emulator.axis_state == p.AxisState.IDLE
+            assert abs(emulator.plant.velocity_rad_s) < 0.05  # braked before IDLE
+            assert emulator.active_errors == 0  # no Estop was needed
