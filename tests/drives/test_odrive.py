@@ -281,6 +281,18 @@ def test_a_bad_station_file_is_refused_in_one_line(tmp_path: Path, old: str, new
     assert text.startswith(f"{path}: [odrive]")
 
 
+def test_equipment_an_odrive_cannot_serve_is_refused(tmp_path: Path,
+                                                    profile: UnitProfile) -> None:
+    path = tmp_path / "station.toml"
+    path.write_text(STATION + "\n[locked_rotor]\noutput_bit = 0\ncheck_torque_nm = 0.05\n",
+                    encoding="utf-8")
+    station = load_station(path)
+    assert isinstance(station, OdriveStation)
+    with pytest.raises(ProfileError, match=r"station\.toml: \[locked_rotor\] is not served "
+                                           r"over an ODrive"):
+        OdriveDrive(station, limits=profile.limits)
+
+
 def test_the_shipped_stations_load() -> None:
     example = load_station(builtin_station("station_odrive_example.toml"))
     emulator = load_station(builtin_station("station_odrive_emulator.toml"))

@@ -77,10 +77,18 @@ class OdriveDrive(Drive):
     DriveCommunicationError
         The bus cannot be opened or the node does not answer.
     ProfileError
-        The ODrive's cyclic messages are not the station's.
+        The ODrive's cyclic messages are not the station's, or the station declares
+        equipment the backend does not serve.
     """
 
     def __init__(self, station: OdriveStation, *, limits: Limits) -> None:
+        equipment = station.equipment
+        if equipment.torque_transducer is not None or equipment.locked_rotor is not None:
+            table = ("[torque_transducer]" if equipment.torque_transducer is not None
+                     else "[locked_rotor]")
+            raise ProfileError(f"{table} is not served over an ODrive (CANSimple has no output "
+                               "for a clamp, and K_t is measured only with both): remove it",
+                               source=station.source)
         self.station = station
         self.limits = limits
         self.link = OdriveLink(station)
