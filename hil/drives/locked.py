@@ -20,9 +20,9 @@ CHECK = "locked_rotor_check"
 
 
 @contextmanager
-def clamped(drive: Drive, equipment: Equipment, *, set_clamp: Callable[[bool], None],
-            rate_hz: float) -> Iterator[TransducerReader]:
-    """The clamp engaged and confirmed, the transducer open; released on leaving.
+def clamped(drive: Drive, equipment: Equipment, reader: TransducerReader, *,
+            set_clamp: Callable[[bool], None], rate_hz: float) -> Iterator[None]:
+    """The clamp engaged and confirmed; released on leaving.
 
     Parameters
     ----------
@@ -30,6 +30,10 @@ def clamped(drive: Drive, equipment: Equipment, *, set_clamp: Callable[[bool], N
         The enabled drive (the check move runs through it).
     equipment : Equipment
         The station's transducer and fixture.
+    reader : TransducerReader
+        The station's transducer, open (one connection for the drive's session: a
+        connection opened and closed per block cost the polled drive 50 ms pauses as the
+        amplifier's server tore it down).
     set_clamp : callable
         Engages (``True``) or releases the clamp (the drive's output).
     rate_hz : float
@@ -40,25 +44,17 @@ def clamped(drive: Drive, equipment: Equipment, *, set_clamp: Callable[[bool], N
     DriveStateError
         The station lacks the fixture or the transducer, or the check move moved the axis
         (the clamp released, nothing else driven).
-    DriveCommunicationError
-        The transducer does not answer.
     """
-    fixture, transducer = equipment.locked_rotor, equipment.torque_transducer
+    fixture = equipment.locked_rotor
     if fixture is None:
         raise DriveStateError(f"the station lacks: {Capability.LOCKED_ROTOR.value}")
-    if transducer is None:
-        raise DriveStateError(f"the station lacks: {Capability.TORQUE_SENSOR.value}")
-    reader = TransducerReader(transducer)
-    reader.open()
+    set_clamp(True)
     try:
-        set_clamp(True)
-        try:
-            check_holds(drive, fixture, rate_hz=rate_hz)
-            yield reader
-        finally:
-            set_clamp(False)
+        check_holds(drive, fixture, rate_hz=rate_hz)
+        yield
     finally:
-        reader.close()
+        set_clamp(False)
+        reader.stop()
 
 
 def check_holds(drive: Drive, fixture: LockedRotor, *, rate_hz: float) -> float:
@@ -93,7 +89,8 @@ class ClampedRotor(abc.ABC):
     into the backend, which says where the clamp is and at what rate the check runs, and
     reads ``_shaft`` on each run while it is set."""
 
-    _shaft: TransducerReader | None = None
+    _shaft: TransducerReader | None = None  # read on each run while clamped
+    _transducer: TransducerReader | None = None  # opened at the first block, kept open
 
     @abc.abstractmethod
     def _clamp_equipment(self) -> Equipment:
@@ -124,11 +121,24 @@ class ClampedRotor(abc.ABC):
     @contextmanager
     def _clamped(self) -> Iterator[None]:
         assert isinstance(self, Drive)
-        with clamped(self, self._clamp_equipment(), set_clamp=self._set_clamp,
-                     rate_hz=self._check_rate_hz()) as reader:
-            self._shaft = reader
+        equipment = self._clamp_equipment()
+        if equipment.torque_transducer is None:
+            raise DriveStateError(f"the station lacks: {Capability.TORQUE_SENSOR.value}")
+        if self._transducer is None:
+            reader = TransducerReader(equipment.torque_transducer)
+            reader.open()  # DriveCommunicationError: one line naming it
+            self._transducer = reader
+        with clamped(self, equipment, self._transducer, set_clamp=self._set_clamp,
+                     rate_hz=self._check_rate_hz()):
+            self._shaft = self._transducer
             try:
                 yield
             finally:
                 self._shaft = None
                 self._released()
+
+    def _close_transducer(self) -> None:
+        """The transducer's connection closed (the backend's close calls it)."""
+        reader, self._transducer = self._transducer, None
+        if reader is not None:
+            reader.close()

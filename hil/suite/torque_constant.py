@@ -56,7 +56,7 @@ REQUIRES: tuple[Capability, ...] = (Capability.TORQUE_SENSOR, Capability.LOCKED_
 #: polled at 100 Hz ``level_s`` alone left 4 samples a level, and the shaft torque, read
 #: beside the drive's rows, a row's placement away from its level's start
 MIN_LEVEL_SAMPLES = 20
-MIN_SETTLE_SAMPLES = 2
+MIN_SETTLE_SAMPLES = 3
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)

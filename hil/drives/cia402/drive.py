@@ -414,6 +414,7 @@ class CanOpenDrive(ClampedRotor, Drive):
         """Disable (the held axes first), return the node to PRE-OPERATIONAL, stop watching
         our heartbeat (a clean end is no lost host), release the bus."""
         try:
+            self._close_transducer()
             self.held.release()
             self.disable()
             if self.link.connected:

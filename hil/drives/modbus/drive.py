@@ -249,6 +249,7 @@ class ModbusDrive(ClampedRotor, Drive):
     def close(self) -> None:
         """Disable (the held axes first), then close the connection."""
         try:
+            self._close_transducer()
             self.held.release()
             self.disable()
         finally:
