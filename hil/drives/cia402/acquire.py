@@ -17,7 +17,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from hil.drives.base import MotionEnvelope
+from hil.drives.base import MotionEnvelope, Recorder
 from hil.drives.cia402.link import CanLink
 from hil.drives.cia402.protocol import (
     CW_ENABLE_OPERATION,
@@ -426,20 +426,16 @@ def run_recorder(link: CanLink, setup: RunSetup, excitation: Excitation) -> Acqu
         The excitation does not fit the recorder (nothing moved).
     """
     st_period_s = setup.sync_period_s
-    if excitation.torque_offset_nm is not None:
-        raise DriveStateError(f"'{excitation.name}' sends a torque offset (0x60B2): the drive "
-                              "recorder plays no offset; stream it (at the SYNC rate)")
     recorder, waveform = setup.recorder_index, setup.waveform_index
     assert recorder is not None
     assert waveform is not None
+    # the planner's own question (DriveInfo.recorder), asked again of the drive's length now
+    refused = Recorder(stream_rate_hz=0.0, samples=int(link.read(recorder, 5))).refuses(
+        excitation)
+    if refused is not None:
+        raise DriveStateError(f"{refused}: stream it (at the SYNC rate)")
     divider = round(setup.recorder_rate_hz / excitation.fs_hz)
     wave = np.repeat(_raw_command(setup, excitation), divider).astype("<i4")
-    capacity = int(link.read(recorder, 5))
-    if len(excitation.command) > capacity:
-        raise DriveStateError(
-            f"'{excitation.name}' has {len(excitation.command)} samples; the drive recorder "
-            f"holds {capacity}"
-        )
     link.write(waveform, 1, wave.tobytes())
     link.write(recorder, 3, divider)
     link.write(recorder, 1, 1)
