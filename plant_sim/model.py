@@ -280,51 +280,57 @@ class Plant:
         sample) is the master's torque offset, which the firmware adds when it has
         ``feedforward``. With ``guard`` the run stops after the first period whose measured
         position or velocity leaves it: the trace is then shorter than ``command``."""
+        block = self.block(command, torque_offset, guard=guard)
+        run_kernel: Callable[..., int] = kernel.run_kernel
+        done = run_kernel(block.arrays, _KERNEL_MODE[mode], block.loop_noise, block.out,
+                          1.0 / self.fs_hz, self._substeps)
+        return self.advance(block, done)
+
+    def block(self, command: FloatArray, torque_offset: FloatArray | None = None, *,
+              guard: MotionGuard | None = None) -> KernelBlock:
+        """The kernel's inputs and outputs for ``command`` (one sample per period): this
+        axis's arrays (its state among them, advanced in place by the kernel), its noise."""
         command = np.ascontiguousarray(command, dtype=np.float64)
         n = command.shape[0]
         offset = (np.zeros(0) if torque_offset is None
                   else np.ascontiguousarray(torque_offset, dtype=np.float64))
         if offset.shape[0] not in (0, n):
             raise ValueError(f"torque_offset has {offset.shape[0]} samples, command {n}")
-        noise = self._rng.normal(0.0, 1.0, n) * self.params.torque_noise_nm
-        outputs = [np.empty(n) for _ in range(6)]
-        run_kernel: Callable[..., int] = kernel.run_kernel
-        done = run_kernel(
-            self._packed,
-            self._cogging,
-            self._kt_ripple,
-            self._state,
-            _KERNEL_MODE[mode],
-            command,
-            offset,
-            self._comp_cogging,
-            self._comp_ripple,
-            self._delay_line,
-            noise,
-            self._draw_loop_noise(n),
-            1.0 / self.fs_hz,
-            self._substeps,
-            *outputs,
-            np.zeros(0) if guard is None else guard.packed(),
-        )
-        if done < n:  # the guard stopped the run: what was run, no more
-            n, outputs = done, [out[:done] for out in outputs]
-        time_s = (self._samples_done + np.arange(n)) / self.fs_hz
-        self._samples_done += n
-        position, velocity, torque, current, actual, sensor = outputs
+        noise = np.asarray(self._rng.normal(0.0, 1.0, n) * self.params.torque_noise_nm)
+        arrays = (self._packed, self._cogging, self._kt_ripple, self._state, command, offset,
+                  self._comp_cogging, self._comp_ripple, self._delay_line, noise,
+                  np.zeros(0) if guard is None else guard.packed())
+        return KernelBlock(arrays=arrays, loop_noise=self._draw_loop_noise(n),
+                           out=np.empty((kernel.N_OUT, n)))
+
+    def advance(self, block: KernelBlock, done: int) -> PlantTrace:
+        """The trace of the ``done`` periods the kernel ran of ``block`` (the clock moved)."""
+        out = block.out[:, :done]
+        time_s = (self._samples_done + np.arange(done)) / self.fs_hz
+        self._samples_done += done
         load_torque = None
         if self.params.locked_rotor:
-            noise_sensor = self._rng.normal(0.0, 1.0, n) * self.params.load_torque_noise_nm
-            load_torque = sensor + noise_sensor
+            noise_sensor = self._rng.normal(0.0, 1.0, done) * self.params.load_torque_noise_nm
+            load_torque = out[kernel.O_LOAD_TORQUE] + noise_sensor
         return PlantTrace(
             time_s=time_s,
-            position_rad=position,
-            velocity_rad_s=velocity,
-            torque_nm=torque,
-            current_a=current,
-            torque_actual_nm=actual,
+            position_rad=out[kernel.O_POSITION],
+            velocity_rad_s=out[kernel.O_VELOCITY],
+            torque_nm=out[kernel.O_TORQUE],
+            current_a=out[kernel.O_CURRENT],
+            torque_actual_nm=out[kernel.O_TORQUE_ACTUAL],
             load_torque_nm=load_torque,
         )
+
+
+@dataclass(frozen=True, slots=True)
+class KernelBlock:
+    """One axis's arrays for a kernel call (``kernel.A_*`` order), its in-loop noise rows
+    and the output rows the kernel fills (``kernel.O_*``)."""
+
+    arrays: tuple[FloatArray, ...]
+    loop_noise: FloatArray
+    out: FloatArray
 
 
 def trace_to_recording(

@@ -99,6 +99,11 @@ class PlantParams:
     # product of inertia between its level and zenith axes
     inertia_elevation_kg_m2: float = 0.0
     inertia_product_kg_m2: float = 0.0
+    # and the stage's products of inertia of its elevation axis with the zenith and the
+    # line of sight: c(el) = level·cos(el) + vertical·sin(el) couples the two axes'
+    # accelerations (plant_sim.gimbal; no effect while the elevation stands still)
+    inertia_coupling_level_kg_m2: float = 0.0
+    inertia_coupling_vertical_kg_m2: float = 0.0
     elevation_rad: float = 0.0  # the other axis' angle (station state)
     # --- noise inside the loops (what makes two runs of one unit differ), drawn from the
     # run's seed; sizes a real unit has are LOOP_NOISE_DEFAULTS ---
