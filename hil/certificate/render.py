@@ -1,7 +1,8 @@
-"""Human-readable rendering of a certificate dictionary, and the wording every reading of it
-shares (``certificate.txt`` here, the HTML and PDF through :mod:`hil.report.view`): every
-line labelled, no Python literals, no paths of the machine that ran it, limits one-sided
-where the quantity is, each skipped protocol once with its reason."""
+"""Human-readable rendering of a certificate (:class:`hil.certificate.model.Certificate`),
+and the wording every reading of it shares (``certificate.txt`` here, the HTML and PDF
+through :mod:`hil.report.view`): every line labelled, no Python literals, no paths of the
+machine that ran it, limits one-sided where the quantity is, each skipped protocol once
+with its reason."""
 
 from __future__ import annotations
 
@@ -12,6 +13,7 @@ from datetime import datetime
 from pathlib import PureWindowsPath
 from typing import Any
 
+from hil.certificate.model import Certificate, Result, as_certificate
 from hil.gum import rounded_pair, significant
 
 NOT_AUTHORISED = "not authorised"
@@ -58,17 +60,17 @@ def when(stamp: str) -> str:
     return f"{moment:%Y-%m-%d %H:%M:%S} {zone}".strip()
 
 
-def title_of(result: Mapping[str, Any]) -> str:
+def title_of(result: Result) -> str:
     """A result's title; a certificate written before titles existed has its code name."""
-    return str(result.get("title") or result["parameter"])
+    return result.shown_title
 
 
-def limits_text(result: Mapping[str, Any]) -> str:
+def limits_text(result: Result) -> str:
     """The acceptance limits as a reader expects them: ``0.21 to 0.39``; one-sided
     (``≤ 20``) for a size by nature (``non_negative``) with a lower limit at or below zero,
     or when one limit is infinite."""
-    lower, upper = float(result["lower_limit"]), float(result["upper_limit"])
-    if result.get("non_negative") and lower <= 0:
+    lower, upper = float(result.lower_limit), float(result.upper_limit)
+    if result.non_negative and lower <= 0:
         lower = -math.inf
     if not math.isfinite(lower) and not math.isfinite(upper):
         return "none"
@@ -92,89 +94,91 @@ def protocol_messages(messages: Sequence[str]) -> list[str]:
     return seen
 
 
-def environment_text(cert: Mapping[str, Any]) -> str:
+def environment_text(cert: Certificate) -> str:
     """The environmental conditions the station declares, or that it records none."""
-    env = cert.get("environment") or {}
-    if not isinstance(env, Mapping):
-        return str(env)
+    env = cert.environment
     parts = []
-    if env.get("temperature_c") is not None:
-        parts.append(f"temperature {env['temperature_c']:g} °C")
-    if env.get("humidity_pct") is not None:
-        parts.append(f"relative humidity {env['humidity_pct']:g} %")
-    if env.get("note"):
-        parts.append(str(env["note"]))
+    if env.temperature_c is not None:
+        parts.append(f"temperature {env.temperature_c:g} °C")
+    if env.humidity_pct is not None:
+        parts.append(f"relative humidity {env.humidity_pct:g} %")
+    if env.note:
+        parts.append(env.note)
     if not parts:
         return "not recorded by the station"
     return ", ".join(parts) + " (declared by the station, not measured in this run)"
 
 
-def certificate_fields(cert: Mapping[str, Any]) -> list[tuple[str, str]]:
+def certificate_fields(document: Certificate | Mapping[str, Any]) -> list[tuple[str, str]]:
     """The ISO/IEC 17025 7.8 items of a certificate as (label, text) pairs, in reading order.
 
     Parameters
     ----------
-    cert : mapping
-        ``certificate.json`` as read (old ones without the laboratory fields too).
+    document : Certificate or mapping
+        The certificate (``certificate.json`` as read: old ones without the laboratory
+        fields too).
 
     Returns
     -------
     list of (str, str)
     """
-    unit, dates, drive = cert["unit"], cert["dates"], cert["drive"]
-    software, method, run = cert["software"], cert["method"], cert.get("run") or {}
-    lab = cert.get("laboratory") or {}
-    ran = [n for n, p in method["protocols"].items() if p["outcome"] != "SKIPPED"]
-    unit_type = str(unit.get("type", ""))
-    axis = str(unit.get("axis", ""))
+    cert = as_certificate(document)
+    unit, dates, drive, software, method = (cert.unit, cert.dates, cert.drive, cert.software,
+                                            cert.method)
+    run, lab = cert.run, cert.laboratory
+    ran = method.ran()
+    unit_type = unit.unit_type
+    axis = unit.axis
     kind = "" if not axis or axis in unit_type.lower() else f", {axis} axis"
-    simulated = (cert.get("conditions") or {}).get("simulated")
-    drive_text = (" ".join(str(drive.get(k) or "") for k in ("kind", "vendor", "model")).strip()
-                  + f", firmware {drive.get('firmware_version') or NOT_STATED}")
-    for key in ("serial", "transport"):
-        if drive.get(key):
-            drive_text += f", {key} {drive[key]}"
+    simulated = cert.conditions.simulated if cert.conditions else None
+    drive_text = (" ".join(v or "" for v in (drive.kind, drive.vendor, drive.model)).strip()
+                  + f", firmware {drive.firmware_version or NOT_STATED}")
+    for key, value in (("serial", drive.serial), ("transport", drive.transport)):
+        if value:
+            drive_text += f", {key} {value}"
     if simulated is not None:
         drive_text += f"; simulated: {yes_no(simulated)}"
-    bias = method.get("method_bias") or {}
-    station = run.get("station") or NOT_STATED
+    bias = method.method_bias
+    station = (run.station if run else None) or NOT_STATED
+    operator = (run.operator if run else None) or NOT_STATED
     fields = [
-        ("Certificate id", str(cert["certificate_id"])),
-        ("Laboratory", ", ".join(str(v) for v in (lab.get("name"), lab.get("address")) if v)
-         or NOT_STATED),
-        ("Customer", str(cert.get("customer") or NOT_STATED)),
-        ("Unit", f"serial {unit['serial']}, type {unit_type}{kind}"),
-        ("Calibration started", when(dates["calibration_started"])),
-        ("Issued", when(dates["issued"])),
-        ("Authorised by", str(cert.get("authorised_by") or NOT_AUTHORISED)),
-        ("Station and operator", f"station {station}, operator {run.get('operator') or NOT_STATED}"
-         + ("; a reference (golden) unit" if run.get("reference") else "")),
+        ("Certificate id", cert.certificate_id),
+        ("Laboratory", ", ".join(v for v in (lab.name, lab.address) if v) or NOT_STATED),
+        ("Customer", cert.customer or NOT_STATED),
+        ("Unit", f"serial {unit.serial}, type {unit_type}{kind}"),
+        ("Calibration started", when(dates.calibration_started)),
+        ("Issued", when(dates.issued)),
+        ("Authorised by", cert.authorised_by or NOT_AUTHORISED),
+        ("Station and operator", f"station {station}, operator {operator}"
+         + ("; a reference (golden) unit" if run and run.reference else "")),
         ("Environment", environment_text(cert)),
         ("Method", "gimbal-hil calibration suite: "
                    + (", ".join(PROTOCOL_TITLES.get(n, n).lower() for n in ran)
                       or "no protocol ran")),
-        ("Unit profile", f"{file_name(method['profile'])} (SHA-256 {method['profile_sha256']})"),
-        ("Method-bias map", f"{file_name(str(bias.get('file') or ''))} "
-                            f"(SHA-256 {bias.get('sha256') or NOT_STATED})"),
-        ("Software", f"gimbal-hil {software['version']}, revision "
-                     f"{software.get('git_revision') or 'unknown'}, Python "
-                     f"{software.get('python') or 'unknown'}"),
+        ("Unit profile", f"{file_name(method.profile)} (SHA-256 {method.profile_sha256})"),
+        ("Method-bias map", f"{file_name(bias.file if bias else '')} "
+                            f"(SHA-256 {(bias.sha256 if bias else '') or NOT_STATED})"),
+        ("Software", f"gimbal-hil {software.version}, revision "
+                     f"{software.git_revision or 'unknown'}, Python "
+                     f"{software.python or 'unknown'}"),
         ("Drive", drive_text),
-        ("Machine time", f"{cert['machine_time']['motion_time_s']:.1f} s of motion, "
-                         f"{cert['machine_time']['wall_time_s']:.1f} s wall"),
-        ("Accreditation", str(cert["accreditation"])),
+        ("Machine time", f"{cert.machine_time.motion_time_s:.1f} s of motion, "
+                         f"{cert.machine_time.wall_time_s:.1f} s wall"),
+        ("Accreditation", cert.accreditation),
     ]
     return fields
 
 
-def render_text(cert: dict[str, Any]) -> str:
+def render_text(document: Certificate | Mapping[str, Any]) -> str:
+    """``certificate.txt``: the certificate as plain text."""
+    cert = as_certificate(document)
     fields = certificate_fields(cert)
     width = max(len(label) for label, _ in fields)
-    authorised = cert.get("authorised_by")
+    authorised = cert.authorised_by
     lines = [
-        cert["title"],
-        "=" * len(cert["title"]),
-        f"OUTCOME: {cert['outcome']}" + ("" if authorised else f" ({NOT_AUTHORISED})"),
+        cert.title,
+        "=" * len(cert.title),
+        f"OUTCOME: {cert.outcome}" + ("" if authorised else f" ({NOT_AUTHORISED})"),
         "",
         *(f"{label:<{width}} : {text}" for label, text in fields),
         "",
@@ -184,34 +188,33 @@ def render_text(cert: dict[str, Any]) -> str:
         f"{'result':<40}{'value':>13}{'U':>11} {'(k)':<7}{'unit':<11}{'limits':<22}"
         f"{'outcome':<10}code name",
     ]
-    for r in cert["results"]:
-        value, expanded = rounded_pair(r["value"], r["expanded_uncertainty"])
+    for r in cert.results:
+        value, expanded = rounded_pair(r.value, r.expanded_uncertainty)
         lines.append(
-            f"{title_of(r):<40}{value:>13}{expanded:>11} ({r['coverage_factor']:.2f}) "
-            f"{r['unit']:<11}{limits_text(r):<22}{r['outcome']:<10}{r['parameter']}"
+            f"{title_of(r):<40}{value:>13}{expanded:>11} ({r.coverage_factor:.2f}) "
+            f"{r.unit:<11}{limits_text(r):<22}{r.outcome:<10}{r.parameter}"
         )
-    missing = cert.get("not_measured", [])
+    missing = cert.not_measured
     if missing:
         lines += ["", "Not measured (declared by the profile):"]
-        lines += [f"  {m['parameter']:<38}{'required' if m['required'] else 'optional':<10}"
-                  f"{m['protocol']}: {protocol_messages([m['reason']])[0]}" for m in missing]
-    lines += _budgets(cert["results"])
+        lines += [f"  {m.parameter:<38}{'required' if m.required else 'optional':<10}"
+                  f"{m.protocol}: {protocol_messages([m.reason])[0]}" for m in missing]
+    lines += _budgets(cert.results)
     lines += ["", "Protocols:"]
-    for name, p in cert["method"]["protocols"].items():
-        lines.append(f"  {name:<24}{p['outcome']:<14}motion {p['motion_time_s']:.1f} s")
-        lines += [f"      {message}" for message in protocol_messages(p["messages"])]
+    for name, p in cert.method.protocols.items():
+        lines.append(f"  {name:<24}{p.outcome:<14}motion {p.motion_time_s:.1f} s")
+        lines += [f"      {message}" for message in protocol_messages(p.messages)]
     lines += ["", "Raw data (SHA-256):"]
-    lines += [f"  {f['file']}  {f['sha256']}"
-              + (f"  (held: {f['held_axes']})" if f.get("held_axes") else "")
-              for f in cert["raw_data"]]
-    if cert["artifacts"]:
+    lines += [f"  {f.file}  {f.sha256}" + (f"  (held: {f.held_axes})" if f.held_axes else "")
+              for f in cert.raw_data]
+    if cert.artifacts:
         lines += ["", "Derived files (SHA-256):"]
-        lines += [f"  {a['file']}  {a['sha256']}  {a['description']}" for a in cert["artifacts"]]
+        lines += [f"  {a.file}  {a.sha256}  {a.description}" for a in cert.artifacts]
     lines += [
         "",
-        f"Decision rule: {cert['decision_rule']}",
+        f"Decision rule: {cert.decision_rule}",
         "",
-        f"OUTCOME: {cert['outcome']}. {cert['conformity']}",
+        f"OUTCOME: {cert.outcome}. {cert.conformity}",
         f"Authorised by: {authorised or NOT_AUTHORISED}",
         "",
     ]
@@ -223,30 +226,30 @@ def with_unit(text: str, unit: str) -> str:
     return f"{text} {unit}" if unit else text
 
 
-def _budgets(results: list[dict[str, Any]]) -> list[str]:
+def _budgets(results: Sequence[Result]) -> list[str]:
     """Per result its uncertainty budget (GUM 8): each input's u(xᵢ), sensitivity cᵢ,
     contribution |cᵢ|·u(xᵢ) in the result's unit and its share of u²."""
     lines = ["", "Uncertainty budgets (standard uncertainties, k = 1; share of u²):"]
     for r in results:
-        u = r["standard_uncertainty"]
-        value, expanded = rounded_pair(r["value"], r["expanded_uncertainty"])
-        lines.append(f"  {title_of(r)} ({r['parameter']}): "
-                     f"{with_unit(f'{value} ± {expanded}', r['unit'])} "
-                     f"(k = {r['coverage_factor']:.2f}), "
-                     f"u = {with_unit(significant(u), r['unit'])}")
-        if r.get("description"):
-            lines.append(f"    {r['description']}")
-        for line in r.get("budget", []):
-            share = (line["contribution"] / u) ** 2 if u else 0.0
+        u = r.standard_uncertainty
+        value, expanded = rounded_pair(r.value, r.expanded_uncertainty)
+        lines.append(f"  {title_of(r)} ({r.parameter}): "
+                     f"{with_unit(f'{value} ± {expanded}', r.unit)} "
+                     f"(k = {r.coverage_factor:.2f}), "
+                     f"u = {with_unit(significant(u), r.unit)}")
+        if r.description:
+            lines.append(f"    {r.description}")
+        for line in r.budget:
+            share = (line.contribution / u) ** 2 if u else 0.0
             lines.append(
-                f"    {line['type']}  u(x) = {significant(line['standard_uncertainty']):<9}"
-                f"{line['unit']:<11} c = {line['sensitivity']:<9.3g} "
-                f"→ {significant(line['contribution']):<9}{100 * share:>4.0f} %  "
-                f"{line['component']}"
+                f"    {line.kind}  u(x) = {significant(line.standard_uncertainty):<9}"
+                f"{line.unit:<11} c = {line.sensitivity:<9.3g} "
+                f"→ {significant(line.contribution):<9}{100 * share:>4.0f} %  "
+                f"{line.component}"
             )
-        validation = r.get("validation")
+        validation = r.validation
         if validation:
-            note = f": {validation['note']}" if validation.get("note") else ""
-            lines.append(f"    validated: ±U held the truth for {100 * validation['coverage']:.0f} "
-                         f"% of {validation['units']} simulated units{note}")
+            note = f": {validation.note}" if validation.note else ""
+            lines.append(f"    validated: ±U held the truth for {100 * validation.coverage:.0f} "
+                         f"% of {validation.units} simulated units{note}")
     return lines

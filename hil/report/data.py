@@ -12,6 +12,8 @@ from typing import Any, TypeVar
 import numpy as np
 
 from hil.calibration import CalibrationRun
+from hil.certificate.build import result_record
+from hil.certificate.model import Certificate, Result, as_certificate
 from hil.details import Details, DetailsError
 from hil.recording import Recording, read_recording
 from hil.suite.catalogue import CATALOGUE
@@ -34,21 +36,21 @@ class ProtocolData:
     details_problem : str
         Why ``details`` is ``None`` (empty when it is not).
     results : mapping
-        Its judged results by parameter, as the certificate writes them.
+        Its judged results by parameter (:class:`hil.certificate.model.Result`).
     recordings : mapping
         Excitation name → raw recording file (complete recordings only).
     """
 
     name: str
     details: Details | None
-    results: Mapping[str, Mapping[str, Any]]
+    results: Mapping[str, Result]
     recordings: Mapping[str, Path]
     details_problem: str = ""
 
     def value(self, parameter: str) -> float | None:
         """A result's value, or ``None`` when the run did not record it."""
         found = self.results.get(parameter)
-        return None if found is None else float(found["value"])
+        return None if found is None else float(found.value)
 
     def details_as(self, kind: type[D]) -> D | None:
         """The details, as the protocol's declared type; ``None`` when the run recorded
@@ -77,13 +79,15 @@ class ProtocolData:
                 for name, path in self.recordings.items() if name.startswith(prefix)]
 
 
-def from_certificate(cert: Mapping[str, Any], unit_dir: Path) -> list[ProtocolData]:
+def from_certificate(document: Certificate | Mapping[str, Any], unit_dir: Path
+                     ) -> list[ProtocolData]:
     """The protocols of a written certificate that ran (not skipped), in run order.
 
     Parameters
     ----------
-    cert : mapping
-        ``certificate.json`` as read.
+    document : Certificate or mapping
+        The certificate (:func:`hil.certificate.model.read_certificate`; a parsed
+        ``certificate.json`` is read here).
     unit_dir : Path
         The unit's directory (the recordings' paths are relative to it).
 
@@ -91,18 +95,19 @@ def from_certificate(cert: Mapping[str, Any], unit_dir: Path) -> list[ProtocolDa
     -------
     list of ProtocolData
     """
+    cert = as_certificate(document)
     out = []
-    for name, protocol in cert["method"]["protocols"].items():
-        if protocol["outcome"] == "SKIPPED":
+    for name, protocol in cert.method.protocols.items():
+        if protocol.outcome == "SKIPPED":
             continue
-        details, problem = _read_details(name, cert["method"]["details"].get(name))
+        details, problem = _read_details(name, cert.method.details.get(name))
         out.append(ProtocolData(
             name=name,
             details=details,
             details_problem=problem,
-            results={r["parameter"]: r for r in cert["results"] if r["protocol"] == name},
-            recordings={**{f["excitation"]: unit_dir / f["file"] for f in cert["raw_data"]
-                           if f["protocol"] == name and f["complete"]},
+            results={r.parameter: r for r in cert.results_of(name)},
+            recordings={**{f.excitation: unit_dir / f.file for f in cert.raw_data
+                           if f.protocol == name and f.complete},
                         **_analysed_elsewhere(details, unit_dir)},
         ))
     return out
@@ -146,7 +151,8 @@ def from_run(run: CalibrationRun, name: str) -> ProtocolData:
     return ProtocolData(
         name=name,
         details=run.details.get(name),
-        results={m.spec.name: m.as_dict() for m in run.measurements if m.protocol == name},
+        results={m.spec.name: result_record(m) for m in run.measurements
+                 if m.protocol == name},
         recordings={**{f.excitation: f.path for f in run.raw_files
                        if f.protocol == name and f.complete},
                     **_analysed_elsewhere(run.details.get(name), run.unit_dir)},

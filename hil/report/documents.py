@@ -12,6 +12,7 @@ from pathlib import Path
 from typing import Any
 
 from hil.certificate.integrity import verify_certificate
+from hil.certificate.model import Certificate, read_certificate
 from hil.errors import InputError
 from hil.parallel import forked_bytes
 from hil.recording import write_atomic
@@ -50,12 +51,7 @@ def certificate_file(target: Path) -> Path:
     path = target / "certificate.json" if target.is_dir() else target
     if not path.is_file():
         raise InputError("no certificate.json here", source=str(target))
-    try:
-        schema = json.loads(path.read_bytes()).get("schema", "")
-    except (json.JSONDecodeError, UnicodeDecodeError, AttributeError) as exc:
-        raise InputError(f"not a JSON object ({exc})", source=str(path)) from None
-    if not str(schema).startswith("gimbal-hil/certificate/"):
-        raise InputError(f"not a gimbal-hil certificate (schema {schema!r})", source=str(path))
+    read_certificate(path)  # a gimbal-hil certificate, every key as its schema states
     verification = verify_certificate(path)  # the plots are drawn from its recordings
     if verification.refusals:
         raise InputError(verification.refusal(), source=str(path))
@@ -80,7 +76,7 @@ def write_documents(certificate_path: Path) -> list[str]:
     """
     unit_dir = certificate_path.parent
     record = certificate_path.read_bytes()
-    cert = json.loads(record)
+    cert = Certificate.from_json(json.loads(record), source=str(certificate_path))
     problems: list[str] = []
     view = certificate_view(cert)
     pngs = _plots(cert, unit_dir, view, problems)
@@ -90,7 +86,7 @@ def write_documents(certificate_path: Path) -> list[str]:
     except Exception as exc:  # boundary: the JSON record must survive any rendering fault
         problems.append(f"certificate.html not written: {type(exc).__name__}: {exc}")
     try:
-        issued = datetime.fromisoformat(cert["dates"]["issued"])
+        issued = datetime.fromisoformat(cert.dates.issued)
         pdf = render_pdf(view, certificate_json=record, plots=pngs, issued=issued)
         write_atomic(unit_dir / "certificate.pdf", pdf)
     except ImportError:
@@ -103,7 +99,7 @@ def write_documents(certificate_path: Path) -> list[str]:
     return problems
 
 
-def _plots(cert: dict[str, Any], unit_dir: Path, view: dict[str, Any], problems: list[str]
+def _plots(cert: Certificate, unit_dir: Path, view: dict[str, Any], problems: list[str]
            ) -> dict[str, bytes]:
     """Each protocol's plot as PNG (one raster for both documents: an SVG of thousands of
     points costs more to make than the rest of the document); sets ``plot`` and

@@ -7,6 +7,7 @@ from __future__ import annotations
 from collections.abc import Mapping
 from typing import Any
 
+from hil.certificate.model import Certificate, ProtocolRecord, Result, as_certificate
 from hil.certificate.render import (
     NOT_AUTHORISED,
     PROTOCOL_TITLES,
@@ -28,13 +29,14 @@ BANNER: dict[str, tuple[str, str]] = {
 }
 
 
-def certificate_view(cert: Mapping[str, Any]) -> dict[str, Any]:
+def certificate_view(document: Certificate | Mapping[str, Any]) -> dict[str, Any]:
     """The certificate's content for reading, in display order.
 
     Parameters
     ----------
-    cert : mapping
-        ``certificate.json`` as read (or as :func:`hil.certificate.build_certificate` made it).
+    document : Certificate or mapping
+        The certificate (:func:`hil.certificate.model.read_certificate`, or
+        ``certificate.json`` as parsed, read here).
 
     Returns
     -------
@@ -46,65 +48,66 @@ def certificate_view(cert: Mapping[str, Any]) -> dict[str, Any]:
         ``protocols``, ``raw_data``, ``artifacts``, ``decision_rule``, ``conformity``,
         ``accreditation``; all text.
     """
-    outcome = str(cert["outcome"])
+    cert = as_certificate(document)
+    outcome = cert.outcome
     word, line = BANNER.get(outcome, (outcome, ""))
-    if cert.get("aborted"):
+    if cert.aborted:
         line = "the run was ABORTED: " + line
-    results = [_result(r) for r in cert["results"]]
+    results = [_result(r) for r in cert.results]
     return {
-        "id": cert["certificate_id"],
-        "title": cert["title"],
+        "id": cert.certificate_id,
+        "title": cert.title,
         "outcome": outcome,
         "passed": outcome in ("PASS", "MARGINAL"),
         "banner": {"word": word, "line": line},
-        "authorised": bool(cert.get("authorised_by")),
-        "authorised_by": str(cert.get("authorised_by") or NOT_AUTHORISED),
+        "authorised": bool(cert.authorised_by),
+        "authorised_by": cert.authorised_by or NOT_AUTHORISED,
         "fields": [list(pair) for pair in certificate_fields(cert)],
         "results": results,
         "not_measured": not_measured(cert),
-        "groups": _groups(results, cert["method"]["protocols"]),
-        "budgets": [_budget(r) for r in cert["results"]],
-        "protocols": [_protocol(name, p) for name, p in cert["method"]["protocols"].items()],
+        "groups": _groups(results, cert.method.protocols),
+        "budgets": [_budget(r) for r in cert.results],
+        "protocols": [_protocol(name, p) for name, p in cert.method.protocols.items()],
         # where a gimbal's other axes stood, held by their drives, beside each recording
-        "raw_data": [{"file": f["file"] + (f" (held: {f['held_axes']})"
-                                           if f.get("held_axes") else ""),
-                      "sha256": f["sha256"]} for f in cert["raw_data"]],
-        "artifacts": [{"file": a["file"], "sha256": a["sha256"], "description": a["description"]}
-                      for a in cert["artifacts"]],
-        "decision_rule": cert["decision_rule"],
-        "conformity": cert["conformity"],
-        "accreditation": cert["accreditation"],
+        "raw_data": [{"file": f.file + (f" (held: {f.held_axes})" if f.held_axes else ""),
+                      "sha256": f.sha256} for f in cert.raw_data],
+        "artifacts": [{"file": a.file, "sha256": a.sha256, "description": a.description}
+                      for a in cert.artifacts],
+        "decision_rule": cert.decision_rule,
+        "conformity": cert.conformity,
+        "accreditation": cert.accreditation,
     }
 
 
-def not_measured(cert: Mapping[str, Any]) -> list[dict[str, str]]:
+def not_measured(cert: Certificate) -> list[dict[str, str]]:
     """The declared results the run has no value of (``certificate.json``'s
     ``not_measured``; none in certificates written before it)."""
-    return [{"parameter": m["parameter"],
-             "protocol": PROTOCOL_TITLES.get(m["protocol"], m["protocol"]),
-             "required": "required" if m["required"] else "optional",
-             "reason": protocol_messages([m["reason"]])[0]}
-            for m in cert.get("not_measured", [])]
+    return [{"parameter": m.parameter,
+             "protocol": PROTOCOL_TITLES.get(m.protocol, m.protocol),
+             "required": "required" if m.required else "optional",
+             "reason": protocol_messages([m.reason])[0]}
+            for m in cert.not_measured]
 
 
-def _result(r: Mapping[str, Any]) -> dict[str, str]:
-    value, expanded = rounded_pair(r["value"], r["expanded_uncertainty"])
+def _result(r: Result) -> dict[str, str]:
+    value, expanded = rounded_pair(r.value, r.expanded_uncertainty)
     return {
-        "parameter": r["parameter"],
+        "parameter": r.parameter,
         "title": title_of(r),
-        "description": str(r.get("description") or ""),
-        "protocol": str(r.get("protocol") or ""),
+        "description": r.description,
+        "protocol": r.protocol,
         "value": value,
         "U": expanded,
-        "k": f"{r['coverage_factor']:.2f}",
-        "unit": r["unit"],
-        "nominal": f"{r['nominal']:.4g}" if r.get("nominal") is not None else "—",
+        "k": f"{r.coverage_factor:.2f}",
+        "unit": r.unit,
+        "nominal": f"{r.nominal:.4g}" if r.nominal is not None else "—",
         "limits": limits_text(r),
-        "outcome": r["outcome"],
+        "outcome": r.outcome,
     }
 
 
-def _groups(results: list[dict[str, str]], protocols: Mapping[str, Any]) -> list[dict[str, Any]]:
+def _groups(results: list[dict[str, str]], protocols: Mapping[str, ProtocolRecord]
+            ) -> list[dict[str, Any]]:
     """The results by protocol, in the order the protocols ran."""
     order = list(protocols)
     names = order + sorted({r["protocol"] for r in results} - set(order))
@@ -112,41 +115,42 @@ def _groups(results: list[dict[str, str]], protocols: Mapping[str, Any]) -> list
     for name in names:
         rows = [r for r in results if r["protocol"] == name]
         if rows:
+            record = protocols.get(name)
             groups.append({"name": name, "title": PROTOCOL_TITLES.get(name, name),
-                           "outcome": str((protocols.get(name) or {}).get("outcome", "")),
+                           "outcome": record.outcome if record else "",
                            "results": rows})
     return groups
 
 
-def _budget(r: Mapping[str, Any]) -> dict[str, Any]:
-    u = float(r["standard_uncertainty"])
-    value, expanded = rounded_pair(r["value"], r["expanded_uncertainty"])
+def _budget(r: Result) -> dict[str, Any]:
+    u = float(r.standard_uncertainty)
+    value, expanded = rounded_pair(r.value, r.expanded_uncertainty)
     lines = []
-    for line in r.get("budget", []):
-        share = (line["contribution"] / u) ** 2 if u else 0.0
+    for line in r.budget:
+        share = (line.contribution / u) ** 2 if u else 0.0
         lines.append({
-            "component": line["component"],
-            "type": line["type"],
-            "u": with_unit(significant(line["standard_uncertainty"]), line["unit"]),
-            "c": f"{line['sensitivity']:.3g}",
-            "contribution": significant(line["contribution"]),
+            "component": line.component,
+            "type": line.kind,
+            "u": with_unit(significant(line.standard_uncertainty), line.unit),
+            "c": f"{line.sensitivity:.3g}",
+            "contribution": significant(line.contribution),
             "share": f"{100 * share:.0f} %",
         })
     return {
-        "parameter": r["parameter"],
+        "parameter": r.parameter,
         "title": title_of(r),
-        "description": str(r.get("description") or ""),
-        "summary": f"{with_unit(f'{value} ± {expanded}', r['unit'])} "
-                   f"(k = {r['coverage_factor']:.2f}); u = {with_unit(significant(u), r['unit'])}",
+        "description": r.description,
+        "summary": f"{with_unit(f'{value} ± {expanded}', r.unit)} "
+                   f"(k = {r.coverage_factor:.2f}); u = {with_unit(significant(u), r.unit)}",
         "lines": lines,
     }
 
 
-def _protocol(name: str, p: Mapping[str, Any]) -> dict[str, Any]:
+def _protocol(name: str, p: ProtocolRecord) -> dict[str, Any]:
     return {
         "name": name,
         "title": PROTOCOL_TITLES.get(name, name),
-        "outcome": p["outcome"],
-        "motion": f"{p['motion_time_s']:.1f} s",
-        "messages": protocol_messages(p["messages"]),
+        "outcome": p.outcome,
+        "motion": f"{p.motion_time_s:.1f} s",
+        "messages": protocol_messages(p.messages),
     }
