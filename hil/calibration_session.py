@@ -64,6 +64,7 @@ CERTIFICATE_KEY = pytest.StashKey[Path]()
 DOCUMENTS_KEY = pytest.StashKey[list[str]]()
 STORE_MESSAGE_KEY = pytest.StashKey[str]()
 STATION_KEY = pytest.StashKey[StationIdentity]()
+GIMBAL_AXES_KEY = pytest.StashKey[dict[str, UnitProfile]]()
 REFUSALS_KEY = pytest.StashKey[list[HilError]]()
 STORAGE_FAILURE_KEY = pytest.StashKey[str]()  # the certificate could not be written
 PROTOCOL_MARK = "protocol"
@@ -99,6 +100,8 @@ def start(config: pytest.Config) -> None:
             check_protocol_settings(profile, _planning_info(profile))
         _check_resources(config, profile)
         _check_run_options(config, profile, kind)
+        config.stash[GIMBAL_AXES_KEY] = _gimbal_axes(config.getoption("--gimbal-axis"),
+                                                     profile=profile)
         station = config.getoption("--station")
         config.stash[STATION_KEY] = (
             load_station_identity(station) if station is not None else StationIdentity()
@@ -109,6 +112,30 @@ def start(config: pytest.Config) -> None:
         _lock_unit_folder(config, axis=profile.axis)
     except HilError as exc:
         raise pytest.UsageError(str(exc)) from None
+
+
+def _gimbal_axes(items: list[str], *, profile: UnitProfile) -> dict[str, UnitProfile]:
+    """The gimbal's other axes (``--gimbal-axis NAME=PROFILE``), each profile loaded.
+
+    Raises
+    ------
+    InputError
+        An item without ``=``, the axis under test or an axis named twice; a profile that
+        calibrates another axis than its name.
+    """
+    axes: dict[str, UnitProfile] = {}
+    for item in items:
+        name, sep, path = item.partition("=")
+        if not sep or not name or not path:
+            raise InputError(f"--gimbal-axis {item!r}: NAME=PROFILE expected")
+        if name == profile.axis or name in axes:
+            raise InputError(f"--gimbal-axis {item!r}: the '{name}' axis is named twice")
+        sibling = load_profile(path)
+        if sibling.axis != name:
+            raise InputError(f"--gimbal-axis {item!r}: the profile calibrates the "
+                             f"'{sibling.axis}' axis", source=sibling.source)
+        axes[name] = sibling
+    return axes
 
 
 def _check_run_options(config: pytest.Config, profile: UnitProfile, kind: str) -> None:
@@ -283,6 +310,7 @@ def drive_connection(
         unit_serial=calibration.unit_serial,
         station=pytestconfig.getoption("--station"),
         seed=pytestconfig.getoption("--seed"),
+        gimbal_axes=pytestconfig.stash.get(GIMBAL_AXES_KEY, {}),
     ) as drive:
         calibration.drive_info = drive.info
         yield drive

@@ -54,6 +54,15 @@ def pytest_addoption(parser: pytest.Parser) -> None:
     )
     group.addoption("--seed", default=0, type=int, help="simulator seed (sim and emulators)")
     group.addoption(
+        "--gimbal-axis",
+        action="append",
+        default=[],
+        metavar="NAME=PROFILE",
+        help="another axis of this unit's gimbal and its profile (calibrate --gimbal passes "
+        "each); with --drive sim it is simulated with this axis, coupled, held by its own "
+        "drive (default: none, a one-axis unit)",
+    )
+    group.addoption(
         "--method-bias",
         default=None,
         help="method-bias map (TOML) the results are corrected with; 'off' for none "

@@ -66,6 +66,10 @@ def test_a_gimbal_is_one_serial_one_certificate_one_verdict(tmp_path: Path) -> N
         assert own["unit"]["axis"] == axis["axis"]
         assert {r["parameter"] for r in axis["results"]} == {
             r["parameter"] for r in own["results"]}
+        # one two-axis plant on the simulator: the other axis held by its own drive
+        other = "elevation" if axis["axis"] == "azimuth" else "azimuth"
+        assert {entry["held_axes"] for entry in own["raw_data"]} == {
+            f"{other} (simulated, held by its drive) at +0.0000 rad"}
     page = (folder / "gimbal-certificate.html").read_text(encoding="utf-8")
     assert "Axis elevation: <span" in page
     assert "azimuth/GMB-0042/certificate.pdf" in page

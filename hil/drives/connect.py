@@ -3,14 +3,21 @@ station file; every kind is left disabled and closed on leaving."""
 
 from __future__ import annotations
 
-from collections.abc import Iterator
+from collections.abc import Iterator, Mapping
 from contextlib import contextmanager
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from hil.drives.base import Drive
 from hil.drives.kinds import DriveKind, drive_kind
 from hil.errors import ProfileError
 from hil.profile import UnitProfile
+
+if TYPE_CHECKING:
+    from hil.drives.sim import GimbalPartner
+
+#: a gimbal's axes the simulator couples: the outer carries the inner
+OUTER_AXIS, INNER_AXIS = "azimuth", "elevation"
 
 
 @contextmanager
@@ -21,9 +28,13 @@ def open_drive(
     unit_serial: str,
     station: Path | None = None,
     seed: int = 0,
+    gimbal_axes: Mapping[str, UnitProfile] | None = None,
 ) -> Iterator[Drive]:
     """Open the drive named by ``kind``; on leaving, the drive is quick-stopped on error
     and always disabled and closed. Emulator kinds start (and stop) their emulator.
+    ``gimbal_axes`` (name → profile) are the unit's other axes: the simulator simulates an
+    azimuth and an elevation as one coupled gimbal, the other axis held by its drive (the
+    emulators take theirs from the station file).
     """
     opened = drive_kind(kind)  # an unknown kind: one line naming the known ones
     if opened.opens == "simulator":
@@ -38,6 +49,7 @@ def open_drive(
             fs_hz=profile.sample_rate_hz,
             seed=seed,
             serial=unit_serial,
+            partner=_gimbal_partner(profile, gimbal_axes or {}),
         ) as drive:
             yield drive
         return
@@ -45,6 +57,25 @@ def open_drive(
         opened, profile=profile, unit_serial=unit_serial, station=station, seed=seed
     ) as drive:
         yield drive
+
+
+def _gimbal_partner(profile: UnitProfile,
+                    others: Mapping[str, UnitProfile]) -> GimbalPartner | None:
+    """The other axis of an azimuth-over-elevation gimbal, to simulate with ``profile``'s
+    (``None`` for a one-axis unit, or a gimbal of other axes: each simulated alone).
+    The held elevation starts where the azimuth's plant parks it; a held azimuth at 0."""
+    from hil.drives.sim import GimbalPartner
+
+    pair = {OUTER_AXIS: INNER_AXIS, INNER_AXIS: OUTER_AXIS}
+    name = pair.get(profile.axis)
+    other = others.get(name) if name is not None else None
+    if other is None or other.plant is None:
+        return None
+    outer = other if name == OUTER_AXIS else profile
+    assert outer.plant is not None
+    return GimbalPartner(name=other.axis, plant=other.plant, firmware=other.firmware,
+                         outer=name == OUTER_AXIS,
+                         at_rad=outer.plant.elevation_rad if name == INNER_AXIS else 0.0)
 
 
 @contextmanager

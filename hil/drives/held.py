@@ -4,7 +4,10 @@ releasing them first on leaving)."""
 
 from __future__ import annotations
 
+import math
 from typing import Generic, Protocol, TypeVar
+
+import numpy as np
 
 
 class Held(Protocol):
@@ -51,3 +54,21 @@ class HeldAxes(Generic[H]):
         """Disable each (each logs what it cannot confirm)."""
         for axis in self.axes.values():
             axis.disable()
+
+
+def trapezoid_rad(start_rad: float, end_rad: float, *, speed_rad_s: float,
+                  accel_rad_s2: float, step_s: float) -> np.ndarray:
+    """Positions every ``step_s`` of a move from ``start_rad`` to ``end_rad`` at most at
+    ``speed_rad_s``, accelerating and braking at ``accel_rad_s2`` (the last one the end)."""
+    distance = abs(end_rad - start_rad)
+    top = min(speed_rad_s, math.sqrt(distance * accel_rad_s2))
+    ramp_s = top / accel_rad_s2
+    cruise_s = distance / top - ramp_s if top > 0 else 0.0
+    total_s = 2 * ramp_s + cruise_s
+    t = np.append(np.arange(1, max(1, math.ceil(total_s / step_s))) * step_s, total_s)
+    up = 0.5 * accel_rad_s2 * np.minimum(t, ramp_s) ** 2
+    flat = top * np.clip(t - ramp_s, 0.0, cruise_s)
+    down = np.clip(t - ramp_s - cruise_s, 0.0, ramp_s)
+    travelled = up + flat + top * down - 0.5 * accel_rad_s2 * down**2
+    sign = math.copysign(1.0, end_rad - start_rad)
+    return np.asarray(start_rad + sign * np.minimum(travelled, distance), dtype=np.float64)

@@ -6,6 +6,7 @@ import contextlib
 import logging
 import math
 from collections.abc import Iterator
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -19,17 +20,36 @@ from hil.drives.base import (
     check_limits,
     interrupted,
 )
+from hil.drives.held import trapezoid_rad
 from hil.errors import DriveStateError
 from hil.motion import CompensationTable, Excitation, Limits, Mode, PositionHarmonic
 from hil.recording import Recording
 from plant_sim.firmware import Firmware
-from plant_sim.model import MotionGuard, Plant, trace_to_recording
+from plant_sim.gimbal import AxisBlock, GimbalPlant
+from plant_sim.model import MotionGuard, Plant, PlantTrace, trace_to_recording
 from plant_sim.params import Harmonic, PlantParams
 
 log = logging.getLogger(__name__)
 
 QUICK_STOP_DECEL_RAD_S2 = 20.0  # the simulated drive's quick-stop ramp (as the emulators')
 QUICK_STOP_HOLD_S = 0.05  # held at zero velocity after the ramp
+HOLD_SPEED_RAD_S = 1.0  # how the simulated station moves a held axis (as the emulators')
+HOLD_ACCEL_RAD_S2 = 4.0
+HOLD_SETTLE_S = 0.2  # standing after a move, before the next run
+PARTNER_SEED = 0x6A  # the held axis's plant seeds its noise with seed + (this << 32)
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class GimbalPartner:
+    """The gimbal's other axis, simulated with the axis under test (one two-axis plant) and
+    held by its own drive in position control: ``outer`` when it carries the axis under
+    test (it is the azimuth), ``at_rad`` where its drive holds it from the start."""
+
+    name: str
+    plant: PlantParams
+    firmware: Firmware
+    outer: bool
+    at_rad: float
 
 
 class SimDrive(Drive):
@@ -46,12 +66,24 @@ class SimDrive(Drive):
         serial: str = "SIM-0001",
         has_torque_sensor: bool = True,
         exact_torque_hold: bool = True,
+        partner: GimbalPartner | None = None,
     ) -> None:
         if exact_torque_hold and not plant.exact_torque_hold:
             plant = plant.with_changes(exact_torque_hold=True)
         self._plant_params = plant
         firmware = firmware or Firmware()
         self._plant = Plant(plant, fs_hz=fs_hz, seed=seed, firmware=firmware)
+        self._partner = partner
+        self._gimbal: GimbalPlant | None = None
+        if partner is not None:
+            held = Plant(partner.plant.with_changes(exact_torque_hold=exact_torque_hold),
+                         fs_hz=fs_hz, seed=seed + (PARTNER_SEED << 32),
+                         firmware=partner.firmware, initial_position_rad=partner.at_rad)
+            self._held_plant = held
+            self._hold_rad = partner.at_rad
+            self._gimbal = (GimbalPlant(held, self._plant) if partner.outer
+                            else GimbalPlant(self._plant, held))
+        moves_elevation = partner is None or partner.name == "elevation"
         self._state = DriveState.DISABLED
         self._envelope = MotionEnvelope.of(limits)
         self._info = DriveInfo(
@@ -63,7 +95,8 @@ class SimDrive(Drive):
             limits=limits,
             modes=(Mode.TORQUE, Mode.VELOCITY, Mode.POSITION),
             max_sample_rate_hz=fs_hz,
-            capabilities=frozenset({Capability.ELEVATION_AXIS, Capability.COMPENSATION_TABLE}
+            capabilities=frozenset({Capability.COMPENSATION_TABLE}
+                                   | ({Capability.ELEVATION_AXIS} if moves_elevation else set())
                                    | ({Capability.TORQUE_SENSOR, Capability.LOCKED_ROTOR}
                                       if has_torque_sensor else set())),
             transport="in-process",
@@ -90,8 +123,38 @@ class SimDrive(Drive):
             self._plant.set_locked_rotor(False)
 
     def set_elevation(self, elevation_rad: float) -> None:
-        """Put the station's other (elevation) axis at ``elevation_rad`` (simulated)."""
-        self._plant.set_elevation(elevation_rad)
+        """Put the station's elevation axis at ``elevation_rad``: with the gimbal's
+        elevation simulated beside this axis, its drive moves it there (a trapezoid at
+        :data:`HOLD_SPEED_RAD_S`, :data:`HOLD_ACCEL_RAD_S2`, then :data:`HOLD_SETTLE_S`
+        standing) while this axis holds its position; else the plant's parameter is set.
+
+        Raises
+        ------
+        DriveStateError
+            This axis is the gimbal's elevation (no other elevation to move).
+        """
+        if self._partner is None:
+            self._plant.set_elevation(elevation_rad)
+            return
+        if self._partner.name != "elevation":
+            raise self._without(Capability.ELEVATION_AXIS)
+        fs = self._plant.fs_hz
+        path = trapezoid_rad(self._held_plant.position_rad, elevation_rad,
+                             speed_rad_s=HOLD_SPEED_RAD_S, accel_rad_s2=HOLD_ACCEL_RAD_S2,
+                             step_s=1.0 / fs)
+        path = np.concatenate([path, np.full(math.ceil(HOLD_SETTLE_S * fs), elevation_rad)])
+        here = np.full(path.shape, self._plant.position_rad)
+        self._step_gimbal(AxisBlock(mode=Mode.POSITION, command=here), held_command=path)
+        self._hold_rad = elevation_rad
+        log.info("sim: elevation moved to %+.4f rad", self._held_plant.position_rad)
+
+    @property
+    def held_text(self) -> str:
+        """``elevation (simulated) at +0.6000 rad``: where the gimbal's other axis stands."""
+        if self._partner is None:
+            return ""
+        return (f"{self._partner.name} (simulated, held by its drive) at "
+                f"{self._held_plant.position_rad:+.4f} rad")
 
     def load_compensation(self, table: CompensationTable | None) -> None:
         """Load (or clear) the drive's cogging compensation table."""
@@ -138,8 +201,9 @@ class SimDrive(Drive):
                             position_max_rad=envelope.position_max_rad,
                             velocity_max_rad_s=envelope.velocity_rad_s)
         try:
-            trace = self._plant.run(excitation.mode, excitation.command,
-                                    excitation.torque_offset_nm, guard=guard)
+            trace = self._advance(AxisBlock(mode=excitation.mode, command=excitation.command,
+                                            torque_offset=excitation.torque_offset_nm,
+                                            guard=guard))
         except KeyboardInterrupt as stop:
             # the kernel runs a whole excitation in one numba call: a signal is handled
             # after it returns, so a stop lands between excitations, with no rows to keep
@@ -150,6 +214,7 @@ class SimDrive(Drive):
             "excitation": excitation.name,
             "control_mode": excitation.mode.value,
             "serial": self._info.serial,
+            **({"held_axes": self.held_text} if self._partner is not None else {}),
             **excitation.metadata,
         }
         done = len(trace.time_s)
@@ -180,7 +245,23 @@ class SimDrive(Drive):
         ramp = max(1, math.ceil(abs(start) / QUICK_STOP_DECEL_RAD_S2 * fs))
         hold = math.ceil(QUICK_STOP_HOLD_S * fs)
         command = np.concatenate([start * (1.0 - np.arange(1, ramp + 1) / ramp), np.zeros(hold)])
-        self._plant.run(Mode.VELOCITY, command)
+        self._advance(AxisBlock(mode=Mode.VELOCITY, command=command))
+
+    def _advance(self, block: AxisBlock) -> PlantTrace:
+        """Run this axis through ``block``; the gimbal's other axis, if simulated, holds."""
+        if self._gimbal is None:
+            return self._plant.run(block.mode, block.command, block.torque_offset,
+                                   guard=block.guard)
+        return self._step_gimbal(block, held_command=np.full(block.command.shape,
+                                                             self._hold_rad))
+
+    def _step_gimbal(self, block: AxisBlock, *, held_command: np.ndarray) -> PlantTrace:
+        assert self._gimbal is not None
+        assert self._partner is not None
+        held = AxisBlock(mode=Mode.POSITION, command=held_command)
+        if self._partner.outer:
+            return self._gimbal.run(held, block)[1]
+        return self._gimbal.run(block, held)[0]
 
 
 def _harmonics(table: tuple[PositionHarmonic, ...]) -> tuple[Harmonic, ...]:

@@ -77,10 +77,12 @@ def _each_axis(gimbal: GimbalProfile, *, serial: str, folder: Path, store_url: s
                       flush=True)
                 written = folder / axis.name / serial / "certificate.json"
                 before = _stamp(written)
+                siblings = [item for other in gimbal.axes if other is not axis
+                            for item in ("--gimbal-axis", f"{other.name}={other.profile_path}")]
                 code = _calibrate_axis([
                     sys.executable, "-m", "hil.cli", "calibrate", "--profile",
                     str(axis.profile_path), "--unit-serial", serial, "--out",
-                    str(folder / axis.name), "--store", store_url, *options])
+                    str(folder / axis.name), "--store", store_url, *siblings, *options])
                 codes.append(code)
                 # only a certificate this run wrote (a refused axis leaves the last one)
                 fresh = written if _stamp(written) not in (None, before) else None

@@ -11,8 +11,8 @@ import pytest
 from hil.config import builtin_fixture
 from hil.drives.base import Capability
 from hil.drives.emulated import modbus_emulator
+from hil.drives.held import trapezoid_rad
 from hil.drives.modbus.drive import ModbusDrive
-from hil.drives.modbus.held_axis import trapezoid_rad
 from hil.drives.station import ModbusStation, load_station
 from hil.errors import DriveFaultError, ProfileError
 from hil.profile import load_profile

@@ -14,13 +14,11 @@ disabled itself stops the run, naming it.
 from __future__ import annotations
 
 import logging
-import math
 import time
 from collections.abc import Callable
 
-import numpy as np
-
 from hil.drives.base import DriveState, DriveStatus
+from hil.drives.held import trapezoid_rad
 from hil.drives.modbus.acquire import Feedback, set_interpolation
 from hil.drives.modbus.link import ModbusLink
 from hil.drives.modbus.state_machine import ModbusStateMachine
@@ -33,24 +31,6 @@ log = logging.getLogger(__name__)
 SETPOINT_STEP_S = 0.02  # between two setpoints of a held axis's move
 KEEPALIVE_S = 0.1  # longest silence towards a held axis while the axis under test runs
 AT_REST_RAD_S = 0.01  # a held axis this slow is standing
-
-
-def trapezoid_rad(start_rad: float, end_rad: float, *, speed_rad_s: float,
-                  accel_rad_s2: float, step_s: float) -> np.ndarray:
-    """Positions every ``step_s`` of a move from ``start_rad`` to ``end_rad`` at most at
-    ``speed_rad_s``, accelerating and braking at ``accel_rad_s2`` (the last one the end)."""
-    distance = abs(end_rad - start_rad)
-    top = min(speed_rad_s, math.sqrt(distance * accel_rad_s2))
-    ramp_s = top / accel_rad_s2
-    cruise_s = distance / top - ramp_s if top > 0 else 0.0
-    total_s = 2 * ramp_s + cruise_s
-    t = np.append(np.arange(1, max(1, math.ceil(total_s / step_s))) * step_s, total_s)
-    up = 0.5 * accel_rad_s2 * np.minimum(t, ramp_s) ** 2
-    flat = top * np.clip(t - ramp_s, 0.0, cruise_s)
-    down = np.clip(t - ramp_s - cruise_s, 0.0, ramp_s)
-    travelled = up + flat + top * down - 0.5 * accel_rad_s2 * down**2
-    sign = math.copysign(1.0, end_rad - start_rad)
-    return np.asarray(start_rad + sign * np.minimum(travelled, distance), dtype=np.float64)
 
 
 class HeldModbusAxis:
