@@ -335,8 +335,10 @@ class Certificate:
                                    "not a certificate", source=source)
         schema = document.get("schema")
         if schema != SCHEMA:
-            raise CertificateError(f"schema is {schema!r}, expected {SCHEMA!r}",
-                                   source=source)
+            raise CertificateError(
+                f"schema {schema!r} is not {SCHEMA!r} (another version of gimbal-hil)"
+                if str(schema).startswith(SCHEMA.rsplit("/", 1)[0] + "/")
+                else f"not a gimbal-hil certificate (schema {schema!r})", source=source)
         certificate = _read(cls, document, "", source)
         if certificate.outcome not in OUTCOMES:
             raise CertificateError(f"outcome is {certificate.outcome!r}, expected one of "
