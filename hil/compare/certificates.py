@@ -16,9 +16,9 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any, Literal
 
-from hil.certificate.build import SCHEMA
 from hil.certificate.gimbal_file import GIMBAL_FILE
 from hil.certificate.integrity import verify_document
+from hil.certificate.model import SCHEMA
 from hil.errors import InputError
 
 log = logging.getLogger(__name__)

@@ -16,6 +16,7 @@ from typing import Any
 
 from hil.certificate.gimbal_file import GIMBAL_FILE, GIMBAL_SCHEMA
 from hil.certificate.integrity import OUTCOME_RANK
+from hil.certificate.model import Certificate, CertificateError
 from hil.gimbal.profile import GimbalProfile
 from hil.gum import rounded_pair
 
@@ -90,20 +91,27 @@ def _section(axis: AxisOutcome, folder: Path) -> dict[str, Any]:
         return {"axis": axis.name, "outcome": "ERROR", "certificate": None,
                 "exit_code": axis.exit_code, "note": note, "results": []}
     payload = axis.certificate.read_bytes()
-    cert = json.loads(payload)
-    outcome = "ERROR" if cert.get("aborted") else str(cert.get("outcome", "ERROR"))
+    try:
+        cert = Certificate.from_json(json.loads(payload), source=str(axis.certificate))
+    except (ValueError, CertificateError) as exc:  # not JSON, or not an axis certificate
+        return {"axis": axis.name, "outcome": "ERROR", "certificate": None,
+                "exit_code": axis.exit_code, "note": f"its certificate does not read: {exc}",
+                "results": []}
+    outcome = "ERROR" if cert.aborted else cert.outcome
     return {
         "axis": axis.name,
         "outcome": outcome,
         "certificate": axis.certificate.relative_to(folder).as_posix(),
-        "certificate_id": cert.get("certificate_id"),
+        "certificate_id": cert.certificate_id,
         "certificate_sha256": hashlib.sha256(payload).hexdigest(),
-        "unit_type": cert.get("unit", {}).get("type"),
+        "unit_type": cert.unit.unit_type,
         "exit_code": axis.exit_code,
-        "motion_time_s": (cert.get("machine_time") or {}).get("motion_time_s"),
-        "results": [{k: r.get(k) for k in ("parameter", "title", "value",
-                                           "expanded_uncertainty", "unit", "outcome")}
-                    for r in cert.get("results", [])],
+        "motion_time_s": cert.machine_time.motion_time_s,
+        # null title: an axis certificate written before titles
+        "results": [{"parameter": r.parameter, "title": r.title or None, "value": r.value,
+                     "expanded_uncertainty": r.expanded_uncertainty, "unit": r.unit,
+                     "outcome": r.outcome}
+                    for r in cert.results],
     }
 
 
