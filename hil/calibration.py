@@ -21,9 +21,9 @@ from pathlib import Path
 
 from hil.budget import StorageError, storage_error
 from hil.details import Details
-from hil.drives.base import Drive, DriveInfo, Interrupted
+from hil.drives.base import Capability, Drive, DriveInfo, Interrupted
 from hil.drives.station import StationIdentity
-from hil.errors import DriveError, InputError
+from hil.errors import DriveError, DriveStateError, InputError
 from hil.identify.estimate import Estimate
 from hil.measurement import (
     Declared,
@@ -202,6 +202,9 @@ class CalibrationRun:
     def run(self, drive: Drive, excitation: Excitation, *, protocol: str) -> Recording:
         """Execute ``excitation`` and keep its raw recording, even a partial one on error."""
         self.drive_info = drive.info
+        if excitation.elevation_path_rad is not None and (
+                lacking := drive.info.lacking((Capability.ELEVATION_MOTION,))) is not None:
+            raise DriveStateError(f"'{excitation.name}' moves the elevation axis: {lacking}")
         record = self.protocol(protocol)
         started = time.perf_counter()
         try:

@@ -40,6 +40,11 @@ class Excitation:
     ``torque_offset_nm`` (one per command sample, optional): the torque feedforward the
     master sends beside the command (CiA 402 0x60B2); a drive whose firmware has
     ``feedforward`` adds it to its torque command, any other ignores it.
+
+    ``elevation_path_rad`` (one per command sample, optional): the gimbal's elevation axis,
+    held by its own drive, follows this path while this axis runs; only a station that
+    declares it can (``Capability.ELEVATION_MOTION``) runs such an excitation, and its
+    recording has the elevation's measured angle as ``elevation_rad``.
     """
 
     name: str
@@ -48,12 +53,14 @@ class Excitation:
     fs_hz: float
     metadata: dict[str, str] = field(default_factory=dict)
     torque_offset_nm: FloatArray | None = None
+    elevation_path_rad: FloatArray | None = None
 
     def __post_init__(self) -> None:
-        offset = self.torque_offset_nm
-        if offset is not None and len(offset) != len(self.command):
-            raise ValueError(f"excitation '{self.name}': torque_offset_nm has {len(offset)} "
-                             f"samples, the command {len(self.command)}")
+        for what, values in (("torque_offset_nm", self.torque_offset_nm),
+                             ("elevation_path_rad", self.elevation_path_rad)):
+            if values is not None and len(values) != len(self.command):
+                raise ValueError(f"excitation '{self.name}': {what} has {len(values)} "
+                                 f"samples, the command {len(self.command)}")
 
     @property
     def duration_s(self) -> float:

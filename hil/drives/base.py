@@ -45,6 +45,8 @@ class Capability(Enum):
     TORQUE_SENSOR = "shaft torque sensor"
     LOCKED_ROTOR = "locked-rotor fixture (Drive.locked_rotor)"
     ELEVATION_AXIS = "elevation axis the harness can move (Drive.set_elevation)"
+    ELEVATION_MOTION = ("elevation axis that follows a path while this axis runs "
+                        "(Excitation.elevation_path_rad)")
     COMPENSATION_TABLE = "cogging compensation table (Drive.load_compensation)"
 
 

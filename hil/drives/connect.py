@@ -74,6 +74,7 @@ def _gimbal_partner(profile: UnitProfile,
     outer = other if name == OUTER_AXIS else profile
     assert outer.plant is not None
     return GimbalPartner(name=other.axis, plant=other.plant, firmware=other.firmware,
+                         limits=other.limits,
                          outer=name == OUTER_AXIS,
                          at_rad=outer.plant.elevation_rad if name == INNER_AXIS else 0.0)
 

@@ -6,7 +6,7 @@ import contextlib
 import logging
 import math
 from collections.abc import Iterator
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -48,6 +48,7 @@ class GimbalPartner:
     name: str
     plant: PlantParams
     firmware: Firmware
+    limits: Limits
     outer: bool
     at_rad: float
 
@@ -80,10 +81,12 @@ class SimDrive(Drive):
                          fs_hz=fs_hz, seed=seed + (PARTNER_SEED << 32),
                          firmware=partner.firmware, initial_position_rad=partner.at_rad)
             self._held_plant = held
+            self._partner_limits = partner.limits
             self._hold_rad = partner.at_rad
             self._gimbal = (GimbalPlant(held, self._plant) if partner.outer
                             else GimbalPlant(self._plant, held))
         moves_elevation = partner is None or partner.name == "elevation"
+        follows = partner is not None and partner.name == "elevation"
         self._state = DriveState.DISABLED
         self._envelope = MotionEnvelope.of(limits)
         self._info = DriveInfo(
@@ -97,6 +100,7 @@ class SimDrive(Drive):
             max_sample_rate_hz=fs_hz,
             capabilities=frozenset({Capability.COMPENSATION_TABLE}
                                    | ({Capability.ELEVATION_AXIS} if moves_elevation else set())
+                                   | ({Capability.ELEVATION_MOTION} if follows else set())
                                    | ({Capability.TORQUE_SENSOR, Capability.LOCKED_ROTOR}
                                       if has_torque_sensor else set())),
             transport="in-process",
@@ -200,10 +204,24 @@ class SimDrive(Drive):
         guard = MotionGuard(position_min_rad=envelope.position_min_rad,
                             position_max_rad=envelope.position_max_rad,
                             velocity_max_rad_s=envelope.velocity_rad_s)
+        block = AxisBlock(mode=excitation.mode, command=excitation.command,
+                          torque_offset=excitation.torque_offset_nm, guard=guard)
+        path = excitation.elevation_path_rad
+        elevation: np.ndarray | None = None
         try:
-            trace = self._advance(AxisBlock(mode=excitation.mode, command=excitation.command,
-                                            torque_offset=excitation.torque_offset_nm,
-                                            guard=guard))
+            if path is None:
+                trace = self._advance(block)
+            else:
+                if Capability.ELEVATION_MOTION not in self._info.capabilities:
+                    raise self._without(Capability.ELEVATION_MOTION)
+                check_limits(replace(excitation, name=f"{excitation.name} (elevation)",
+                                     mode=Mode.POSITION, command=path,
+                                     torque_offset_nm=None, elevation_path_rad=None),
+                             self._partner_limits,
+                             start_position_rad=self._held_plant.position_rad)
+                trace, held = self._step_gimbal(block, held_command=path)
+                elevation = held.position_rad
+                self._hold_rad = float(path[-1])
         except KeyboardInterrupt as stop:
             # the kernel runs a whole excitation in one numba call: a signal is handled
             # after it returns, so a stop lands between excitations, with no rows to keep
@@ -221,6 +239,9 @@ class SimDrive(Drive):
         recording = trace_to_recording(
             trace, mode=excitation.mode, command=excitation.command[:done], metadata=metadata
         )
+        if elevation is not None:
+            recording = replace(recording, columns={**recording.columns,
+                                                    "elevation_rad": elevation})
         if done == len(excitation.command):
             return recording
         # the monitor tripped inside the kernel: the last row is the one that left the envelope
@@ -253,15 +274,19 @@ class SimDrive(Drive):
             return self._plant.run(block.mode, block.command, block.torque_offset,
                                    guard=block.guard)
         return self._step_gimbal(block, held_command=np.full(block.command.shape,
-                                                             self._hold_rad))
+                                                             self._hold_rad))[0]
 
-    def _step_gimbal(self, block: AxisBlock, *, held_command: np.ndarray) -> PlantTrace:
+    def _step_gimbal(self, block: AxisBlock, *,
+                     held_command: np.ndarray) -> tuple[PlantTrace, PlantTrace]:
+        """This axis through ``block``, the other following ``held_command`` in position
+        mode: (this axis's trace, the other's)."""
         assert self._gimbal is not None
         assert self._partner is not None
         held = AxisBlock(mode=Mode.POSITION, command=held_command)
         if self._partner.outer:
-            return self._gimbal.run(held, block)[1]
-        return self._gimbal.run(block, held)[0]
+            other, mine = self._gimbal.run(held, block)
+            return mine, other
+        return self._gimbal.run(block, held)
 
 
 def _harmonics(table: tuple[PositionHarmonic, ...]) -> tuple[Harmonic, ...]:
