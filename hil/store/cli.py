@@ -201,11 +201,12 @@ def _units_text(found: Sequence[RunSummary],
 
 
 def _history(args: argparse.Namespace, store: Store) -> int:
-    from hil.store.query import history, run_results
+    from hil.store.query import gimbal_certificates, history, run_results
 
     runs = history(store, args.serial)
     if not runs:
         raise InputError(f"no runs of unit '{args.serial}' in {store.url}")
+    certified = gimbal_certificates(store, serial=args.serial)
     # as found → as left per axis: a gimbal's axes share its serial, never each other's runs
     axes: dict[str, list[Any]] = {}
     for summary in runs:
@@ -224,7 +225,8 @@ def _history(args: argparse.Namespace, store: Store) -> int:
         latest = next(a for a in per_axis if a["as_left_run"] == runs[-1].run_id)
         _emit(args, {"serial": args.serial, "runs": [_summary_json(s) for s in runs],
                      **{k: v for k, v in latest.items() if k != "axis"},  # the latest run's
-                     "axes": per_axis}, "")
+                     "axes": per_axis,
+                     "gimbal_certificates": [_gimbal_json(g) for g in certified]}, "")
         return 0
     several = len(axes) > 1
     rows = [(str(s.attempt), *((s.axis,) if several else ()), s.started_at.strftime(TIME_FORMAT),
@@ -232,17 +234,34 @@ def _history(args: argparse.Namespace, store: Store) -> int:
              s.certificate_id) for s in runs]
     header = ("#", *(("axis",) if several else ()), "started (UTC)", "station", "operator",
               "outcome", "certificate")
-    text = [f"unit {args.serial}: {len(runs)} run(s)"
+    identity = (f" ({certified[-1].part_number}"
+                + (f" rev {certified[-1].revision}" if certified[-1].revision else "") + ")"
+                if certified else "")
+    text = [f"unit {args.serial}{identity}: {len(runs)} run(s)"
             + (f" of {len(axes)} axes ({', '.join(axes)})" if several else ""),
             _table(header, rows)]
+    if certified:
+        text += ["", "gimbal certificates:", _table(
+            ("issued (UTC)", "outcome", "axes", "certificate"),
+            [(g.issued_at.strftime(TIME_FORMAT), g.outcome, ", ".join(g.axes),
+              g.certificate_id) for g in certified])]
     for axis, of_axis, found, changes in compared:
-        if found:
-            text += ["", f"{axis + ': ' if several else ''}as found (run "
-                     f"{of_axis[-2].attempt}) → as left (run {of_axis[-1].attempt}, the latest):",
+        # a gimbal's axes each show their latest results, as found "-" before a second run
+        if found or several:
+            since_run = (f"as found (run {of_axis[-2].attempt}) → " if found else
+                         "no earlier run of this axis (as found -) → ")
+            text += ["", f"{axis + ': ' if several else ''}{since_run}as left (run "
+                     f"{of_axis[-1].attempt}, the latest):",
                      _table(("result", "as found", "as left", "unit", "outcome"),
                             [_change_row(c) for c in changes])]
     print("\n".join(text))
     return 0
+
+
+def _gimbal_json(g: Any) -> dict[str, Any]:
+    return {"certificate_id": g.certificate_id, "part_number": g.part_number,
+            "revision": g.revision, "outcome": g.outcome, "issued_at": g.issued_at.isoformat(),
+            "axes": list(g.axes), "axis_certificates": list(g.axis_certificates)}
 
 
 def _as_found_left(name: str, found: dict[str, Any] | None,
@@ -270,14 +289,16 @@ def _trend(args: argparse.Namespace, store: Store) -> int:
 
     since = _date(args.since) if args.since else None
     _known_parameter(store, args.parameter)
+    part_number, revision = fleet_cli.part_selection(args)
     matching = result_kinds(store, args.parameter, station=args.station, since=since,
-                            axis=args.axis, unit_type=args.unit_type)
+                            axis=args.axis, unit_type=args.unit_type,
+                            part_number=part_number, revision=revision)
     # several kinds of unit are refused (never pooled); none is an empty trend
     series = result_series(store, args.parameter, station=args.station, since=since,
                            include_aborted=args.include_aborted,
                            include_reference=args.include_reference,
-                           kind=fleet_cli.one_kind(store, args.parameter, args, since)
-                           ) if matching else []
+                           kind=fleet_cli.one_kind(store, args.parameter, args, since),
+                           revision=revision) if matching else []
     values = [p.value for p in series]
     import statistics  # here: 15 ms of every command's start otherwise
 

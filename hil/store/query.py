@@ -42,14 +42,34 @@ class StoredResult:
 
 @dataclass(frozen=True, slots=True, order=True)
 class Kind:
-    """The kind of unit a result was measured on: its unit type and axis. Statistics never
-    pool results of different kinds (an azimuth and an elevation inertia are two series)."""
+    """The kind of unit a result was measured on: its unit type and axis, and the part
+    number of the gimbal it is an axis of ("" for a unit without a stored gimbal
+    certificate). Statistics never pool results of different kinds (an azimuth and an
+    elevation inertia are two series, and so are two part numbers' elevations)."""
 
     unit_type: str
     axis: str
+    part_number: str = ""
 
     def __str__(self) -> str:
-        return self.unit_type if self.axis in self.unit_type else f"{self.unit_type}, {self.axis}"
+        shown = (self.unit_type if self.axis in self.unit_type
+                 else f"{self.unit_type}, {self.axis}")
+        return f"part number {self.part_number}, {shown}" if self.part_number else shown
+
+
+@dataclass(frozen=True, slots=True)
+class StoredGimbal:
+    """A stored gimbal certificate: identity, verdict, when, and where its axes ran."""
+
+    certificate_id: str
+    serial: str
+    part_number: str
+    revision: str
+    outcome: str
+    issued_at: datetime
+    station: str  # the station of its first axis's stored run ("" when none is stored)
+    axes: tuple[str, ...]
+    axis_certificates: tuple[str, ...]  # each axis's certificate id, in ``axes`` order
 
 
 @dataclass(frozen=True, slots=True)
@@ -70,6 +90,7 @@ class RunSummary:
     is_reference: bool
     axis: str = ""
     runs_of_unit: int = 1
+    part_number: str = ""  # of the gimbal the run is an axis of ("": none stored)
 
 
 def utc(moment: datetime) -> datetime:
@@ -86,6 +107,7 @@ def result_series(
     include_aborted: bool = False,
     include_reference: bool = False,
     kind: Kind | None = None,
+    revision: str | None = None,
 ) -> list[StoredResult]:
     """Every stored value of result ``name``, oldest run first.
 
@@ -104,7 +126,11 @@ def result_series(
     include_reference : bool
         Keep runs of reference (golden) units (left out by default).
     kind : Kind, optional
-        Only runs of this unit type and axis (see :func:`result_kinds`).
+        Only runs of this unit type and axis, of gimbals of its part number (of serials
+        without a stored gimbal certificate when its part number is "") (see
+        :func:`result_kinds`).
+    revision : str, optional
+        Only gimbals of this revision (of ``kind``'s part number).
 
     Returns
     -------
@@ -130,6 +156,10 @@ def result_series(
         query = query.where(runs.c.is_reference.is_(False))
     if kind is not None:
         query = query.where(runs.c.unit_type == kind.unit_type, runs.c.axis == kind.axis)
+        if kind.part_number:
+            query = of_part_number(query, kind.part_number, revision)
+        else:  # a one-axis unit, or a gimbal whose certificate is not stored (yet)
+            query = query.where(runs.c.serial.not_in(select(gimbals.c.serial)))
     with store.engine.connect() as connection:
         rows = connection.execute(query).all()
     # positional: the columns are selected in the dataclass's field order (fast for 10⁵ rows)
@@ -148,23 +178,84 @@ def result_kinds(
     since: datetime | None = None,
     axis: str | None = None,
     unit_type: str | None = None,
+    part_number: str | None = None,
+    revision: str | None = None,
 ) -> dict[Kind, int]:
-    """The kinds of unit (unit type, axis) result ``name`` is stored for, with how many runs
-    of each (aborted runs included), narrowed by ``axis`` and ``unit_type`` when given."""
+    """The kinds of unit (unit type, axis, gimbal part number) result ``name`` is stored
+    for, with how many runs of each (aborted runs included), narrowed by ``axis``,
+    ``unit_type``, ``part_number`` and ``revision`` when given."""
+    part = _part_of_serial()
+    part_number_of_run = func.coalesce(part.c.part_number, "")
     query = (
-        select(runs.c.unit_type, runs.c.axis, func.count())
+        select(runs.c.unit_type, runs.c.axis, part_number_of_run, func.count())
         .join(results, runs.c.run_id == results.c.run_id)
+        .outerjoin(part, part.c.serial == runs.c.serial)
         .where(results.c.name == name)
-        .group_by(runs.c.unit_type, runs.c.axis)
+        .group_by(runs.c.unit_type, runs.c.axis, part_number_of_run)
     )
     query = _narrowed(query, station=station, since=since)
     if axis is not None:
         query = query.where(runs.c.axis == axis)
     if unit_type is not None:
         query = query.where(runs.c.unit_type == unit_type)
+    if part_number is not None:
+        query = of_part_number(query, part_number, revision)
     with store.engine.connect() as connection:
-        return {Kind(unit_type, axis): int(count)
-                for unit_type, axis, count in connection.execute(query)}
+        return {Kind(unit_type, axis, part or ""): int(count)
+                for unit_type, axis, part, count in connection.execute(query)}
+
+
+def of_part_number(query: _Query, part_number: str, revision: str | None = None) -> _Query:
+    """``query`` (over ``runs``) kept to the serials with a stored gimbal certificate of
+    ``part_number`` (and ``revision``, when given)."""
+    serials = select(gimbals.c.serial).where(gimbals.c.part_number == part_number)
+    if revision is not None:
+        serials = serials.where(gimbals.c.revision == revision)
+    return query.where(runs.c.serial.in_(serials))
+
+
+def _part_of_serial() -> Any:
+    """Each serial with a stored gimbal certificate and its part number (one row a serial:
+    a serial certified under two part numbers, which should not happen, takes the greater)."""
+    return (select(gimbals.c.serial, func.max(gimbals.c.part_number).label("part_number"))
+            .group_by(gimbals.c.serial).subquery())
+
+
+def gimbal_certificates(
+    store: Store,
+    *,
+    part_number: str | None = None,
+    revision: str | None = None,
+    serial: str | None = None,
+) -> list[StoredGimbal]:
+    """Every stored gimbal certificate, oldest first (issue time, then id), narrowed by
+    ``part_number``, ``revision`` and ``serial`` when given; each with the station of its
+    first axis's stored run."""
+    query = select(gimbals).order_by(gimbals.c.issued_at, gimbals.c.certificate_id)
+    if part_number is not None:
+        query = query.where(gimbals.c.part_number == part_number)
+    if revision is not None:
+        query = query.where(gimbals.c.revision == revision)
+    if serial is not None:
+        query = query.where(gimbals.c.serial == serial)
+    with store.engine.connect() as connection:
+        rows = connection.execute(query).all()
+        wanted = {a.get("certificate_id") for row in rows for a in json.loads(row.axes)}
+        stations = dict(connection.execute(
+            select(runs.c.certificate_id, runs.c.station)
+            .where(runs.c.certificate_id.in_(sorted(w for w in wanted if w)))).all()
+        ) if wanted else {}
+    found = []
+    for row in rows:
+        axes = [a for a in json.loads(row.axes) if isinstance(a, dict)]
+        ids = tuple(str(a.get("certificate_id") or "") for a in axes)
+        found.append(StoredGimbal(
+            certificate_id=row.certificate_id, serial=row.serial,
+            part_number=row.part_number, revision=row.revision, outcome=row.outcome,
+            issued_at=utc(row.issued_at),
+            station=next((stations[i] for i in ids if i in stations), ""),
+            axes=tuple(str(a.get("axis")) for a in axes), axis_certificates=ids))
+    return found
 
 
 def units(store: Store) -> list[RunSummary]:
@@ -227,10 +318,12 @@ def history(store: Store, serial: str) -> list[RunSummary]:
 
 
 def run_summaries(
-    store: Store, *, station: str | None = None, since: datetime | None = None
+    store: Store, *, station: str | None = None, since: datetime | None = None,
+    part_number: str | None = None, revision: str | None = None,
 ) -> list[RunSummary]:
     """Every stored run (aborted and reference runs included: each carries its flags),
-    oldest first; for yields per station and day.
+    oldest first, with the part number of the gimbal it is an axis of; for yields per
+    station and day.
 
     Parameters
     ----------
@@ -240,11 +333,18 @@ def run_summaries(
         Only runs of this station id.
     since : datetime, optional
         Only runs started at or after it (naive times are taken as UTC).
+    part_number, revision : str, optional
+        Only runs of gimbals of this part number (and revision).
     """
-    query = select(*_summary_columns()).order_by(runs.c.started_at, runs.c.run_id)
+    part = _part_of_serial()
+    query = (select(*_summary_columns(), part.c.part_number)
+             .outerjoin(part, part.c.serial == runs.c.serial)
+             .order_by(runs.c.started_at, runs.c.run_id))
     query = _narrowed(query, station=station, since=since)
+    if part_number is not None:
+        query = of_part_number(query, part_number, revision)
     with store.engine.connect() as connection:
-        return [_summary(row) for row in connection.execute(query)]
+        return [_summary(row, part_number=row[13] or "") for row in connection.execute(query)]
 
 
 def run_results(store: Store, run_id: str) -> dict[str, dict[str, Any]]:
@@ -303,7 +403,7 @@ def _summary_columns() -> tuple[Any, ...]:
     )
 
 
-def _summary(row: Any, *, runs_of_unit: int = 1) -> RunSummary:
+def _summary(row: Any, *, runs_of_unit: int = 1, part_number: str = "") -> RunSummary:
     """A row of :func:`_summary_columns`."""
     (run_id, certificate_id, serial, unit_type, station, operator, started_at, ended_at,
      outcome, aborted, attempt, is_reference, axis) = row[:13]
@@ -312,6 +412,7 @@ def _summary(row: Any, *, runs_of_unit: int = 1) -> RunSummary:
         station=station, operator=operator, started_at=utc(started_at),
         ended_at=utc(ended_at), outcome=outcome, aborted=bool(aborted), attempt=int(attempt),
         is_reference=bool(is_reference), axis=axis, runs_of_unit=runs_of_unit,
+        part_number=part_number,
     )
 
 
