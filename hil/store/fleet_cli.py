@@ -101,7 +101,8 @@ def add_part_arguments(parser: argparse.ArgumentParser) -> None:
     """``--part-number`` and ``--revision``: only the gimbals of one part number."""
     parser.add_argument("--part-number", default=None, metavar="PN",
                         help="only the axes of gimbals of this part number, from their "
-                             "stored gimbal certificates (default: every unit)")
+                             "stored gimbal certificates; 'none': only units without one "
+                             "(default: every unit)")
     parser.add_argument("--revision", default=None, metavar="REV",
                         help="only gimbals of this revision of --part-number (default: "
                              "every revision)")
@@ -123,7 +124,7 @@ def part_selection(args: argparse.Namespace) -> tuple[str | None, str | None]:
 
 
 # the options that pick a kind, fewest first: the first set whose values tell every kind
-# found apart is named with each (--part-number only where each kind has one)
+# found apart is named with each (a unit without a gimbal certificate: --part-number none)
 _PICKERS: tuple[tuple[str, ...], ...] = (
     ("axis",), ("part_number",), ("part_number", "axis"), ("unit_type",),
     ("unit_type", "axis"), ("part_number", "unit_type", "axis"))
@@ -131,18 +132,18 @@ _PICKERS: tuple[tuple[str, ...], ...] = (
 
 def _picking(kinds: list[Kind]) -> tuple[str, ...]:
     for fields in _PICKERS:
-        if "part_number" in fields and not all(k.part_number for k in kinds):
-            continue
         if len({tuple(getattr(k, f) for f in fields) for k in kinds}) == len(kinds):
             return fields
-    return ("unit_type", "axis")  # a unit type and axis both with and without a gimbal
+    return _PICKERS[-1]
 
 
 def _options(kind: Kind, fields: tuple[str, ...]) -> str:
     def shown(value: str) -> str:
         return value if value.replace("-", "").replace("_", "").isalnum() else f"'{value}'"
 
-    return " ".join(f"--{field.replace('_', '-')} {shown(getattr(kind, field))}"
+    from hil.store.query import NO_PART_NUMBER
+
+    return " ".join(f"--{field.replace('_', '-')} {shown(getattr(kind, field) or NO_PART_NUMBER)}"
                     for field in fields)
 
 
@@ -163,9 +164,10 @@ def one_kind(store: Store, name: str, args: argparse.Namespace,
                          unit_type=args.unit_type, part_number=part_number,
                          revision=revision)
     if not kinds:
-        narrowed = "".join(f" with {flag} {value}" for flag, value in (
+        given = " ".join(f"{flag} {value}" for flag, value in (
             ("--axis", args.axis), ("--unit-type", args.unit_type),
             ("--part-number", part_number), ("--revision", revision)) if value is not None)
+        narrowed = f" with {given}" if given else ""
         raise InputError(f"no stored results named '{name}'{narrowed} in {store.url}")
     if len(kinds) > 1:
         fields = _picking(sorted(kinds))

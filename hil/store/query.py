@@ -17,6 +17,7 @@ from sqlalchemy import Select, and_, delete, func, insert, select
 from hil.store.engine import Store
 from hil.store.schema import gimbals, results, runs, spc_baselines
 
+NO_PART_NUMBER = "none"  # --part-number none: the units without a stored gimbal certificate
 _Query = TypeVar("_Query", bound=Select[*tuple[Any, ...]])
 
 
@@ -207,7 +208,10 @@ def result_kinds(
 
 def of_part_number(query: _Query, part_number: str, revision: str | None = None) -> _Query:
     """``query`` (over ``runs``) kept to the serials with a stored gimbal certificate of
-    ``part_number`` (and ``revision``, when given)."""
+    ``part_number`` (and ``revision``, when given); :data:`NO_PART_NUMBER`: to the serials
+    without one (one-axis units)."""
+    if part_number == NO_PART_NUMBER:
+        return query.where(runs.c.serial.not_in(select(gimbals.c.serial)))
     serials = select(gimbals.c.serial).where(gimbals.c.part_number == part_number)
     if revision is not None:
         serials = serials.where(gimbals.c.revision == revision)

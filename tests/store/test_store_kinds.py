@@ -129,7 +129,7 @@ def test_a_gimbal_serial_passes_first_time_only_when_each_axis_did(
     """Two gimbals, each an azimuth and an elevation run under one serial (attempt 1 each):
     the one whose elevation failed is a failed first pass (it never lowered the yield when
     the lowest attempt of the serial alone counted); ``history`` compares each axis with
-    its own earlier run."""
+    its own earlier run, and shows each axis's results as left when it has none."""
     store = ["--store", store_url]
     text = (calibrated / SERIAL / "certificate.json").read_text(encoding="utf-8")
     index = 0
@@ -161,4 +161,6 @@ def test_a_gimbal_serial_passes_first_time_only_when_each_axis_did(
     assert all(a["as_found_run"] is None for a in shown["axes"])  # one run of each axis
     code, out, _ = _run(capsys, "history", "GMB-0002", *store)
     assert "2 run(s) of 2 axes (azimuth, elevation)" in out
-    assert "as found" not in out
+    # each axis's results as left, with no earlier run to have been found (issue 27)
+    assert "azimuth: no earlier run of this axis (as found -) → as left (run 1" in out
+    assert "elevation: no earlier run of this axis (as found -) → as left (run 1" in out
