@@ -25,7 +25,9 @@ def _demo(axis: str) -> tuple[PlantParams, object]:
 def test_a_gimbal_without_coupling_gives_each_axis_its_own_plants_recording() -> None:
     outer, outer_fw = _demo("azimuth")
     inner, inner_fw = _demo("elevation")
-    outer = outer.with_changes(inertia_elevation_kg_m2=0.0, inertia_product_kg_m2=0.0)
+    outer = outer.with_changes(inertia_elevation_kg_m2=0.0, inertia_product_kg_m2=0.0,
+                               inertia_coupling_level_kg_m2=0.0,
+                               inertia_coupling_vertical_kg_m2=0.0)
     t = np.arange(12000) / FS
     commands = (0.8 * np.sin(2 * np.pi * 2.0 * t), 0.2 * np.sin(2 * np.pi * 0.7 * t))
     alone = [Plant(params, fs_hz=FS, seed=seed, firmware=fw).run(Mode.VELOCITY, command)

@@ -28,6 +28,7 @@ PROTOCOL_TITLES: dict[str, str] = {
     "torque_constant": "Torque constant",
     "resonance": "Resonance",
     "inertia_elevation": "Azimuth inertia across elevation",
+    "cross_coupling": "Cross-coupling between the axes",
     "velocity_loop_frf": "Velocity-loop frequency response",
     "velocity_step": "Velocity steps",
     "tracking": "Tracking a standard move",

@@ -24,6 +24,7 @@ PLOTTERS: dict[str, Callable[[ProtocolData], Figure | None]] = {
     "resonance": plots_frequency.resonance,
     "torque_constant": plots_motion.torque_constant,
     "inertia_elevation": plots_motion.inertia_elevation,
+    "cross_coupling": plots_motion.cross_coupling,
     "velocity_loop_frf": plots_closed_loop.velocity_loop_frf,
     "velocity_step": plots_closed_loop.velocity_step,
     "tracking": plots_closed_loop.tracking,
@@ -41,6 +42,8 @@ CAPTIONS = {
     "resonance": "frequency response (Bode) and the two-mass fit",
     "torque_constant": "shaft torque against current at each locked angle, and its linearity",
     "inertia_elevation": "azimuth inertia per elevation, the cos² + sin(2el) fit and its extremes",
+    "cross_coupling": "the torque the azimuth needs while the elevation swings (swinging "
+                      "pass less standing pass) and the fitted coupling, each direction",
     "velocity_loop_frf": "closed loop and sensitivity with the −3 dB bandwidth, and the loop "
                          "gain with its gain and phase margins (Bode)",
     "velocity_step": "every step normalised to its size, small and large, with the 10–90 % "

@@ -1,5 +1,6 @@
 """Plots of the motion protocols: the J/B/T_c sine fit, the Stribeck curve, the gravity and
-cable sweep with its hysteresis loop, azimuth inertia across elevation.
+cable sweep with its hysteresis loop, azimuth inertia across elevation, the cross-coupling
+between the axes.
 
 Each takes a :class:`~hil.report.data.ProtocolData` and returns a figure, or ``None`` when
 the run kept too little to draw (a protocol that stopped before its analysis).
@@ -12,10 +13,12 @@ import re
 import numpy as np
 from matplotlib.figure import Figure
 
+from hil.identify.kinematics import phase_free_derivatives, zero_phase_lowpass
 from hil.identify.sine_run import analyse_sine_run
 from hil.identify.stribeck import stribeck_curve
 from hil.report.data import ProtocolData, finite
 from hil.report.figures import COLOURS, MEASURED, MODEL, new_figure, thin
+from hil.suite.cross_coupling import CrossCouplingDetails
 from hil.suite.gravity_cable import GravityCableDetails
 from hil.suite.inertia_elevation import InertiaElevationDetails
 from hil.suite.inertia_friction import InertiaFrictionDetails
@@ -179,6 +182,45 @@ def inertia_elevation(data: ProtocolData) -> Figure | None:
     ax.set(xlabel="elevation (rad)", ylabel="azimuth inertia (kg·m²)",
            title=f"azimuth inertia across elevation: max/min {ratio:.4g}")
     fig.legend(loc="outside lower center", ncols=3)
+    return fig
+
+
+def cross_coupling(data: ProtocolData) -> Figure | None:
+    """Per direction: the azimuth's torque with the elevation swinging less the same pass
+    standing (band-limited as the fit's), against time, with the fitted coupling and
+    Coriolis torque ``d/dt[c(el)·el̇] + J'(el)·el̇·ψ̇``."""
+    details = data.details_as(CrossCouplingDetails)
+    level = data.value("coupling_product_level_kg_m2")
+    vertical = data.value("coupling_product_vertical_kg_m2")
+    swinging = dict(data.recordings_named("swinging_"))
+    standing = dict(data.recordings_named("standing_"))
+    if details is None or level is None or vertical is None or len(swinging) != 2:
+        return None
+    fig = new_figure()
+    for ax, way in zip(fig.axes, ("forward", "backward"), strict=True):
+        moving, still = swinging.get(f"swinging_{way}"), standing.get(f"standing_{way}")
+        if moving is None or still is None:
+            return None
+        t, el = moving.columns["time_s"], moving.columns["elevation_rad"]
+        fs = 1.0 / float(np.median(np.diff(t)))
+        rate, accel = phase_free_derivatives(el, time_s=t, window_s=0.02)
+        az_rate, _ = phase_free_derivatives(moving.columns["position_rad"], time_s=t,
+                                            window_s=0.1)
+        model = (level * (np.cos(el) * accel - np.sin(el) * rate**2)
+                 + vertical * (np.sin(el) * accel + np.cos(el) * rate**2)
+                 + rate * az_rate * (-details.coriolis_delta_j_kg_m2 * np.sin(2 * el)
+                                     + 2 * details.coriolis_product_kg_m2 * np.cos(2 * el)))
+        still_torque = np.interp(t - t[0], still.columns["time_s"] - still.columns["time_s"][0],
+                                 still.columns["torque_nm"])
+        measured = zero_phase_lowpass(moving.columns["torque_nm"] - still_torque, fs_hz=fs,
+                                      cutoff_hz=12.0, segments=((0, len(t)),))
+        ax.plot(*thin(t - t[0], 1e3 * measured), color=MEASURED, lw=0.8,
+                label="swinging − standing (band-limited)")
+        ax.plot(*thin(t - t[0], 1e3 * model), color=MODEL, lw=1.0, label="fitted coupling")
+        ax.set(xlabel="time in the pass (s)", ylabel="azimuth torque (mN·m)",
+               title=f"azimuth {way}, {details.azimuth_speed_rad_s:g} rad/s")
+    fig.suptitle(f"elevation swing {details.swing}")
+    fig.legend(*fig.axes[0].get_legend_handles_labels(), loc="outside lower center", ncols=2)
     return fig
 
 

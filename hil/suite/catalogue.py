@@ -15,6 +15,7 @@ from hil.profile import UnitProfile
 from hil.suite import (
     cogging,
     cogging_compensation,
+    cross_coupling,
     current_loop,
     gravity_cable,
     inertia_elevation,
@@ -33,8 +34,8 @@ from hil.suite.protocol import Protocol
 #: every protocol of the suite, by name, in the suite's run order
 CATALOGUE: Mapping[str, Protocol] = {module.PROTOCOL.name: module.PROTOCOL for module in (
     current_loop, gravity_cable, inertia_friction, stribeck, cogging, torque_constant,
-    resonance, inertia_elevation, velocity_loop_frf, velocity_step, tracking, standstill,
-    cogging_compensation)}
+    resonance, inertia_elevation, cross_coupling, velocity_loop_frf, velocity_step, tracking,
+    standstill, cogging_compensation)}
 #: protocol → the results it measures
 PROTOCOLS: Mapping[str, tuple[str, ...]] = {p.name: p.measurements for p in CATALOGUE.values()}
 #: protocol → what it takes from earlier protocols (each with its fallback)
