@@ -281,9 +281,13 @@ class Plant:
         ``feedforward``. With ``guard`` the run stops after the first period whose measured
         position or velocity leaves it: the trace is then shorter than ``command``."""
         block = self.block(command, torque_offset, guard=guard)
+        (params, cogging, kt_ripple, state, command, offset, comp_cogging, comp_ripple,
+         delay_line, noise, guard_values) = block.arrays
         run_kernel: Callable[..., int] = kernel.run_kernel
-        done = run_kernel(block.arrays, _KERNEL_MODE[mode], block.loop_noise, block.out,
-                          1.0 / self.fs_hz, self._substeps)
+        done = run_kernel(params, cogging, kt_ripple, state, _KERNEL_MODE[mode], command, offset,
+                          comp_cogging, comp_ripple, delay_line, noise, block.loop_noise,
+                          1.0 / self.fs_hz, self._substeps, *block.out,
+                          guard_values)
         return self.advance(block, done)
 
     def block(self, command: FloatArray, torque_offset: FloatArray | None = None, *,
