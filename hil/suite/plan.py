@@ -10,7 +10,7 @@ from collections.abc import Iterable
 
 import numpy as np
 
-from hil.drives.base import DriveInfo
+from hil.drives.base import Capability, DriveInfo
 from hil.errors import HilError, ProfileError
 from hil.motion import Excitation, Mode
 from hil.profile import UnitProfile
@@ -47,8 +47,10 @@ def acquisition_info(name: str, profile: UnitProfile, info: DriveInfo
 
     A drive whose highest rate is its own recorder's (:class:`hil.drives.base.Recorder`)
     keeps it for a protocol whose every planned run fits the recorder; a protocol with one
-    that does not (too many samples, a torque offset) is planned and run streamed, at the
-    link's rate, so that it completes instead of stopping at that run.
+    that does not (too many samples, a torque offset), or that reads the station's shaft
+    torque transducer (the host reads it beside the stream, the recorder cannot), is
+    planned and run streamed, at the link's rate, so that it completes instead of stopping
+    at that run.
 
     Returns
     -------
@@ -65,6 +67,9 @@ def acquisition_info(name: str, profile: UnitProfile, info: DriveInfo
     except (HilError, ValueError):
         return info, None  # the protocol states its own error when it builds the spec
     reasons = [r for e in excitations if (r := info.recorder.refuses(e)) is not None]
+    if Capability.TORQUE_SENSOR in protocol.requires:
+        reasons.insert(0, "it reads the station's shaft torque transducer, which the drive "
+                          "recorder does not record")
     if not reasons:
         return info, None
     streamed = info.streamed()

@@ -4,6 +4,7 @@ checked with every node's heartbeat before any motion."""
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import re
 import subprocess
@@ -23,6 +24,7 @@ from hil.drives.emulated import canopen_emulator
 from hil.drives.station import CanOpenStation, load_station
 from hil.errors import DriveStateError, ProfileError
 from hil.profile import load_profile
+from hil.suite.travel import move_excitation
 from tests.drives.conftest import sine
 
 STATION = builtin_fixture("station_canopen_gimbal_emulator.toml")
@@ -85,6 +87,27 @@ def test_the_elevation_drive_moves_for_real_and_is_left_disabled() -> None:
             assert elevation.plant.position_rad == pytest.approx(-1.1, abs=0.002)
         assert elevation.state != ENABLED
         assert azimuth.state != ENABLED
+
+
+def test_after_a_run_on_the_drive_recorder_the_axis_holds_where_it_ended() -> None:
+    """The SYNC stream goes on while a held axis moves: the target it carries must be where
+    the recorder's run ended (a stale one pulled the azimuth back from 1.89 rad until it
+    stopped at its own limit, and the next run was refused)."""
+    profile = load_profile("demo_gimbal_azimuth")
+    station = load_station(STATION)
+    assert isinstance(station, CanOpenStation)
+    station = dataclasses.replace(station, acquisition="auto")
+    with canopen_emulator(profile, seed=5, base_station=station) as (azimuth, on_bus), \
+            CanOpenDrive(on_bus, limits=profile.limits) as drive:
+        drive.enable()
+        fs = drive.info.max_sample_rate_hz
+        assert fs > 1000.0  # the recorder's rate: the move runs on it
+        drive.run(move_excitation("move", drive.status().position_rad, 1.89, fs_hz=fs,
+                                  speed_rad_s=2.0, hold_s=0.2))
+        drive.set_elevation(0.6)
+        assert azimuth.state == ENABLED
+        assert drive.status().position_rad == pytest.approx(1.89, abs=0.002)
+        drive.run(sine(0.3, fs_hz=fs, periods=1))
 
 
 def test_a_bus_load_beyond_the_budget_is_refused_before_motion() -> None:

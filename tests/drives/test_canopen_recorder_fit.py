@@ -51,6 +51,18 @@ def test_a_torque_offset_is_streamed_whatever_its_length() -> None:
     assert "torque offset" in why
 
 
+def test_the_torque_constant_streams_whatever_its_length() -> None:
+    """The host reads the station's transducer beside the SYNC stream; the drive recorder
+    does not record it (over a gimbal station with ``acquisition = "auto"`` the locked sweeps
+    went to the recorder and K_t came out −0.002 ± 0.0095 N·m/A)."""
+    profile = load_profile(PROFILE)
+    streamed, why = acquisition_info("torque_constant", profile,
+                                     _info(profile, recorder_samples=10**9))
+    assert streamed.max_sample_rate_hz == 1000.0
+    assert why is not None
+    assert "torque transducer" in why
+
+
 def test_the_plan_is_the_motion_each_protocol_runs() -> None:
     """The planned time of a streamed protocol is the streamed motion's (same seconds, the
     samples differ): the planner asks the same question as the run."""

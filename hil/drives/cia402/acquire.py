@@ -131,6 +131,11 @@ def _raw_command(setup: RunSetup, excitation: Excitation) -> np.ndarray:
     return np.clip(np.round(np.asarray(excitation.command) * factor), low, high).astype(np.int64)
 
 
+def _hold_where_it_ended(link: CanLink, mode: Mode, raw: np.ndarray) -> None:
+    """The target the link holds after a run: the last position, else zero."""
+    link.target = 0 if mode is not Mode.POSITION else int(raw[-1])
+
+
 def _raw_offset(setup: RunSetup, excitation: Excitation) -> np.ndarray | None:
     """The torque offset (0x60B2, per-mille of the rated torque) of a velocity-mode run:
     zeros when the excitation sends none; ``None`` in the other modes' RPDOs.
@@ -225,7 +230,7 @@ def run_stream(link: CanLink, setup: RunSetup, excitation: Excitation) -> Acquir
     recording = _stream_recording(link, setup, excitation, raw, first, done)
     if error is not None or stop is not None:
         return Acquired(recording, error, stop)
-    link.target = 0 if mode is not Mode.POSITION else int(raw[-1])
+    _hold_where_it_ended(link, mode, raw)
     link.tick()
     lost = len(raw) - len(recording)
     if lost > setup.lost_sample_fraction * len(raw):
@@ -460,6 +465,10 @@ def run_recorder(link: CanLink, setup: RunSetup, excitation: Excitation) -> Acqu
                 )
         if int(link.read(recorder, 2)) != 2:
             raise DriveStateError(f"drive recorder did not finish '{excitation.name}'")
+        # the stream's held target takes over from the table: where the run ended (a stale
+        # one pulled the azimuth back from 1.89 rad while a held elevation moved, and the
+        # drive stopped at its own limit)
+        _hold_where_it_ended(link, excitation.mode, wave)
     except DriveError as exc:
         error = exc
     # a stop signal propagates: the caller quick-stops first, then uploads (recorder_upload)

@@ -447,6 +447,11 @@ class CanOpenDrive(ClampedRotor, Drive):
             )
         fs = excitation.fs_hz
         use_recorder = self.recorder_rate_hz > 0 and fs > self.stream_rate_hz
+        if use_recorder and self._shaft is not None:
+            raise DriveStateError(
+                f"excitation '{excitation.name}' at {fs:g} Hz would run on the drive "
+                "recorder, which does not record the station's torque transducer: stream it "
+                f"(at most {self.stream_rate_hz:g} Hz)")
         if use_recorder:
             divider = self.recorder_rate_hz / fs
             if abs(divider - round(divider)) > 1e-9:
