@@ -1,7 +1,8 @@
 """Reading the two sides of a comparison: certificate JSON, checked against its schema.
 
 Each side is one ``certificate.json`` or a directory holding one per serial
-(``DIR/SERIAL/certificate.json``). Anything missing or mistyped is an
+(``DIR/SERIAL/certificate.json``), read by the certificate's one reader
+(:func:`hil.certificate.model.read_certificate`). Anything missing or mistyped is an
 :class:`~hil.errors.InputError` naming the file and the place in it.
 """
 
@@ -16,9 +17,9 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any, Literal
 
+from hil.certificate import model
 from hil.certificate.gimbal_file import GIMBAL_FILE
 from hil.certificate.integrity import verify_document
-from hil.certificate.model import SCHEMA
 from hil.errors import InputError
 
 log = logging.getLogger(__name__)
@@ -128,57 +129,46 @@ def load_side(path: Path) -> dict[str, Certificate]:
 
 
 def read_certificate(path: Path) -> Certificate:
-    """Read and check one ``certificate.json`` (schema ``gimbal-hil/certificate/v1``)."""
-    try:
-        document = json.loads(path.read_text(encoding="utf-8"))
-    except OSError as exc:
-        raise InputError(f"cannot read: {exc.strerror or exc}", source=str(path)) from exc
-    except (UnicodeDecodeError, json.JSONDecodeError) as exc:
-        raise InputError(f"not JSON: {exc}", source=str(path)) from exc
+    """Read one ``certificate.json`` with the certificate's own reader
+    (:func:`hil.certificate.model.read_certificate`), then check what a comparison
+    relies on beyond its types: each parameter once, finite numbers, non-negative
+    uncertainties, a known direction, a budget of Type A and B lines."""
+    cert = model.read_certificate(path)
     at = _Reader(path)
-    if not isinstance(document, dict):
-        raise at.error("", "a certificate is a JSON object")
-    if document.get("schema") != SCHEMA:
-        raise at.error("schema", f"is {document.get('schema')!r}, expected {SCHEMA!r}")
-    unit, method = at.obj(document, "unit"), at.obj(document, "method")
-    software, drive = at.obj(document, "software"), at.obj(document, "drive")
-    results = at.list_(document, "results")
-    parsed = [_result(at, entry, f"results[{i}]") for i, entry in enumerate(results)]
     by_name: dict[str, Result] = {}
-    for i, result in enumerate(parsed):
+    for i, entry in enumerate(cert.results):
+        result = _result(at, entry, f"results[{i}]")
         if result.parameter in by_name:
             raise at.error(f"results[{i}].parameter", f"{result.parameter!r} appears twice")
         by_name[result.parameter] = result
-    bias = method.get("method_bias")
-    station = {key: drive.get(key) for key in ("kind", "vendor", "model", "transport")}
+    drive = cert.drive
+    station: dict[str, Any] = {"kind": drive.kind,
+                               **{key: drive.info.get(key)
+                                  for key in ("vendor", "model", "transport")}}
     station["transport"] = _stable_transport(station["transport"])
-    if "station" in document:  # a station file's identity, when the certificate states one
-        station["station"] = document["station"]
-    revision = software.get("git_revision")
-    # verified before believed: digest, recordings' SHA-256, outcomes (integrity.py)
+    # verified before believed: digest, recordings' SHA-256, outcomes (integrity.py, which
+    # reads the raw JSON: the digest covers its bytes)
+    document = json.loads(path.read_bytes())
     verification = verify_document(document, path=path, unit_dir=path.parent)
     if verification.refusals:
         raise InputError(verification.refusal(), source=str(path))
     for warning in verification.warnings:
         log.warning("%s: %s", path, warning)
+    bias = cert.method.method_bias
     return Certificate(
         path=path,
-        serial=at.string(unit, "serial", "unit.serial"),
-        unit_type=at.string(unit, "type", "unit.type"),
-        axis=str(unit.get("axis", "")),
-        profile_sha256=at.string(method, "profile_sha256", "method.profile_sha256"),
-        profile_sha256_without_firmware=(
-            at.string(method, "profile_sha256_without_firmware",
-                      "method.profile_sha256_without_firmware")
-            if "profile_sha256_without_firmware" in method else None),
-        protocols=tuple(at.obj(method, "protocols", "method.protocols")),
+        serial=cert.unit.serial,
+        unit_type=cert.unit.unit_type,
+        axis=cert.unit.axis,
+        profile_sha256=cert.method.profile_sha256,
+        profile_sha256_without_firmware=cert.method.profile_sha256_without_firmware,
+        protocols=tuple(cert.method.protocols),
         station=station,
-        software_version=at.string(software, "version", "software.version"),
-        git_revision=revision if isinstance(revision, str) else None,
-        firmware_version=(str(drive["firmware_version"])
-                          if drive.get("firmware_version") is not None else None),
-        method_bias_sha256=(str(bias.get("sha256")) if isinstance(bias, dict) else None),
-        outcome=at.string(document, "outcome", "outcome"),
+        software_version=cert.software.version,
+        git_revision=cert.software.git_revision,
+        firmware_version=drive.firmware_version,
+        method_bias_sha256=bias.sha256 if bias is not None else None,
+        outcome=cert.outcome,
         results=by_name,
         certificate_id=verification.certificate_id,
         warnings=verification.warnings,
@@ -263,50 +253,45 @@ def _stable_transport(transport: object) -> object:
     return transport
 
 
-def _result(at: _Reader, entry: Any, where: str) -> Result:
-    if not isinstance(entry, dict):
-        raise at.error(where, "must be an object")
-    direction = entry.get("direction")
-    if direction is not None and direction not in DIRECTIONS:
-        raise at.error(f"{where}.direction", f"is {direction!r}, expected 'higher' or 'lower'")
-    budget = at.list_(entry, "budget", f"{where}.budget")
-    if not budget:
+def _result(at: _Reader, entry: model.Result, where: str) -> Result:
+    if entry.direction is not None and entry.direction not in DIRECTIONS:
+        raise at.error(f"{where}.direction",
+                       f"is {entry.direction!r}, expected 'higher' or 'lower'")
+    if not entry.budget:
         raise at.error(f"{where}.budget", "is empty (every result has at least one line)")
     return Result(
-        parameter=at.string(entry, "parameter", f"{where}.parameter"),
-        value=at.number(entry, "value", f"{where}.value"),
-        unit=at.string(entry, "unit", f"{where}.unit"),
-        standard_uncertainty=at.number(entry, "standard_uncertainty",
+        parameter=entry.parameter,
+        value=at.number(entry.value, f"{where}.value"),
+        unit=entry.unit,
+        standard_uncertainty=at.number(entry.standard_uncertainty,
                                        f"{where}.standard_uncertainty", non_negative=True),
-        expanded_uncertainty=at.number(entry, "expanded_uncertainty",
+        expanded_uncertainty=at.number(entry.expanded_uncertainty,
                                        f"{where}.expanded_uncertainty", non_negative=True),
-        dof=at.dof(entry, "degrees_of_freedom", f"{where}.degrees_of_freedom"),
-        lower_limit=at.number(entry, "lower_limit", f"{where}.lower_limit"),
-        upper_limit=at.number(entry, "upper_limit", f"{where}.upper_limit"),
-        outcome=at.string(entry, "outcome", f"{where}.outcome"),
-        direction=direction,
-        budget=tuple(_line(at, line, f"{where}.budget[{j}]") for j, line in enumerate(budget)),
+        dof=at.dof(entry.degrees_of_freedom, f"{where}.degrees_of_freedom"),
+        lower_limit=at.number(entry.lower_limit, f"{where}.lower_limit"),
+        upper_limit=at.number(entry.upper_limit, f"{where}.upper_limit"),
+        outcome=entry.outcome,
+        direction=entry.direction,
+        budget=tuple(_line(at, line, f"{where}.budget[{j}]")
+                     for j, line in enumerate(entry.budget)),
     )
 
 
-def _line(at: _Reader, line: Any, where: str) -> BudgetLine:
-    if not isinstance(line, dict):
-        raise at.error(where, "must be an object")
-    kind = line.get("type")
-    if kind not in ("A", "B"):
-        raise at.error(f"{where}.type", f"is {kind!r}, expected 'A' or 'B'")
+def _line(at: _Reader, line: model.BudgetLine, where: str) -> BudgetLine:
+    if line.kind not in ("A", "B"):
+        raise at.error(f"{where}.type", f"is {line.kind!r}, expected 'A' or 'B'")
     return BudgetLine(
-        source=at.string(line, "component", f"{where}.component"),
-        kind=kind,
-        standard_uncertainty=at.number(line, "standard_uncertainty",
+        source=line.component,
+        kind="A" if line.kind == "A" else "B",
+        standard_uncertainty=at.number(line.standard_uncertainty,
                                        f"{where}.standard_uncertainty", non_negative=True),
-        sensitivity=at.number(line, "sensitivity", f"{where}.sensitivity"),
-        dof=at.dof(line, "degrees_of_freedom", f"{where}.degrees_of_freedom"),
+        sensitivity=at.number(line.sensitivity, f"{where}.sensitivity"),
+        dof=at.dof(line.degrees_of_freedom, f"{where}.degrees_of_freedom"),
     )
 
 
 class _Reader:
-    """Typed access to a certificate's fields; errors name the file and the JSON path."""
+    """The checks beyond the certificate's types; errors name the file and the JSON path."""
 
     def __init__(self, path: Path) -> None:
         self.path = path
@@ -314,46 +299,17 @@ class _Reader:
     def error(self, where: str, message: str) -> InputError:
         return InputError(f"{where} {message}" if where else message, source=str(self.path))
 
-    def obj(self, parent: Mapping[str, Any], key: str, where: str | None = None
-            ) -> dict[str, Any]:
-        value = self._get(parent, key, where)
-        if not isinstance(value, dict):
-            raise self.error(where or key, "must be an object")
-        return value
-
-    def list_(self, parent: Mapping[str, Any], key: str, where: str | None = None
-              ) -> list[Any]:
-        value = self._get(parent, key, where)
-        if not isinstance(value, list):
-            raise self.error(where or key, "must be a list")
-        return value
-
-    def string(self, parent: Mapping[str, Any], key: str, where: str) -> str:
-        value = self._get(parent, key, where)
-        if not isinstance(value, str):
-            raise self.error(where, f"must be a string, not {type(value).__name__}")
-        return value
-
-    def number(self, parent: Mapping[str, Any], key: str, where: str, *,
-               non_negative: bool = False) -> float:
-        value = self._get(parent, key, where)
-        if isinstance(value, bool) or not isinstance(value, int | float):
-            raise self.error(where, f"must be a number, not {type(value).__name__}")
+    def number(self, value: float, where: str, *, non_negative: bool = False) -> float:
         if not math.isfinite(value) or (non_negative and value < 0):
             raise self.error(where, f"is {value}, expected a finite"
                              + (" non-negative" if non_negative else "") + " number")
         return float(value)
 
-    def dof(self, parent: Mapping[str, Any], key: str, where: str) -> float:
-        """Degrees of freedom: ``null`` or absent means infinitely many (Type B)."""
-        if parent.get(key) is None:
+    def dof(self, value: float | None, where: str) -> float:
+        """Degrees of freedom: ``null`` means infinitely many (Type B)."""
+        if value is None:
             return math.inf
-        value = self.number(parent, key, where, non_negative=True)
+        value = self.number(value, where, non_negative=True)
         if value <= 0:
             raise self.error(where, f"is {value}, expected a positive number or null")
         return value
-
-    def _get(self, parent: Mapping[str, Any], key: str, where: str | None) -> Any:
-        if key not in parent:
-            raise self.error(where or key, "is missing")
-        return parent[key]

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -162,13 +163,13 @@ def _broken(document: dict[str, Any]) -> dict[str, Any]:
 @pytest.mark.parametrize(("content", "message"), [
     (None, "no such file or directory"),
     ("{not json", "not JSON"),
-    (json.dumps({**certificate(), "schema": "other/v9"}), "schema is 'other/v9'"),
+    (json.dumps({**certificate(), "schema": "other/v9"}),
+     "not a gimbal-hil certificate (schema 'other/v9')"),
     (json.dumps({k: v for k, v in certificate().items() if k != "results"}),
      "results is missing"),
     (json.dumps(_broken(certificate())),
-     "results[0].budget[0].standard_uncertainty must be a number, not str"),
-    (json.dumps({**certificate(), "results": [{**result("x", 1.0, u_a=0.1),
-                                               "direction": "up"}]}),
+     "results[0].budget[0].standard_uncertainty must be a number, not a string"),
+    (json.dumps(certificate(results=[replace(result("x", 1.0, u_a=0.1), direction="up")])),
      "results[0].direction is 'up', expected 'higher' or 'lower'"),
 ])
 def test_bad_input_is_one_line_naming_what_and_where(
