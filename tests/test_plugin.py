@@ -16,7 +16,9 @@ import pytest
 # command line loads each command's dependencies when it runs
 import hil.store.record  # noqa: F401
 from hil.certificate.controller import controller_outputs
+from hil.certificate.model import read_certificate
 from hil.profile import builtin_profile_path, load_profile
+from tests.compare import certificate_factory as factory
 from tests.helpers import subset_profile
 
 pytest_plugins = ["pytester"]
@@ -181,15 +183,14 @@ def test_a_typo_in_protocol_settings_is_an_error_not_a_default(
 
 
 def test_controller_outputs_carry_the_cable_loop_when_measured() -> None:
-    results = [
-        {"parameter": "coulomb_nm", "value": 0.02},
-        {"parameter": "cable_stiffness_nm_rad", "value": 0.004},
-        {"parameter": "cable_hysteresis_nm", "value": 0.001},
-    ]
-    outputs = controller_outputs(
-        {"results": results, "certificate_id": "X", "outcome": "PASS", "artifacts": []}
-    )
+    document = factory.certificate(results=[
+        factory.result("coulomb_nm", 0.02, u_a=0.001),
+        factory.result("cable_stiffness_nm_rad", 0.004, u_a=0.0001),
+        factory.result("cable_hysteresis_nm", 0.001, u_a=0.0001),
+    ])
+    outputs = controller_outputs(read_certificate(document))
     assert outputs is not None
+    assert outputs["certificate_id"] == document["certificate_id"]
     assert outputs["cable_feedforward"] == {"stiffness_nm_rad": 0.004, "hysteresis_nm": 0.001}
     assert outputs["friction_feedforward"] == {"coulomb_nm": 0.02}
 

@@ -214,7 +214,7 @@ def write_certificate(run: CalibrationRun, *, aborted: bool) -> Path:
     run.archive_previous()
     certificate = build_certificate(run, aborted=aborted)
     run.unit_dir.mkdir(parents=True, exist_ok=True)
-    outputs = controller_outputs(certificate.to_json())  # still a dict reader
+    outputs = controller_outputs(certificate)
     if outputs is not None:
         text = json.dumps(outputs, indent=2) + "\n"
         write_atomic(run.unit_dir / "controller.json", text.encode("utf-8"))

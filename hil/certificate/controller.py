@@ -27,6 +27,8 @@ from __future__ import annotations
 
 from typing import Any
 
+from hil.certificate.model import Certificate
+
 SCHEMA = "gimbal-hil/controller/v1"
 
 _FRICTION = ("viscous_nm_s_rad", "coulomb_nm", "static_friction_nm", "stribeck_velocity_rad_s")
@@ -34,9 +36,9 @@ _GRAVITY = {"gravity_mge_nm": "mge_nm", "gravity_phase_rad": "phase_rad"}
 _CABLE = {"cable_stiffness_nm_rad": "stiffness_nm_rad", "cable_hysteresis_nm": "hysteresis_nm"}
 
 
-def controller_outputs(certificate: dict[str, Any]) -> dict[str, Any] | None:
+def controller_outputs(certificate: Certificate) -> dict[str, Any] | None:
     """Feedforward parameters from a certificate's results; None when there are none."""
-    values = {r["parameter"]: r["value"] for r in certificate["results"]}
+    values = {r.parameter: r.value for r in certificate.results}
     friction = {name: values[name] for name in _FRICTION if name in values}
     gravity = {key: values[name] for name, key in _GRAVITY.items() if name in values}
     cable = {key: values[name] for name, key in _CABLE.items() if name in values}
@@ -44,8 +46,8 @@ def controller_outputs(certificate: dict[str, Any]) -> dict[str, Any] | None:
         return None
     outputs: dict[str, Any] = {
         "schema": SCHEMA,
-        "certificate_id": certificate["certificate_id"],
-        "certificate_outcome": certificate["outcome"],
+        "certificate_id": certificate.certificate_id,
+        "certificate_outcome": certificate.outcome,
     }
     if friction:
         outputs["friction_feedforward"] = friction
@@ -55,7 +57,7 @@ def controller_outputs(certificate: dict[str, Any]) -> dict[str, Any] | None:
         outputs["cable_feedforward"] = cable
     if "inertia_kg_m2" in values:
         outputs["inertia_kg_m2"] = values["inertia_kg_m2"]
-    tables = [a["file"] for a in certificate["artifacts"] if "cogging" in a["file"]]
+    tables = [a.file for a in certificate.artifacts if "cogging" in a.file]
     if tables:
         outputs["cogging_table"] = tables[0]
     return outputs
