@@ -131,8 +131,11 @@ def build_parser() -> argparse.ArgumentParser:
                           "the login name)")
     cal.add_argument("--reference", action="store_true",
                      help="a reference (golden) unit (default: a production unit)")
-    cal.add_argument("--gimbal-axis", action="append", default=[], metavar="NAME=PROFILE",
-                     help=argparse.SUPPRESS)  # calibrate --gimbal: the axis's siblings
+    cal.add_argument("--gimbal-axis", action="append", default=None, metavar="NAME=PROFILE",
+                     help="another axis of this unit's gimbal and its profile, once per axis "
+                          "(calibrate --gimbal passes them): with --drive sim the axes are "
+                          "simulated together, coupled, the other held by its drive "
+                          "(default: none, a one-axis unit)")
     cal.add_argument("pytest_args", nargs="*", metavar="PYTEST_ARG",
                      help="extra pytest arguments (after --; default: none)")
 
@@ -308,7 +311,7 @@ def _calibrate(args: argparse.Namespace) -> int:
     options += ["--store", args.store] if args.store else []
     options += ["--operator", args.operator] if args.operator else []
     options += ["--reference"] if args.reference else []
-    for sibling in args.gimbal_axis:
+    for sibling in args.gimbal_axis or []:
         options += ["--gimbal-axis", sibling]
     return int(pytest.main([*suite_arguments(), *options, *args.pytest_args]))
 

@@ -27,6 +27,7 @@ def test_the_azimuth_moves_the_elevation_for_real_and_its_records_say_where() ->
     with open_drive("sim", profile=AZIMUTH, unit_serial="SIM-0001",
                     gimbal_axes={"elevation": ELEVATION}) as drive:
         assert Capability.ELEVATION_AXIS in drive.info.capabilities
+        assert Capability.ELEVATION_MOTION in drive.info.capabilities
         drive.enable()
         before = drive.status().position_rad
         drive.set_elevation(0.6)
@@ -47,6 +48,7 @@ def test_the_elevation_under_test_has_no_elevation_to_move() -> None:
     with open_drive("sim", profile=ELEVATION, unit_serial="SIM-0001",
                     gimbal_axes={"azimuth": AZIMUTH}) as drive:
         assert Capability.ELEVATION_AXIS not in drive.info.capabilities
+        assert Capability.ELEVATION_MOTION not in drive.info.capabilities
         drive.enable()
         with pytest.raises(DriveStateError, match="elevation axis"):
             drive.set_elevation(0.3)
