@@ -1,7 +1,8 @@
 """A certificate (``certificate.json``) as the rows of the results store.
 
-Pure: no database. Every field comes from the certificate; a certificate written before the
-store existed lacks the ``run`` block (run id, station, operator, reference, attempt) and
+Pure: no database. Every field comes from the certificate, read by the certificate's one
+reader (:mod:`hil.certificate.model`); a certificate written before the store existed lacks
+the ``run`` block (run id, station, operator, reference, attempt) and
 gets a run id derived from its certificate id and "not recorded" for the rest.
 """
 
@@ -10,11 +11,11 @@ from __future__ import annotations
 import hashlib
 import json
 import uuid
-from collections.abc import Mapping
 from dataclasses import dataclass
 from datetime import UTC, datetime
 from typing import Any
 
+from hil.certificate.model import Certificate, Result
 from hil.errors import InputError
 
 NOT_RECORDED = "(not recorded)"
@@ -33,7 +34,8 @@ class CertificateRows:
 
 
 def certificate_rows(text: str, *, source: str) -> CertificateRows:
-    """Parse a certificate's JSON text into rows.
+    """Parse a certificate's JSON text into rows (read by
+    :func:`hil.certificate.model.read_certificate`).
 
     Parameters
     ----------
@@ -45,42 +47,39 @@ def certificate_rows(text: str, *, source: str) -> CertificateRows:
     Raises
     ------
     InputError
-        Not JSON, or a required field missing or of the wrong type (naming file and field).
+        Not JSON, or not a certificate: another schema, a field missing, unknown or of the
+        wrong type (:class:`~hil.certificate.model.CertificateError`, naming file and field),
+        a time that is not ISO 8601.
     """
     try:
-        cert = json.loads(text)
-    except json.JSONDecodeError as exc:
+        document = json.loads(text)
+    except (ValueError, RecursionError) as exc:
         raise InputError(f"not valid JSON: {exc}", source=source) from None
-    if not isinstance(cert, dict) or "certificate_id" not in cert:
-        raise InputError("not a gimbal-hil certificate (no certificate_id)", source=source)
-    get = _Reader(cert, source)
-    certificate_id = get.text("certificate_id")
-    block: dict[str, Any] = cert["run"] if isinstance(cert.get("run"), dict) else {}
-    dates = get.mapping("dates")
-    drive = get.mapping("drive")
-    started = _time(dates, "calibration_started", source)
+    cert = Certificate.from_json(document, source=source)
+    block = cert.run
+    drive = cert.drive
     run: dict[str, Any] = {
-        "run_id": str(block.get("id") or uuid.uuid5(_RUN_NAMESPACE, certificate_id)),
-        "certificate_id": certificate_id,
-        "serial": get.text("unit", "serial"),
-        "unit_type": get.text("unit", "type"),
-        "axis": get.text("unit", "axis"),
-        "station": str(block.get("station") or NOT_RECORDED),
-        "operator": str(block.get("operator") or NOT_RECORDED),
-        "is_reference": bool(block.get("reference", False)),
-        "attempt": int(block["attempt"]) if block.get("attempt") is not None else None,
-        "profile": get.text("method", "profile"),
-        "profile_sha256": get.text("method", "profile_sha256"),
-        "software_version": get.text("software", "version"),
-        "git_revision": get.mapping("software").get("git_revision"),
-        "drive_kind": get.text("drive", "kind"),
-        "drive_model": drive.get("model"),
-        "firmware_version": drive.get("firmware_version"),
-        "started_at": started,
-        "ended_at": _time(dates, "calibration_finished", source)
-        if "calibration_finished" in dates else _time(dates, "issued", source),
-        "outcome": get.text("outcome"),
-        "aborted": bool(cert.get("aborted", False)),
+        "run_id": block.id if block is not None and block.id
+        else str(uuid.uuid5(_RUN_NAMESPACE, cert.certificate_id)),
+        "certificate_id": cert.certificate_id,
+        "serial": cert.unit.serial,
+        "unit_type": cert.unit.unit_type,
+        "axis": cert.unit.axis,
+        "station": (block.station if block is not None else None) or NOT_RECORDED,
+        "operator": (block.operator if block is not None else None) or NOT_RECORDED,
+        "is_reference": block.reference if block is not None else False,
+        "attempt": block.attempt if block is not None else None,
+        "profile": cert.method.profile,
+        "profile_sha256": cert.method.profile_sha256,
+        "software_version": cert.software.version,
+        "git_revision": cert.software.git_revision,
+        "drive_kind": drive.kind,
+        "drive_model": drive.model,
+        "firmware_version": drive.firmware_version,
+        "started_at": _time(cert.dates.calibration_started, "calibration_started", source),
+        "ended_at": _time(cert.dates.issued, "issued", source),
+        "outcome": cert.outcome,
+        "aborted": cert.aborted,
         "certificate_path": source,
         "certificate_sha256": hashlib.sha256(text.encode("utf-8")).hexdigest(),
     }
@@ -89,93 +88,55 @@ def certificate_rows(text: str, *, source: str) -> CertificateRows:
         {
             "run_id": run_id,
             "protocol": name,
-            "outcome": str(p.get("outcome", "NOT_COMPLETED")),
-            "motion_time_s": float(p.get("motion_time_s", 0.0)),
-            "wall_time_s": float(p.get("wall_time_s", 0.0)),
-            "messages": json.dumps(p.get("messages", [])),
+            "outcome": p.outcome,
+            "motion_time_s": float(p.motion_time_s),
+            "wall_time_s": float(p.wall_time_s),
+            "messages": json.dumps(list(p.messages)),
         }
-        for name, p in get.mapping("method", "protocols").items()
+        for name, p in cert.method.protocols.items()
     ]
-    results = [_result(run_id, r, source) for r in get.sequence("results")]
+    results = [_result(run_id, r) for r in cert.results]
     recordings = [
         {
             "run_id": run_id,
-            "path": str(f["file"]),
-            "protocol": str(f.get("protocol", "")),
-            "excitation": str(f.get("excitation", "")),
-            "sha256": str(f["sha256"]),
-            "samples": f.get("samples"),
-            "complete": bool(f.get("complete", True)),
+            "path": f.file,
+            "protocol": f.protocol,
+            "excitation": f.excitation,
+            "sha256": f.sha256,
+            "samples": f.samples,
+            "complete": f.complete,
         }
-        for f in get.sequence("raw_data")
+        for f in cert.raw_data
     ]
     return CertificateRows(run=run, protocols=protocols, results=results, recordings=recordings)
 
 
-def _result(run_id: str, r: Mapping[str, Any], source: str) -> dict[str, Any]:
-    try:
-        return {
-            "run_id": run_id,
-            "name": str(r["parameter"]),
-            "protocol": str(r.get("protocol", "")),
-            "value": float(r["value"]),
-            "unit": str(r.get("unit", "")),
-            "standard_uncertainty": float(r["standard_uncertainty"]),
-            "coverage_factor": float(r["coverage_factor"]),
-            "expanded_uncertainty": float(r["expanded_uncertainty"]),
-            "degrees_of_freedom": _optional(r.get("degrees_of_freedom")),
-            "nominal": _optional(r.get("nominal")),
-            "lower_limit": _optional(r.get("lower_limit")),
-            "upper_limit": _optional(r.get("upper_limit")),
-            "marginal_fraction": _optional(r.get("marginal_fraction")),
-            "outcome": str(r["outcome"]),
-        }
-    except (KeyError, TypeError, ValueError) as exc:
-        name = r.get("parameter", "?") if isinstance(r, Mapping) else "?"
-        raise InputError(f"results[{name}]: missing or invalid {exc}", source=source) from None
+def _result(run_id: str, r: Result) -> dict[str, Any]:
+    return {
+        "run_id": run_id,
+        "name": r.parameter,
+        "protocol": r.protocol,
+        "value": float(r.value),
+        "unit": r.unit,
+        "standard_uncertainty": float(r.standard_uncertainty),
+        "coverage_factor": float(r.coverage_factor),
+        "expanded_uncertainty": float(r.expanded_uncertainty),
+        "degrees_of_freedom": _optional(r.degrees_of_freedom),
+        "nominal": _optional(r.nominal),
+        "lower_limit": float(r.lower_limit),
+        "upper_limit": float(r.upper_limit),
+        "marginal_fraction": float(r.marginal_fraction),
+        "outcome": r.outcome,
+    }
 
 
-def _optional(value: Any) -> float | None:
+def _optional(value: float | None) -> float | None:
     return None if value is None else float(value)
 
 
-def _time(dates: Mapping[str, Any], key: str, source: str) -> datetime:
+def _time(text: str, key: str, source: str) -> datetime:
     try:
-        moment = datetime.fromisoformat(str(dates[key]))
-    except (KeyError, ValueError):
-        raise InputError(f"dates.{key}: missing or not an ISO time", source=source) from None
+        moment = datetime.fromisoformat(text)
+    except ValueError:
+        raise InputError(f"dates.{key}: not an ISO time", source=source) from None
     return moment.replace(tzinfo=UTC) if moment.tzinfo is None else moment.astimezone(UTC)
-
-
-class _Reader:
-    """Required fields of a certificate, each missing one an error naming its path."""
-
-    def __init__(self, cert: Mapping[str, Any], source: str) -> None:
-        self.cert = cert
-        self.source = source
-
-    def _at(self, keys: tuple[str, ...]) -> Any:
-        node: Any = self.cert
-        for key in keys:
-            if not isinstance(node, Mapping) or key not in node:
-                raise InputError(f"certificate lacks '{'.'.join(keys)}'", source=self.source)
-            node = node[key]
-        return node
-
-    def text(self, *keys: str) -> str:
-        value = self._at(keys)
-        if not isinstance(value, str):
-            raise InputError(f"'{'.'.join(keys)}' must be text", source=self.source)
-        return value
-
-    def mapping(self, *keys: str) -> Mapping[str, Any]:
-        value = self._at(keys)
-        if not isinstance(value, Mapping):
-            raise InputError(f"'{'.'.join(keys)}' must be a table", source=self.source)
-        return value
-
-    def sequence(self, *keys: str) -> list[Any]:
-        value = self._at(keys)
-        if not isinstance(value, list):
-            raise InputError(f"'{'.'.join(keys)}' must be a list", source=self.source)
-        return value
