@@ -39,6 +39,8 @@ from hil.calibration import (
     check_serial,
 )
 from hil.certificate import write_certificate
+from hil.certificate.build import result_record
+from hil.certificate.model import read_certificate
 from hil.drives.base import Capability, Drive, DriveInfo
 from hil.drives.connect import open_drive
 from hil.drives.kinds import drive_kind as kind_named
@@ -364,7 +366,7 @@ def _allure_measurements(request: pytest.FixtureRequest) -> Iterator[None]:
 
     for measurement in run.measurements[before:]:
         allure.attach(
-            json.dumps(measurement.as_dict(), indent=2),
+            json.dumps(result_record(measurement).to_json(), indent=2),
             name=measurement.spec.name,
             attachment_type=allure.attachment_type.JSON,
         )
@@ -512,7 +514,7 @@ def pytest_runtest_call(item: pytest.Item) -> Generator[None, None, None]:
     finally:
         run = item.config.stash.get(RUN_KEY, None)
         for measurement in run.measurements[before:] if run is not None else []:
-            item.user_properties.extend(measurement_properties(measurement.as_dict()))
+            item.user_properties.extend(measurement_properties(result_record(measurement)))
 
 
 @pytest.hookimpl(tryfirst=True)  # before junitxml's own sessionfinish writes its file
@@ -556,9 +558,9 @@ def _junit_suite(config: pytest.Config, certificate: Path) -> None:
     xml = config.stash.get(xml_key, None)
     if xml is None:
         return
-    cert = json.loads(certificate.read_text(encoding="utf-8"))
+    cert = read_certificate(certificate)
     if config.getini("junit_suite_name") == PYTEST_DEFAULT_SUITE_NAME:
-        xml.suite_name = suite_name(cert["unit"]["serial"])
+        xml.suite_name = suite_name(cert.unit.serial)
     for name, value in junit_suite_properties(cert):
         xml.add_global_property(name, value)
 
@@ -578,8 +580,8 @@ def pytest_terminal_summary(terminalreporter: pytest.TerminalReporter) -> None:
         terminalreporter.write_line(
             f"{m.spec.name:<32}{value:>12} ± {expanded:<9}{m.spec.unit:<11}{m.outcome.value}"
         )
-    cert = json.loads(path.read_text(encoding="utf-8"))
-    outcome = cert["outcome"]
+    cert = read_certificate(path)
+    outcome = cert.outcome
     problems = config.stash.get(DOCUMENTS_KEY, [])
     documents = () if config.getoption("--no-documents") else (
         "certificate.html", "certificate.pdf")
@@ -589,7 +591,7 @@ def pytest_terminal_summary(terminalreporter: pytest.TerminalReporter) -> None:
     for problem in problems:
         terminalreporter.write_line(f"not rendered: {problem}", yellow=True)
     colour = {"PASS": "green", "MARGINAL": "yellow"}.get(outcome, "red")
-    for line in outcome_banner(outcome, aborted=bool(cert.get("aborted"))):
+    for line in outcome_banner(outcome, aborted=cert.aborted):
         terminalreporter.write_line(line, **{colour: True, "bold": True})
     if STORE_MESSAGE_KEY in config.stash:
         terminalreporter.write_line(config.stash[STORE_MESSAGE_KEY])

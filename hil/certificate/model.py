@@ -269,6 +269,10 @@ class Result:
         """Its title; its code name for a certificate written before titles."""
         return self.title or self.parameter
 
+    def to_json(self) -> dict[str, Any]:
+        """The result as JSON values, as the certificate's ``results`` holds it."""
+        return typing.cast(dict[str, Any], _to_json(self))
+
 
 @dataclasses.dataclass(frozen=True, slots=True, kw_only=True)
 class NotMeasured:

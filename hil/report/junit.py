@@ -9,24 +9,12 @@ layer) hands them to pytest's ``LogXML`` and each item's ``user_properties``.
 
 from __future__ import annotations
 
-from collections.abc import Mapping
 from pathlib import PurePath
-from typing import Any
+
+from hil.certificate.model import Certificate, Result
 
 #: pytest's ``junit_suite_name`` when nobody set one: the calibration then names the unit.
 PYTEST_DEFAULT_SUITE_NAME = "pytest"
-#: The suite's properties and where the certificate keeps each.
-SUITE_FIELDS = (("unit_serial", ("unit", "serial")), ("unit_type", ("unit", "type")),
-                ("profile", ("method", "profile")),
-                ("profile_sha256", ("method", "profile_sha256")),
-                ("certificate_id", ("certificate_id",)), ("outcome", ("outcome",)),
-                ("drive", ("drive", "kind")), ("station", ("run", "station")),
-                ("run_id", ("run", "id")))
-#: A measurement's properties, ``<parameter>.<field>``, and the certificate key of each.
-MEASUREMENT_FIELDS = (("value", "value"), ("U", "expanded_uncertainty"),
-                      ("k", "coverage_factor"), ("unit", "unit"),
-                      ("lower_limit", "lower_limit"), ("upper_limit", "upper_limit"),
-                      ("outcome", "outcome"))
 
 
 def suite_name(unit_serial: str) -> str:
@@ -34,13 +22,13 @@ def suite_name(unit_serial: str) -> str:
     return f"gimbal-hil {unit_serial}"
 
 
-def suite_properties(cert: Mapping[str, Any]) -> list[tuple[str, str]]:
+def suite_properties(cert: Certificate) -> list[tuple[str, str]]:
     """The certificate's identity as ``(name, value)`` suite properties.
 
     Parameters
     ----------
-    cert : mapping
-        ``certificate.json`` as written.
+    cert : Certificate
+        ``certificate.json`` as read (:func:`hil.certificate.model.read_certificate`).
 
     Returns
     -------
@@ -49,37 +37,36 @@ def suite_properties(cert: Mapping[str, Any]) -> list[tuple[str, str]]:
         SHA-256, certificate id, overall outcome, drive kind, station and run id; a field
         the certificate lacks is left out.
     """
-    out = []
-    for name, path in SUITE_FIELDS:
-        found: Any = cert
-        for key in path:
-            found = found.get(key) if isinstance(found, Mapping) else None
-        if found is not None:
-            out.append((name, _profile_name(found) if name == "profile" else str(found)))
-    return out
+    run = cert.run
+    found: tuple[tuple[str, str | None], ...] = (
+        ("unit_serial", cert.unit.serial), ("unit_type", cert.unit.unit_type),
+        ("profile", PurePath(cert.method.profile).stem),  # a built-in's name, a file's stem
+        ("profile_sha256", cert.method.profile_sha256),
+        ("certificate_id", cert.certificate_id), ("outcome", cert.outcome),
+        ("drive", cert.drive.kind), ("station", run.station if run else None),
+        ("run_id", run.id if run else None))
+    return [(name, value) for name, value in found if value is not None]
 
 
-def _profile_name(profile: object) -> str:
-    """The profile's name: a built-in name as is, a file's name without its folder."""
-    return PurePath(str(profile)).stem
-
-
-def measurement_properties(result: Mapping[str, Any]) -> list[tuple[str, str]]:
+def measurement_properties(result: Result) -> list[tuple[str, str]]:
     """One judged measurement as ``<parameter>.<field>`` properties: value, U (expanded),
     k, unit, limits and outcome, numbers at full precision (as ``certificate.json``).
 
     Parameters
     ----------
-    result : mapping
-        The measurement as the certificate's ``results`` writes it
-        (:meth:`hil.measurement.Measurement.as_dict`).
+    result : Result
+        The measurement as the certificate states it
+        (:func:`hil.certificate.build.result_record`).
 
     Returns
     -------
     list of (str, str)
     """
-    name = result["parameter"]
-    return [(f"{name}.{field}", _text(result[key])) for field, key in MEASUREMENT_FIELDS]
+    fields = (("value", result.value), ("U", result.expanded_uncertainty),
+              ("k", result.coverage_factor), ("unit", result.unit),
+              ("lower_limit", result.lower_limit), ("upper_limit", result.upper_limit),
+              ("outcome", result.outcome))
+    return [(f"{result.parameter}.{field}", _text(value)) for field, value in fields]
 
 
 def _text(value: object) -> str:
