@@ -91,41 +91,6 @@ class Measurement:
             f"{self.outcome.value} (limits [{spec.lower_limit:.6g}, {spec.upper_limit:.6g}])"
         )
 
-    def as_dict(self) -> dict[str, object]:
-        e, declared = self.estimate, self.declared
-        return {
-            "parameter": self.spec.name,
-            "title": declared.title if declared else self.spec.name,
-            "description": declared.description if declared else "",
-            "non_negative": declared.non_negative if declared else False,
-            "protocol": self.protocol,
-            "value": e.value,
-            "unit": self.spec.unit or e.unit,
-            "standard_uncertainty": e.standard_uncertainty,
-            "coverage_factor": e.coverage_factor,
-            "expanded_uncertainty": e.expanded_uncertainty,
-            "degrees_of_freedom": e.dof if math.isfinite(e.dof) else None,
-            "cramer_rao_std": e.cramer_rao_std,
-            "nominal": self.spec.nominal,
-            "lower_limit": self.spec.lower_limit,
-            "upper_limit": self.spec.upper_limit,
-            "marginal_fraction": self.spec.marginal_fraction,
-            "outcome": self.outcome.value,
-            "budget": [
-                {
-                    "component": c.source,
-                    "type": c.kind,
-                    "standard_uncertainty": c.standard_uncertainty,
-                    "unit": c.unit,
-                    "sensitivity": c.sensitivity,
-                    "contribution": c.contribution,
-                    "degrees_of_freedom": c.dof if math.isfinite(c.dof) else None,
-                }
-                for c in e.components()
-            ],
-            "validation": self.validation,
-        }
-
 
 def judge(estimate: Estimate, spec: MeasurementSpec, *, non_negative: bool = False) -> Outcome:
     """Apply :data:`DECISION_RULE` (``non_negative``: the quantity cannot be below zero)."""
