@@ -8,7 +8,7 @@ import pytest
 
 from hil.drives.base import Capability
 from hil.drives.connect import open_drive
-from hil.errors import DriveStateError
+from hil.errors import DriveStateError, LimitViolationError
 from hil.motion import Excitation, Mode
 from hil.profile import UnitProfile, load_profile
 
@@ -36,6 +36,10 @@ def test_the_azimuth_moves_the_elevation_for_real_and_its_records_say_where() ->
         recording = drive.run(_sine(AZIMUTH, "sine_at_0.6"))
         drive.set_elevation(-0.3)
         second = drive.run(_sine(AZIMUTH, "sine_at_-0.3"))
+        here = drive.status().position_rad
+        with pytest.raises(LimitViolationError):  # beyond the elevation's travel (±1.4 rad)
+            drive.set_elevation(1.6)
+        assert drive.status().position_rad == here  # nothing moved
     assert recording.metadata["held_axes"] == (
         "elevation (simulated, held by its drive) at +0.6000 rad")
     assert second.metadata["held_axes"] == (

@@ -136,6 +136,8 @@ class SimDrive(Drive):
         ------
         DriveStateError
             This axis is the gimbal's elevation (no other elevation to move).
+        LimitViolationError
+            The angle is outside the elevation's travel (nothing moved).
         """
         if self._partner is None:
             self._plant.set_elevation(elevation_rad)
@@ -147,6 +149,9 @@ class SimDrive(Drive):
                              speed_rad_s=HOLD_SPEED_RAD_S, accel_rad_s2=HOLD_ACCEL_RAD_S2,
                              step_s=1.0 / fs)
         path = np.concatenate([path, np.full(math.ceil(HOLD_SETTLE_S * fs), elevation_rad)])
+        check_limits(Excitation(name=f"elevation to {elevation_rad:+.4f} rad",
+                                mode=Mode.POSITION, command=path, fs_hz=fs),
+                     self._partner_limits, start_position_rad=self._held_plant.position_rad)
         here = np.full(path.shape, self._plant.position_rad)
         self._step_gimbal(AxisBlock(mode=Mode.POSITION, command=here), held_command=path)
         self._hold_rad = elevation_rad
@@ -154,7 +159,8 @@ class SimDrive(Drive):
 
     @property
     def held_text(self) -> str:
-        """``elevation (simulated) at +0.6000 rad``: where the gimbal's other axis stands."""
+        """``elevation (simulated, held by its drive) at +0.6000 rad``: where the gimbal's
+        other axis stands."""
         if self._partner is None:
             return ""
         return (f"{self._partner.name} (simulated, held by its drive) at "
