@@ -9,6 +9,7 @@ runs.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import logging
 import math
 import os
@@ -204,6 +205,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     except HilError as exc:
         print(f"gimbal-hil: error: {exc}", file=sys.stderr)
         return 2
+    except BrokenPipeError:  # the reader went away (`| head`): what it read was complete
+        with contextlib.suppress(OSError, ValueError):  # no error flushing at exit
+            os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return 141  # as a shell reports a process ended by SIGPIPE
     except Exception as exc:  # a bug: one line for the operator, the traceback with -v
         if args.verbose:
             raise

@@ -80,3 +80,24 @@ def test_without_documents_the_console_names_only_what_was_written(tmp_path: Pat
     assert done.returncode == 0, done.stdout + done.stderr
     assert "(and certificate.txt beside it)" in done.stdout
     assert not (tmp_path / "CLI-8" / "certificate.html").exists()
+
+
+def test_a_reader_that_goes_away_ends_the_command_quietly(tmp_path: Path) -> None:
+    """``gimbal-hil results … | head``: the pipe closed early is no internal error."""
+    import subprocess
+    import sys
+
+    reader = subprocess.Popen(
+        [sys.executable, "-c", "import sys; sys.stdin.readline()"], stdin=subprocess.PIPE)
+    assert reader.stdin is not None
+    command = subprocess.run(
+        [sys.executable, "-c", "import sys\nfrom hil.cli import main\n"
+         "import hil.cli\nhil.cli._verify = lambda args: [print('x' * 80) for _ in "
+         "range(100000)] and 0\nsys.exit(main(['verify', '.']))"],
+        stdout=reader.stdin, stderr=subprocess.PIPE, text=True, check=False, cwd=tmp_path,
+        timeout=60)
+    reader.stdin.close()
+    reader.wait(timeout=10)
+    assert "internal error" not in command.stderr, command.stderr
+    assert "Traceback" not in command.stderr, command.stderr
+    assert command.returncode == 141
