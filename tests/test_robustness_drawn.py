@@ -17,6 +17,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from hil.certificate.integrity import seal, verify_document
+from hil.certificate.model import SCHEMA
 from hil.config import builtin_fixture
 from hil.drives.base import Capability, DriveInfo
 from hil.drives.station import station_from_mapping
@@ -138,7 +139,7 @@ def test_a_drawn_recording_is_read_or_refused_in_one_line(
 def _certificate() -> dict[str, Any]:
     """A small certificate, sealed: one result, one protocol."""
     return seal({
-        "schema": "gimbal-hil/certificate/v1", "certificate_id": "U-1-20261127T000000Z-00",
+        "schema": SCHEMA, "certificate_id": "U-1-20261127T000000Z-00",
         "results": [{"parameter": "inertia_kg_m2", "value": 0.0036, "unit": "kg·m²",
                      "standard_uncertainty": 2e-5, "coverage_factor": 2.0,
                      "expanded_uncertainty": 4e-5, "nominal": 0.0036,

@@ -55,6 +55,7 @@ def certificate_view(document: Certificate | Mapping[str, Any]) -> dict[str, Any
         line = "the run was ABORTED: " + line
     results = [_result(r) for r in cert.results]
     return {
+        "schema": cert.schema,  # the PDF names it beside the certificate.json it embeds
         "id": cert.certificate_id,
         "title": cert.title,
         "outcome": outcome,
