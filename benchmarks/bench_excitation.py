@@ -64,7 +64,7 @@ def multisine_blocks(recording: Recording, spec: protocol.MultisineSpec, *, sigm
                      ) -> list[FrfBlocks]:
     """Per line: the analysed periods' position phasors and the torque-noise covariance of
     each period's Fourier coefficient (white noise ``sigma`` through the joint design)."""
-    window = spec.analysed
+    window = spec.analysed(spec.periods)
     n = round(spec.period_s * spec.fs_hz)
     harmonics = spec.harmonics
     position = period_phasors(recording.position[window], period_samples=n,

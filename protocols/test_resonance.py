@@ -20,6 +20,7 @@ from hil.drives.base import Drive, DriveInfo
 from hil.identify.estimate import Estimate
 from hil.identify.resonance import ResonanceResult
 from hil.measurement import Declared, declare
+from hil.motion import Mode
 from hil.profile import UnitProfile
 from hil.suite.needs import note_fallbacks
 from hil.suite.rate import sample_rate_shortfall
@@ -71,11 +72,10 @@ def result(drive: Drive, calibration: CalibrationRun, profile: UnitProfile,
     if shortfall is not None:
         pytest.skip(shortfall)
     note_fallbacks(calibration, NAME, NEEDS)
-    *moves, measured = excitation(spec, position_rad=drive.status().position_rad)
-    for move in moves:
-        calibration.run(drive, move, protocol=NAME)
-    recording = calibration.run(drive, measured, protocol=NAME)
-    analysed = analyse(recording, spec, time_constant_s=measured_time_constant_s(calibration))
+    recordings = [recording for e in excitation(spec, position_rad=drive.status().position_rad)
+                  if (recording := calibration.run(drive, e, protocol=NAME)) is not None
+                  and e.mode is not Mode.POSITION]  # the moves are not analysed
+    analysed = analyse(recordings, spec, time_constant_s=measured_time_constant_s(calibration))
     m = analysed.model
     calibration.details[NAME] = ResonanceDetails(
         excitation="multisine" if isinstance(spec, MultisineSpec) else "stepped_sine",

@@ -71,7 +71,8 @@ def resonance(data: ProtocolData) -> Figure | None:
     details = data.details_as(ResonanceDetails)
     f_r, f_a = data.value("resonance_frequency_hz"), data.value("antiresonance_frequency_hz")
     zeta_r = data.value("resonance_damping_ratio")
-    sine = data.recording("multisine") or data.recording("stepped_sine")
+    pieces = data.recordings_named("multisine")  # one run, or the first of its pieces
+    sine = pieces[0][1] if pieces else data.recording("stepped_sine")
     if (details is None or not details.frf or not math.isfinite(details.inertia_total_kg_m2)
             or sine is None or f_r is None or f_a is None or zeta_r is None):
         return None

@@ -12,13 +12,19 @@ log-spaced lines on the period's grid, Schroeder phases for its amplitudes: one 
 serves every line, and every analysed period measures every line.
 ``excitation = "stepped_sine"`` (:class:`SteppedSpec`): one sine per frequency, each with
 its own settling.
+
+A multisine longer than the drive's own recorder (:class:`hil.drives.base.Recorder`) is
+played in as many pieces as it takes for each to fit, each with its ramps and settling
+periods, the carrier turning back each piece (the lines keep their phase); the analysed
+periods of all pieces are one set (a period is a period: the FRF and its jackknife do not
+care which piece it came from).
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Iterable
-from dataclasses import dataclass
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass, replace
 
 import numpy as np
 from numpy.typing import NDArray
@@ -150,6 +156,7 @@ class MultisineSpec(TravelSpec):
     settle_periods: int
     periods: int
     ramp_s: float
+    pieces: int = 1  # runs the periods are played in (each fits the drive's recorder)
 
     @classmethod
     def from_profile(cls, profile: UnitProfile, info: DriveInfo) -> MultisineSpec:
@@ -191,10 +198,29 @@ class MultisineSpec(TravelSpec):
             settle_periods=settings.integer("settle_periods", 1),
             periods=settings.integer("periods", 17),
             ramp_s=settings.positive("ramp_s", 0.1),
+            pieces=1,
         )
         settings.done()
         spec.check(source=profile.source, velocity_limit_rad_s=info.limits.velocity_rad_s)
-        return spec
+        return replace(spec, pieces=spec.pieces_for(info))
+
+    def pieces_for(self, info: DriveInfo) -> int:
+        """How many runs the periods take: 1, or as many as the drive's recorder needs when
+        the spec runs at its rate (each piece its ramps and settling, at least 3 periods)."""
+        recorder = info.recorder
+        if recorder is None or self.fs_hz <= recorder.stream_rate_hz * (1 + 1e-9):
+            return 1
+        period = round(self.period_s * self.fs_hz)
+        overhead = 2 * round(self.ramp_s * self.fs_hz) + self.settle_periods * period
+        fits = (recorder.samples - overhead) // period  # analysed periods a piece holds
+        if fits < 3:
+            return 1  # it cannot be split: the planner streams it, saying why
+        return math.ceil(self.periods / fits)
+
+    def piece_periods(self) -> tuple[int, ...]:
+        """The analysed periods of each piece, as even as they go."""
+        base, extra = divmod(self.periods, self.pieces)
+        return tuple(base + (1 if i < extra else 0) for i in range(self.pieces))
 
     def check(self, *, source: str, velocity_limit_rad_s: float) -> None:
         """Refuse a design the drive cannot run or the analysis cannot use.
@@ -268,15 +294,15 @@ class MultisineSpec(TravelSpec):
 
     @property
     def duration_s(self) -> float:
-        """Ramps and periods of the multisine run (s)."""
-        return 2 * self.ramp_s + (self.settle_periods + self.periods) * self.period_s
+        """Ramps and periods of the multisine runs (s)."""
+        return (2 * self.ramp_s * self.pieces
+                + (self.settle_periods * self.pieces + self.periods) * self.period_s)
 
-    @property
-    def analysed(self) -> slice:
-        """The analysed periods' samples in the multisine excitation."""
+    def analysed(self, periods: int) -> slice:
+        """The analysed samples of a multisine run of ``periods`` analysed periods."""
         n = round(self.period_s * self.fs_hz)
         start = round(self.ramp_s * self.fs_hz) + self.settle_periods * n
-        return slice(start, start + self.periods * n)
+        return slice(start, start + periods * n)
 
     def lines_command(self, *, periods: int) -> NDArray[np.float64]:
         """The multisine alone (rad/s, zero mean) over ``periods`` periods, Schroeder phases
@@ -346,21 +372,38 @@ def excitation(spec: Spec, *, position_rad: float) -> list[Excitation]:
         ]
     up = speed_ramp(spec.speed_rad_s, ramp_s=spec.ramp_s, fs_hz=spec.fs_hz, up=True)
     down = speed_ramp(spec.speed_rad_s, ramp_s=spec.ramp_s, fs_hz=spec.fs_hz, up=False)
-    lines = spec.lines_command(periods=spec.settle_periods + spec.periods)
-    command = np.concatenate([up, spec.speed_rad_s + lines, down])
-    sign = direction_from(spec, position_rad, float(np.sum(command)) / spec.fs_hz)
+    if spec.pieces == 1:
+        lines = spec.lines_command(periods=spec.settle_periods + spec.periods)
+        command = np.concatenate([up, spec.speed_rad_s + lines, down])
+        sign = direction_from(spec, position_rad, float(np.sum(command)) / spec.fs_hz)
+        moves = [] if sign is not None else [spec.move_to_start(position_rad, hold_s=0.1)]
+        return [*moves, Excitation(name="multisine", mode=Mode.VELOCITY, fs_hz=spec.fs_hz,
+                                   command=(sign or 1.0) * command)]
+    # pieces: the carrier turns back each piece (the first one's way decides), the lines
+    # keep their sign and phase
+    carrier = np.concatenate([up, np.full(round((spec.settle_periods + max(
+        spec.piece_periods())) * spec.period_s * spec.fs_hz), spec.speed_rad_s), down])
+    sign = direction_from(spec, position_rad, float(np.sum(carrier)) / spec.fs_hz)
     moves = [] if sign is not None else [spec.move_to_start(position_rad, hold_s=0.1)]
-    return [*moves, Excitation(name="multisine", mode=Mode.VELOCITY, fs_hz=spec.fs_hz,
-                               command=(sign or 1.0) * command)]
+    runs = []
+    for i, periods in enumerate(spec.piece_periods()):
+        way = (sign or 1.0) * (1 if i % 2 == 0 else -1)
+        lines = spec.lines_command(periods=spec.settle_periods + periods)
+        command = np.concatenate([way * up, way * spec.speed_rad_s + lines, way * down])
+        runs.append(Excitation(name=f"multisine_{i + 1}of{spec.pieces}", mode=Mode.VELOCITY,
+                               fs_hz=spec.fs_hz, command=command))
+    return [*moves, *runs]
 
 
-def analyse(recording: Recording, spec: Spec, *, time_constant_s: float = 2e-4) -> ResonanceResult:
+def analyse(recordings: Sequence[Recording], spec: Spec, *,
+            time_constant_s: float = 2e-4) -> ResonanceResult:
     """The FRF (per line or per frequency) and the two-mass model fitted to it.
 
     Parameters
     ----------
-    recording : Recording
-        The measured run's recording (the last excitation), with its velocity command.
+    recordings : sequence of Recording
+        The measured runs' recordings (the multisine's pieces in order, or the stepped
+        sine), each with its velocity command.
     spec : SteppedSpec or MultisineSpec
         The protocol's spec.
     time_constant_s : float
@@ -379,15 +422,26 @@ def analyse(recording: Recording, spec: Spec, *, time_constant_s: float = 2e-4) 
         Too few samples, periods or frequencies, a line or segment without torque, or a
         model fit that fails.
     """
-    command = recording.velocity_cmd
-    if command is None:
+    if any(r.velocity_cmd is None for r in recordings):
         raise ValueError("the resonance recording lacks its velocity command")
     if isinstance(spec, MultisineSpec):
-        window = spec.analysed
-        points = frf_lines(recording.position[window], recording.effort[window],
-                           command[window], harmonics=spec.harmonics, period_s=spec.period_s,
+        pieces = spec.piece_periods()
+        if len(recordings) != len(pieces):
+            raise ValueError(f"the multisine was planned in {len(pieces)} run(s), "
+                             f"{len(recordings)} recorded")
+        windows = [(r, spec.analysed(periods)) for r, periods in zip(recordings, pieces,
+                                                                    strict=True)]
+        # each piece's carrier offset goes with its own mean (the lines have none)
+        lines = np.concatenate([r.velocity_cmd[w] - np.mean(r.velocity_cmd[w])  # type: ignore[index]
+                                for r, w in windows])
+        points = frf_lines(np.concatenate([r.position[w] for r, w in windows]),
+                           np.concatenate([r.effort[w] for r, w in windows]),
+                           lines, harmonics=spec.harmonics, period_s=spec.period_s,
                            fs_hz=spec.fs_hz, periods=spec.periods)
         return identify_resonance(points, fs_hz=spec.fs_hz, time_constant_s=time_constant_s)
+    (recording,) = recordings
+    command = recording.velocity_cmd
+    assert command is not None
     start = round(spec.ramp_s * spec.fs_hz)
     points = []
     for f in spec.frequencies_hz:

@@ -176,7 +176,7 @@ def test_hidden_shaft_is_recovered_within_the_claimed_accuracy(
                                                position_rad=drive.status().position_rad)
         for move in moves:
             drive.run(move)
-        result = protocol.analyse(drive.run(measured), DESIGNED)
+        result = protocol.analyse([drive.run(measured)], DESIGNED)
     assert result.resonance.value == pytest.approx(plant.resonance_hz,
                                                    rel=_accuracy("resonance_frequency_hz"))
     assert result.antiresonance.value == pytest.approx(
@@ -201,6 +201,6 @@ def test_the_stepped_sine_stays_available_through_the_profile() -> None:
         drive.enable()
         move, sine = protocol.excitation(spec, position_rad=drive.status().position_rad)
         drive.run(move)
-        result = protocol.analyse(drive.run(sine), spec)
+        result = protocol.analyse([drive.run(sine)], spec)
     assert result.resonance.value == pytest.approx(plant.resonance_hz,
                                                    rel=_accuracy("resonance_frequency_hz"))

@@ -172,10 +172,10 @@ def test_the_demo_protocol_on_the_simulator_with_every_effect() -> None:
         for move in moves:
             drive.run(move)
         recording = drive.run(run)
-        result = protocol.analyse(recording, SPEC)
+        result = protocol.analyse([recording], SPEC)
     # never saturated, never reversed: the FRF is the linear plant's
     assert float(np.max(np.abs(recording.effort))) < PROFILE.limits.torque_nm
-    window = recording.velocity[SPEC.analysed]
+    window = recording.velocity[SPEC.analysed(SPEC.periods)]
     assert float(np.min(window)) > 0.0
     j_load, j_total = plant.load_at_elevation_kg_m2, plant.total_inertia_kg_m2
     reduced = plant.inertia_kg_m2 * j_load / j_total
@@ -190,3 +190,42 @@ def test_the_demo_protocol_on_the_simulator_with_every_effect() -> None:
         accuracy = PROFILE.measurement(estimate.name).accuracy_rel
         assert accuracy is not None
         assert estimate.value == pytest.approx(truth, rel=accuracy), estimate.name
+
+
+def test_a_multisine_longer_than_the_drive_recorder_is_played_in_pieces_that_fit() -> None:
+    """The azimuth demo's 18 800 samples at 4 kHz against a 16 384-sample recorder: two
+    pieces, each fitting, the carrier back and forth; their periods analysed as one set
+    give the plant's resonance as one run does (issue 27: the CANopen gimbal station)."""
+    from hil.drives.base import Recorder
+    from hil.suite.plan import acquisition_info
+
+    info = dataclasses.replace(INFO, recorder=Recorder(stream_rate_hz=1000.0, samples=16384))
+    spec = protocol.spec_from_profile(PROFILE, info)
+    assert isinstance(spec, protocol.MultisineSpec)
+    assert spec.pieces == 2
+    assert sum(spec.piece_periods()) == SPEC.periods
+    kept, why = acquisition_info(protocol.NAME, PROFILE, info)
+    assert why is None  # on the recorder, not streamed
+    assert kept is info
+    plant = PROFILE.plant
+    assert plant is not None
+    results = []
+    for design in (SPEC, spec):
+        with SimDrive(plant, firmware=PROFILE.firmware, limits=PROFILE.limits, fs_hz=FS,
+                      seed=3) as drive:
+            drive.enable()
+            runs = []
+            for e in protocol.excitation(design, position_rad=drive.status().position_rad):
+                assert info.recorder is not None
+                assert info.recorder.refuses(e) is None or design is SPEC
+                recording = drive.run(e)
+                if e.name.startswith("multisine"):
+                    runs.append(recording)
+            assert len(runs) == design.pieces
+            results.append(protocol.analyse(runs, design))
+    whole, pieces = results
+    for a, b in ((whole.resonance, pieces.resonance), (whole.antiresonance,
+                                                       pieces.antiresonance)):
+        # two analyses of the same plant, other noise: within their combined U
+        assert abs(a.value - b.value) <= 2 * math.hypot(a.standard_uncertainty,
+                                                        b.standard_uncertainty), (a, b)
