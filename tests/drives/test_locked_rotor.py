@@ -29,12 +29,12 @@ from hil.profile import UnitProfile, load_profile
 PROFILE = builtin_fixture("demo_gimbal_elevation.toml")
 
 
-def kt_result(tmp_path: Path, drive: str) -> dict[str, Any]:
+def kt_result(tmp_path: Path, drive: str, *station: str) -> dict[str, Any]:
     out = tmp_path / drive
     done = subprocess.run(
         [sys.executable, "-m", "hil.cli", "calibrate", "--drive", drive, "--profile",
-         str(PROFILE), "--out", str(out), "--", "-k", "torque_constant", "--no-documents",
-         "--store", "off"],
+         str(PROFILE), "--out", str(out), *station, "--", "-k", "torque_constant",
+         "--no-documents", "--store", "off"],
         capture_output=True, text=True, timeout=600, check=False)
     path = out / "SIM-0001" / "certificate.json"
     assert path.is_file(), done.stdout[-3000:] + done.stderr[-3000:]
@@ -62,7 +62,18 @@ def test_kt_over_the_canopen_emulator_agrees_with_the_simulator(tmp_path: Path) 
 
 @pytest.mark.realtime
 def test_kt_over_the_modbus_emulator_agrees_with_the_simulator(tmp_path: Path) -> None:
-    check_agreement(kt_result(tmp_path, "modbus-emulator"), kt_result(tmp_path, "sim"))
+    """This bench sends its setpoints 6 periods ahead (60 ms at 100 Hz), as
+    ``tests/drives/test_collector_held.py`` does: the test is about K_t, and a host pause of
+    50 ms on CI's shared runner (a dry run of session 20; 2 of 22 runs in session 19, in
+    the moves between locked sweeps) stopped it before K_t, rightly. What a pause does to a
+    run is ``tests/drives/test_modbus_timing.py``'s business."""
+    bench = tmp_path / "bench.toml"
+    text = builtin_fixture("station_modbus_emulator.toml").read_text(encoding="utf-8")
+    assert "setpoint_lead_periods = 3 " in text
+    bench.write_text(text.replace("setpoint_lead_periods = 3 ", "setpoint_lead_periods = 6 "),
+                     encoding="utf-8")
+    check_agreement(kt_result(tmp_path, "modbus-emulator", "--station", str(bench)),
+                    kt_result(tmp_path, "sim"))
 
 
 def test_a_clamp_that_does_not_hold_is_refused(profile: UnitProfile) -> None:
