@@ -19,7 +19,7 @@ elevation the kinetic energy ``½·[ψ̇ θ̇]·M(θ)·[ψ̇ θ̇]ᵀ``,
 
 The single-axis plant is the case of an elevation that does not move (c·θ̈ = 0, and J at the
 outer plant's ``elevation_rad``): a gimbal whose coupling terms are zero gives each axis the
-recording its own plant gives (``tests/plant/test_gimbal_plant.py``).
+recording its own plant gives (``tests/test_gimbal_plant.py``).
 """
 
 from __future__ import annotations
@@ -56,11 +56,16 @@ class AxisBlock:
     guard: MotionGuard | None = None
 
 
+def carrier_inertia_kg_m2(params: PlantParams) -> float:
+    """The inertia of the part that carries an axis's load torques, before any elevation
+    term: the load of a two-mass axis, else the axis (``kernel.carrier_inertia``'s)."""
+    return params.load_inertia_kg_m2 if params.load_inertia_kg_m2 > 0 else params.inertia_kg_m2
+
+
 def coupling_vector(outer: PlantParams) -> FloatArray:
     """The kernel's coupling vector (``kernel.C_*``) of an outer plant."""
     vector = np.zeros(kernel.C_SIZE)
-    vector[kernel.C_J_BASE] = (outer.load_inertia_kg_m2 if outer.load_inertia_kg_m2 > 0
-                               else outer.inertia_kg_m2)
+    vector[kernel.C_J_BASE] = carrier_inertia_kg_m2(outer)
     vector[kernel.C_DJ] = outer.inertia_elevation_kg_m2
     vector[kernel.C_P] = outer.inertia_product_kg_m2
     vector[kernel.C_CC] = outer.inertia_coupling_level_kg_m2
@@ -80,7 +85,7 @@ def coupling_ratio(outer: PlantParams, inner: PlantParams) -> float:
     coupling = coupling_vector(outer)
     c = (coupling[kernel.C_CC] * np.cos(ELEVATION_GRID)
          + coupling[kernel.C_CS] * np.sin(ELEVATION_GRID))
-    j_inner = inner.load_inertia_kg_m2 if inner.load_inertia_kg_m2 > 0 else inner.inertia_kg_m2
+    j_inner = carrier_inertia_kg_m2(inner)
     return float(np.max(c**2 / (outer_inertia_kg_m2(coupling, ELEVATION_GRID) * j_inner)))
 
 
@@ -126,5 +131,5 @@ class GimbalPlant:
                    second.arrays, _KERNEL_MODE[inner.mode], second.loop_noise, second.out,
                    self._coupling, 1.0 / self.fs_hz, self._substeps)
         traces = self.outer.advance(first, done), self.inner.advance(second, done)
-        self.outer.set_elevation(self.inner.position_rad)
+        self.outer.follow_elevation(self.inner.position_rad)  # its parameters say where
         return traces

@@ -33,7 +33,8 @@ The velocity loop lets the azimuth give a little under the coupling torque; that
 ``J·Δψ̈`` (the two passes' ``ψ̈`` apart), is taken out with the azimuth's J from the sine
 protocol rather than fitted: the give is the loop's response to the coupling itself, a
 few per cent of it, and measured through encoder counts it is mostly quantisation, so a
-fitted J traded against the products (their U grew fifty-fold on a gimbal without them).
+fitted J traded against the products (their U grew about seventeen-fold on a gimbal
+without them).
 
 Torque and every regressor are low-passed alike (parallel filtering, which keeps the fit
 unbiased) above the swing's harmonics, where the velocity loop's noise is. Motion comes
