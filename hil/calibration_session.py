@@ -93,6 +93,10 @@ def start(config: pytest.Config) -> None:
     kind = drive_kind(config)
     if config.getoption("--unit-serial") is None and not kind_named(kind).simulated:
         raise pytest.UsageError(f"--drive {kind} (a real unit) needs --unit-serial SERIAL")
+    pace = config.getoption("--sim-pace")
+    if pace is not None and not (pace > 0 and kind == "sim"):
+        raise pytest.UsageError(f"--sim-pace {pace}: a positive multiple of real time, "
+                                "for --drive sim (a field bus keeps its own pace)")
     try:
         profile = config.stash[PROFILE_KEY] = load_profile(config.getoption("--profile"))
         # every table known and every protocol's settings read, before any motion
@@ -313,6 +317,7 @@ def drive_connection(
         station=pytestconfig.getoption("--station"),
         seed=pytestconfig.getoption("--seed"),
         gimbal_axes=pytestconfig.stash.get(GIMBAL_AXES_KEY, {}),
+        sim_pace=pytestconfig.getoption("--sim-pace"),
     ) as drive:
         calibration.drive_info = drive.info
         yield drive

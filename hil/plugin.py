@@ -54,6 +54,15 @@ def pytest_addoption(parser: pytest.Parser) -> None:
     )
     group.addoption("--seed", default=0, type=int, help="simulator seed (sim and emulators)")
     group.addoption(
+        "--sim-pace",
+        default=None,
+        type=float,
+        metavar="MULTIPLE",
+        help="--drive sim keeps its motion to the wall clock at this multiple of real time "
+        "(1: as a drive does; a rehearsal of a station's timing and stops); default: as "
+        "fast as it computes",
+    )
+    group.addoption(
         "--gimbal-axis",
         action="append",
         default=[],

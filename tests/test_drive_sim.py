@@ -2,10 +2,14 @@
 
 from __future__ import annotations
 
+import _thread
+import threading
+import time
+
 import numpy as np
 import pytest
 
-from hil.drives.base import DriveState
+from hil.drives.base import DriveState, Interrupted
 from hil.drives.sim import SimDrive
 from hil.errors import DriveStateError, LimitViolationError
 from hil.motion import Excitation, Limits, Mode
@@ -82,3 +86,45 @@ def test_position_carries_over_between_runs() -> None:
     second = drive.run(Excitation(name="b", mode=Mode.VELOCITY, command=np.zeros(500), fs_hz=FS))
     assert second.time_s[0] > first.time_s[-1]
     assert second.position[0] == pytest.approx(first.position[-1], abs=1e-3)
+
+
+def _sine(duration_s: float) -> Excitation:
+    t = np.arange(round(duration_s * FS)) / FS
+    return Excitation(name="sine", mode=Mode.VELOCITY, command=0.5 * np.sin(2 * np.pi * t),
+                      fs_hz=FS)
+
+
+def test_a_paced_run_keeps_to_the_wall_clock_and_moves_as_an_unpaced_one() -> None:
+    """Piece by piece, the plant's state carries over: a noiseless plant's recording is the
+    unpaced one to the last bit, and it takes its motion time over the pace."""
+    plant = PlantParams(inertia_kg_m2=0.003, coulomb_nm=0.01, viscous_nm_s_rad=0.002)
+    firmware = Firmware(velocity_kp_nm_s_rad=0.3, velocity_ki_nm_rad=10.0)
+    recordings, took = [], []
+    for pace in (None, 4.0):
+        drive = SimDrive(plant, firmware=firmware, limits=LIMITS, fs_hz=FS, seed=0, pace=pace)
+        drive.enable()
+        started = time.monotonic()
+        recordings.append(drive.run(_sine(1.2)))
+        took.append(time.monotonic() - started)
+    unpaced, paced = recordings
+    assert unpaced.columns.keys() == paced.columns.keys()
+    for name, column in unpaced.columns.items():
+        np.testing.assert_array_equal(paced.columns[name], column, err_msg=name)
+    assert took[1] >= 1.2 / 4.0
+
+
+def test_a_stop_mid_paced_motion_quick_stops_and_keeps_the_rows_so_far() -> None:
+    drive = SimDrive(PlantParams(inertia_kg_m2=0.003, coulomb_nm=0.01),
+                     firmware=Firmware(velocity_kp_nm_s_rad=0.3, velocity_ki_nm_rad=10.0),
+                     limits=LIMITS, fs_hz=FS, seed=0, pace=1.0)
+    drive.enable()
+    timer = threading.Timer(0.3, _thread.interrupt_main)  # SIGINT's KeyboardInterrupt
+    timer.start()
+    with pytest.raises(Interrupted) as stopped:
+        drive.run(_sine(2.0))
+    timer.join()
+    partial = stopped.value.partial_recording
+    assert partial is not None
+    assert 0.25 < partial.duration_s < 1.9  # the rows until the stop, not the excitation's
+    assert drive.status().state is DriveState.QUICK_STOPPED
+    assert abs(drive.status().velocity_rad_s) < 0.05  # braked to rest

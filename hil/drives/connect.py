@@ -29,12 +29,14 @@ def open_drive(
     station: Path | None = None,
     seed: int = 0,
     gimbal_axes: Mapping[str, UnitProfile] | None = None,
+    sim_pace: float | None = None,
 ) -> Iterator[Drive]:
     """Open the drive named by ``kind``; on leaving, the drive is quick-stopped on error
     and always disabled and closed. Emulator kinds start (and stop) their emulator.
     ``gimbal_axes`` (name → profile) are the unit's other axes: the simulator simulates an
     azimuth and an elevation as one coupled gimbal, the other axis held by its drive (the
-    emulators take theirs from the station file).
+    emulators take theirs from the station file). ``sim_pace`` keeps the simulator's
+    motion to the wall clock (:class:`hil.drives.sim.SimDrive`'s ``pace``).
     """
     opened = drive_kind(kind)  # an unknown kind: one line naming the known ones
     if opened.opens == "simulator":
@@ -50,6 +52,7 @@ def open_drive(
             seed=seed,
             serial=unit_serial,
             partner=_gimbal_partner(profile, gimbal_axes or {}),
+            pace=sim_pace,
         ) as drive:
             yield drive
         return

@@ -5,6 +5,7 @@ from __future__ import annotations
 import contextlib
 import logging
 import math
+import time
 from collections.abc import Iterator
 from dataclasses import dataclass, replace
 
@@ -26,7 +27,7 @@ from hil.motion import CompensationTable, Excitation, Limits, Mode, PositionHarm
 from hil.recording import Recording
 from plant_sim.firmware import Firmware
 from plant_sim.gimbal import AxisBlock, GimbalPlant
-from plant_sim.model import MotionGuard, Plant, PlantTrace, trace_to_recording
+from plant_sim.model import FloatArray, MotionGuard, Plant, PlantTrace, trace_to_recording
 from plant_sim.params import Harmonic, PlantParams
 
 log = logging.getLogger(__name__)
@@ -37,6 +38,7 @@ HOLD_SPEED_RAD_S = 1.0  # how the simulated station moves a held axis (as the em
 HOLD_ACCEL_RAD_S2 = 4.0
 HOLD_SETTLE_S = 0.2  # standing after a move, before the next run
 PARTNER_SEED = 0x6A  # the held axis's plant seeds its noise with seed + (this << 32)
+PACE_PIECE_S = 0.05  # of motion per kernel call when paced: a stop lands within one
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -68,7 +70,15 @@ class SimDrive(Drive):
         has_torque_sensor: bool = True,
         exact_torque_hold: bool = True,
         partner: GimbalPartner | None = None,
+        pace: float | None = None,
     ) -> None:
+        """``pace``: ``None`` runs each excitation as fast as it computes; a number keeps
+        the motion to the wall clock at that multiple of real time (1.0: as a drive does),
+        a piece of :data:`PACE_PIECE_S` at a time, so a stop signal lands mid-motion (a
+        rehearsal of a station's timing and stops)."""
+        if pace is not None and not pace > 0:
+            raise ValueError(f"pace must be a positive multiple of real time, not {pace}")
+        self._pace = pace
         if exact_torque_hold and not plant.exact_torque_hold:
             plant = plant.with_changes(exact_torque_hold=True)
         self._plant_params = plant
@@ -213,41 +223,34 @@ class SimDrive(Drive):
         block = AxisBlock(mode=excitation.mode, command=excitation.command,
                           torque_offset=excitation.torque_offset_nm, guard=guard)
         path = excitation.elevation_path_rad
-        elevation: np.ndarray | None = None
+        if path is not None:
+            if Capability.ELEVATION_MOTION not in self._info.capabilities:
+                raise self._without(Capability.ELEVATION_MOTION)
+            check_limits(replace(excitation, name=f"{excitation.name} (elevation)",
+                                 mode=Mode.POSITION, command=path,
+                                 torque_offset_nm=None, elevation_path_rad=None),
+                         self._partner_limits,
+                         start_position_rad=self._held_plant.position_rad)
         try:
-            if path is None:
-                trace = self._advance(block)
-            else:
-                if Capability.ELEVATION_MOTION not in self._info.capabilities:
-                    raise self._without(Capability.ELEVATION_MOTION)
-                check_limits(replace(excitation, name=f"{excitation.name} (elevation)",
-                                     mode=Mode.POSITION, command=path,
-                                     torque_offset_nm=None, elevation_path_rad=None),
-                             self._partner_limits,
-                             start_position_rad=self._held_plant.position_rad)
-                trace, held = self._step_gimbal(block, held_command=path)
-                elevation = held.position_rad
-                self._hold_rad = float(path[-1])
+            trace, held = self._move(block, path) if self._pace is None else self._paced(
+                block, path, pace=self._pace)
+        except _PacedStop as stop:  # between two pieces: the axis was moving
+            log.info("sim: quick stop, axis at %.3g rad/s", self._plant.velocity_rad_s)
+            self._brake()
+            self._state = DriveState.QUICK_STOPPED
+            moved, moved_held = stop.so_far
+            rows = (self._recording(moved, excitation, moved_held)
+                    if len(moved.time_s) else None)
+            raise interrupted(stop, rows) from stop
         except KeyboardInterrupt as stop:
             # the kernel runs a whole excitation in one numba call: a signal is handled
             # after it returns, so a stop lands between excitations, with no rows to keep
             self.quick_stop()
             raise interrupted(stop, None) from stop
-        metadata = {
-            "drive": "plant_sim",
-            "excitation": excitation.name,
-            "control_mode": excitation.mode.value,
-            "serial": self._info.serial,
-            **({"held_axes": self.held_text} if self._partner is not None else {}),
-            **excitation.metadata,
-        }
+        if path is not None:
+            self._hold_rad = float(path[-1])
+        recording = self._recording(trace, excitation, held)
         done = len(trace.time_s)
-        recording = trace_to_recording(
-            trace, mode=excitation.mode, command=excitation.command[:done], metadata=metadata
-        )
-        if elevation is not None:
-            recording = replace(recording, columns={**recording.columns,
-                                                    "elevation_rad": elevation})
         if done == len(excitation.command):
             return recording
         # the monitor tripped inside the kernel: the last row is the one that left the envelope
@@ -263,6 +266,62 @@ class SimDrive(Drive):
         log.info("sim: %s", error)  # the caller reports the error itself
         error.partial_recording = recording
         raise error
+
+    def _recording(self, trace: PlantTrace, excitation: Excitation,
+                   held: PlantTrace | None) -> Recording:
+        """The drive's recording of ``trace`` (the elevation's column when it moved too)."""
+        metadata = {
+            "drive": "plant_sim",
+            "excitation": excitation.name,
+            "control_mode": excitation.mode.value,
+            "serial": self._info.serial,
+            **({"held_axes": self.held_text} if self._partner is not None else {}),
+            **excitation.metadata,
+        }
+        recording = trace_to_recording(trace, mode=excitation.mode,
+                                       command=excitation.command[:len(trace.time_s)],
+                                       metadata=metadata)
+        if held is None:
+            return recording
+        return replace(recording, columns={**recording.columns,
+                                           "elevation_rad": held.position_rad})
+
+    def _move(self, block: AxisBlock,
+              path: np.ndarray | None) -> tuple[PlantTrace, PlantTrace | None]:
+        """This axis through ``block``; the elevation along ``path`` (its trace second)."""
+        if path is None:
+            return self._advance(block), None
+        return self._step_gimbal(block, held_command=path)
+
+    def _paced(self, block: AxisBlock, path: np.ndarray | None, *,
+               pace: float) -> tuple[PlantTrace, PlantTrace | None]:
+        """:meth:`_move` a piece of :data:`PACE_PIECE_S` at a time, each once the wall
+        clock reaches it at ``pace`` × real time.
+
+        Raises
+        ------
+        _PacedStop
+            A stop signal: the pieces moved so far attached.
+        """
+        fs = self._plant.fs_hz
+        size = max(1, round(PACE_PIECE_S * fs))
+        offset = block.torque_offset
+        started = time.monotonic()
+        moved: list[tuple[PlantTrace, PlantTrace | None]] = []
+        try:
+            for start in range(0, len(block.command), size):
+                part = slice(start, start + size)
+                piece = AxisBlock(mode=block.mode, command=block.command[part],
+                                  torque_offset=None if offset is None or not len(offset)
+                                  else offset[part], guard=block.guard)
+                moved.append(self._move(piece, None if path is None else path[part]))
+                if len(moved[-1][0].time_s) < len(piece.command):
+                    break  # the monitor tripped: run() brakes
+                time.sleep(max(0.0, started + (start + len(piece.command)) / fs / pace
+                               - time.monotonic()))
+        except KeyboardInterrupt as stop:
+            raise _PacedStop(str(stop), so_far=_joined(moved)) from stop
+        return _joined(moved)
 
     def _brake(self) -> None:
         """The quick-stop ramp: velocity mode from the axis' speed to rest at
@@ -293,6 +352,40 @@ class SimDrive(Drive):
             other, mine = self._gimbal.run(held, block)
             return mine, other
         return self._gimbal.run(block, held)
+
+
+class _PacedStop(KeyboardInterrupt):
+    """A stop signal between two paced pieces, with the traces moved so far."""
+
+    def __init__(self, message: str, *,
+                 so_far: tuple[PlantTrace, PlantTrace | None]) -> None:
+        super().__init__(message)
+        self.so_far = so_far
+
+
+Moved = tuple[PlantTrace, PlantTrace | None]  # this axis's trace, the elevation's if it moved
+
+
+def _joined(pieces: list[Moved]) -> Moved:
+    """The traces of consecutive pieces as one (empty when there are none)."""
+    if not pieces:
+        empty = np.zeros(0)
+        return PlantTrace(time_s=empty, position_rad=empty, velocity_rad_s=empty,
+                          torque_nm=empty, current_a=empty, torque_actual_nm=empty), None
+    mine = _concatenated([axis for axis, _ in pieces])
+    held = [other for _, other in pieces if other is not None]
+    return mine, _concatenated(held) if held else None
+
+
+def _concatenated(traces: list[PlantTrace]) -> PlantTrace:
+    def joined(name: str) -> FloatArray:
+        return np.concatenate([getattr(trace, name) for trace in traces])
+    load = [trace.load_torque_nm for trace in traces if trace.load_torque_nm is not None]
+    return PlantTrace(time_s=joined("time_s"), position_rad=joined("position_rad"),
+                      velocity_rad_s=joined("velocity_rad_s"), torque_nm=joined("torque_nm"),
+                      current_a=joined("current_a"), torque_actual_nm=joined("torque_actual_nm"),
+                      load_torque_nm=np.concatenate(load) if len(load) == len(traces)
+                      else None)
 
 
 def _harmonics(table: tuple[PositionHarmonic, ...]) -> tuple[Harmonic, ...]:
