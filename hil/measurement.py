@@ -7,16 +7,19 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field, replace
 from enum import StrEnum
 from pathlib import Path
 
-from hil.config import ConfigTable, builtin_fixture, read_results_by_axis
+from hil.config import ConfigTable, builtin_fixture, read_results_by_axis, read_toml
 from hil.gum import format_result
 from hil.identify.estimate import Component, Estimate
 from hil.profile import MeasurementSpec
+from hil.recording import EVERY_CONTROL_PERIOD
 
 METHOD_BIAS_FILE = "method_bias.toml"
+#: method lines of acquisition paths other than the simulator's (over an emulator)
+ACQUISITION_BIAS_FILE = "method_bias_acquisition.toml"
 
 DECISION_RULE = (
     "Simple acceptance with the expanded uncertainty U (k≈2, ~95 %) stated (ILAC-G8:09/2019 "
@@ -135,6 +138,8 @@ class MethodBias:
         Size of that population.
     note : str
         What keeps a result's validated coverage from 95 %, when something does.
+    acquisition : str
+        The acquisition path the population was recorded on.
     """
 
     name: str
@@ -145,6 +150,7 @@ class MethodBias:
     validated_coverage: float | None = None
     validated_units: int | None = None
     note: str = ""
+    acquisition: str = EVERY_CONTROL_PERIOD  # the path its population was recorded on
 
     def validation(self) -> dict[str, object] | None:
         """What the certificate states of the map's out-of-sample check, if made."""
@@ -161,6 +167,16 @@ class MethodBiasMap:
     source: str
     sha256: str
     entries: Mapping[str, MethodBias]
+    #: lines of other acquisition paths: path → result → line
+    acquisition: Mapping[str, Mapping[str, MethodBias]] = field(default_factory=dict)
+
+    def line(self, name: str, *, path: str | None = None) -> MethodBias | None:
+        """``name``'s method line on the acquisition ``path`` its recording came over
+        (``None``: the simulator's, :data:`EVERY_CONTROL_PERIOD`). A line is valid on the
+        path it was measured on only: another path gets its own line or none."""
+        if path is None or path == EVERY_CONTROL_PERIOD:
+            return self.entries.get(name)
+        return self.acquisition.get(path, {}).get(name)
 
 
 def load_method_bias(path: Path | None = None, *, axis: str = "") -> MethodBiasMap:
@@ -186,7 +202,46 @@ def load_method_bias(path: Path | None = None, *, axis: str = "") -> MethodBiasM
     """
     path = path or builtin_fixture(METHOD_BIAS_FILE)
     sha256, by_axis = read_results_by_axis(path, _method_bias)
-    return MethodBiasMap(source=str(path), sha256=sha256, entries=by_axis.get(axis, {}))
+    return MethodBiasMap(source=str(path), sha256=sha256, entries=by_axis.get(axis, {}),
+                         acquisition=_acquisition_lines(builtin_fixture(ACQUISITION_BIAS_FILE),
+                                                        axis=axis))
+
+
+def acquisition_band(line: MethodBias, *, value: float, unit: str) -> Component:
+    """A method line of another acquisition path as a budget line: not a correction, since
+    the path's effect depends on the drive (the images of a 1 kHz target's interpolation
+    pass its own velocity loop) and the line was measured on one emulator, but a
+    rectangular band of half-width ``|bias| + 2·scatter`` around the value."""
+    half = abs(line.bias) + 2 * line.scatter
+    sign = "+" if line.bias >= 0 else "−"
+    shown = f"{100 * half:.2g} %" if line.relative else f"{half:.2g}"
+    return Component(
+        source=f"method: this acquisition path ({line.acquisition}) moved it by "
+               f"{sign}{100 * abs(line.bias) if line.relative else abs(line.bias):.2g}"
+               f"{' %' if line.relative else ''} over {line.units} emulated units; "
+               f"drive-dependent, not corrected: ±{shown} rectangular",
+        kind="B", standard_uncertainty=half * (abs(value) if line.relative else 1.0)
+        / math.sqrt(3), unit=unit)
+
+
+def _acquisition_lines(path: Path, *, axis: str) -> dict[str, dict[str, MethodBias]]:
+    """The shipped lines of other acquisition paths (``[acquisition."PATH".results.AXIS.
+    NAME]``, benchmarks/bench_acquisition_path.py) for ``axis``, by path."""
+    document, _ = read_toml(path)
+    root = ConfigTable.root(document, source=str(path))
+    root.string("population")
+    found = {}
+    for acquisition, table in root.tables("acquisition").items():
+        by_axis = {name: {result: _method_bias(result, entry)
+                          for result, entry in results.tables_here().items()}
+                   for name, results in table.tables("results").items()}
+        table.done()
+        found[acquisition] = {
+            name: replace(line, acquisition=acquisition,
+                          note=line.note or "over the CANopen emulator, on this path")
+            for name, line in by_axis.get(axis, {}).items()}
+    root.done()
+    return found
 
 
 def _method_bias(name: str, table: ConfigTable) -> MethodBias:
@@ -219,16 +274,20 @@ def with_method_terms(
         Its declaration; ``allowance_rel`` adds a rectangular line for physics the
         simulator lacks.
     bias : MethodBias or None
-        The method's error over the simulated population, when measured.
+        The method's error over a population, when measured: over simulated units on the
+        simulator's path (:data:`EVERY_CONTROL_PERIOD`), corrected; over emulated units on
+        another acquisition path, a band (:func:`acquisition_band`), not corrected.
 
     Returns
     -------
     Estimate
         Value corrected by the population's mean error; budget with the error's
-        unit-to-unit scatter and the allowance as named Type B lines.
+        unit-to-unit scatter (or the path's band) and the allowance as named Type B lines.
     """
     value, added = estimate.value, []
-    if bias is not None:
+    if bias is not None and bias.acquisition != EVERY_CONTROL_PERIOD:
+        added.append(acquisition_band(bias, value=value, unit=estimate.unit))
+    elif bias is not None:
         value = value / (1 + bias.bias) if bias.relative else value - bias.bias
         scatter = bias.scatter * abs(value) if bias.relative else bias.scatter
         sign = "+" if bias.bias >= 0 else "−"

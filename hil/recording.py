@@ -43,6 +43,9 @@ LINEAR_OPTIONAL = ("velocity_cmd_m_s", "position_cmd_m", "current_a")
 MIN_SAMPLES = 100
 GAP_FACTOR = 5.0
 SATURATION_FRACTION = 0.01
+#: the acquisition path of a recording with a row per control period (the simulator, a
+#: drive recorder): the one the method map (``fixtures/method_bias.toml``) was measured on
+EVERY_CONTROL_PERIOD = "every control period"
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)

@@ -14,6 +14,7 @@ from hil.calibration import CalibrationRun
 from hil.drives.base import Drive, DriveInfo
 from hil.identify.current_loop import (
     CurrentLoopResult,
+    acquisition_path,
     timing_problem,
     torque_hold_s,
 )
@@ -71,6 +72,7 @@ def result(drive: Drive, calibration: CalibrationRun, profile: UnitProfile,
     calibration.details[NAME] = CurrentLoopDetails(
         **runs.details(),
         torque_hold=torque_hold_s(recording.metadata, fs_hz=spec.fs_hz),
+        acquisition=acquisition_path(recording.metadata, fs_hz=spec.fs_hz),
         viscous_over_inertia_1_s=analysed.viscous_over_inertia_1_s,
         chi2_per_dof=analysed.chi2_per_dof,
         points=tuple(
@@ -87,6 +89,8 @@ def result(drive: Drive, calibration: CalibrationRun, profile: UnitProfile,
 def test_current_loop(
     parameter: str, result: dict[str, Estimate], calibration: CalibrationRun
 ) -> None:
-    measurement = calibration.record(NAME, result[parameter],
-                                     declared=DECLARED[parameter])
+    details = calibration.details[NAME]
+    measurement = calibration.record(
+        NAME, result[parameter], declared=DECLARED[parameter],
+        acquisition=details.acquisition if isinstance(details, CurrentLoopDetails) else None)
     assert measurement.conforms, measurement.verdict()

@@ -69,6 +69,7 @@ from scipy.optimize import least_squares
 from hil.errors import IdentificationError
 from hil.identify.estimate import Estimate
 from hil.identify.harmonic_fit import fit_harmonics, polynomial_columns
+from hil.recording import EVERY_CONTROL_PERIOD
 
 FloatArray = NDArray[np.float64]
 ComplexArray = NDArray[np.complex128]
@@ -210,6 +211,24 @@ def torque_hold_s(metadata: Mapping[str, str], *, fs_hz: float) -> TorqueHold:
             "record at the control rate (drive recorder)"
         )
     return TorqueHold(hold_s=control_s, mean_samples=round(ratio) if sampling == "mean" else 1)
+
+
+def acquisition_path(metadata: Mapping[str, str], *, fs_hz: float) -> str:
+    """How a recording's torque rows were taken, as a method line names its path:
+    :data:`hil.recording.EVERY_CONTROL_PERIOD` (the simulator's, a drive recorder's: the
+    method map was measured on it), or ``one row per N control periods, torque SAMPLING``
+    (a field bus streaming a faster drive; ``SAMPLING`` ``instantaneous`` or ``mean``).
+
+    Raises
+    ------
+    IdentificationError
+        As :func:`torque_hold_s`: the metadata does not say how the torque was held.
+    """
+    hold = torque_hold_s(metadata, fs_hz=fs_hz)
+    per_row = round(1.0 / (fs_hz * hold.hold_s))
+    if per_row <= 1:
+        return EVERY_CONTROL_PERIOD
+    return f"one row per {per_row} control periods, torque {metadata['torque_sample']}"
 
 
 def sampled_response(

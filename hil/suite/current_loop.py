@@ -186,6 +186,7 @@ class CurrentLoopDetails(RunDetails):
     """The certificate's details: how the drive held its torque, the fit, each point."""
 
     torque_hold: TorqueHold
+    acquisition: str  # the rows' path: its method line (hil.identify.current_loop)
     viscous_over_inertia_1_s: float
     chi2_per_dof: float
     points: tuple[LagPoint, ...]

@@ -21,7 +21,8 @@ from hil.drives.cia402.drive import CanOpenDrive
 from hil.drives.cia402.emulator import INTERPOLATION_HOLD
 from hil.drives.emulated import canopen_emulator
 from hil.errors import IdentificationError
-from hil.identify.current_loop import CurrentLoopResult, torque_hold_s
+from hil.identify.current_loop import CurrentLoopResult, acquisition_path, torque_hold_s
+from hil.measurement import load_method_bias, with_method_terms
 from hil.motion import Excitation, Mode
 from hil.profile import UnitProfile
 from hil.suite import current_loop as protocol
@@ -191,15 +192,44 @@ def test_hidden_lag_is_recovered_over_canopen(
     assert result.time_constant.value == pytest.approx(tau_ms, rel=accuracy)
 
 
-@pytest.mark.xfail(strict=True, reason="point-sampled torque over a 1 kHz stream: an alias "
-                   "bias of −2 … −4 % with the loops' noise (interpolation images through the "
-                   "velocity loop) that no method line of this acquisition path corrects yet; "
-                   "issue 30")
-def test_point_sampled_lag_is_within_its_stated_uncertainty(profile: UnitProfile) -> None:
-    """τ 0.3 ms, seed 2: −3.2 % against U = 2.0 % (the averaged torque: +1.5 %)."""
-    result = _current_loop_over_canopen(_lagged(profile, 3e-4), seed=2)
-    estimate = result.time_constant
-    assert abs(estimate.value - 0.3) <= estimate.expanded_uncertainty
+@pytest.mark.parametrize("sampling", ["instantaneous", "mean"])
+def test_a_streamed_lag_is_within_the_uncertainty_the_certificate_states(
+    profile: UnitProfile, sampling: str
+) -> None:
+    """Over a 1 kHz stream the interpolation's images bias τ by the drive's own loop
+    (point sample: −3.2 % against U = 2.0 % at 0.3 ms, seed 2, was a strict xfail): the
+    certificate states the path's band (fixtures/method_bias_acquisition.toml, built on
+    other seeds), not the simulator's line. Over 6 units with τ drawn over the limits its
+    ±U holds the truth for at least 5 and error/u has an RMS in 0.5–2 (test_coverage's)."""
+    name = "current_loop_time_constant_ms"
+    spec_of_result = profile.measurement(name)
+    line_map = load_method_bias(axis=profile.axis)
+    rng = np.random.default_rng(30)
+    held, z = [], []
+    for seed in range(6):
+        tau_ms = float(rng.uniform(spec_of_result.lower_limit, spec_of_result.upper_limit))
+        with (
+            canopen_emulator(_lagged(profile, tau_ms * 1e-3), seed=300 + seed,
+                             station_changes={"torque_sample": sampling}) as (_emu, station),
+            CanOpenDrive(station, limits=profile.limits) as drive,
+        ):
+            drive.enable()
+            spec = protocol.Spec.from_profile(profile, drive.info)
+            move, sines = protocol.excitation(spec, position_rad=drive.status().position_rad)
+            drive.run(move)
+            recording = drive.run(sines)
+        path = acquisition_path(recording.metadata, fs_hz=spec.fs_hz)
+        assert path == f"one row per 4 control periods, torque {sampling}"
+        line = line_map.line(name, path=path)
+        assert line is not None
+        estimate = with_method_terms(protocol.analyse(recording, spec).time_constant,
+                                     spec_of_result, line)
+        assert any(c.source.startswith(f"method: this acquisition path ({path})")
+                   for c in estimate.components())
+        held.append(abs(estimate.value - tau_ms) <= estimate.expanded_uncertainty)
+        z.append((estimate.value - tau_ms) / estimate.standard_uncertainty)
+    assert sum(held) >= 5, z
+    assert 0.5 <= math.sqrt(np.mean(np.square(z))) <= 2.0, z
 
 
 def test_held_targets_are_refused(profile: UnitProfile) -> None:
