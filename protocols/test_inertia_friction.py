@@ -18,6 +18,7 @@ from hil.identify.inertia_friction import InertiaFrictionResult
 from hil.measurement import Declared, declare
 from hil.motion import Mode
 from hil.profile import UnitProfile
+from hil.suite.cogging import SWEEP_PASSES, position_torque_of_sweep
 from hil.suite.inertia_friction import (
     MEASUREMENTS,
     NAME,
@@ -30,6 +31,7 @@ from hil.suite.inertia_friction import (
     motion,
 )
 from hil.suite.needs import note_fallbacks
+from hil.suite.plan import acquisition_info
 from hil.suite.stop_rule import run_repeated
 
 pytestmark = pytest.mark.protocol(NAME)
@@ -63,9 +65,17 @@ def result(
     for move in sequence[:len(sequence) - len(sines)]:  # once: a repeat stays at the centre
         calibration.run(drive, move, protocol=NAME)
 
+    # cogging and K_t ripple from the gravity sweep: the ripple modulates J·α over the travel
+    sweep_info, _ = acquisition_info(SWEEP_PASSES, profile, drive.info)
+    position_torque, why_not = position_torque_of_sweep(calibration, profile, sweep_info)
+    if position_torque is None:
+        calibration.protocol(NAME).messages.append(
+            f"cogging and K_t ripple not taken out: {why_not}")
+
     def run_once() -> tuple[InertiaFrictionResult, dict[str, Estimate], EarlierInputs]:
         recordings = [calibration.run(drive, e, protocol=NAME) for e in sines]
-        return analyse_in_calibration(recordings, spec, calibration)
+        return analyse_in_calibration(recordings, spec, calibration,
+                                      position_torque=position_torque)
 
     runs = run_repeated(run_once, lambda found: found[1], rule=spec.stop, calibration=calibration)
     analysed, _, corrections = runs.first  # the first run's fit and inputs, for the details
@@ -78,6 +88,7 @@ def result(
         load_stiffness_nm_rad=corrections.load_stiffness_nm_rad,
         cable_loop_removed=corrections.cable_loop_removed,
         current_loop_lag_compensated_s=corrections.current_loop_lag_compensated_s,
+        position_torque_removed=corrections.position_torque_removed,
         fit_pct=round(analysed.fit_pct, 2),
         noise_rms_nm=analysed.noise_rms_nm,
         components=tuple(

@@ -26,6 +26,7 @@ from hil.identify.inertia_friction import (
     inertia_amplitude_spread,
     stiffness_corrected_inertia,
 )
+from hil.identify.position_torque import PositionTorque
 from hil.identify.sine_run import analyse_sine_run, torque_hold_samples, without_cable_loop
 from hil.motion import Excitation, Mode
 from hil.profile import UnitProfile
@@ -194,6 +195,7 @@ def analyse(
     *,
     current_loop_lag_s: float = 0.0,
     cable_loop: CableLoop | None = None,
+    position_torque: PositionTorque | None = None,
 ) -> InertiaFrictionResult:
     """J, B, T_c. The reported torque reaches the shaft half a control period (zero-order
     hold) plus the current loop's lag later, which would otherwise leak into B as
@@ -210,6 +212,9 @@ def analyse(
         The current loop's time constant, added to the zero-order hold's delay.
     cable_loop : CableLoop or None
         The cable's hysteresis loop to take out, if measured.
+    position_torque : PositionTorque or None
+        Cogging and K_t ripple to take out, if measured (the K_t ripple modulates the
+        inertial torque over the sine's travel: :mod:`hil.identify.position_torque`).
 
     Returns
     -------
@@ -222,6 +227,8 @@ def analyse(
         A run with too few whole periods, fewer than two runs, or amplitudes too close to
         separate B from T_c.
     """
+    if position_torque:
+        recordings = [position_torque.without(r) for r in recordings]
     runs = [
         analyse_sine_run(
             without_cable_loop(r, cable_loop),
@@ -284,6 +291,7 @@ def with_earlier_inputs(
     *,
     lag: Estimate | None,
     loop: CableLoop | None,
+    position_torque: PositionTorque | None = None,
 ) -> dict[str, Estimate]:
     """Every result with the uncertainty of what earlier protocols measured and this one
     takes out as named budget lines: the sines re-analysed with the current loop's lag at
@@ -299,6 +307,9 @@ def with_earlier_inputs(
         The current loop's time constant (seconds), if measured.
     loop : CableLoop or None
         The cable's hysteresis loop, if measured.
+    position_torque : PositionTorque or None
+        Cogging and K_t ripple, if measured: their amplitudes at ``1 + u`` and their
+        phases at ``+u`` rad (``u`` the map's relative uncertainty) give two lines.
 
     Returns
     -------
@@ -308,9 +319,10 @@ def with_earlier_inputs(
     """
     lag_s = 0.0 if lag is None else lag.value
 
-    def at(lag_s: float, loop: CableLoop | None) -> dict[str, Estimate]:
+    def at(lag_s: float, loop: CableLoop | None,
+           angle_map: PositionTorque | None = position_torque) -> dict[str, Estimate]:
         return sine_estimates(analyse(recordings, spec, current_loop_lag_s=lag_s,
-                                      cable_loop=loop))
+                                      cable_loop=loop, position_torque=angle_map))
 
     base = at(lag_s, loop)
     inputs: list[tuple[str, float, str, dict[str, Estimate]]] = []
@@ -322,6 +334,13 @@ def with_earlier_inputs(
         wider = dataclasses.replace(loop, half_width_nm=loop.half_width_nm + loop.half_width_u_nm)
         inputs.append(("cable hysteresis loop h taken out (gravity_cable)",
                        loop.half_width_u_nm, "N·m", at(lag_s, wider)))
+    if position_torque and (u := position_torque.relative_u()) > 0:
+        inputs += [
+            ("cogging and K_t ripple taken out: their amplitudes (gravity sweep)", u, "",
+             at(lag_s, loop, position_torque.perturbed(scale=1 + u))),
+            ("cogging and K_t ripple taken out: their phases (gravity sweep)", u, "rad",
+             at(lag_s, loop, position_torque.perturbed(phase_rad=u))),
+        ]
     lines = {
         name: [Component.from_change(source=source, standard_uncertainty=u, unit=unit,
                                      change=shifted[name].value - estimate.value)
@@ -420,10 +439,12 @@ class EarlierInputs:
     load_stiffness_nm_rad: float | None  # there (gravity and cable), None: not measured
     cable_loop_removed: CableLoop | None
     current_loop_lag_compensated_s: float
+    position_torque_removed: str  # cogging and K_t ripple taken out, or "none"
 
 
 def analyse_in_calibration(
-    recordings: list[Recording], spec: Spec, calibration: CalibrationRun
+    recordings: list[Recording], spec: Spec, calibration: CalibrationRun, *,
+    position_torque: PositionTorque | None = None,
 ) -> tuple[InertiaFrictionResult, dict[str, Estimate], EarlierInputs]:
     """J, B, T_c and the amplitude spread with what earlier protocols measured taken out:
     the current loop's lag and the cable's hysteresis loop (their uncertainties as budget
@@ -438,6 +459,9 @@ def analyse_in_calibration(
         The protocol's spec.
     calibration : CalibrationRun
         The calibration in progress (earlier results).
+    position_torque : PositionTorque or None
+        Cogging and K_t ripple measured on the gravity sweep
+        (:func:`hil.suite.cogging.position_torque_of_sweep`), taken out too.
 
     Returns
     -------
@@ -457,8 +481,10 @@ def analyse_in_calibration(
     lag = measured_current_loop_lag(calibration)
     lag_s = 0.0 if lag is None else lag.value
     loop = measured_cable_loop(calibration)
-    analysed = analyse(recordings, spec, current_loop_lag_s=lag_s, cable_loop=loop)
-    estimates = with_earlier_inputs(recordings, spec, lag=lag, loop=loop)
+    analysed = analyse(recordings, spec, current_loop_lag_s=lag_s, cable_loop=loop,
+                       position_torque=position_torque)
+    estimates = with_earlier_inputs(recordings, spec, lag=lag, loop=loop,
+                                    position_torque=position_torque)
     centre_rad = float(np.mean([np.mean(r.position) for r in recordings]))
     stiffness = measured_load_stiffness(calibration, position_rad=centre_rad)
     if stiffness is not None:
@@ -469,7 +495,15 @@ def analyse_in_calibration(
         centre_rad=centre_rad,
         load_stiffness_nm_rad=None if stiffness is None else stiffness.value,
         cable_loop_removed=loop, current_loop_lag_compensated_s=lag_s,
+        position_torque_removed=_described(position_torque),
     )
+
+
+def _described(position_torque: PositionTorque | None) -> str:
+    if not position_torque:
+        return "none"
+    return (f"cogging orders {[h.order for h in position_torque.cogging]}, K_t ripple orders "
+            f"{[h.order for h in position_torque.kt_ripple]} (gravity sweep)")
 
 
 def planned_motion(profile: UnitProfile, info: DriveInfo, at: Position) -> Iterable[Excitation]:
@@ -498,7 +532,8 @@ class InertiaFrictionDetails(RunDetails):
     centre_rad: float
     load_stiffness_nm_rad: float | None
     cable_loop_removed: CableLoop | None
-    current_loop_lag_compensated_s: float  # these four: EarlierInputs
+    current_loop_lag_compensated_s: float
+    position_torque_removed: str  # these five: EarlierInputs
     fit_pct: float
     noise_rms_nm: float
     components: tuple[SineComponent, ...]
