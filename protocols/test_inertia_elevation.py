@@ -35,6 +35,7 @@ from hil.suite.inertia_elevation import (
     reported_torque_gain,
 )
 from hil.suite.needs import note_fallbacks
+from hil.suite.position_torque import measured_position_torque
 from hil.suite.stop_rule import run_repeated
 
 pytestmark = pytest.mark.protocol(NAME)
@@ -70,6 +71,7 @@ def result(
     spec = Spec.from_profile(profile, drive_info)
     note_fallbacks(calibration, NAME, NEEDS)
     gain = reported_torque_gain(calibration)
+    position_torque = measured_position_torque(calibration, profile, drive.info, protocol=NAME)
 
     def run_once() -> tuple[InertiaElevationResult, list[Estimate]]:
         by_elevation: list[list[Recording]] = []
@@ -85,7 +87,8 @@ def result(
             recording = calibration.run(drive, e, protocol=NAME)
             if e.mode is not Mode.POSITION:
                 by_elevation[-1].append(recording)
-        inertias = [inertia_at_elevation(recordings, spec, calibration, gain=gain)
+        inertias = [inertia_at_elevation(recordings, spec, calibration, gain=gain,
+                                         position_torque=position_torque)
                     for recordings in by_elevation]
         return fit_inertia_elevation(spec.elevations_rad, inertias,
                                      travel_rad=spec.travel_rad), inertias

@@ -18,7 +18,6 @@ from hil.identify.inertia_friction import InertiaFrictionResult
 from hil.measurement import Declared, declare
 from hil.motion import Mode
 from hil.profile import UnitProfile
-from hil.suite.cogging import SWEEP_PASSES, position_torque_of_sweep
 from hil.suite.inertia_friction import (
     MEASUREMENTS,
     NAME,
@@ -31,7 +30,7 @@ from hil.suite.inertia_friction import (
     motion,
 )
 from hil.suite.needs import note_fallbacks
-from hil.suite.plan import acquisition_info
+from hil.suite.position_torque import measured_position_torque
 from hil.suite.stop_rule import run_repeated
 
 pytestmark = pytest.mark.protocol(NAME)
@@ -66,11 +65,7 @@ def result(
         calibration.run(drive, move, protocol=NAME)
 
     # cogging and K_t ripple from the gravity sweep: the ripple modulates J·α over the travel
-    sweep_info, _ = acquisition_info(SWEEP_PASSES, profile, drive.info)
-    position_torque, why_not = position_torque_of_sweep(calibration, profile, sweep_info)
-    if position_torque is None:
-        calibration.protocol(NAME).messages.append(
-            f"cogging and K_t ripple not taken out: {why_not}")
+    position_torque = measured_position_torque(calibration, profile, drive.info, protocol=NAME)
 
     def run_once() -> tuple[InertiaFrictionResult, dict[str, Estimate], EarlierInputs]:
         recordings = [calibration.run(drive, e, protocol=NAME) for e in sines]

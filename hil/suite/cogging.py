@@ -27,7 +27,6 @@ from hil.details import RunDetails
 from hil.drives.base import Capability, DriveInfo
 from hil.errors import IdentificationError
 from hil.identify.cogging import CoggingResult, identify_cogging
-from hil.identify.position_torque import PositionTorque
 from hil.motion import Excitation, Mode
 from hil.profile import UnitProfile
 from hil.recording import read_recording
@@ -297,45 +296,6 @@ def sweep_passes(
     position, torque, _ = on_command_grid(recording, sweep)
     first = spec.plan.up[0]
     return position[first:], torque[first:], str(raw[0].path), first
-
-
-def position_torque_of_sweep(calibration: CalibrationRun, profile: UnitProfile,
-                             info: DriveInfo) -> tuple[PositionTorque | None, str]:
-    """Cogging and K_t ripple from the gravity sweep already recorded, for a protocol that
-    runs before this one (the sine protocol takes them out), with the declared J for the
-    passes' acceleration correction, as this protocol uses before J is measured.
-
-    Parameters
-    ----------
-    calibration : CalibrationRun
-        The calibration in progress: the sweep's raw recording.
-    profile : UnitProfile
-        The unit's profile: ``[protocols.cogging]`` with ``passes = "gravity_cable"``.
-    info : DriveInfo
-        The drive as the gravity protocol saw it (its acquisition).
-
-    Returns
-    -------
-    PositionTorque or None
-        The significant harmonics, ``None`` when there is no such sweep or nothing stands
-        above its noise.
-    str
-        Why not, when ``None``.
-    """
-    if NAME not in profile.protocols:
-        return None, f"the profile has no [protocols.{NAME}]"
-    spec = Spec.from_profile(profile, info)
-    if spec.passes != SWEEP_PASSES:
-        return None, f"[protocols.{NAME}] has passes of its own, run after this protocol"
-    try:
-        position, torque, _, _ = sweep_passes(calibration, profile, info)
-        inertia, _ = inertia_for_correction(calibration, profile)
-        found = analyse(np.arange(len(position)) / spec.fs_hz, position, torque, spec,
-                        inertia_kg_m2=inertia)
-    except IdentificationError as exc:
-        return None, str(exc)
-    torque_map = PositionTorque.of(found)
-    return (torque_map, "") if torque_map else (None, "no harmonic above the sweep's noise")
 
 
 def planned_motion(profile: UnitProfile, info: DriveInfo, at: Position) -> Iterable[Excitation]:

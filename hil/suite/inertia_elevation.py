@@ -29,6 +29,7 @@ from hil.details import RunDetails
 from hil.drives.base import Capability, DriveInfo
 from hil.identify.estimate import Estimate
 from hil.identify.inertia_elevation import HALF_TURN_RAD, scale_by_gain
+from hil.identify.position_torque import PositionTorque
 from hil.motion import Excitation
 from hil.profile import UnitProfile
 from hil.recording import Recording
@@ -162,6 +163,7 @@ def inertia_at_elevation(
     calibration: CalibrationRun,
     *,
     gain: tuple[float, float] | None,
+    position_torque: PositionTorque | None = None,
 ) -> Estimate:
     """J from the sines run at one elevation, in shaft-torque units when the gain is known.
 
@@ -177,6 +179,8 @@ def inertia_at_elevation(
     gain : tuple of (float, float) or None
         Shaft over reported torque and its standard uncertainty (see
         :func:`reported_torque_gain`); ``None`` leaves J in reported-torque units.
+    position_torque : PositionTorque or None
+        Cogging and K_t ripple to take out, if measured.
 
     Returns
     -------
@@ -188,7 +192,8 @@ def inertia_at_elevation(
     IdentificationError
         The sine analysis fails (see :func:`hil.suite.inertia_friction.analyse`).
     """
-    inertia = sine.analyse_in_calibration(recordings, spec.sine, calibration)[0].inertia
+    inertia = sine.analyse_in_calibration(recordings, spec.sine, calibration,
+                                          position_torque=position_torque)[0].inertia
     if gain is None:
         return inertia
     return scale_by_gain(inertia, gain=gain[0], gain_u=gain[1])

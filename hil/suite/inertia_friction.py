@@ -461,7 +461,7 @@ def analyse_in_calibration(
         The calibration in progress (earlier results).
     position_torque : PositionTorque or None
         Cogging and K_t ripple measured on the gravity sweep
-        (:func:`hil.suite.cogging.position_torque_of_sweep`), taken out too.
+        (:func:`hil.suite.position_torque.position_torque_of_sweep`), taken out too.
 
     Returns
     -------
