@@ -68,10 +68,11 @@ def test_timing_registers_are_checked(tmp_path: Path, profile: UnitProfile) -> N
     period = _regmap_with(tmp_path, "control_period_s = 0.00025", "control_period_s = -1")
     with pytest.raises(ProfileError, match=r"regmap\.toml: \[device\] 'control_period_s': must"):
         load_register_map(period)
-    apart = _regmap_with(tmp_path, "address = 8 ", "address = 40 ")
+    # 200: beyond one read of the feedback (125 registers), short of the recorder's (256 on)
+    apart = _regmap_with(tmp_path, "address = 8 ", "address = 200 ")
     with pytest.raises(ProfileError, match=r"regmap\.toml.*'timestamp' must be read in one"):
         ModbusDrive(_station(apart), limits=profile.limits)
-    mean_apart = _regmap_with(tmp_path, "address = 10 ", "address = 40 ")
+    mean_apart = _regmap_with(tmp_path, "address = 10 ", "address = 200 ")
     with pytest.raises(ProfileError, match=r"'torque_mean', .*must be read in one"):
         ModbusDrive(_station(mean_apart), limits=profile.limits)
     unsigned = _regmap_with(

@@ -40,9 +40,11 @@ from pymodbus.datastore.context import ModbusBaseDeviceContext
 from pymodbus.server import ModbusTcpServer
 
 from hil.drives.emulator_faults import ModbusFaults
+from hil.drives.modbus.emulator_recorder import ModbusRecorder
 from hil.drives.modbus.regmap import (
     DIGITAL_OUTPUTS,
     FEEDBACK,
+    RECORDER_COLUMNS,
     SETPOINT_INTERPOLATION,
     TIMESTAMP,
     TORQUE_MEAN,
@@ -138,7 +140,9 @@ class ModbusEmulator:
         self.faults = faults or ModbusFaults()
         self.watchdog_s = watchdog_s
         self.port = 0
-        self.regs = np.zeros(REGISTERS, dtype=np.int64)
+        self.regs = np.zeros(max(REGISTERS, self.map.address_end), dtype=np.int64)
+        # the drive recorder, where the map declares one (its rate: the control rate)
+        self.recorder = ModbusRecorder(self.map, self.regs) if self.map.has_recorder else None
         self.enabled = False
         self.quick_stopping = False
         self.fault_code = 0
@@ -251,16 +255,17 @@ class ModbusEmulator:
                 stall = False
                 if f.exception_after_s is not None and elapsed >= f.exception_after_s:
                     return ExcCodes(f.exception_code)
-                if address < 0 or address + count > REGISTERS:
+                if address < 0 or address + count > len(self.regs):
                     return ExcCodes.ILLEGAL_ADDRESS
                 if values is None:
                     if count > self.map.max_registers_per_read:
                         return ExcCodes.ILLEGAL_VALUE
+                    if self.recorder is not None:
+                        self.recorder.before_read(address, count)
                     words = [int(v) & 0xFFFF for v in self.regs[address : address + count]]
                     self._restart_torque_mean(address, count)
                     return words
-                self._write(address, values)
-                return None
+                return self._write(address, values)
         if stall:
             await asyncio.sleep(3600)
         return None
@@ -273,7 +278,10 @@ class ModbusEmulator:
             if transport is not None:
                 transport.close()
 
-    def _write(self, address: int, values: list[int]) -> None:
+    def _write(self, address: int, values: list[int]) -> ExcCodes | None:
+        recorder = self.recorder
+        if recorder is not None and recorder.refuses_write(address, len(values)):
+            return ExcCodes.DEVICE_BUSY
         for offset, value in enumerate(values):
             self.regs[address + offset] = value
         outputs = self.map.registers.get(DIGITAL_OUTPUTS)
@@ -288,6 +296,34 @@ class ModbusEmulator:
         command = self.map[f"{name}_cmd"]
         if address < command.address + command.count and command.address < address + len(values):
             self._retarget(name)
+        self._recorder_check()
+        if recorder is not None and not recorder.written(
+                address, len(values), mode=name,
+                can_play=self.enabled and not self.quick_stopping and not self.fault_code):
+            return ExcCodes.ILLEGAL_VALUE
+        return None
+
+    def _recorder_check(self) -> None:
+        """A recorder playing stops when the drive stops (quick stop, disable, fault) or the
+        host changes the mode."""
+        recorder = self.recorder
+        if recorder is None or not recorder.busy:
+            return
+        if (not self.enabled or self.quick_stopping or self.fault_code
+                or self._mode_name() != recorder.mode):
+            recorder.abort()
+
+    def _recorder_ended(self) -> None:
+        """After the table: the setpoint ramps from its last value to the mode's register
+        over the setpoint interpolation time."""
+        assert self.recorder is not None
+        mode = self.recorder.mode
+        steps = 0
+        if SETPOINT_INTERPOLATION in self.map.registers:
+            steps = round(self._get(SETPOINT_INTERPOLATION) * self.fs_hz)
+        last = self.recorder.last_value() * self.map[f"{mode}_cmd"].scale
+        self._setpoint = _Setpoint(mode=mode, start=last, target=self._get(f"{mode}_cmd"),
+                                   begin=self._step(), steps=steps)
 
     def _mode_name(self) -> str:
         modes = {v: k for k, v in self.map.modes.items()}
@@ -363,6 +399,11 @@ class ModbusEmulator:
         steps = int((now - self._clock) * self.fs_hz)
         while steps > 0:
             block = min(steps, int(self.fs_hz))
+            self._recorder_check()
+            playing = self.recorder is not None and self.recorder.busy
+            if playing:  # a block ends where the table does
+                assert self.recorder is not None
+                block = min(block, self.recorder.periods_left())
             self._clock += block / self.fs_hz
             steps -= block
             self._follow_elevation()
@@ -371,6 +412,10 @@ class ModbusEmulator:
             if self.enabled and TORQUE_OFFSET in self.map.registers:
                 offset = np.full(block, self._get(TORQUE_OFFSET))  # held until written again
             trace = self.plant.run(mode, command, offset)
+            if playing:
+                assert self.recorder is not None
+                if self.recorder.capture(trace, self._raw):
+                    self._recorder_ended()
             shaft = trace.load_torque_nm  # the transducer between the clamp and the shaft
             self.shaft_torque_nm = 0.0 if shaft is None else float(np.mean(shaft))
             if self.enabled:
@@ -394,6 +439,8 @@ class ModbusEmulator:
         if not self.enabled:
             return Mode.TORQUE, np.zeros(steps)
         name = self._mode_name()
+        if self.recorder is not None and self.recorder.busy:  # the table, in its units
+            return Mode(name), self.recorder.play(steps) * self.map[f"{name}_cmd"].scale
         if self._setpoint.mode != name:  # mode changed: the register's setpoint, at once
             self._setpoint = _Setpoint(mode=name, start=0.0, target=self._get(f"{name}_cmd"))
         return Mode(name), self._setpoint.values(self._step(), steps)
@@ -434,6 +481,22 @@ class ModbusEmulator:
             if name not in self.map.registers:
                 raise KeyError(name)
 
+    @property
+    def _raw(self) -> dict[str, Callable[[np.ndarray], np.ndarray]]:
+        """Per captured column: SI values → the raw counts of its capture window (torque
+        limited as the torque register is)."""
+        limit = 16 * self.rated_torque_nm
+
+        def raw(name: str, low: float = -math.inf, high: float = math.inf
+                ) -> Callable[[np.ndarray], np.ndarray]:
+            register = self.map[RECORDER_COLUMNS[name]]
+            lo, hi = register.raw_range
+            return lambda si: np.clip(
+                np.round(np.clip(si, low, high) / register.scale), lo, hi).astype(np.int64)
+
+        return {"position": raw("position"), "velocity": raw("velocity"),
+                "torque": raw("torque", -limit, limit), "current": raw("current")}
+
     def _restart_torque_mean(self, address: int, count: int) -> None:
         """A read that includes ``torque_mean``'s first word restarts the average: the next
         latched sample's mean is over the control periods after the one this read returned.
@@ -451,6 +514,7 @@ class ModbusEmulator:
         self.fault_code = code
         self.enabled = False
         self.quick_stopping = False
+        self._recorder_check()
         self._put("status_word", self._status_word())
         self._put("fault_code", code)
 

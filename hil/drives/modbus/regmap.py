@@ -4,9 +4,12 @@ from __future__ import annotations
 
 import struct
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
+from itertools import pairwise
 from pathlib import Path
 from typing import Literal
+
+import numpy as np
 
 from hil.config import ConfigTable, read_toml
 from hil.errors import ProfileError
@@ -53,6 +56,29 @@ TORQUE_OFFSET = "torque_offset"
 DIGITAL_OUTPUTS = "digital_outputs"
 TORQUE_MEAN = "torque_mean"
 TORQUE_MEAN_WINDOW = "torque_mean_window"
+# optional, all or none: the drive recorder (a waveform table the drive plays at its control
+# rate while it captures position, velocity, torque and current per sample; the host writes
+# the table and reads the captures back through windows of ``length`` samples at
+# ``recorder_index``). Its rate is 1 / the device's ``control_period_s``.
+RECORDER_CONTROL = "recorder_control"  # write 1: play the table (trigger); 2: abort
+RECORDER_STATE = "recorder_state"  # 0 idle, 1 busy, 2 done, 3 aborted (fault, stop, disable)
+RECORDER_LENGTH = "recorder_length"  # samples of the table to play
+RECORDER_DIVIDER = "recorder_divider"  # control periods per sample (table held, capture decimated)
+RECORDER_SAMPLES = "recorder_samples"  # samples captured so far
+RECORDER_CAPACITY = "recorder_capacity"  # the most samples the table and the buffers hold
+RECORDER_INDEX = "recorder_index"  # the first sample of every window
+RECORDER_WAVEFORM = "recorder_waveform"  # window of the table (the mode's *_cmd units)
+RECORDER_COLUMNS = {  # capture windows, by the feedback register whose values they hold
+    "position": "recorder_position",
+    "velocity": "recorder_velocity",
+    "torque": "recorder_torque",
+    "current": "recorder_current",
+}
+RECORDER = (RECORDER_CONTROL, RECORDER_STATE, RECORDER_LENGTH, RECORDER_DIVIDER,
+            RECORDER_SAMPLES, RECORDER_CAPACITY, RECORDER_INDEX, RECORDER_WAVEFORM,
+            *RECORDER_COLUMNS.values())
+RECORDER_IDLE, RECORDER_BUSY, RECORDER_DONE, RECORDER_ABORTED = 0, 1, 2, 3
+RECORDER_START, RECORDER_ABORT = 1, 2
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -65,10 +91,17 @@ class Register:
     scale: float
     unit: str
     writable: bool
+    length: int = 1  # values in a row from ``address`` (a window of the drive recorder)
 
     @property
     def count(self) -> int:
+        """Registers of one value."""
         return TYPES[self.type][1]
+
+    @property
+    def words(self) -> int:
+        """Registers of all ``length`` values."""
+        return self.count * self.length
 
     @property
     def modulus(self) -> int:
@@ -94,6 +127,27 @@ class Register:
         words = [int.from_bytes(data[i : i + 2], order) for i in range(0, len(data), 2)]
         return words if self.word_order == "big" or self.count == 1 else words[::-1]
 
+    def decode_raw(self, words: list[int]) -> np.ndarray:
+        """The ``length`` raw values (counts, unscaled) of a window's registers."""
+        unit = replace(self, scale=1.0)
+        return np.asarray([unit.decode(words[i : i + self.count])
+                           for i in range(0, len(words), self.count)], dtype=np.float64)
+
+    def encode_raw(self, raw: np.ndarray) -> list[int]:
+        """Registers holding the raw values ``raw`` (counts, in this register's type)."""
+        unit = replace(self, scale=1.0)
+        return [w for value in raw for w in unit.encode(float(value))]
+
+    @property
+    def raw_range(self) -> tuple[float, float]:
+        """The raw values this register's type holds."""
+        bits = 16 * self.count
+        if self.type.startswith("uint"):
+            return 0.0, float((1 << bits) - 1)
+        if self.type == "float32":
+            return -3.4e38, 3.4e38
+        return float(-(1 << (bits - 1))), float((1 << (bits - 1)) - 1)
+
 
 @dataclass(frozen=True, slots=True, kw_only=True)
 class RegisterMap:
@@ -113,7 +167,7 @@ class RegisterMap:
     def blocks(self, names: tuple[str, ...]) -> list[tuple[int, int]]:
         """Contiguous (address, count) reads covering ``names``, each within the limit."""
         spans = sorted(
-            (self.registers[n].address, self.registers[n].address + self.registers[n].count)
+            (self.registers[n].address, self.registers[n].address + self.registers[n].words)
             for n in names
             if n in self.registers
         )
@@ -125,6 +179,26 @@ class RegisterMap:
             else:
                 blocks.append([start, stop])
         return [(start, stop - start) for start, stop in blocks]
+
+    @property
+    def has_recorder(self) -> bool:
+        """The map declares the drive recorder (and the control period that is its rate)."""
+        return RECORDER_CONTROL in self.registers
+
+    @property
+    def recorder_window(self) -> int:
+        """Samples per window of the recorder (its waveform's; the capture's may differ)."""
+        return self.registers[RECORDER_WAVEFORM].length
+
+    @property
+    def capture_window(self) -> int:
+        """Samples per capture window (the same for every column)."""
+        return self.registers[RECORDER_COLUMNS["position"]].length
+
+    @property
+    def address_end(self) -> int:
+        """One past the highest register the map declares."""
+        return max(r.address + r.words for r in self.registers.values())
 
 
 def load_register_map(path: str | Path) -> RegisterMap:
@@ -188,6 +262,7 @@ def load_register_map(path: str | Path) -> RegisterMap:
                 f"register '{name}' needs a positive scale (seconds per count)",
                 source=f"{source} [registers.{name}]",
             )
+    _check_recorder(registers, control_period, max_registers_per_read, source)
     if SETPOINT_INTERPOLATION in registers and not registers[SETPOINT_INTERPOLATION].writable:
         raise ProfileError(
             f"register '{SETPOINT_INTERPOLATION}' must be writable (access = \"rw\")",
@@ -204,6 +279,53 @@ def load_register_map(path: str | Path) -> RegisterMap:
         status_bits=status_bits,
         modes=modes,
     )
+
+
+def _check_recorder(registers: Mapping[str, Register], control_period_s: float | None,
+                    max_registers_per_read: int, source: str) -> None:
+    """The drive recorder's registers: all or none, the windows' shapes, and reads and
+    writes that fit one request (a capture window with its index, the index with the
+    waveform window: the host reads and writes them together)."""
+    declared = [name for name in RECORDER if name in registers]
+    if not declared:
+        for name, register in registers.items():
+            if register.length != 1:
+                raise ProfileError(f"register '{name}': 'length' is for the recorder's windows",
+                                   source=f"{source} [registers.{name}]")
+        return
+    missing = [name for name in RECORDER if name not in registers]
+    if missing:
+        raise ProfileError(f"a drive recorder needs every one of its registers; [registers] "
+                           f"lacks {', '.join(missing)}", source=source)
+    if control_period_s is None:
+        raise ProfileError("a drive recorder needs [device] control_period_s (its rate)",
+                           source=source)
+    for name in (RECORDER_CONTROL, RECORDER_LENGTH, RECORDER_DIVIDER, RECORDER_INDEX,
+                 RECORDER_WAVEFORM):
+        if not registers[name].writable:
+            raise ProfileError(f"register '{name}' must be writable (access = \"rw\")",
+                               source=f"{source} [registers.{name}]")
+    for name in (RECORDER_CONTROL, RECORDER_STATE, RECORDER_LENGTH, RECORDER_DIVIDER,
+                 RECORDER_SAMPLES, RECORDER_CAPACITY, RECORDER_INDEX):
+        if registers[name].type not in ("uint16", "uint32") or registers[name].length != 1:
+            raise ProfileError(f"register '{name}' must be one uint16 or uint32",
+                               source=f"{source} [registers.{name}]")
+    columns = [registers[name] for name in RECORDER_COLUMNS.values()]
+    if len({c.length for c in columns}) != 1 or registers[RECORDER_WAVEFORM].type == "float32":
+        raise ProfileError("the recorder's capture windows must have one length, and its "
+                           "waveform an integer type", source=source)
+    index = registers[RECORDER_INDEX]
+    capture = sorted((c.address, c.address + c.words) for c in columns)
+    waveform = registers[RECORDER_WAVEFORM]
+    if (any(a[1] != b[0] for a, b in pairwise(capture))
+            or capture[-1][1] != index.address or index.address + index.count != waveform.address
+            or index.address + index.count - capture[0][0] > max_registers_per_read
+            or index.count + waveform.words > 123):
+        raise ProfileError(
+            "the recorder's capture windows must be contiguous and end at "
+            f"'{RECORDER_INDEX}', which the waveform window follows: one read of at most "
+            f"{max_registers_per_read} registers (max_registers_per_read) and one write of at "
+            "most 123", source=source)
 
 
 def _integers(table: ConfigTable, defaults: Mapping[str, int]) -> dict[str, int]:
@@ -227,6 +349,9 @@ def _register(name: str, table: ConfigTable, byte_order: str, word_order: str) -
         scale=scale,
         unit=table.string("unit", ""),
         writable=table.choice("access", ("r", "w", "rw"), "r") in ("rw", "w"),
+        length=table.integer("length", 1),
     )
+    if register.length < 1:
+        raise table.error("length", "must be 1 or more (values)")
     table.done()
     return register
