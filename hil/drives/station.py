@@ -181,6 +181,7 @@ class ModbusStation:
     watchdog_s: float = 0.5
     torque_sample: str = "auto"
     setpoint_lead_periods: int = 3
+    acquisition: str = "stream"  # "auto"/"recorder": the map's drive recorder above the poll
     gimbal: GimbalBus = field(default_factory=GimbalBus)  # [modbus.axes], [modbus.hold]
     equipment: Equipment = field(default_factory=Equipment)  # [torque_transducer], ...
 
@@ -490,6 +491,7 @@ def _modbus(table: ConfigTable, base_dir: Path) -> ModbusStation:
         watchdog_s=table.positive("watchdog_s", 0.5),
         torque_sample=table.choice("torque_sample", TORQUE_SAMPLES, "auto"),
         setpoint_lead_periods=table.integer("setpoint_lead_periods", 3),
+        acquisition=table.choice("acquisition", ACQUISITIONS, "stream"),
         gimbal=_gimbal(table, base_dir, largest_address=247),
     )
     table.done()

@@ -34,6 +34,7 @@ from hil.drives.base import (
     DriveState,
     DriveStatus,
     MotionEnvelope,
+    Recorder,
     check_limits,
     interrupted,
 )
@@ -51,6 +52,13 @@ from hil.drives.modbus.acquire import (
 )
 from hil.drives.modbus.held_axis import KEEPALIVE_S, HeldModbusAxis
 from hil.drives.modbus.link import ModbusLink
+from hil.drives.modbus.recorder import (
+    play,
+    recorder_capacity,
+    recorder_rate_hz,
+    recorder_refusal,
+    upload,
+)
 from hil.drives.modbus.regmap import (
     DIGITAL_OUTPUTS,
     TORQUE_MEAN,
@@ -105,6 +113,8 @@ class ModbusDrive(ClampedRotor, Drive):
         self.states = ModbusStateMachine(self.link, self.feedback)
         self.link.connect()
         self.held: HeldAxes[HeldModbusAxis] = HeldAxes()  # the gimbal's other axes here
+        self.poll_rate_hz = 0.0  # measured at connection (info.max_sample_rate_hz unless
+        self.recorder_rate_hz = 0.0  # the drive recorder, at its control rate, is faster)
         try:
             self._info = self._read_info()
             for name, unit_id in station.held.items():
@@ -148,7 +158,11 @@ class ModbusDrive(ClampedRotor, Drive):
     def _read_info(self) -> DriveInfo:
         ident = self.read_values(("firmware_version", "serial_number", "rated_torque"))
         firmware = int(ident.get("firmware_version", 0))
-        rate = self._measure_poll_rate()
+        rate = self.poll_rate_hz = self._measure_poll_rate()
+        recorder = None
+        if self.station.acquisition != "stream" and recorder_rate_hz(self.link) > rate:
+            recorder = Recorder(stream_rate_hz=rate, samples=recorder_capacity(self.link))
+        self.recorder_rate_hz = 0.0 if recorder is None else recorder_rate_hz(self.link)
         return DriveInfo(
             vendor="modbus",
             model=self.map.model,
@@ -159,7 +173,8 @@ class ModbusDrive(ClampedRotor, Drive):
             modes=tuple(
                 Mode(name) for name in self.map.modes if name in ("torque", "velocity", "position")
             ),
-            max_sample_rate_hz=rate,
+            max_sample_rate_hz=max(rate, self.recorder_rate_hz),
+            recorder=recorder,
             capabilities=self._clamp_equipment().capabilities() | frozenset(
                 {Capability.ELEVATION_AXIS} if "elevation" in self.station.held else ()),
             **sensor_fields(self._clamp_equipment()),
@@ -278,10 +293,12 @@ class ModbusDrive(ClampedRotor, Drive):
         states = self.states
         if states.state is not DriveState.ENABLED:
             raise DriveStateError(f"cannot run '{excitation.name}': drive is {states.state.value}")
-        if excitation.fs_hz > self._info.max_sample_rate_hz * (1 + 1e-9):
+        if self.recorder_rate_hz and excitation.fs_hz > self.poll_rate_hz * (1 + 1e-9):
+            return self._run_recorder(excitation)
+        if excitation.fs_hz > self.poll_rate_hz * (1 + 1e-9):
             raise DriveStateError(
                 f"excitation '{excitation.name}' is sampled at {excitation.fs_hz} Hz; this "
-                f"Modbus link polls at up to {self._info.max_sample_rate_hz:g} Hz"
+                f"Modbus link polls at up to {self.poll_rate_hz:g} Hz"
             )
         start = self.status()
         check_limits(excitation, self.limits, start_position_rad=start.position_rad)
@@ -334,6 +351,63 @@ class ModbusDrive(ClampedRotor, Drive):
             return shaft.on_rows(recording)
         return recording
 
+    def _run_recorder(self, excitation: Excitation) -> Recording:
+        """Play ``excitation`` on the drive recorder (see :mod:`hil.drives.modbus.recorder`):
+        a stop signal or an error while it plays quick-stops and disables the drive, and
+        what it captured until then is read back and kept."""
+        states, fs = self.states, excitation.fs_hz
+        if self._shaft is not None:
+            raise DriveStateError(
+                f"excitation '{excitation.name}' at {fs:g} Hz would run on the drive "
+                "recorder, which does not record the station's torque transducer: poll it "
+                f"(at most {self.poll_rate_hz:g} Hz)")
+        refused = recorder_refusal(excitation, rate_hz=self.recorder_rate_hz,
+                                   capacity=recorder_capacity(self.link))
+        if refused is not None:
+            raise DriveStateError(f"{refused}: poll it (at most {self.poll_rate_hz:g} Hz)")
+        start = self.status()
+        check_limits(excitation, self.limits, start_position_rad=start.position_rad)
+        if excitation.mode is not states.mode:
+            states.select(excitation.mode)
+        divider = round(self.recorder_rate_hz / fs)
+        error: DriveError | None = None
+        try:
+            with collector_held():
+                play(self.link, self.feedback, excitation, rate_hz=self.recorder_rate_hz,
+                     divider=divider, envelope=MotionEnvelope.of(self.limits),
+                     keepalive=self._keepalive)
+        except DriveError as exc:
+            error = exc
+        except KeyboardInterrupt as stop:  # a stop signal: stop, then keep what it captured
+            states.quick_stop()
+            states.disable()
+            raise interrupted(stop, self._recorded(excitation, divider)) from stop
+        except BaseException:
+            states.quick_stop()
+            states.disable()
+            raise
+        if error is not None:
+            states.make_safe(error)
+            error.partial_recording = self._recorded(excitation, divider)
+            raise error
+        recording = upload(self.link, excitation, self._info, rate_hz=self.recorder_rate_hz,
+                           divider=divider)
+        if self.held.axes:
+            recording = replace(recording, metadata={**recording.metadata,
+                                                     "held_axes": self.held.text()})
+        return recording
+
+    def _recorded(self, excitation: Excitation, divider: int) -> Recording | None:
+        """After a stopped or failed play (the drive made safe): what the recorder
+        captured, or ``None`` when it cannot be read (logged)."""
+        try:
+            return upload(self.link, excitation, self._info, rate_hz=self.recorder_rate_hz,
+                          divider=divider)
+        except DriveError as exc:
+            log.warning("%s: the drive recorder's samples of '%s' not read: %s",
+                        self.link.where, excitation.name, exc)
+            return None
+
     def _clamp_equipment(self) -> Equipment:
         """The station's equipment the register map can serve (a clamp needs the map's
         digital outputs)."""
@@ -343,7 +417,7 @@ class ModbusDrive(ClampedRotor, Drive):
         return equipment
 
     def _check_rate_hz(self) -> float:
-        return self.info.max_sample_rate_hz
+        return self.poll_rate_hz
 
     def _set_clamp(self, engaged: bool) -> None:
         fixture = self.station.equipment.locked_rotor

@@ -145,6 +145,10 @@ class ModbusLink:
         """Read ``names`` (in as few requests as the map allows) in SI units."""
         return self.decode(self.read_words(self.map.blocks(names)), names)
 
+    def write_words(self, address: int, words: list[int], what: str) -> None:
+        """Write registers from ``address`` on in one request."""
+        self._call(f"write {what}", "write_registers", address, words)
+
     def write_value(self, name: str, value_si: float) -> None:
         """Write one register from an SI value."""
         register = self.map[name]
