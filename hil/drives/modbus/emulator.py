@@ -130,8 +130,14 @@ class ModbusEmulator:
         neighbours: Mapping[int, ModbusEmulator] | None = None,
         elevation_of: Callable[[], float] | None = None,
         clamp_output_bit: int | None = None,
+        exact_torque_hold: bool = True,
     ) -> None:
         self.firmware = firmware or Firmware()
+        if exact_torque_hold and not plant.exact_torque_hold:
+            # the same physics as SimDrive and the CANopen emulator (False: the kernel's
+            # legacy half-step advance of the motion against the torque, which no drive
+            # has: it took half a control period off τ on the drive recorder)
+            plant = plant.with_changes(exact_torque_hold=True)
         self.plant = Plant(plant, fs_hz=fs_hz, seed=seed, firmware=self.firmware)
         self.fs_hz = float(fs_hz)
         self.map = load_register_map(register_map)

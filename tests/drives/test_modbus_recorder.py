@@ -1,0 +1,240 @@
+"""The Modbus drive recorder, through a real pymodbus client and the emulator's real server:
+its rows are the plant's control periods (pinned exactly on a frictionless, lag-free axis),
+a run it cannot hold is refused before motion, a fault or a stop signal while it plays
+leaves the drive disabled with what it captured, a map without its registers means no
+recorder, and the demo gimbal over one Modbus server certifies PASS with it.
+"""
+
+from __future__ import annotations
+
+import _thread
+import dataclasses
+import json
+import math
+import subprocess
+import sys
+import threading
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from hil.drives.base import DriveState, Interrupted
+from hil.drives.emulated import MODBUS_STATION, builtin_station, modbus_emulator
+from hil.drives.emulator_faults import ModbusFaults
+from hil.drives.modbus.drive import ModbusDrive
+from hil.drives.modbus.regmap import RECORDER_ABORTED, RECORDER_DONE, load_register_map
+from hil.drives.station import ModbusStation, load_station
+from hil.errors import DriveFaultError, DriveStateError, ProfileError
+from hil.identify.current_loop import acquisition_path, torque_hold_s
+from hil.motion import Excitation, Mode
+from hil.profile import UnitProfile
+from hil.recording import EVERY_CONTROL_PERIOD
+from plant_sim.firmware import Firmware
+from plant_sim.params import PlantParams
+
+# the wall clock times the emulator's plant and the host's watch: run alone (README)
+pytestmark = pytest.mark.realtime
+
+J = 0.004
+CONTROL_S = 2.5e-4  # the demo servo's control period (4 kHz)
+LSB_RAD = 2 * math.pi / (1 << 19)  # the map's position increment
+REGMAP = Path(__file__).parents[2] / "fixtures" / "regmap_gimbal_hil_servo.toml"
+AUTO = {"acquisition": "auto"}
+
+
+def _frictionless(profile: UnitProfile) -> UnitProfile:
+    plant = PlantParams(inertia_kg_m2=J, torque_limit_nm=0.5, exact_torque_hold=True)
+    return dataclasses.replace(profile, plant=plant, firmware=Firmware())
+
+
+def _step_position(rows: int, divider: int, k0: int, step_nm: float) -> np.ndarray:
+    """Row k's position from the play's start: the exact double integral of the torque
+    held per control period n (the table's sample n // divider), measured at the start of
+    control period k·divider."""
+    fine = np.where(np.arange(rows * divider) // divider >= k0, step_nm, 0.0)
+    velocity = np.concatenate([[0.0], np.cumsum(fine) * CONTROL_S / J])
+    angle = np.concatenate([[0.0], np.cumsum(velocity[:-1] + velocity[1:]) * CONTROL_S / 2])
+    return angle[: rows * divider : divider]
+
+
+@pytest.mark.parametrize("fs_hz", [4000.0, 1000.0])
+def test_torque_step_row_and_position_instant(profile: UnitProfile, fs_hz: float) -> None:
+    """Row k is the plant's control period k·n of the play (n = 4 kHz / fs): the torque
+    commanded over it (the table's sample k, so the step is in row k0 exactly) and the
+    position at its start; one control period earlier or later is many increments away."""
+    divider = round(1 / (fs_hz * CONTROL_S))
+    step_nm, k0, rows = 0.1, 40 // divider, 400 // divider  # 0.1 s: within the speed limit
+    command = np.where(np.arange(rows) >= k0, step_nm, 0.0)
+    with (
+        modbus_emulator(_frictionless(profile), seed=0, station_changes=AUTO) as (emulator, st),
+        ModbusDrive(st, limits=profile.limits) as drive,
+    ):
+        assert drive.info.recorder is not None
+        assert drive.info.max_sample_rate_hz == 4000.0
+        drive.enable(Mode.TORQUE)
+        recording = drive.run(Excitation(name="step", mode=Mode.TORQUE, fs_hz=fs_hz,
+                                         command=command))
+        assert emulator.recorder is not None
+        assert emulator.recorder.state == RECORDER_DONE
+        assert drive.status().state is DriveState.ENABLED
+    meta = recording.metadata
+    assert meta["acquisition"] == "drive recorder"
+    assert meta["recorder_divider"] == str(divider)
+    assert meta["control_period_s"] == f"{CONTROL_S:g}"
+    assert (meta["torque_sample"], meta["command_interpolation"]) == ("instantaneous", "hold")
+    assert len(recording) == rows
+    assert recording.time_s == pytest.approx(np.arange(rows) / fs_hz, abs=1e-12)
+    torque = recording.columns["torque_nm"]
+    assert np.all(torque[:k0] == 0.0)
+    assert np.all(torque[k0:] == pytest.approx(step_nm, abs=1e-12))
+    position = recording.columns["position_rad"] - recording.columns["position_rad"][0]
+    expected = _step_position(rows, divider, k0, step_nm)
+    assert np.max(np.abs(position - expected)) <= 1.01 * LSB_RAD
+    for shift in (-1, 1):  # one control period off: many increments at the end
+        fine = _step_position(rows * divider + 2, 1, k0 * divider + shift, step_nm)
+        shifted = fine[: rows * divider : divider]
+        assert np.max(np.abs(position - shifted)) > 20 * LSB_RAD
+    # at 4 kHz the current-loop model takes these rows as the simulator's (every period)
+    if divider == 1:
+        assert torque_hold_s(meta, fs_hz=fs_hz).hold_s == CONTROL_S
+        assert acquisition_path(meta, fs_hz=fs_hz) == EVERY_CONTROL_PERIOD
+
+
+def test_a_run_the_recorder_cannot_hold_is_refused_before_motion(profile: UnitProfile) -> None:
+    with (
+        modbus_emulator(profile, seed=1, station_changes=AUTO) as (emulator, station),
+        ModbusDrive(station, limits=profile.limits) as drive,
+    ):
+        drive.enable(Mode.VELOCITY)
+        before = emulator.requests
+        start = drive.status().position_rad
+        too_long = Excitation(name="long", mode=Mode.VELOCITY, fs_hz=4000.0,
+                              command=np.zeros(16385))
+        with pytest.raises(DriveStateError, match=r"'long' has 16,385 samples at 4000 Hz; "
+                                                  r"the drive recorder holds 16,384: poll it"):
+            drive.run(too_long)
+        offset = Excitation(name="ff", mode=Mode.VELOCITY, fs_hz=4000.0,
+                            command=np.zeros(100), torque_offset_nm=np.zeros(100))
+        with pytest.raises(DriveStateError, match="sends a torque offset; the drive recorder"):
+            drive.run(offset)
+        odd = Excitation(name="odd", mode=Mode.VELOCITY, fs_hz=3000.0, command=np.zeros(100))
+        with pytest.raises(DriveStateError, match=r"samples at 4000 Hz / n"):
+            drive.run(odd)
+        assert emulator.recorder is not None
+        assert emulator.recorder.state == 0
+        assert emulator.requests - before < 10  # the capacity read, a status: no table
+        assert drive.status().state is DriveState.ENABLED
+        assert drive.status().position_rad == pytest.approx(start, abs=1e-3)
+
+
+def _sine(fs_hz: float, seconds: float, amplitude_rad_s: float = 0.5) -> Excitation:
+    t = np.arange(round(seconds * fs_hz)) / fs_hz
+    return Excitation(name="sine", mode=Mode.VELOCITY, fs_hz=fs_hz,
+                      command=amplitude_rad_s * np.sin(2 * math.pi * 2.0 * t))
+
+
+def test_a_fault_while_playing_disables_and_keeps_the_captured_rows(
+        profile: UnitProfile) -> None:
+    faults = ModbusFaults(drive_fault_after_s=0.8)
+    with (
+        modbus_emulator(profile, seed=2, faults=faults, station_changes=AUTO) as (emu, st),
+        ModbusDrive(st, limits=profile.limits) as drive,
+    ):
+        drive.enable(Mode.VELOCITY)
+        excitation = _sine(4000.0, 2.0)
+        with pytest.raises(DriveFaultError, match=r"drive fault at t = .* \(drive recorder\)"
+                           ) as caught:
+            drive.run(excitation)
+        assert caught.value.code == 0x2310
+        partial = caught.value.partial_recording
+        assert partial is not None
+        assert 0 < len(partial) < len(excitation.command)
+        assert partial.metadata["acquisition"] == "drive recorder"
+        assert emu.recorder is not None
+        assert emu.recorder.state == RECORDER_ABORTED
+        assert not emu.enabled
+        assert drive.states.state is not DriveState.ENABLED
+
+
+def test_a_stop_signal_while_playing_stops_disables_and_keeps_the_rows(
+        profile: UnitProfile) -> None:
+    with (
+        modbus_emulator(profile, seed=3, station_changes=AUTO) as (emu, station),
+        ModbusDrive(station, limits=profile.limits) as drive,
+    ):
+        drive.enable(Mode.VELOCITY)
+        excitation = _sine(4000.0, 3.0)
+        timer = threading.Timer(1.0, _thread.interrupt_main)  # SIGINT's KeyboardInterrupt
+        timer.start()
+        try:
+            with pytest.raises(Interrupted) as caught:
+                drive.run(excitation)
+        finally:
+            timer.cancel()
+        partial = caught.value.partial_recording
+        assert partial is not None
+        assert 0 < len(partial) < len(excitation.command)
+        assert emu.recorder is not None
+        assert emu.recorder.state == RECORDER_ABORTED
+        assert not emu.enabled
+        assert abs(emu.plant.velocity_rad_s) < 1e-2  # braked, then disabled
+        assert drive.states.state is DriveState.DISABLED
+
+
+def _map_without_recorder(tmp_path: Path, keep: tuple[str, ...] = ()) -> Path:
+    text = REGMAP.read_text(encoding="utf-8")
+    head, _, tail = text.partition("# The drive recorder")
+    kept = [block for block in tail.split("\n[registers.")[1:]
+            if block.split("]", 1)[0] in keep]
+    path = tmp_path / "regmap.toml"
+    path.write_text(head + "".join("\n[registers." + block for block in kept), "utf-8")
+    return path
+
+
+def test_a_map_without_the_recorder_means_no_recorder(tmp_path: Path,
+                                                      profile: UnitProfile) -> None:
+    bare = _map_without_recorder(tmp_path)
+    assert not load_register_map(bare).has_recorder
+    base = load_station(builtin_station(MODBUS_STATION))
+    assert isinstance(base, ModbusStation)
+    base = dataclasses.replace(base, register_map_path=bare, acquisition="auto")
+    with (
+        modbus_emulator(profile, seed=4, base_station=base) as (emulator, station),
+        ModbusDrive(station, limits=profile.limits) as drive,
+    ):
+        assert emulator.recorder is None
+        assert drive.info.recorder is None
+        assert drive.info.max_sample_rate_hz <= station.max_poll_rate_hz
+        drive.enable(Mode.VELOCITY)
+        with pytest.raises(DriveStateError, match=r"sampled at 4000.0 Hz; this Modbus link "
+                                                  r"polls at up to"):
+            drive.run(_sine(4000.0, 0.1))
+    # a station that streams leaves a map's recorder unused
+    with (
+        modbus_emulator(profile, seed=4, station_changes={"acquisition": "stream"}) as (_, st),
+        ModbusDrive(st, limits=profile.limits) as drive,
+    ):
+        assert drive.info.recorder is None
+    # part of a recorder is no recorder: refused, naming what it lacks
+    part = _map_without_recorder(tmp_path, keep=("recorder_control", "recorder_state"))
+    with pytest.raises(ProfileError, match=r"needs every one of its registers; \[registers\] "
+                                           r"lacks recorder_length"):
+        load_register_map(part)
+
+
+@pytest.mark.slow
+def test_the_demo_gimbal_certifies_pass_over_the_modbus_emulator(tmp_path: Path) -> None:
+    """Both axes behind one Modbus server, the current loop, the FRF and the resonance on
+    the drive recorder: the gimbal's verdict PASS (a few minutes)."""
+    done = subprocess.run(
+        [sys.executable, "-m", "hil.cli", "calibrate", "--gimbal", "demo_gimbal",
+         "--drive", "modbus-emulator", "--station",
+         str(REGMAP.parent / "station_modbus_gimbal_emulator.toml"),
+         "--unit-serial", "GMB-MR", "--out", str(tmp_path), "--", "--no-documents",
+         "--store", "off"],
+        capture_output=True, text=True, timeout=1200, check=False)
+    certificate = tmp_path / "GMB-MR" / "gimbal-certificate.json"
+    assert certificate.is_file(), done.stdout[-4000:] + done.stderr[-4000:]
+    document = json.loads(certificate.read_text("utf-8"))
+    assert document["verdict"] == "PASS", done.stdout[-6000:]
