@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import logging
 import math
+import threading
 import time
 from collections.abc import Callable
 from dataclasses import replace
@@ -115,6 +116,7 @@ class ModbusDrive(ClampedRotor, Drive):
         self.held: HeldAxes[HeldModbusAxis] = HeldAxes()  # the gimbal's other axes here
         self.poll_rate_hz = 0.0  # measured at connection (info.max_sample_rate_hz unless
         self.recorder_rate_hz = 0.0  # the drive recorder, at its control rate, is faster)
+        self._idle = threading.Event()  # set: the held axes' idle keepalive ends
         try:
             self._info = self._read_info()
             for name, unit_id in station.held.items():
@@ -125,6 +127,9 @@ class ModbusDrive(ClampedRotor, Drive):
                 axis.enable()
                 if name in station.gimbal.hold.at_rad:
                     axis.move_to(station.gimbal.hold.at_rad[name])
+            if self.held.axes:
+                threading.Thread(target=self._keep_held_axes, name="modbus-held-keepalive",
+                                 daemon=True).start()
         except BaseException:
             self.held.release()
             self.link.close()
@@ -246,6 +251,20 @@ class ModbusDrive(ClampedRotor, Drive):
         for axis in self.held.axes.values():
             axis.keepalive()
 
+    def _keep_held_axes(self) -> None:
+        """Between runs (the host analysing a 4 kHz recording can take longer than a
+        watchdog time): a status read to each held axis silent for 2 × :data:`KEEPALIVE_S`,
+        on its own thread (the link serialises requests). Its faults are found by the runs'
+        keepalive; the axis under test's own watchdog is left to the host's requests."""
+        while not self._idle.wait(KEEPALIVE_S / 2):
+            for axis in list(self.held.axes.values()):
+                if time.monotonic() - axis.link.last_request_s < 2 * KEEPALIVE_S:
+                    continue
+                try:
+                    axis.link.read_values(("status_word",))
+                except DriveError as exc:
+                    log.debug("%s: idle keepalive: %s", axis.link.where, exc)
+
     def _keepalive_all_but(self, moving: str) -> Callable[[], None]:
         """While the held axis ``moving`` moves: a request to this drive and to every other
         held axis at least every :data:`KEEPALIVE_S` (their watchdogs)."""
@@ -264,6 +283,7 @@ class ModbusDrive(ClampedRotor, Drive):
     def close(self) -> None:
         """Disable (the held axes first), then close the connection."""
         try:
+            self._idle.set()
             self._close_transducer()
             self.held.release()
             self.disable()
@@ -391,7 +411,7 @@ class ModbusDrive(ClampedRotor, Drive):
             error.partial_recording = self._recorded(excitation, divider)
             raise error
         recording = upload(self.link, excitation, self._info, rate_hz=self.recorder_rate_hz,
-                           divider=divider)
+                           divider=divider, keepalive=self._keepalive)
         if self.held.axes:
             recording = replace(recording, metadata={**recording.metadata,
                                                      "held_axes": self.held.text()})
@@ -400,9 +420,15 @@ class ModbusDrive(ClampedRotor, Drive):
     def _recorded(self, excitation: Excitation, divider: int) -> Recording | None:
         """After a stopped or failed play (the drive made safe): what the recorder
         captured, or ``None`` when it cannot be read (logged)."""
+        def keepalive() -> None:  # the held axes' watchdogs; their faults are not this one's
+            try:
+                self._keepalive()
+            except DriveError as exc:
+                log.warning("%s", exc)
+
         try:
             return upload(self.link, excitation, self._info, rate_hz=self.recorder_rate_hz,
-                          divider=divider)
+                          divider=divider, keepalive=keepalive)
         except DriveError as exc:
             log.warning("%s: the drive recorder's samples of '%s' not read: %s",
                         self.link.where, excitation.name, exc)

@@ -6,6 +6,7 @@ It knows the register map but nothing of the CiA-style state machine or of acqui
 
 from __future__ import annotations
 
+import threading
 import time
 from dataclasses import replace
 from typing import Any
@@ -49,15 +50,19 @@ class ModbusLink:
     """
 
     def __init__(self, station: ModbusStation, register_map: RegisterMap, *,
-                 client: Any = None) -> None:
+                 client: Any = None, lock: threading.Lock | None = None) -> None:
         self.station = station
         self.map = register_map
         self._client = client if client is not None else self._make_client()
+        # one request at a time on the connection (the idle keepalive's thread shares it)
+        self._lock = lock if lock is not None else threading.Lock()
+        self.last_request_s = time.monotonic()  # when this unit was last sent a request
 
     def for_unit(self, unit_id: int) -> ModbusLink:
         """The drive at ``unit_id`` on the same connection (a gimbal's other axis on this
         line or server; the same register map)."""
-        return ModbusLink(replace(self.station, unit_id=unit_id), self.map, client=self._client)
+        return ModbusLink(replace(self.station, unit_id=unit_id), self.map, client=self._client,
+                          lock=self._lock)
 
     def _make_client(self) -> Any:
         st = self.station
@@ -102,9 +107,11 @@ class ModbusLink:
         if gap:
             time.sleep(gap)
         try:
-            response = getattr(self._client, method)(
-                *args, device_id=self.station.unit_id, **kwargs
-            )
+            with self._lock:
+                self.last_request_s = time.monotonic()
+                response = getattr(self._client, method)(
+                    *args, device_id=self.station.unit_id, **kwargs
+                )
         except ModbusException as exc:
             raise DriveCommunicationError(f"{self.where}: {what}: {exc}") from exc
         except OSError as exc:

@@ -83,10 +83,13 @@ def _raw_table(link: ModbusLink, excitation: Excitation) -> np.ndarray:
     return raw
 
 
-def write_table(link: ModbusLink, raw: np.ndarray) -> None:
-    """The table, a window per request (``recorder_index`` and the window together)."""
+def write_table(link: ModbusLink, raw: np.ndarray,
+                keepalive: Callable[[], None] = lambda: None) -> None:
+    """The table, a window per request (``recorder_index`` and the window together);
+    ``keepalive`` between them (the held axes' watchdogs)."""
     index, waveform = link.map[RECORDER_INDEX], link.map[RECORDER_WAVEFORM]
     for start in range(0, len(raw), waveform.length):
+        keepalive()
         words = index.encode(start) + waveform.encode_raw(raw[start : start + waveform.length])
         link.write_words(index.address, words, f"waveform samples {start}…")
 
@@ -110,7 +113,7 @@ def play(link: ModbusLink, feedback: Feedback, excitation: Excitation, *, rate_h
         A request failed.
     """
     raw = _raw_table(link, excitation)
-    write_table(link, raw)
+    write_table(link, raw, keepalive)
     link.write_value(RECORDER_LENGTH, float(len(raw)))
     link.write_value(RECORDER_DIVIDER, float(divider))
     try:
@@ -156,9 +159,10 @@ def play(link: ModbusLink, feedback: Feedback, excitation: Excitation, *, rate_h
 
 
 def upload(link: ModbusLink, excitation: Excitation, info: DriveInfo, *, rate_hz: float,
-           divider: int) -> Recording:
+           divider: int, keepalive: Callable[[], None] = lambda: None) -> Recording:
     """What the recorder captured of ``excitation`` (all of it after a finished run, the
-    samples up to the stop after an aborted one), a capture window per read.
+    samples up to the stop after an aborted one), a capture window per read; ``keepalive``
+    between windows (the held axes' watchdogs: 16 384 samples take about 1-2 s).
 
     Raises
     ------
@@ -174,6 +178,7 @@ def upload(link: ModbusLink, excitation: Excitation, info: DriveInfo, *, rate_hz
     window = m.capture_window
     raw: dict[str, list[np.ndarray]] = {name: [] for name in columns}
     for start in range(0, count, window):
+        keepalive()
         link.write_value(RECORDER_INDEX, float(start))
         words = link.read_words(block)
         got = round(index.decode([words[index.address + i] for i in range(index.count)]))
