@@ -335,10 +335,12 @@ def with_earlier_inputs(
         inputs.append(("cable hysteresis loop h taken out (gravity_cable)",
                        loop.half_width_u_nm, "N·m", at(lag_s, wider)))
     if position_torque and (u := position_torque.relative_u()) > 0:
+        # re-measured in every run: the source names the protocol that recorded it
+        found_on = "(gravity_cable: its sweep, by cogging's analysis)"
         inputs += [
-            ("cogging and K_t ripple taken out: their amplitudes (gravity sweep)", u, "",
+            (f"cogging and K_t ripple taken out: their amplitudes {found_on}", u, "",
              at(lag_s, loop, position_torque.perturbed(scale=1 + u))),
-            ("cogging and K_t ripple taken out: their phases (gravity sweep)", u, "rad",
+            (f"cogging and K_t ripple taken out: their phases {found_on}", u, "rad",
              at(lag_s, loop, position_torque.perturbed(phase_rad=u))),
         ]
     lines = {
