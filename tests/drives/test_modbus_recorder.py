@@ -235,9 +235,11 @@ def test_the_demo_gimbal_over_the_modbus_emulator(tmp_path: Path) -> None:
     """Both axes behind one Modbus server (about 3 min): the current loop, the resonance
     and the velocity FRF run on each unit's drive recorder at 4 kHz and PASS, their values
     within U of the plants' (a truth given). The gimbal's PASS is the goal; it is not
-    reached yet: the cable hysteresis and the Stribeck staircase, polled at 100 Hz (too
-    long for the recorder), FAIL or error (docs/drives.md), so that part is an xfail that
-    turns into a pass, not a silent skip, the day it certifies."""
+    reached yet (docs/drives.md): runs too long for the recorder are polled at 100 Hz
+    (the cable hysteresis FAILs or is MARGINAL, the Stribeck staircase can error on
+    stick-slip, cogging SKIPs), tracking needs a torque offset the recorder does not play,
+    the map has no compensation table; so that part is an xfail that turns into a pass,
+    not a silent skip, the day it certifies."""
     done = subprocess.run(
         [sys.executable, "-m", "hil.cli", "calibrate", "--gimbal", "demo_gimbal",
          "--drive", "modbus-emulator", "--station",
