@@ -265,17 +265,18 @@ class CalibrationRun:
         return None if any(e is None for e in found) else tuple(e for e in found if e)
 
     def record(self, protocol: str, estimate: Estimate, *, method_of: str | None = None,
-               declared: Declared | None = None, acquisition: str | None = None
-               ) -> Measurement:
+               declared: Declared | None = None, acquisition: str | None = None,
+               variant: str | None = None) -> Measurement:
         """Judge ``estimate`` against the profile's declared measurement of the same name,
         after the method's known bias is corrected and its budget completed
         (:func:`hil.measurement.with_method_terms`); ``method_of``: take the method terms
         of that (relative) result, which this one is proportional to; ``declared``: the
         protocol's title and description of it, for the certificate; ``acquisition``: the
         path its recording came over, when the method's error depends on it (the method
-        line of that path, or none: :meth:`hil.measurement.MethodBiasMap.line`)."""
+        line of that path, or none: :meth:`hil.measurement.MethodBiasMap.line`);
+        ``variant``: the method ran without an input its main line assumes."""
         spec = self.profile.measurement(estimate.name)
-        bias = self.method_bias.line(method_of or spec.name, path=acquisition)
+        bias = self.method_bias.line(method_of or spec.name, path=acquisition, variant=variant)
         if bias is not None and method_of is not None and not bias.relative:
             bias = None
         estimate = with_method_terms(estimate, spec, bias)

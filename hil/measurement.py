@@ -20,6 +20,10 @@ from hil.recording import EVERY_CONTROL_PERIOD
 METHOD_BIAS_FILE = "method_bias.toml"
 #: method lines of acquisition paths other than the simulator's (over an emulator)
 ACQUISITION_BIAS_FILE = "method_bias_acquisition.toml"
+#: method lines of a protocol run without an input its shipped line assumes
+VARIANT_BIAS_FILE = "method_bias_variants.toml"
+#: the sine protocols' variant when no cogging and K_t ripple map could be taken out
+WITHOUT_POSITION_TORQUE = "cogging and K_t ripple not taken out"
 
 DECISION_RULE = (
     "Simple acceptance with the expanded uncertainty U (k≈2, ~95 %) stated (ILAC-G8:09/2019 "
@@ -140,6 +144,8 @@ class MethodBias:
         What keeps a result's validated coverage from 95 %, when something does.
     acquisition : str
         The acquisition path the population was recorded on.
+    variant : str
+        The method's variant it was measured for ("": as the main map assumes).
     """
 
     name: str
@@ -151,6 +157,7 @@ class MethodBias:
     validated_units: int | None = None
     note: str = ""
     acquisition: str = EVERY_CONTROL_PERIOD  # the path its population was recorded on
+    variant: str = ""  # the method run without an input the main map assumes
 
     def validation(self) -> dict[str, object] | None:
         """What the certificate states of the map's out-of-sample check, if made."""
@@ -169,11 +176,18 @@ class MethodBiasMap:
     entries: Mapping[str, MethodBias]
     #: lines of other acquisition paths: path → result → line
     acquisition: Mapping[str, Mapping[str, MethodBias]] = field(default_factory=dict)
+    #: lines of a method run without an input the main map assumes: variant → result → line
+    variants: Mapping[str, Mapping[str, MethodBias]] = field(default_factory=dict)
 
-    def line(self, name: str, *, path: str | None = None) -> MethodBias | None:
+    def line(self, name: str, *, path: str | None = None,
+             variant: str | None = None) -> MethodBias | None:
         """``name``'s method line on the acquisition ``path`` its recording came over
-        (``None``: the simulator's, :data:`EVERY_CONTROL_PERIOD`). A line is valid on the
-        path it was measured on only: another path gets its own line or none."""
+        (``None``: the simulator's, :data:`EVERY_CONTROL_PERIOD`), for the method's
+        ``variant`` (e.g. :data:`WITHOUT_POSITION_TORQUE`) when it ran as one. A line is
+        valid on the path and variant it was measured on only: another gets its own or
+        none."""
+        if variant is not None and (path is None or path == EVERY_CONTROL_PERIOD):
+            return self.variants.get(variant, {}).get(name)
         if path is None or path == EVERY_CONTROL_PERIOD:
             return self.entries.get(name)
         return self.acquisition.get(path, {}).get(name)
@@ -203,8 +217,10 @@ def load_method_bias(path: Path | None = None, *, axis: str = "") -> MethodBiasM
     path = path or builtin_fixture(METHOD_BIAS_FILE)
     sha256, by_axis = read_results_by_axis(path, _method_bias)
     return MethodBiasMap(source=str(path), sha256=sha256, entries=by_axis.get(axis, {}),
-                         acquisition=_acquisition_lines(builtin_fixture(ACQUISITION_BIAS_FILE),
-                                                        axis=axis))
+                         acquisition=_keyed_lines(builtin_fixture(ACQUISITION_BIAS_FILE),
+                                                  "acquisition", axis=axis),
+                         variants=_keyed_lines(builtin_fixture(VARIANT_BIAS_FILE), "variant",
+                                               axis=axis))
 
 
 def acquisition_band(line: MethodBias, *, value: float, unit: str) -> Component:
@@ -224,21 +240,23 @@ def acquisition_band(line: MethodBias, *, value: float, unit: str) -> Component:
         / math.sqrt(3), unit=unit)
 
 
-def _acquisition_lines(path: Path, *, axis: str) -> dict[str, dict[str, MethodBias]]:
-    """The shipped lines of other acquisition paths (``[acquisition."PATH".results.AXIS.
-    NAME]``, benchmarks/bench_acquisition_path.py) for ``axis``, by path."""
+def _keyed_lines(path: Path, key: str, *, axis: str) -> dict[str, dict[str, MethodBias]]:
+    """The shipped lines of other acquisition paths (``key`` ``acquisition``:
+    ``[acquisition."PATH".results.AXIS.NAME]``, benchmarks/bench_acquisition_path.py) or
+    method variants (``variant``) for ``axis``, by path or variant."""
     document, _ = read_toml(path)
     root = ConfigTable.root(document, source=str(path))
     root.string("population")
     found = {}
-    for acquisition, table in root.tables("acquisition").items():
+    for label, table in root.tables(key).items():
         by_axis = {name: {result: _method_bias(result, entry)
                           for result, entry in results.tables_here().items()}
                    for name, results in table.tables("results").items()}
         table.done()
-        found[acquisition] = {
-            name: replace(line, acquisition=acquisition,
-                          note=line.note or "over the CANopen emulator, on this path")
+        found[label] = {
+            name: (replace(line, acquisition=label,
+                           note=line.note or "over the CANopen emulator, on this path")
+                   if key == "acquisition" else replace(line, variant=label))
             for name, line in by_axis.get(axis, {}).items()}
     root.done()
     return found
@@ -293,7 +311,8 @@ def with_method_terms(
         sign = "+" if bias.bias >= 0 else "−"
         size = f"{100 * abs(bias.bias):.2g} %" if bias.relative else f"{abs(bias.bias):.2g}"
         added.append(Component(
-            source=f"method: error over {bias.units} simulated units beyond Type A "
+            source=f"method: error over {bias.units} simulated units beyond Type A"
+                   f"{', ' + bias.variant if bias.variant else ''} "
                    f"(mean {sign}{size} corrected)",
             kind="B", standard_uncertainty=scatter, unit=estimate.unit))
     if spec.allowance_rel:

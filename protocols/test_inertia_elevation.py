@@ -18,7 +18,7 @@ from hil.calibration import CalibrationRun
 from hil.drives.base import Drive, DriveInfo
 from hil.identify.estimate import Estimate
 from hil.identify.inertia_elevation import InertiaElevationResult, fit_inertia_elevation
-from hil.measurement import Declared, declare
+from hil.measurement import WITHOUT_POSITION_TORQUE, Declared, declare
 from hil.motion import Mode
 from hil.profile import UnitProfile
 from hil.recording import Recording
@@ -118,6 +118,7 @@ def result(
             else "reported torque (no K_t result)"
         ),
         chi2_per_dof=analysed.chi2_per_dof,
+        position_torque_taken_out=position_torque is not None,
     )
     return runs.estimates
 
@@ -126,6 +127,8 @@ def result(
 def test_inertia_elevation(
     parameter: str, result: dict[str, Estimate], calibration: CalibrationRun
 ) -> None:
-    measurement = calibration.record(NAME, result[parameter],
-                                     declared=DECLARED[parameter])
+    details = calibration.details[NAME]
+    taken_out = isinstance(details, InertiaElevationDetails) and details.position_torque_taken_out
+    measurement = calibration.record(NAME, result[parameter], declared=DECLARED[parameter],
+                                     variant=None if taken_out else WITHOUT_POSITION_TORQUE)
     assert measurement.conforms, measurement.verdict()

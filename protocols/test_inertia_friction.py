@@ -15,7 +15,7 @@ from hil.calibration import CalibrationRun
 from hil.drives.base import Drive, DriveInfo
 from hil.identify.estimate import Estimate
 from hil.identify.inertia_friction import InertiaFrictionResult
-from hil.measurement import Declared, declare
+from hil.measurement import WITHOUT_POSITION_TORQUE, Declared, declare
 from hil.motion import Mode
 from hil.profile import UnitProfile
 from hil.suite.inertia_friction import (
@@ -100,6 +100,9 @@ def result(
 def test_inertia_friction(
     parameter: str, result: dict[str, Estimate], calibration: CalibrationRun
 ) -> None:
-    measurement = calibration.record(NAME, result[parameter],
-                                     declared=DECLARED[parameter])
+    details = calibration.details[NAME]
+    taken_out = (isinstance(details, InertiaFrictionDetails)
+                 and details.position_torque_removed != "none")
+    measurement = calibration.record(NAME, result[parameter], declared=DECLARED[parameter],
+                                     variant=None if taken_out else WITHOUT_POSITION_TORQUE)
     assert measurement.conforms, measurement.verdict()

@@ -58,7 +58,8 @@ def test_details_come_back_as_they_were_written() -> None:
         settle_periods=1, centre_rad=0.1, load_stiffness_nm_rad=None,
         cable_loop_removed=CableLoop(half_width_nm=0.001, half_width_u_nm=1e-4,
                                      angle_rad=0.02),
-        current_loop_lag_compensated_s=2e-4, fit_pct=97.5, noise_rms_nm=0.004,
+        current_loop_lag_compensated_s=2e-4, position_torque_removed="none", fit_pct=97.5,
+        noise_rms_nm=0.004,
         components=(SineComponent(velocity_amplitude_rad_s=0.5, quadrature_c_nm=0.02,
                                   in_phase_s_nm=0.03, periods=5),))
     assert InertiaFrictionDetails.from_json(

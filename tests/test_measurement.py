@@ -312,3 +312,25 @@ def test_an_excitation_run_twice_keeps_both_recordings(tmp_path: Path) -> None:
     paths = [raw.path for raw in run.raw_files]
     assert len(set(paths)) == 2
     assert all(path.is_file() for path in paths)
+
+
+def test_a_method_line_holds_for_the_path_and_variant_it_was_measured_on() -> None:
+    """The shipped map's J line assumes cogging and K_t ripple were taken out of the sines;
+    without them its own (wider) line applies; a streamed τ gets its path's line and the
+    simulator's line nowhere else."""
+    from hil.measurement import WITHOUT_POSITION_TORQUE
+
+    shipped = load_method_bias(axis="elevation")
+    taken_out = shipped.line("inertia_kg_m2")
+    without = shipped.line("inertia_kg_m2", variant=WITHOUT_POSITION_TORQUE)
+    assert taken_out is not None
+    assert without is not None
+    assert without.scatter > 10 * taken_out.scatter  # the ripple's share of J's error
+    assert without.variant == WITHOUT_POSITION_TORQUE
+    streamed = "one row per 4 control periods, torque mean"
+    tau = shipped.line("current_loop_time_constant_ms", path=streamed)
+    assert tau is not None
+    assert tau.acquisition == streamed
+    assert shipped.line("inertia_kg_m2", path=streamed) is None
+    assert shipped.line("current_loop_time_constant_ms", path="one row per 2 control "
+                        "periods, torque mean") is None

@@ -230,6 +230,7 @@ class InertiaElevationDetails(RunDetails):
     per_elevation: tuple[ElevationPoint, ...]
     torque_scale: str
     chi2_per_dof: float
+    position_torque_taken_out: bool  # cogging and K_t ripple from the gravity sweep
 
 
 PROTOCOL = Protocol(name=NAME, measurements=tuple(MEASUREMENTS), needs=NEEDS,

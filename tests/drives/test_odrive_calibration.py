@@ -36,8 +36,10 @@ def certificate(tmp_path_factory: pytest.TempPathFactory) -> dict[str, object]:
 def test_j_b_and_coulomb_hold_the_emulated_truth(certificate: dict[str, object]) -> None:
     plant = load_profile(PROFILE).plant  # the truth: the test reads it, the harness does not
     assert plant is not None
-    truth = {"inertia_kg_m2": plant.total_inertia_kg_m2,
-             "viscous_nm_s_rad": plant.viscous_nm_s_rad, "coulomb_nm": plant.coulomb_nm}
+    gain = 1 + plant.torque_constant_error_rel  # results in reported-torque units
+    truth = {"inertia_kg_m2": plant.total_inertia_kg_m2 / gain,
+             "viscous_nm_s_rad": plant.viscous_nm_s_rad / gain,
+             "coulomb_nm": plant.coulomb_nm / gain}
     results = {r["parameter"]: r for r in certificate["results"]}  # type: ignore[attr-defined]
     for name, value in truth.items():
         found = results[name]
