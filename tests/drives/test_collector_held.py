@@ -80,8 +80,9 @@ def test_no_collection_runs_during_an_excitation(profile: UnitProfile, kind: str
     assert watch.starts, "the churn made no collection: the test cannot see one"
     assert watch.held, "the collector was never held"
     first, last = min(watch.held), max(watch.held)
-    # the CANopen emulator's station runs in lockstep, faster than real time
-    assert last - first > 0.1, f"held for {last - first:.3f} s only"
+    # the CANopen emulator's station runs in lockstep, faster than real time: how long the
+    # run lasts is the machine's (0.08 s on a fast one), how often it was seen held is not
+    assert len(watch.held) >= 20, f"seen held {len(watch.held)} times in {last - first:.3f} s"
     during = [t for t in watch.starts if first <= t <= last]
     assert during == [], f"{len(during)} collection(s) while the loop ran"
     assert max(watch.starts) > last, "no collection after the run: the collector was left off"
