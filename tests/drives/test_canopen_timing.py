@@ -25,6 +25,7 @@ from hil.identify.current_loop import CurrentLoopResult, acquisition_path, torqu
 from hil.measurement import load_method_bias, with_method_terms
 from hil.motion import Excitation, Mode
 from hil.profile import UnitProfile
+from hil.recording import Recording
 from hil.suite import current_loop as protocol
 from plant_sim.firmware import Firmware
 from plant_sim.params import PlantParams
@@ -155,6 +156,18 @@ def _lagged(profile: UnitProfile, tau_s: float) -> UnitProfile:
 def _current_loop_over_canopen(
     profile: UnitProfile, *, seed: int, interpolation: int = 0, sampling: str = "instantaneous"
 ) -> CurrentLoopResult:
+    recording, spec = _sines_over_canopen(profile, seed=seed, interpolation=interpolation,
+                                          sampling=sampling)
+    assert spec.fs_hz == pytest.approx(1000.0)
+    hold = torque_hold_s(recording.metadata, fs_hz=spec.fs_hz)
+    assert hold.hold_s == pytest.approx(CONTROL_S)
+    assert hold.mean_samples == (4 if sampling == "mean" else 1)
+    return protocol.analyse(recording, spec)
+
+
+def _sines_over_canopen(profile: UnitProfile, *, seed: int, sampling: str,
+                        interpolation: int = 0) -> tuple[Recording, protocol.Spec]:
+    """The current-loop protocol's sines streamed at 1 kHz from the emulator, and its spec."""
     with (
         canopen_emulator(
             profile,
@@ -168,12 +181,7 @@ def _current_loop_over_canopen(
         spec = protocol.Spec.from_profile(profile, drive.info)
         move, sines = protocol.excitation(spec, position_rad=drive.status().position_rad)
         drive.run(move)
-        recording = drive.run(sines)
-    assert spec.fs_hz == pytest.approx(1000.0)
-    hold = torque_hold_s(recording.metadata, fs_hz=spec.fs_hz)
-    assert hold.hold_s == pytest.approx(CONTROL_S)
-    assert hold.mean_samples == (4 if sampling == "mean" else 1)
-    return protocol.analyse(recording, spec)
+        return drive.run(sines), spec
 
 
 @settings(max_examples=3, deadline=None)
@@ -208,16 +216,8 @@ def test_a_streamed_lag_is_within_the_uncertainty_the_certificate_states(
     held, z = [], []
     for seed in range(6):
         tau_ms = float(rng.uniform(spec_of_result.lower_limit, spec_of_result.upper_limit))
-        with (
-            canopen_emulator(_lagged(profile, tau_ms * 1e-3), seed=300 + seed,
-                             station_changes={"torque_sample": sampling}) as (_emu, station),
-            CanOpenDrive(station, limits=profile.limits) as drive,
-        ):
-            drive.enable()
-            spec = protocol.Spec.from_profile(profile, drive.info)
-            move, sines = protocol.excitation(spec, position_rad=drive.status().position_rad)
-            drive.run(move)
-            recording = drive.run(sines)
+        recording, spec = _sines_over_canopen(_lagged(profile, tau_ms * 1e-3), seed=300 + seed,
+                                              sampling=sampling)
         path = acquisition_path(recording.metadata, fs_hz=spec.fs_hz)
         assert path == f"one row per 4 control periods, torque {sampling}"
         line = line_map.line(name, path=path)
