@@ -311,14 +311,7 @@ def to_recording(
     if feedback.has_timestamp and rows:
         timing["drive_clock_at_start_s"] = f"{rows[0][2][TIMESTAMP]:.6f}"
     metadata = {
-        "drive": feedback.link.where,
-        "unit_id": str(feedback.link.station.unit_id),
-        "model": info.model,
-        "firmware": info.firmware_version,
-        "serial": info.serial,
-        "transport": info.transport,
-        "excitation": excitation.name,
-        "control_mode": excitation.mode.value,
+        **run_identity(feedback.link, info, excitation),
         "acquisition": acquisition,
         "poll_rate_hz": f"{len(rows) / max(excitation.duration_s, 1e-9):.1f}",
         "requested_rate_hz": f"{excitation.fs_hz:g}",
@@ -342,6 +335,20 @@ def to_recording(
         **excitation.metadata,
     }
     return Recording(columns=columns, metadata=metadata, source=f"modbus:{excitation.name}")
+
+
+def run_identity(link: ModbusLink, info: DriveInfo, excitation: Excitation) -> dict[str, str]:
+    """The metadata naming the drive and the run, whichever way its rows were acquired."""
+    return {
+        "drive": link.where,
+        "unit_id": str(link.station.unit_id),
+        "model": info.model,
+        "firmware": info.firmware_version,
+        "serial": info.serial,
+        "transport": info.transport,
+        "excitation": excitation.name,
+        "control_mode": excitation.mode.value,
+    }
 
 
 def drive_time(

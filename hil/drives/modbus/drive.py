@@ -165,9 +165,10 @@ class ModbusDrive(ClampedRotor, Drive):
         firmware = int(ident.get("firmware_version", 0))
         rate = self.poll_rate_hz = self._measure_poll_rate()
         recorder = None
-        if self.station.acquisition != "stream" and recorder_rate_hz(self.link) > rate:
+        if self.station.acquisition != "stream" and (
+                recorder_rate := recorder_rate_hz(self.link)) > rate:
             recorder = Recorder(stream_rate_hz=rate, samples=recorder_capacity(self.link))
-        self.recorder_rate_hz = 0.0 if recorder is None else recorder_rate_hz(self.link)
+            self.recorder_rate_hz = recorder_rate
         return DriveInfo(
             vendor="modbus",
             model=self.map.model,
@@ -381,8 +382,9 @@ class ModbusDrive(ClampedRotor, Drive):
                 f"excitation '{excitation.name}' at {fs:g} Hz would run on the drive "
                 "recorder, which does not record the station's torque transducer: poll it "
                 f"(at most {self.poll_rate_hz:g} Hz)")
+        assert self._info.recorder is not None  # a recorder rate is set only with one
         refused = recorder_refusal(excitation, rate_hz=self.recorder_rate_hz,
-                                   capacity=recorder_capacity(self.link))
+                                   capacity=self._info.recorder.samples)
         if refused is not None:
             raise DriveStateError(f"{refused}: poll it (at most {self.poll_rate_hz:g} Hz)")
         start = self.status()

@@ -18,7 +18,7 @@ from collections.abc import Callable
 import numpy as np
 
 from hil.drives.base import DriveInfo, MotionEnvelope, Recorder
-from hil.drives.modbus.acquire import Feedback
+from hil.drives.modbus.acquire import Feedback, run_identity
 from hil.drives.modbus.link import ModbusLink
 from hil.drives.modbus.regmap import (
     RECORDER_ABORTED,
@@ -196,14 +196,7 @@ def upload(link: ModbusLink, excitation: Excitation, info: DriveInfo, *, rate_hz
 
     control_s = 1.0 / rate_hz
     metadata = {
-        "drive": link.where,
-        "unit_id": str(link.station.unit_id),
-        "model": info.model,
-        "firmware": info.firmware_version,
-        "serial": info.serial,
-        "transport": info.transport,
-        "excitation": excitation.name,
-        "control_mode": excitation.mode.value,
+        **run_identity(link, info, excitation),
         # row k: control period k·n of the table's play (position at its start, the
         # torque commanded over it), timed by the drive's loop
         "acquisition": "drive recorder",
