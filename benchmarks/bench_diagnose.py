@@ -30,7 +30,7 @@ import numpy as np
 
 from hil.diagnose.core import diagnose
 from hil.diagnose.report import report
-from hil.recording import read_recording
+from hil.recording import Recording, read_recording
 
 ROOT = Path(__file__).resolve().parents[1]
 SHARED = ROOT.parent / "shared" / "recordings"
@@ -79,10 +79,30 @@ def declared_alias(data: dict[str, Any], effect: str, key: str, truth: float) ->
     return False
 
 
+def recording_labels(variant: Any) -> str:
+    return ", ".join(variant.labels().values())
+
+
 def hidden(count: int, *, pairs: bool, unknown: bool, seed: int,
-           only: tuple[str, ...] = (), first: int = 0, with_: tuple[str, ...] = ()) -> int:
-    from tests.diagnose.diagnose_simdata import plant_with, record
+           only: tuple[str, ...] = (), first: int = 0, with_: tuple[str, ...] = (),
+           variants: bool = False) -> int:
+    from plant_sim.variant import UnstableLoopError, Variant, draw_variant
+    from tests.diagnose.diagnose_simdata import observable, plant_with, record
     from tests.diagnose.unknown_effects import hide_unknown
+
+    variant_rng = np.random.default_rng(seed + 1_000_003)  # apart: the unit draws stay
+    per_variant: dict[str, Counter[str]] = {}
+
+    def recorded(params: Any, run_seed: int) -> tuple[Recording, Variant | None]:
+        """The case's recording: with ``--variants`` by a drawn variant (one whose loop
+        loses the unit is drawn again)."""
+        while variants:
+            variant = draw_variant(variant_rng)
+            try:
+                return record(params, seed=run_seed, variant=variant), variant
+            except UnstableLoopError:
+                stats["variants_redrawn"] += 1
+        return record(params, seed=run_seed), None
 
     rng = np.random.default_rng(seed)
     combos: list[tuple[str, ...]]
@@ -113,7 +133,8 @@ def hidden(count: int, *, pairs: bool, unknown: bool, seed: int,
             continue
         if unknown:
             base = plant_with(inertia, viscous, coulomb, (), order)
-            recording = hide_unknown(record(base.params, seed=run_seed), effects[0],
+            recording, variant = recorded(base.params, run_seed)
+            recording = hide_unknown(recording, effects[0],
                                      size=float(rng.uniform()), detail=float(rng.uniform()))
             data = report(diagnose(recording))
             names = [c["name"] for c in data["causes"] if "part_of" not in c]
@@ -126,10 +147,12 @@ def hidden(count: int, *, pairs: bool, unknown: bool, seed: int,
             continue
         drawn = tuple((e, float(rng.uniform()), float(rng.uniform())) for e in effects)
         hidden_set = plant_with(inertia, viscous, coulomb, drawn, order)
-        data = report(diagnose(record(hidden_set.params, seed=run_seed)))
+        recording, variant = recorded(hidden_set.params, run_seed)
+        data = report(diagnose(recording))
         # a part of the cause before it (an asymmetric friction's constant) is not a cause
         causes = {c["name"]: c for c in data["causes"] if "part_of" not in c}
-        hidden_names = {t.effect for t in hidden_set.truths}
+        truths = observable(hidden_set.truths, variant)
+        hidden_names = {t.effect for t in truths}
         declared = [f"{n}~{o}(dBIC {a['delta_bic']}, instead {a['instead_delta_bic']}, "
                     f"VIF {a['inflation']})"
                     for n, c in causes.items()
@@ -137,7 +160,7 @@ def hidden(count: int, *, pairs: bool, unknown: bool, seed: int,
         stats["declared_not_separable"] += bool(declared)
         all_ok = True
         notes = []
-        for truth in hidden_set.truths:
+        for truth in truths:
             per_effect[truth.effect] += 1
             cause = causes.get(truth.effect)
             if cause is None:
@@ -179,11 +202,16 @@ def hidden(count: int, *, pairs: bool, unknown: bool, seed: int,
         stats["nothing_else_named"] += not extra
         stats["ok"] += all_ok and not extra
         stats["unexplained"] += data["unexplained"]
+        for label in variant.labels().items() if variant else ():
+            tally = per_variant.setdefault(": ".join(label), Counter())
+            tally["cases"] += 1
+            tally["ok"] += all_ok and not extra
         print(f"{case:3d} {'+'.join(effects):24s} {'ok  ' if all_ok and not extra else 'FAIL'} "
               f"named {list(causes)} {'; '.join(notes)}"
               f"{' EXTRA ' + str(extra) if extra else ''}"
               f"{' ALIAS ' + ','.join(declared) if declared else ''}"
-              f"{' UNEXPLAINED ' + str(_found(data)) if data['unexplained'] else ''}",
+              f"{' UNEXPLAINED ' + str(_found(data)) if data['unexplained'] else ''}"
+              f"{' VARIANT ' + recording_labels(variant) if variant else ''}",
               flush=True)
     elapsed = time.perf_counter() - started
     summary: dict[str, Any] = dict(stats)
@@ -193,6 +221,9 @@ def hidden(count: int, *, pairs: bool, unknown: bool, seed: int,
         e: f"{per_effect_covered[e]}/{per_effect_intervals[e]}" for e in per_effect_intervals}
     if z_scores:
         summary["z_rms"] = float(np.sqrt(np.mean(np.square(z_scores))))
+    if per_variant:
+        summary["ok_per_variant"] = {k: f"{v['ok']}/{v['cases']}"
+                                     for k, v in sorted(per_variant.items())}
     summary["seconds_per_case"] = elapsed / max(count - skipped, 1)
     print(json.dumps(summary, indent=1))
     return 0
@@ -209,12 +240,15 @@ def main(argv: list[str]) -> int:
                         help="skip the cases before this one (their draws are taken)")
     parser.add_argument("--with", dest="with_", nargs="*", default=[], choices=SEVEN,
                         help="--pairs: only the pairs holding one of these (draws taken)")
+    parser.add_argument("--variants", action="store_true",
+                        help="simulate each case with plant_sim.variant, its choices drawn")
     parser.add_argument("--only", nargs="*", default=[], choices=SINGLE,
                         help="single effects to hide (default: all nine in turn)")
     args = parser.parse_args(argv)
     if args.hidden:
         return hidden(args.hidden, pairs=args.pairs, unknown=args.unknown, seed=args.seed,
-                      only=tuple(args.only), first=args.first, with_=tuple(args.with_))
+                      only=tuple(args.only), first=args.first, with_=tuple(args.with_),
+                      variants=args.variants)
     return speed(args.paths)
 
 

@@ -155,7 +155,9 @@ def _basis(position_rad: FloatArray, weight: FloatArray, orders: tuple[int, int]
     low, high = orders
     step = 2.0 * math.pi / BINS_PER_REV
     origin = float(np.min(position_rad))
-    index = np.floor((position_rad - origin) / step).astype(np.intp)
+    # integer orders repeat every revolution: a travel over many folds onto one
+    index = np.floor(np.mod(position_rad - origin, 2.0 * math.pi) / step).astype(np.intp)
+    index = np.minimum(index, BINS_PER_REV - 1)
     size = int(index.max()) + 1
     s_ww = _binned(weight * weight, index, size)
     used = s_ww > 0

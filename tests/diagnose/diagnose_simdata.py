@@ -14,6 +14,7 @@ from hil.recording import Recording
 from plant_sim.firmware import Firmware
 from plant_sim.model import simulate
 from plant_sim.params import Harmonic, PlantParams
+from plant_sim.variant import Variant, simulate_variant
 
 FS_HZ = 2000.0
 FloatArray = NDArray[np.float64]
@@ -154,6 +155,21 @@ def plant(inertia: float, viscous: float, coulomb: float, effect: str | None,
     return Hidden(effect=only.effect, key=only.key, truth=only.truth, params=hidden.params)
 
 
-def record(params: SimUnit, *, seed: int, scale: float = 1.0) -> Recording:
-    return simulate(params.plant, mode=Mode.VELOCITY, command=excitation(scale=scale),
-                    fs_hz=FS_HZ, seed=seed, firmware=params.firmware)
+def record(params: SimUnit, *, seed: int, scale: float = 1.0,
+           variant: Variant | None = None) -> Recording:
+    """The test run of ``params``: by the project's simulator, or by ``plant_sim.variant``
+    with ``variant``'s choices."""
+    if variant is None:
+        return simulate(params.plant, mode=Mode.VELOCITY, command=excitation(scale=scale),
+                        fs_hz=FS_HZ, seed=seed, firmware=params.firmware)
+    return simulate_variant(params.plant, params.firmware, variant, seed=seed,
+                            velocity_command_rad_s=excitation(variant.sample_rate_hz,
+                                                              scale=scale))
+
+
+def observable(truths: tuple[Truth, ...], variant: Variant | None) -> tuple[Truth, ...]:
+    """The hidden effects a recording can show: a current-loop lag acts before a torque
+    reported after the current loop (the measured current), so it is not in its data."""
+    if variant is None or variant.torque_tap == "command":
+        return truths
+    return tuple(t for t in truths if t.effect != "current_lag")
