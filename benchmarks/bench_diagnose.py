@@ -85,7 +85,7 @@ def recording_labels(variant: Any) -> str:
 
 def hidden(count: int, *, pairs: bool, unknown: bool, seed: int,
            only: tuple[str, ...] = (), first: int = 0, with_: tuple[str, ...] = (),
-           variants: bool = False) -> int:
+           variants: bool = False, cutoff_hz: float | None = None) -> int:
     from plant_sim.variant import UnstableLoopError, Variant, draw_variant
     from tests.diagnose.diagnose_simdata import observable, plant_with, record
     from tests.diagnose.unknown_effects import hide_unknown
@@ -136,7 +136,7 @@ def hidden(count: int, *, pairs: bool, unknown: bool, seed: int,
             recording, variant = recorded(base.params, run_seed)
             recording = hide_unknown(recording, effects[0],
                                      size=float(rng.uniform()), detail=float(rng.uniform()))
-            data = report(diagnose(recording))
+            data = report(diagnose(recording, cutoff_hz=cutoff_hz))
             names = [c["name"] for c in data["causes"] if "part_of" not in c]
             ok = data["unexplained"] and not names
             stats["unexplained"] += data["unexplained"]
@@ -148,7 +148,7 @@ def hidden(count: int, *, pairs: bool, unknown: bool, seed: int,
         drawn = tuple((e, float(rng.uniform()), float(rng.uniform())) for e in effects)
         hidden_set = plant_with(inertia, viscous, coulomb, drawn, order)
         recording, variant = recorded(hidden_set.params, run_seed)
-        data = report(diagnose(recording))
+        data = report(diagnose(recording, cutoff_hz=cutoff_hz))
         # a part of the cause before it (an asymmetric friction's constant) is not a cause
         causes = {c["name"]: c for c in data["causes"] if "part_of" not in c}
         truths = observable(hidden_set.truths, variant)
@@ -175,7 +175,7 @@ def hidden(count: int, *, pairs: bool, unknown: bool, seed: int,
             within = math.isclose(value, truth.truth, rel_tol=0.15)
             interval = _interval(cause, truth.key)
             flagged = cause.get("separable") is False
-            if interval is not None and all(math.isfinite(x) for x in interval):
+            if interval is not None and all(x is not None and math.isfinite(x) for x in interval):
                 covered = interval[0] <= truth.truth <= interval[1]
                 stats["intervals"] += 1
                 stats["covered"] += covered
@@ -242,13 +242,15 @@ def main(argv: list[str]) -> int:
                         help="--pairs: only the pairs holding one of these (draws taken)")
     parser.add_argument("--variants", action="store_true",
                         help="simulate each case with plant_sim.variant, its choices drawn")
+    parser.add_argument("--cutoff-hz", type=float, default=None,
+                        help="the diagnoser's analysis bandwidth (default: its own)")
     parser.add_argument("--only", nargs="*", default=[], choices=SINGLE,
                         help="single effects to hide (default: all nine in turn)")
     args = parser.parse_args(argv)
     if args.hidden:
         return hidden(args.hidden, pairs=args.pairs, unknown=args.unknown, seed=args.seed,
                       only=tuple(args.only), first=args.first, with_=tuple(args.with_),
-                      variants=args.variants)
+                      variants=args.variants, cutoff_hz=args.cutoff_hz)
     return speed(args.paths)
 
 

@@ -38,7 +38,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="write the extended model as a unit profile, TOML (default: "
                              "not written)")
     parser.add_argument("--cutoff-hz", type=float, default=None,
-                        help="analysis bandwidth (default: sample rate / 8)")
+                        help="analysis bandwidth (default: sample rate / 8, at most 250 Hz)")
 
 
 def run(args: argparse.Namespace) -> int:

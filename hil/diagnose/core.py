@@ -188,7 +188,7 @@ def diagnose(
         A second log of the same axis, held out: never fitted. Without it a block split of
         ``recording`` is held out.
     cutoff_hz : float, optional
-        Analysis bandwidth (default: an eighth of the sample rate).
+        Analysis bandwidth (default: an eighth of the sample rate, at most 250 Hz).
     hold_samples : float or None
         How many sample periods the effort leads the motion (0.5: zero-order hold with
         the position sampled mid-period); ``None`` (default) estimates it in [0, 1]

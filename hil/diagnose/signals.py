@@ -34,6 +34,14 @@ BoolArray = NDArray[np.bool_]
 
 #: Default derivative bandwidth as a fraction of the sample rate.
 CUTOFF_FRACTION = 0.125
+#: ... and at most this (Hz): the library's effects lie below 0.6 of it (a resonance up
+#: to 150 Hz, a current-loop lag's corner, the ripple's and cogging's frequencies). A
+#: faster recording of the same axis holds the same physics, while the encoder's
+#: quantisation in the inertia column grows as the band's fifth power: at 4 kHz an
+#: eighth of the rate let 32 times that noise in, and over another simulator's 4 kHz
+#: recordings both hidden effects of a pair came out in 12 of 35 (21 of 35 with the cap;
+#: docs/diagnose.md, "Recordings no single simulator shapes").
+MAX_CUTOFF_HZ = 250.0
 #: Relative spread of sample periods above which sampling counts as irregular.
 IRREGULAR_TOLERANCE = 0.01
 MIN_VALID_SAMPLES = 200
@@ -207,7 +215,8 @@ def prepare(recording: Recording, *, cutoff_hz: float | None = None) -> Signals:
     recording : Recording
         The measured log.
     cutoff_hz : float, optional
-        Derivative bandwidth in Hz; default ``fs/8`` (fs: median sample rate).
+        Derivative bandwidth in Hz; default ``fs/8`` (fs: median sample rate), at most
+        :data:`MAX_CUTOFF_HZ`.
 
     Returns
     -------
@@ -231,7 +240,7 @@ def prepare(recording: Recording, *, cutoff_hz: float | None = None) -> Signals:
     irregular = float(np.std(steps) / period_s) > IRREGULAR_TOLERANCE
     resampled = bool(irregular or gap_index.size)
     if cutoff_hz is None:
-        cutoff_hz = CUTOFF_FRACTION * fs_hz
+        cutoff_hz = min(CUTOFF_FRACTION * fs_hz, MAX_CUTOFF_HZ)
     if not 0.0 < cutoff_hz < 0.5 * fs_hz:
         raise IdentificationError(
             f"derivative cutoff {cutoff_hz:g} Hz must lie in (0, {0.5 * fs_hz:g}) Hz"
