@@ -5,8 +5,10 @@ centre). The console turns it into the time left."""
 
 from __future__ import annotations
 
+import dataclasses
 import logging
-from collections.abc import Iterable
+import math
+from collections.abc import Callable, Iterable
 
 import numpy as np
 
@@ -15,6 +17,7 @@ from hil.errors import HilError, ProfileError
 from hil.motion import Excitation, Mode
 from hil.profile import UnitProfile
 from hil.suite.catalogue import CATALOGUE
+from hil.suite.protocol import Position
 
 log = logging.getLogger(__name__)
 
@@ -72,9 +75,45 @@ def acquisition_info(name: str, profile: UnitProfile, info: DriveInfo
                           "recorder does not record")
     if not reasons:
         return info, None
+    if Capability.TORQUE_SENSOR not in protocol.requires:
+        decimated = _decimated(protocol.planned_motion, profile, info, excitations)
+        if decimated is not None:
+            return decimated, (f"on the drive recorder at {decimated.max_sample_rate_hz:.4g} Hz "
+                               f"({info.max_sample_rate_hz:g} Hz / "
+                               f"{round(info.max_sample_rate_hz / decimated.max_sample_rate_hz)}"
+                               f"), not at {info.max_sample_rate_hz:g} Hz: {reasons[0]}")
     streamed = info.streamed()
     return streamed, (f"streamed at {streamed.max_sample_rate_hz:g} Hz, not by the drive "
                       f"recorder at {info.max_sample_rate_hz:g} Hz: {reasons[0]}")
+
+
+def _decimated(planned_motion: Callable[[UnitProfile, DriveInfo, Position],
+                                         Iterable[Excitation]],
+               profile: UnitProfile, info: DriveInfo, at_top: list[Excitation]
+               ) -> DriveInfo | None:
+    """The drive at the highest rate ``info.max_sample_rate_hz / n`` above the link's
+    stream rate at which every planned run fits its recorder (a recorder samples at its
+    control rate divided by a whole number), or ``None``: a run that no such rate makes fit
+    (a torque offset the recorder does not play, or too many samples even at the lowest).
+    A longer run then keeps the recorder's rate the protocol needs instead of the link's."""
+    recorder = info.recorder
+    assert recorder is not None
+    longest = max(len(e.command) * info.max_sample_rate_hz / e.fs_hz for e in at_top)
+    n = max(2, math.ceil(longest / recorder.samples))
+    while (rate := info.max_sample_rate_hz / n) > recorder.stream_rate_hz * (1 + 1e-9):
+        seen = dataclasses.replace(info, max_sample_rate_hz=rate)
+        track = _Track((info.limits.travel_min_rad + info.limits.travel_max_rad) / 2)
+        try:
+            runs = track.walk(planned_motion(profile, seen, track.position))
+        except (HilError, ValueError):
+            return None
+        refused = [r for e in runs if (r := recorder.refuses(e)) is not None]
+        if not refused:
+            return seen
+        if not any(len(e.command) > recorder.samples for e in runs):
+            return None  # not the length: a slower rate does not help
+        n += 1
+    return None
 
 
 def planned_motion_s(profile: UnitProfile, info: DriveInfo) -> dict[str, float]:
