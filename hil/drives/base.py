@@ -53,7 +53,7 @@ class Capability(Enum):
 @dataclass(frozen=True, slots=True, kw_only=True)
 class Recorder:
     """A drive's own recorder: it samples faster than the link streams, but holds a bounded
-    run and plays no torque offset. A run above ``stream_rate_hz`` goes to it.
+    run and may play no torque offset. A run above ``stream_rate_hz`` goes to it.
 
     Attributes
     ----------
@@ -61,16 +61,19 @@ class Recorder:
         The fastest rate the link streams, for a run of any length.
     samples : int
         The most samples one run may have in the recorder.
+    torque_offset : bool
+        It plays a torque offset (feedforward) sample by sample with the command.
     """
 
     stream_rate_hz: float
     samples: int
+    torque_offset: bool = False
 
     def refuses(self, excitation: Excitation) -> str | None:
         """``None`` when ``excitation`` streams or fits the recorder; else why it does not."""
         if excitation.fs_hz <= self.stream_rate_hz * (1 + 1e-9):
             return None
-        if excitation.torque_offset_nm is not None:
+        if excitation.torque_offset_nm is not None and not self.torque_offset:
             return f"'{excitation.name}' sends a torque offset; the drive recorder plays none"
         if len(excitation.command) > self.samples:
             return (f"'{excitation.name}' has {len(excitation.command):,} samples at "

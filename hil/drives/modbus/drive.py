@@ -55,12 +55,14 @@ from hil.drives.modbus.held_axis import KEEPALIVE_S, HeldModbusAxis
 from hil.drives.modbus.link import ModbusLink
 from hil.drives.modbus.recorder import (
     play,
+    plays_torque_offset,
     recorder_capacity,
     recorder_rate_hz,
     recorder_refusal,
     upload,
 )
 from hil.drives.modbus.regmap import (
+    COMPENSATION,
     DIGITAL_OUTPUTS,
     TORQUE_MEAN,
     TORQUE_OFFSET,
@@ -71,7 +73,7 @@ from hil.drives.modbus.state_machine import ModbusStateMachine
 from hil.drives.realtime import collector_held
 from hil.drives.station import ModbusStation
 from hil.errors import DriveCommunicationError, DriveError, DriveStateError, ProfileError
-from hil.motion import Excitation, Limits, Mode
+from hil.motion import CompensationTable, Excitation, Limits, Mode, PositionHarmonic
 from hil.recording import Recording
 
 log = logging.getLogger(__name__)
@@ -127,8 +129,8 @@ class ModbusDrive(ClampedRotor, Drive):
                 axis.enable()
                 if name in station.gimbal.hold.at_rad:
                     axis.move_to(station.gimbal.hold.at_rad[name])
-            if self.held.axes:
-                threading.Thread(target=self._keep_held_axes, name="modbus-held-keepalive",
+            if self.held.axes or self._info.recorder is not None:
+                threading.Thread(target=self._keep_idle_drives, name="modbus-idle-keepalive",
                                  daemon=True).start()
         except BaseException:
             self.held.release()
@@ -167,7 +169,8 @@ class ModbusDrive(ClampedRotor, Drive):
         recorder = None
         if self.station.acquisition != "stream" and (
                 recorder_rate := recorder_rate_hz(self.link)) > rate:
-            recorder = Recorder(stream_rate_hz=rate, samples=recorder_capacity(self.link))
+            recorder = Recorder(stream_rate_hz=rate, samples=recorder_capacity(self.link),
+                                torque_offset=plays_torque_offset(self.link))
             self.recorder_rate_hz = recorder_rate
         return DriveInfo(
             vendor="modbus",
@@ -182,7 +185,8 @@ class ModbusDrive(ClampedRotor, Drive):
             max_sample_rate_hz=max(rate, self.recorder_rate_hz),
             recorder=recorder,
             capabilities=self._clamp_equipment().capabilities() | frozenset(
-                {Capability.ELEVATION_AXIS} if "elevation" in self.station.held else ()),
+                {Capability.ELEVATION_AXIS} if "elevation" in self.station.held else ()
+            ) | frozenset({Capability.COMPENSATION_TABLE} if self.map.has_compensation else ()),
             **sensor_fields(self._clamp_equipment()),
             transport=self.link.where,
         )
@@ -252,19 +256,23 @@ class ModbusDrive(ClampedRotor, Drive):
         for axis in self.held.axes.values():
             axis.keepalive()
 
-    def _keep_held_axes(self) -> None:
-        """Between runs (the host analysing a 4 kHz recording can take longer than a
-        watchdog time): a status read to each held axis silent for 2 × :data:`KEEPALIVE_S`,
-        on its own thread (the link serialises requests). Its faults are found by the runs'
-        keepalive; the axis under test's own watchdog is left to the host's requests."""
+    def _keep_idle_drives(self) -> None:
+        """Between runs the host analyses what it recorded (a 4 kHz recording's analysis
+        takes longer than a watchdog time: the azimuth tripped 0x8130 after the J/B/T_c
+        sines, every time, once their runs went to the recorder), so a status read goes to
+        each drive on the link, the axis under test's and the held axes', silent for
+        2 × :data:`KEEPALIVE_S`, from its own thread (the link serialises requests). A host
+        that dies takes the thread with it and the drives' watchdogs stop the axes. Faults
+        are found by the next run or enable, not here."""
+        links = [self.link, *(axis.link for axis in self.held.axes.values())]
         while not self._idle.wait(KEEPALIVE_S / 2):
-            for axis in list(self.held.axes.values()):
-                if time.monotonic() - axis.link.last_request_s < 2 * KEEPALIVE_S:
+            for link in links:
+                if time.monotonic() - link.last_request_s < 2 * KEEPALIVE_S:
                     continue
                 try:
-                    axis.link.read_values(("status_word",))
+                    link.read_values(("status_word",))
                 except DriveError as exc:
-                    log.debug("%s: idle keepalive: %s", axis.link.where, exc)
+                    log.debug("%s: idle keepalive: %s", link.where, exc)
 
     def _keepalive_all_but(self, moving: str) -> Callable[[], None]:
         """While the held axis ``moving`` moves: a request to this drive and to every other
@@ -384,7 +392,8 @@ class ModbusDrive(ClampedRotor, Drive):
                 f"(at most {self.poll_rate_hz:g} Hz)")
         assert self._info.recorder is not None  # a recorder rate is set only with one
         refused = recorder_refusal(excitation, rate_hz=self.recorder_rate_hz,
-                                   capacity=self._info.recorder.samples)
+                                   capacity=self._info.recorder.samples,
+                                   torque_offset=self._info.recorder.torque_offset)
         if refused is not None:
             raise DriveStateError(f"{refused}: poll it (at most {self.poll_rate_hz:g} Hz)")
         start = self.status()
@@ -397,7 +406,7 @@ class ModbusDrive(ClampedRotor, Drive):
             with collector_held():
                 play(self.link, self.feedback, excitation, rate_hz=self.recorder_rate_hz,
                      divider=divider, envelope=MotionEnvelope.of(self.limits),
-                     keepalive=self._keepalive)
+                     keepalive=self._keepalive, torque_mean=self.torque_sample == "mean")
         except DriveError as exc:
             error = exc
         except KeyboardInterrupt as stop:  # a stop signal: stop, then keep what it captured
@@ -413,7 +422,8 @@ class ModbusDrive(ClampedRotor, Drive):
             error.partial_recording = self._recorded(excitation, divider)
             raise error
         recording = upload(self.link, excitation, self._info, rate_hz=self.recorder_rate_hz,
-                           divider=divider, keepalive=self._keepalive)
+                           divider=divider, keepalive=self._keepalive,
+                           torque_mean=self.torque_sample == "mean")
         if self.held.axes:
             recording = replace(recording, metadata={**recording.metadata,
                                                      "held_axes": self.held.text()})
@@ -430,11 +440,47 @@ class ModbusDrive(ClampedRotor, Drive):
 
         try:
             return upload(self.link, excitation, self._info, rate_hz=self.recorder_rate_hz,
-                          divider=divider, keepalive=keepalive)
+                          divider=divider, keepalive=keepalive,
+                          torque_mean=self.torque_sample == "mean")
         except DriveError as exc:
             log.warning("%s: the drive recorder's samples of '%s' not read: %s",
                         self.link.where, excitation.name, exc)
             return None
+
+    def load_compensation(self, table: CompensationTable | None) -> None:
+        """Write a cogging compensation table into the map's compensation registers
+        (``None``: every slot cleared), all of them in one request.
+
+        Raises
+        ------
+        DriveStateError
+            The register map has no compensation table, or the table has more harmonics
+            than its slots.
+        """
+        if not self.map.has_compensation:
+            raise self._without(Capability.COMPENSATION_TABLE)
+        start, count = self.map.compensation_span()
+        words = [0] * count
+        tables: dict[str, tuple[PositionHarmonic, ...]] = {
+            "cogging": () if table is None else table.cogging_nm,
+            "kt_ripple": () if table is None else table.kt_ripple}
+        for kind, harmonics in tables.items():
+            names = COMPENSATION[kind]
+            slots = self.map[names[0]].length
+            if len(harmonics) > slots:
+                raise DriveStateError(
+                    f"{self.link.where}: the compensation table has {len(harmonics)} {kind} "
+                    f"harmonics; the register map {self.map.source} holds {slots}")
+            columns: tuple[list[float], ...] = (
+                [float(h.order) for h in harmonics], [h.amplitude for h in harmonics],
+                [h.phase_rad for h in harmonics])
+            for name, values in zip(names, columns, strict=True):
+                register = self.map[name]
+                raw = np.zeros(register.length)
+                raw[: len(values)] = np.asarray(values, dtype=np.float64) / register.scale
+                at = register.address - start
+                words[at : at + register.words] = register.encode_raw(raw)
+        self.link.write_words(start, words, "compensation table")
 
     def _clamp_equipment(self) -> Equipment:
         """The station's equipment the register map can serve (a clamp needs the map's

@@ -42,9 +42,11 @@ from pymodbus.server import ModbusTcpServer
 from hil.drives.emulator_faults import ModbusFaults
 from hil.drives.modbus.emulator_recorder import ModbusRecorder
 from hil.drives.modbus.regmap import (
+    COMPENSATION,
     DIGITAL_OUTPUTS,
     FEEDBACK,
     RECORDER_COLUMNS,
+    RECORDER_OFFSET,
     SETPOINT_INTERPOLATION,
     TIMESTAMP,
     TORQUE_MEAN,
@@ -55,7 +57,7 @@ from hil.drives.modbus.regmap import (
 from hil.motion import Mode
 from plant_sim.firmware import Firmware
 from plant_sim.model import Plant
-from plant_sim.params import PlantParams
+from plant_sim.params import Harmonic, PlantParams
 
 log = logging.getLogger(__name__)
 
@@ -295,6 +297,10 @@ class ModbusEmulator:
                 and address <= outputs.address < address + len(values)):
             clamped = int(self._get(DIGITAL_OUTPUTS)) >> self.clamp_output_bit & 1
             self.plant.set_locked_rotor(bool(clamped))
+        if self.map.has_compensation:
+            start, span = self.map.compensation_span()
+            if address < start + span and start < address + len(values):
+                self._load_compensation()
         control = self.map["control_word"]
         if address <= control.address < address + len(values):
             self._apply_control(int(self._get("control_word")))
@@ -308,6 +314,21 @@ class ModbusEmulator:
                 can_play=self.enabled and not self.quick_stopping and not self.fault_code):
             return ExcCodes.ILLEGAL_VALUE
         return None
+
+    def _load_compensation(self) -> None:
+        """The compensation table's registers into the drive: each slot with an order a
+        harmonic (the plant applies them when its firmware has cogging compensation)."""
+        tables = []
+        for order_name, amplitude_name, phase_name in COMPENSATION.values():
+            columns = []
+            for name in (order_name, amplitude_name, phase_name):
+                register = self.map[name]
+                words = [int(w) & 0xFFFF for w in
+                         self.regs[register.address : register.address + register.words]]
+                columns.append(register.decode_raw(words) * register.scale)
+            tables.append(tuple(Harmonic(order=round(o), amplitude=float(a), phase_rad=float(p))
+                                for o, a, p in zip(*columns, strict=True) if round(o) > 0))
+        self.plant.load_compensation(*tables)
 
     def _recorder_check(self) -> None:
         """A recorder playing stops when the drive stops (quick stop, disable, fault) or the
@@ -417,11 +438,16 @@ class ModbusEmulator:
             offset = None
             if self.enabled and TORQUE_OFFSET in self.map.registers:
                 offset = np.full(block, self._get(TORQUE_OFFSET))  # held until written again
-            trace = self.plant.run(mode, command, offset)
-            if playing:
+            if playing and self.enabled and not self.quick_stopping:
                 assert self.recorder is not None
-                if self.recorder.capture(trace, self._raw):
+                table = self.recorder.play_offset(block)  # the offset table, if it plays one
+                if table is not None:
+                    offset = table * self.map[RECORDER_OFFSET].scale
+            trace = self.plant.run(mode, command, offset)
+            if self.recorder is not None:
+                if playing and self.recorder.capture(trace, self._raw):
                     self._recorder_ended()
+                self.recorder.observe(np.asarray(trace.torque_nm))
             shaft = trace.load_torque_nm  # the transducer between the clamp and the shaft
             self.shaft_torque_nm = 0.0 if shaft is None else float(np.mean(shaft))
             if self.enabled:

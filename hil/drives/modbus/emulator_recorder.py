@@ -7,8 +7,13 @@ one request), sets ``recorder_length`` and ``recorder_divider`` and writes 1 to
 over control periods ``k·n … k·n + n − 1`` (``n`` the divider) in the mode of its ``mode``
 register, in that register's ``*_cmd`` units, and captures the plant's sample of control
 period ``k·n`` (position at its start, the torque commanded over it, velocity and current)
-as capture sample ``k``. A quick stop, a disable, a fault or a mode change while it plays
-aborts it (state 3); what was captured stays readable. After the table the drive's setpoint
+as capture sample ``k``; with ``recorder_torque_sample`` = 1 the torque captured is the mean
+of the torque commanded over control periods ``k·n − n + 1 … k·n`` (the ``torque_mean``
+register's definition over the sample's ``n`` periods; ``n`` = 1: the period's own).
+Triggered with 3 (where the map has ``recorder_offset``) it adds the offset table's sample
+``k`` to its torque command over the same periods, as the ``torque_offset`` register would
+be (a firmware with feedforward). A quick stop, a disable, a fault or a mode change while it
+plays aborts it (state 3); what was captured stays readable. After the table the drive's setpoint
 ramps from the table's last value to its ``*_cmd`` register over the setpoint
 interpolation time (the host writes there what the axis should hold).
 """
@@ -30,15 +35,20 @@ from hil.drives.modbus.regmap import (
     RECORDER_DONE,
     RECORDER_INDEX,
     RECORDER_LENGTH,
+    RECORDER_OFFSET,
     RECORDER_SAMPLES,
     RECORDER_START,
+    RECORDER_START_WITH_OFFSET,
     RECORDER_STATE,
+    RECORDER_TORQUE_MEAN,
+    RECORDER_TORQUE_SAMPLE,
     RECORDER_WAVEFORM,
     Register,
     RegisterMap,
 )
 
 CAPACITY = 16384  # samples, as the CANopen emulator's recorder
+HISTORY = 1024  # control periods of torque kept from before a block (a mean's window)
 
 
 class ModbusRecorder:
@@ -63,6 +73,10 @@ class ModbusRecorder:
         self.state = 0
         self.mode = ""  # the mode it plays in (the mode register's at the trigger)
         self.table = np.zeros(capacity, dtype=np.int64)
+        self.offsets = np.zeros(capacity, dtype=np.int64)  # the torque offset table
+        self.with_offset = False  # this play adds the offset table
+        self.mean = False  # this play captures the torque's mean over each sample
+        self._recent = np.zeros(0)  # the torque of the control periods before a block
         self.captured = {name: np.zeros(capacity, dtype=np.int64) for name in RECORDER_COLUMNS}
         self.count = 0  # samples captured
         self.length = 0  # samples to play
@@ -112,34 +126,46 @@ class ModbusRecorder:
         stored, a trigger or an abort carried out. ``False``: the trigger is refused
         (ILLEGAL DATA VALUE: the drive not enabled, or an empty, too long or ill-divided
         table); the recorder is then idle."""
-        waveform = self._register(RECORDER_WAVEFORM)
-        if self._overlaps(waveform, address, count):
-            index = self._get(RECORDER_INDEX)
-            first = max(address, waveform.address)
-            last = min(address + count, waveform.address + waveform.words)
-            for slot in range((first - waveform.address) // waveform.count,
-                              -(-(last - waveform.address) // waveform.count)):
-                at = waveform.address + slot * waveform.count
-                if index + slot < self.capacity:
-                    words = [int(w) & 0xFFFF for w in self.regs[at : at + waveform.count]]
-                    self.table[index + slot] = round(
-                        waveform.decode(words) / waveform.scale)
+        self._store(RECORDER_WAVEFORM, self.table, address, count)
+        if RECORDER_OFFSET in self.map.registers:
+            self._store(RECORDER_OFFSET, self.offsets, address, count)
         if not self._overlaps(self._register(RECORDER_CONTROL), address, count):
             return True
         command = self._get(RECORDER_CONTROL)
+        starts = (RECORDER_START, *((RECORDER_START_WITH_OFFSET,)
+                                    if RECORDER_OFFSET in self.map.registers else ()))
         if command == RECORDER_ABORT:
             self.abort()
-        elif command == RECORDER_START:
+        elif command in starts:
             length, divider = self._get(RECORDER_LENGTH), self._get(RECORDER_DIVIDER)
             if not can_play or not 1 <= length <= self.capacity or divider < 1 or self.busy:
                 self._put(RECORDER_CONTROL, 0)
                 return False
             self.length, self.divider, self.mode = length, divider, mode
+            self.with_offset = command == RECORDER_START_WITH_OFFSET
+            self.mean = (RECORDER_TORQUE_SAMPLE in self.map.registers
+                         and self._get(RECORDER_TORQUE_SAMPLE) == RECORDER_TORQUE_MEAN)
             self.count, self._period = 0, 0
             self.state = RECORDER_BUSY
         self._put(RECORDER_CONTROL, 0)
         self._publish()
         return True
+
+    def _store(self, name: str, table: np.ndarray, address: int, count: int) -> None:
+        """The values a write put into the window ``name`` go into ``table`` from
+        ``recorder_index`` on."""
+        window = self._register(name)
+        if not self._overlaps(window, address, count):
+            return
+        index = self._get(RECORDER_INDEX)
+        first = max(address, window.address)
+        last = min(address + count, window.address + window.words)
+        for slot in range((first - window.address) // window.count,
+                          -(-(last - window.address) // window.count)):
+            at = window.address + slot * window.count
+            if index + slot < self.capacity:
+                words = [int(w) & 0xFFFF for w in self.regs[at : at + window.count]]
+                table[index + slot] = round(window.decode(words) / window.scale)
 
     def before_read(self, address: int, count: int) -> None:
         """Fill the capture windows from ``recorder_index`` if the read includes them."""
@@ -165,15 +191,44 @@ class ModbusRecorder:
         periods = self._period + np.arange(steps)
         return self.table[periods // self.divider].astype(np.float64)
 
+    def play_offset(self, steps: int) -> np.ndarray | None:
+        """The offset table's raw values over the next ``steps`` control periods, or
+        ``None`` when this play has none."""
+        if not self.with_offset:
+            return None
+        periods = self._period + np.arange(steps)
+        return self.offsets[periods // self.divider].astype(np.float64)
+
+    def observe(self, torque_nm: np.ndarray) -> None:
+        """The torque commanded over a block of control periods (every block, playing or
+        not: a mean's window reaches back before the play)."""
+        self._recent = np.concatenate([self._recent, torque_nm])[-HISTORY:]
+
+    def _torque_means(self, torque_nm: np.ndarray, keep: np.ndarray) -> np.ndarray:
+        """Per captured period ``keep`` of a block: the mean of the torque over the
+        ``divider`` periods up to and including it (those before the block from
+        :meth:`observe`)."""
+        full = np.concatenate([self._recent, torque_nm])
+        sums = np.concatenate([[0.0], np.cumsum(full)])
+        ends = keep + len(self._recent) + 1
+        starts = np.maximum(ends - self.divider, 0)
+        means: np.ndarray = (sums[ends] - sums[starts]) / (ends - starts)
+        return means
+
     def capture(self, trace: Any, raw: dict[str, Any]) -> bool:
         """Capture the samples of ``trace`` (the control periods :meth:`play` gave), their
-        raw values by ``raw[column](si values)``; ``True`` when the table has ended."""
+        raw values by ``raw[column](si values)``; ``True`` when the table has ended. Call
+        before :meth:`observe` of the same block."""
         n = len(trace.time_s)
         periods = self._period + np.arange(n)
         keep = np.flatnonzero(periods % self.divider == 0)
         rows = periods[keep] // self.divider
+        torque = np.asarray(trace.torque_nm)
         si = {"position": trace.position_rad, "velocity": trace.velocity_rad_s,
-              "torque": trace.torque_nm, "current": trace.current_a}
+              "torque": torque, "current": trace.current_a}
+        if self.mean and self.divider > 1:
+            si["torque"] = np.zeros(n)
+            si["torque"][keep] = self._torque_means(torque, keep)
         for name in RECORDER_COLUMNS:
             self.captured[name][rows] = raw[name](np.asarray(si[name])[keep])
         self.count += len(rows)

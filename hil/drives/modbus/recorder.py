@@ -7,6 +7,11 @@ velocity, torque and current per table sample; the host meanwhile polls the feed
 (fault, enable, the motion monitor) and the recorder's state, keeps the held axes' watchdogs
 fed, and afterwards reads the captures back a window at a time (the index written, then the
 capture windows and the index in one read, so each block says which samples it holds).
+Where the map has them: a run's torque offset is written as the offset table and played
+with the command (the drive adds it sample by sample), and at a divider above 1 the drive
+captures the torque's mean over each sample's control periods (the station's
+``torque_sample``, as for the polled ``torque_mean``: the recording says ``mean`` and its
+``torque_mean_period_s``), which the point sample of a 4 kHz torque aliases.
 """
 
 from __future__ import annotations
@@ -30,10 +35,15 @@ from hil.drives.modbus.regmap import (
     RECORDER_DONE,
     RECORDER_INDEX,
     RECORDER_LENGTH,
+    RECORDER_OFFSET,
     RECORDER_SAMPLES,
     RECORDER_START,
+    RECORDER_START_WITH_OFFSET,
     RECORDER_STATE,
+    RECORDER_TORQUE_MEAN,
+    RECORDER_TORQUE_SAMPLE,
     RECORDER_WAVEFORM,
+    TORQUE_OFFSET,
 )
 from hil.errors import DriveCommunicationError, DriveFaultError, DriveStateError
 from hil.motion import COMMAND_COLUMN, Excitation, Mode
@@ -52,10 +62,17 @@ def recorder_capacity(link: ModbusLink) -> int:
     return round(link.read_values((RECORDER_CAPACITY,))[RECORDER_CAPACITY])
 
 
-def recorder_refusal(excitation: Excitation, *, rate_hz: float, capacity: int) -> str | None:
+def plays_torque_offset(link: ModbusLink) -> bool:
+    """The recorder plays a torque offset table (the map's ``recorder_offset``)."""
+    return RECORDER_OFFSET in link.map.registers
+
+
+def recorder_refusal(excitation: Excitation, *, rate_hz: float, capacity: int,
+                     torque_offset: bool = False) -> str | None:
     """Why ``excitation`` cannot be played on a recorder of ``capacity`` samples at
-    ``rate_hz / n``, or ``None``."""
-    refused = Recorder(stream_rate_hz=0.0, samples=capacity).refuses(excitation)
+    ``rate_hz / n`` (``torque_offset``: one that plays a torque offset table), or ``None``."""
+    refused = Recorder(stream_rate_hz=0.0, samples=capacity,
+                       torque_offset=torque_offset).refuses(excitation)
     if refused is not None:
         return refused
     divider = rate_hz / excitation.fs_hz
@@ -65,39 +82,52 @@ def recorder_refusal(excitation: Excitation, *, rate_hz: float, capacity: int) -
     return None
 
 
-def _raw_table(link: ModbusLink, excitation: Excitation) -> np.ndarray:
-    """The command in the played mode's ``*_cmd`` units, as the waveform register holds it.
+def _raw_table(link: ModbusLink, excitation: Excitation, values: np.ndarray, *,
+               window: str, units: str) -> np.ndarray:
+    """``values`` in the units of the register ``units``, as the window ``window`` holds
+    them.
 
     Raises
     ------
     DriveStateError
-        A sample the waveform register cannot hold.
+        A sample the window cannot hold.
     """
-    scale = link.map[f"{excitation.mode.value}_cmd"].scale
-    raw = np.round(np.asarray(excitation.command, dtype=np.float64) / scale)
-    low, high = link.map[RECORDER_WAVEFORM].raw_range
+    scale = link.map[units].scale
+    raw = np.round(np.asarray(values, dtype=np.float64) / scale)
+    low, high = link.map[window].raw_range
     if raw.size and (raw.min() < low or raw.max() > high):
         raise DriveStateError(
-            f"{link.where}: '{excitation.name}' exceeds what '{RECORDER_WAVEFORM}' holds "
+            f"{link.where}: '{excitation.name}' exceeds what '{window}' holds "
             f"({low:g} … {high:g} × {scale:g})")
     return raw
 
 
 def write_table(link: ModbusLink, raw: np.ndarray,
-                keepalive: Callable[[], None] = lambda: None) -> None:
-    """The table, a window per request (``recorder_index`` and the window together);
+                keepalive: Callable[[], None] = lambda: None, *,
+                window: str = RECORDER_WAVEFORM) -> None:
+    """The table, a window per request (``recorder_index`` and the waveform window
+    together; the index, then the window, for a window that does not follow the index);
     ``keepalive`` between them (the held axes' watchdogs)."""
-    index, waveform = link.map[RECORDER_INDEX], link.map[RECORDER_WAVEFORM]
-    for start in range(0, len(raw), waveform.length):
+    index, values = link.map[RECORDER_INDEX], link.map[window]
+    after_index = index.address + index.count == values.address
+    for start in range(0, len(raw), values.length):
         keepalive()
-        words = index.encode(start) + waveform.encode_raw(raw[start : start + waveform.length])
-        link.write_words(index.address, words, f"waveform samples {start}…")
+        words = values.encode_raw(raw[start : start + values.length])
+        if after_index:
+            link.write_words(index.address, index.encode(start) + words,
+                             f"{window} samples {start}…")
+        else:
+            link.write_words(index.address, index.encode(start), f"{RECORDER_INDEX} {start}")
+            link.write_words(values.address, words, f"{window} samples {start}…")
 
 
 def play(link: ModbusLink, feedback: Feedback, excitation: Excitation, *, rate_hz: float,
-         divider: int, envelope: MotionEnvelope, keepalive: Callable[[], None]) -> None:
+         divider: int, envelope: MotionEnvelope, keepalive: Callable[[], None],
+         torque_mean: bool = False) -> None:
     """Write ``excitation`` as the table (each sample held over ``divider`` control
-    periods), start it, and watch the drive until it ends.
+    periods) with its torque offset as the offset table, start it, and watch the drive
+    until it ends. ``torque_mean``: capture the torque's mean over each sample's control
+    periods (:func:`captures_mean`).
 
     Raises
     ------
@@ -112,20 +142,31 @@ def play(link: ModbusLink, feedback: Feedback, excitation: Excitation, *, rate_h
     DriveCommunicationError
         A request failed.
     """
-    raw = _raw_table(link, excitation)
+    units = f"{excitation.mode.value}_cmd"
+    raw = _raw_table(link, excitation, excitation.command, window=RECORDER_WAVEFORM,
+                     units=units)
     write_table(link, raw, keepalive)
+    start = RECORDER_START
+    if excitation.torque_offset_nm is not None:
+        offsets = _raw_table(link, excitation, excitation.torque_offset_nm,
+                             window=RECORDER_OFFSET, units=TORQUE_OFFSET)
+        write_table(link, offsets, keepalive, window=RECORDER_OFFSET)
+        start = RECORDER_START_WITH_OFFSET
     link.write_value(RECORDER_LENGTH, float(len(raw)))
     link.write_value(RECORDER_DIVIDER, float(divider))
+    if RECORDER_TORQUE_SAMPLE in link.map.registers:
+        link.write_value(RECORDER_TORQUE_SAMPLE,
+                         float(RECORDER_TORQUE_MEAN if captures_mean(torque_mean, divider)
+                               else 0))
     try:
-        link.write_value(RECORDER_CONTROL, float(RECORDER_START))
+        link.write_value(RECORDER_CONTROL, float(start))
     except DriveFaultError as exc:
         raise DriveStateError(f"{link.where}: the drive refused to play '{excitation.name}' "
                               f"on its recorder ({exc})") from exc
     t0 = time.monotonic()
     # what the drive's setpoint goes to after the table: where it ended, or rest
-    scale = link.map[f"{excitation.mode.value}_cmd"].scale
-    link.write_value(f"{excitation.mode.value}_cmd",
-                     float(raw[-1]) * scale if excitation.mode is Mode.POSITION else 0.0)
+    scale = link.map[units].scale
+    link.write_value(units, float(raw[-1]) * scale if excitation.mode is Mode.POSITION else 0.0)
     duration_s = len(raw) * divider / rate_hz
     log.info("%s: %s on the drive recorder (%d samples at %g Hz, %.2f s)", link.where,
              excitation.name, len(raw), rate_hz / divider, duration_s)
@@ -158,11 +199,19 @@ def play(link: ModbusLink, feedback: Feedback, excitation: Excitation, *, rate_h
         time.sleep(max(0.0, POLL_S - (time.monotonic() - stamp)))
 
 
+def captures_mean(torque_mean: bool, divider: int) -> bool:
+    """The torque captured is the mean over each sample's ``divider`` control periods:
+    asked for, and more than one period (one period's mean is its torque)."""
+    return torque_mean and divider > 1
+
+
 def upload(link: ModbusLink, excitation: Excitation, info: DriveInfo, *, rate_hz: float,
-           divider: int, keepalive: Callable[[], None] = lambda: None) -> Recording:
+           divider: int, keepalive: Callable[[], None] = lambda: None,
+           torque_mean: bool = False) -> Recording:
     """What the recorder captured of ``excitation`` (all of it after a finished run, the
     samples up to the stop after an aborted one), a capture window per read; ``keepalive``
     between windows (the held axes' watchdogs: 16 384 samples take about 1-2 s).
+    ``torque_mean``: as given to :func:`play` (the recording says which torque it holds).
 
     Raises
     ------
@@ -195,6 +244,12 @@ def upload(link: ModbusLink, excitation: Excitation, info: DriveInfo, *, rate_hz
         return (np.concatenate(raw[name]) if raw[name] else np.zeros(0)).astype(np.float64)
 
     control_s = 1.0 / rate_hz
+    if captures_mean(torque_mean and RECORDER_TORQUE_SAMPLE in m.registers, divider):
+        # the mean over the sample's periods up to and including the captured one: the
+        # streamed torque_mean's definition, over divider periods
+        torque = {"torque_sample": "mean", "torque_mean_period_s": f"{divider * control_s:g}"}
+    else:
+        torque = {"torque_sample": "instantaneous"}
     metadata = {
         **run_identity(link, info, excitation),
         # row k: control period k·n of the table's play (position at its start, the
@@ -203,7 +258,7 @@ def upload(link: ModbusLink, excitation: Excitation, info: DriveInfo, *, rate_hz
         "recorder_divider": str(divider),
         "requested_rate_hz": f"{excitation.fs_hz:g}",
         "control_period_s": f"{control_s:g}",
-        "torque_sample": "instantaneous",
+        **torque,
         "command_interpolation": "hold",  # each table sample held over its periods
         **excitation.metadata,
     }

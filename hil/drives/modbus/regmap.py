@@ -78,7 +78,27 @@ RECORDER = (RECORDER_CONTROL, RECORDER_STATE, RECORDER_LENGTH, RECORDER_DIVIDER,
             RECORDER_SAMPLES, RECORDER_CAPACITY, RECORDER_INDEX, RECORDER_WAVEFORM,
             *RECORDER_COLUMNS.values())
 RECORDER_IDLE, RECORDER_BUSY, RECORDER_DONE, RECORDER_ABORTED = 0, 1, 2, 3
-RECORDER_START, RECORDER_ABORT = 1, 2
+RECORDER_START, RECORDER_ABORT, RECORDER_START_WITH_OFFSET = 1, 2, 3
+# optional, with the recorder: what its torque capture holds at a divider n > 1 (0: the
+# torque commanded over the captured control period; 1: the mean of the torque commanded
+# per control period over the sample's n periods up to and including the captured one, the
+# torque_mean register's definition), and a window of a torque offset table (the
+# torque_offset register's units) the drive adds sample by sample to its torque command
+# while it plays the table, when triggered with 3
+RECORDER_TORQUE_SAMPLE = "recorder_torque_sample"
+RECORDER_TORQUE_MEAN = 1
+RECORDER_OFFSET = "recorder_offset"
+# optional, all or none: the cogging compensation table (the drive adds Σ cogging to its
+# torque command and divides it by 1 + Σ K_t ripple when its firmware has cogging
+# compensation), a harmonic per slot: its order (0: the slot is unused), amplitude (N·m, or
+# relative for the ripple) and phase (rad); windows of one length, written in one request
+COMPENSATION = {
+    "cogging": ("compensation_cogging_order", "compensation_cogging_amplitude",
+                "compensation_cogging_phase"),
+    "kt_ripple": ("compensation_ripple_order", "compensation_ripple_amplitude",
+                  "compensation_ripple_phase"),
+}
+COMPENSATION_REGISTERS = tuple(name for names in COMPENSATION.values() for name in names)
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -196,6 +216,18 @@ class RegisterMap:
         return self.registers[RECORDER_COLUMNS["position"]].length
 
     @property
+    def has_compensation(self) -> bool:
+        """The map declares the cogging compensation table."""
+        return COMPENSATION_REGISTERS[0] in self.registers
+
+    def compensation_span(self) -> tuple[int, int]:
+        """(address, count) of the compensation table's registers, one write."""
+        start = min(self.registers[n].address for n in COMPENSATION_REGISTERS)
+        stop = max(self.registers[n].address + self.registers[n].words
+                   for n in COMPENSATION_REGISTERS)
+        return start, stop - start
+
+    @property
     def address_end(self) -> int:
         """One past the highest register the map declares."""
         return max(r.address + r.words for r in self.registers.values())
@@ -263,6 +295,7 @@ def load_register_map(path: str | Path) -> RegisterMap:
                 source=f"{source} [registers.{name}]",
             )
     _check_recorder(registers, control_period, max_registers_per_read, source)
+    _check_compensation(registers, source)
     if SETPOINT_INTERPOLATION in registers and not registers[SETPOINT_INTERPOLATION].writable:
         raise ProfileError(
             f"register '{SETPOINT_INTERPOLATION}' must be writable (access = \"rw\")",
@@ -289,8 +322,9 @@ def _check_recorder(registers: Mapping[str, Register], control_period_s: float |
     declared = [name for name in RECORDER if name in registers]
     if not declared:
         for name, register in registers.items():
-            if register.length != 1:
-                raise ProfileError(f"register '{name}': 'length' is for the recorder's windows",
+            if register.length != 1 and name not in COMPENSATION_REGISTERS:
+                raise ProfileError(f"register '{name}': 'length' is for the recorder's and "
+                                   "the compensation table's windows",
                                    source=f"{source} [registers.{name}]")
         return
     missing = [name for name in RECORDER if name not in registers]
@@ -326,6 +360,39 @@ def _check_recorder(registers: Mapping[str, Register], control_period_s: float |
             f"'{RECORDER_INDEX}', which the waveform window follows: one read of at most "
             f"{max_registers_per_read} registers (max_registers_per_read) and one write of at "
             "most 123", source=source)
+    sample = registers.get(RECORDER_TORQUE_SAMPLE)
+    if sample is not None and (not sample.writable or sample.type not in ("uint16", "uint32")
+                               or sample.length != 1):
+        raise ProfileError(f"register '{RECORDER_TORQUE_SAMPLE}' must be one writable uint16 "
+                           "or uint32", source=f"{source} [registers.{RECORDER_TORQUE_SAMPLE}]")
+    offset = registers.get(RECORDER_OFFSET)
+    if offset is not None and (not offset.writable or offset.type == "float32"
+                               or index.count + offset.words > 123):
+        raise ProfileError(f"register '{RECORDER_OFFSET}' must be a writable integer window "
+                           f"that one write of at most 123 registers carries",
+                           source=f"{source} [registers.{RECORDER_OFFSET}]")
+
+
+def _check_compensation(registers: Mapping[str, Register], source: str) -> None:
+    """The compensation table's registers: all or none, writable, windows of one length
+    (orders an integer type), one write of at most 123 registers."""
+    declared = [name for name in COMPENSATION_REGISTERS if name in registers]
+    if not declared:
+        return
+    missing = [name for name in COMPENSATION_REGISTERS if name not in registers]
+    if missing:
+        raise ProfileError(f"a compensation table needs every one of its registers; "
+                           f"[registers] lacks {', '.join(missing)}", source=source)
+    windows = [registers[name] for name in COMPENSATION_REGISTERS]
+    spans = sorted((w.address, w.address + w.words) for w in windows)
+    orders = [registers[names[0]] for names in COMPENSATION.values()]
+    if (len({w.length for w in windows}) != 1 or not all(w.writable for w in windows)
+            or any(o.type == "float32" for o in orders)
+            or any(a[1] != b[0] for a, b in pairwise(spans))
+            or spans[-1][1] - spans[0][0] > 123):
+        raise ProfileError("the compensation table's registers must be writable windows of "
+                           "one length (orders an integer type), contiguous: one write of at "
+                           "most 123 registers", source=source)
 
 
 def _integers(table: ConfigTable, defaults: Mapping[str, int]) -> dict[str, int]:
