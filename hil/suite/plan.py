@@ -62,8 +62,8 @@ def acquisition_info(name: str, profile: UnitProfile, info: DriveInfo
         says why it streams.
     """
     protocol = CATALOGUE.get(name)
-    if info.recorder is None or protocol is None or info.lacking(protocol.requires):
-        return info, None  # (one the station lacks a capability for skips, unplanned)
+    if info.recorder is None or protocol is None:
+        return info, None
     track = _Track((info.limits.travel_min_rad + info.limits.travel_max_rad) / 2)
     try:
         excitations = track.walk(protocol.planned_motion(profile, info, track.position))
