@@ -1,7 +1,8 @@
 """A drive whose highest rate is its own recorder: each protocol whose runs fit the recorder
 uses it, each with a run that does not (too long, a torque offset) is streamed at the SYNC
-rate, and the certificate says which and why (issue 28: the example station's elevation
-suite stopped at 'the drive recorder holds 16384')."""
+rate unless the recorder at its rate / n holds it faster than the link, and the certificate
+says which and why (issue 28: the example station's elevation suite stopped at 'the drive
+recorder holds 16384')."""
 
 from __future__ import annotations
 
@@ -9,6 +10,7 @@ import json
 import subprocess
 import sys
 import tomllib
+from dataclasses import replace
 from pathlib import Path
 
 from hil.config import builtin_fixture
@@ -41,6 +43,25 @@ def test_a_protocol_with_a_run_longer_than_the_recorder_is_streamed() -> None:
     kept, none = acquisition_info("current_loop", profile, info)
     assert kept is info
     assert none is None
+
+
+def test_a_long_run_stays_on_the_recorder_at_its_rate_divided_when_that_beats_the_link(
+) -> None:
+    """Above a slow link (a 100 Hz Modbus poll) the gravity sweep (78,900 samples at 4 kHz)
+    and the Stribeck staircase are planned on the recorder at the highest 4 kHz / n at
+    which they fit; a recorder that plays a torque offset takes tracking at 4 kHz."""
+    profile = load_profile(PROFILE)
+    info = replace(_info(profile, recorder_samples=16384),
+                   recorder=Recorder(stream_rate_hz=100.0, samples=16384, torque_offset=True))
+    sweep, why = acquisition_info("gravity_cable", profile, info)
+    assert sweep.max_sample_rate_hz == 800.0
+    assert sweep.recorder is not None
+    assert why is not None
+    assert why.startswith("on the drive recorder at 800 Hz (4000 Hz / 5)")
+    staircase, _ = acquisition_info("stribeck", profile, info)
+    assert staircase.max_sample_rate_hz == 1000.0
+    tracking, none = acquisition_info("tracking", profile, info)
+    assert (tracking, none) == (info, None)
 
 
 def test_a_torque_offset_is_streamed_whatever_its_length() -> None:
