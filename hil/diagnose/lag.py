@@ -42,7 +42,6 @@ from hil.diagnose.model import (
     moving_rows,
 )
 from hil.diagnose.signals import Signals, derivatives
-from hil.identify.quantisation import quantisation_step
 
 FloatArray = NDArray[np.float64]
 
@@ -61,6 +60,11 @@ NOISY_KEYS = frozenset({"inertia", "viscous"})
 NOISY_EFFECTS = frozenset({"two_mass"})
 #: τ searched from half a sample up to this (s) or 100 samples, whichever is shorter.
 MAX_LAG_S = 0.05
+
+
+def longest_lag_s(fs_hz: float) -> float:
+    """The top of τ's search range at ``fs_hz`` (:data:`MAX_LAG_S` or 100 samples)."""
+    return min(MAX_LAG_S, 100.0 / fs_hz)
 #: Jackknife blocks, s: each group takes every ``groups``-th block, a part of every
 #: experiment (the lag's information lies in the chirp's top octave: deleting one
 #: contiguous stretch of it leaves τ and δ unresolved, not less precise).
@@ -139,8 +143,9 @@ def through_level_changes(position: FloatArray) -> FloatArray:
 def quantisation_noise(signals: Signals) -> tuple[Signals, ...]:
     """Stand-ins for the position's quantisation error, as signals (empty: none found).
 
-    The position, drawn through its changes of level (:func:`through_level_changes`) and
-    low-passed, is re-quantised with the recording's step at each of
+    The position, drawn through its changes of level (:func:`through_level_changes`; a
+    resampled one as it is) and low-passed, is re-quantised with the recording's step
+    (:attr:`Signals.position_step`, found before resampling) at each of
     :data:`QUANT_PHASES`; each error goes through the low-pass and the derivatives the
     regressors are built with. (Re-quantising the low-passed position itself gave the
     inertia column 1.24 × too little noise power and its lead 1.45 ×, 2–3 × where the axis
@@ -156,10 +161,12 @@ def quantisation_noise(signals: Signals) -> tuple[Signals, ...]:
         ``signals`` with ``position``, ``velocity`` and ``acceleration`` replaced by one
         re-quantisation error and its derivatives; empty when the position has no step.
     """
-    step = quantisation_step(np.asarray(signals.position))
+    step = signals.position_step
     if not step > 0:
         return ()
-    smooth = signals.lowpass(through_level_changes(np.asarray(signals.position)))
+    # a resampled position lies between the levels already (the spline through them)
+    position = np.asarray(signals.position)
+    smooth = signals.lowpass(position if signals.resampled else through_level_changes(position))
     out = []
     for phase in QUANT_PHASES:
         shifted = smooth + phase * step
@@ -222,7 +229,7 @@ class LagProblem:
         self._full: dict[tuple[int, int], tuple[FloatArray, FloatArray]] = {}
         self._taps: dict[tuple[int, int], list[tuple[FloatArray, FloatArray]]] = {}
         fs = signals.fs_hz
-        self.lag_grid = np.geomspace(0.5 / fs, min(MAX_LAG_S, 100.0 / fs), 20)
+        self.lag_grid = np.geomspace(0.5 / fs, longest_lag_s(fs), 20)
 
     def _pair(self, designer: Designer, model: Model, signals: Signals,
               shift: float) -> tuple[FloatArray, FloatArray]:

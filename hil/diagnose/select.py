@@ -47,6 +47,7 @@ from hil.diagnose.effects import (
     propose,
     search_shift,
 )
+from hil.diagnose.lag import longest_lag_s
 from hil.diagnose.model import (
     Designer,
     Fit,
@@ -73,6 +74,11 @@ MAX_CAUSES = 5
 #: A current-loop lag shorter than this many sample periods is not named: it cannot be
 #: told apart from the sub-sample skew between effort and position sampling.
 MIN_LAG_SAMPLES = 1.0
+#: ... nor one within this part of the top of its search range (a τ that runs to the
+#: range's end is not an estimate: the misfit wants more of the lead column than any lag
+#: gives; another simulator's jittered 2^17-count recording ran τ to the 50 ms top,
+#: docs/diagnose.md).
+LAG_RANGE_MARGIN = 0.9
 #: A structural resonance is named only when the load is at least this part of the inertia.
 MIN_LOAD_FRACTION = 0.05
 #: ...and its damping ratio at most this (a peak of Q ≥ 2.5): a better-damped shaft filter
@@ -575,7 +581,8 @@ def plausible(effect: str, fit: Fit, fs_hz: float, band_hz: float) -> bool:
         ``stribeck``: static friction above Coulomb. ``two_mass``: a load between
         :data:`MIN_LOAD_FRACTION` of the inertia and all of it, and a resonance at most
         ``band_hz``. ``cable_spring``: positive stiffness and non-negative hysteresis.
-        ``current_lag``: τ at least :data:`MIN_LAG_SAMPLES` sample periods. Else True.
+        ``current_lag``: τ at least :data:`MIN_LAG_SAMPLES` sample periods and short of
+        the top of its search range (:data:`LAG_RANGE_MARGIN`). Else True.
     """
     values = fit.as_dict()
     if effect == "stribeck":
@@ -592,7 +599,8 @@ def plausible(effect: str, fit: Fit, fs_hz: float, band_hz: float) -> bool:
     if effect == "cable_spring":  # a spring, and a loop (when there is one) that dissipates
         return values["cable_stiffness"] > 0 and values.get("cable_hysteresis", 0.0) >= 0
     if effect == "current_lag":  # a shorter lag is indistinguishable from sampling skew
-        return fit.model.lag_s * fs_hz >= MIN_LAG_SAMPLES
+        return (fit.model.lag_s * fs_hz >= MIN_LAG_SAMPLES
+                and fit.model.lag_s <= LAG_RANGE_MARGIN * longest_lag_s(fs_hz))
     return True
 
 

@@ -25,6 +25,7 @@ from scipy import stats
 
 from hil.errors import IdentificationError
 from hil.identify.kinematics import savgol_derivatives, uniform_position, zero_phase_lowpass
+from hil.identify.quantisation import quantisation_step
 from hil.recording import GAP_FACTOR, AxisKind, Recording, saturated_mask
 
 log = logging.getLogger(__name__)
@@ -91,6 +92,9 @@ class Signals:
         Samples of the recording (before resampling) at the effort clip value.
     saturation_level : float
         Largest ``|effort|`` among the saturated grid samples; 0 when there are none.
+    position_step : float
+        The encoder's step, found on the recorded positions before any resampling (a
+        resampled position lies between its levels); 0 when it has none.
     """
 
     source: str
@@ -110,6 +114,7 @@ class Signals:
     gap_count: int
     saturated_count: int
     saturation_level: float
+    position_step: float = 0.0
 
     def __len__(self) -> int:
         return len(self.time_s)
@@ -310,6 +315,7 @@ def prepare(recording: Recording, *, cutoff_hz: float | None = None) -> Signals:
         gap_count=int(gap_index.size),
         saturated_count=int(sat_raw.sum()),
         saturation_level=level,
+        position_step=quantisation_step(np.asarray(recording.position)),
     )
 
 
