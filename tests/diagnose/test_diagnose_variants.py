@@ -20,7 +20,7 @@ from test_diagnose_hidden import recovered
 
 from hil.diagnose.core import diagnose
 from hil.diagnose.report import report
-from plant_sim.variant import MAIN_LIKE, draw_variant
+from plant_sim.variant import MAIN_LIKE, TorqueTap, draw_variant
 
 pytestmark = pytest.mark.slow(seconds=60)
 
@@ -47,7 +47,9 @@ def test_a_lag_before_a_measured_torque_is_not_in_the_data() -> None:
     motor makes: the loop's lag is not in that recording (the benchmark does not count it
     as hidden there, ``observable``), and none is named."""
     hidden = plant(0.004, 0.005, 0.02, "current_lag", 0.5, 0.5, 60)
-    for tap, named in (("command", ["current_lag"]), ("measured", [])):
+    taps: tuple[tuple[TorqueTap, list[str]], ...] = (("command", ["current_lag"]),
+                                                      ("measured", []))
+    for tap, named in taps:
         variant = dataclasses.replace(MAIN_LIKE, torque_tap=tap)
         data = report(diagnose(record(hidden.params, seed=3, variant=variant)))
         assert [cause["name"] for cause in data["causes"]] == named, tap
