@@ -60,11 +60,6 @@ NOISY_KEYS = frozenset({"inertia", "viscous"})
 NOISY_EFFECTS = frozenset({"two_mass"})
 #: τ searched from half a sample up to this (s) or 100 samples, whichever is shorter.
 MAX_LAG_S = 0.05
-
-
-def longest_lag_s(fs_hz: float) -> float:
-    """The top of τ's search range at ``fs_hz`` (:data:`MAX_LAG_S` or 100 samples)."""
-    return min(MAX_LAG_S, 100.0 / fs_hz)
 #: Jackknife blocks, s: each group takes every ``groups``-th block, a part of every
 #: experiment (the lag's information lies in the chirp's top octave: deleting one
 #: contiguous stretch of it leaves τ and δ unresolved, not less precise).
@@ -112,6 +107,11 @@ class _Grams:
         except np.linalg.LinAlgError:
             return math.inf
         return float(self.yy - theta @ (moment / scale))
+
+
+def longest_lag_s(fs_hz: float) -> float:
+    """The top of τ's search range at ``fs_hz`` (:data:`MAX_LAG_S` or 100 samples)."""
+    return min(MAX_LAG_S, 100.0 / fs_hz)
 
 
 def through_level_changes(position: FloatArray) -> FloatArray:
