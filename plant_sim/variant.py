@@ -44,7 +44,11 @@ _SUPPORTED: Final = frozenset({
     "torque_noise_nm", "position_kp_1_s", "substeps", "exact_torque_hold",
     "cable_hysteresis_angle_rad", "shaft_disturbance_lf_hz",
 })
-"""The :class:`PlantParams` fields this simulator models (any other must keep its default)."""
+"""The :class:`PlantParams` fields this simulator takes (any other must keep its default):
+the unit's physics, plus the main simulator's own integrator settings (``substeps``,
+``exact_torque_hold``), the position loop's gain (velocity mode only here) and two
+parameters of effects left out (the cable loop's angle, the drifting load's corner), which
+it ignores."""
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
