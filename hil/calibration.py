@@ -28,6 +28,7 @@ from hil.identify.estimate import Estimate
 from hil.measurement import (
     Declared,
     Measurement,
+    MethodBias,
     MethodBiasMap,
     Outcome,
     judge,
@@ -264,6 +265,16 @@ class CalibrationRun:
         found = [self.result(name) for name in names]
         return None if any(e is None for e in found) else tuple(e for e in found if e)
 
+    def method_line(self, name: str, *, method_of: str | None = None,
+                    acquisition: str | None = None,
+                    variant: str | None = None) -> MethodBias | None:
+        """The method line :meth:`record` adds to result ``name`` (the stop rule judges
+        each run's U with the same, :func:`hil.suite.stop_rule.run_repeated`)."""
+        bias = self.method_bias.line(method_of or name, path=acquisition, variant=variant)
+        if bias is not None and method_of is not None and not bias.relative:
+            return None
+        return bias
+
     def record(self, protocol: str, estimate: Estimate, *, method_of: str | None = None,
                declared: Declared | None = None, acquisition: str | None = None,
                variant: str | None = None) -> Measurement:
@@ -276,9 +287,8 @@ class CalibrationRun:
         line of that path, or none: :meth:`hil.measurement.MethodBiasMap.line`);
         ``variant``: the method ran without an input its main line assumes."""
         spec = self.profile.measurement(estimate.name)
-        bias = self.method_bias.line(method_of or spec.name, path=acquisition, variant=variant)
-        if bias is not None and method_of is not None and not bias.relative:
-            bias = None
+        bias = self.method_line(spec.name, method_of=method_of, acquisition=acquisition,
+                                variant=variant)
         estimate = with_method_terms(estimate, spec, bias)
         measurement = Measurement(
             protocol=protocol, spec=spec, estimate=estimate,

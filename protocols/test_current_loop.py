@@ -67,7 +67,9 @@ def result(drive: Drive, calibration: CalibrationRun, profile: UnitProfile,
         return analyse(recording, spec), recording
 
     runs = run_repeated(run_once, lambda found: {MEASUREMENTS[0]: found[0].time_constant},
-                        rule=spec.stop, calibration=calibration)
+                        rule=spec.stop, calibration=calibration,
+                        acquisition=lambda found: acquisition_path(found[1].metadata,
+                                                                   fs_hz=spec.fs_hz))
     analysed, recording = runs.first
     calibration.details[NAME] = CurrentLoopDetails(
         **runs.details(),

@@ -97,7 +97,8 @@ def result(
         runs = run_repeated(run_once, lambda found: {
             e.name: e for e in (found[0].level, found[0].zenith, found[0].product,
                                 found[0].ratio)},
-            rule=spec.stop, calibration=calibration)
+            rule=spec.stop, calibration=calibration,
+            variant=lambda _: None if position_torque is not None else WITHOUT_POSITION_TORQUE)
     finally:
         drive.set_elevation(spec.park_elevation_rad)
     analysed, inertias = runs.first

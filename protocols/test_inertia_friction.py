@@ -72,7 +72,9 @@ def result(
         return analyse_in_calibration(recordings, spec, calibration,
                                       position_torque=position_torque)
 
-    runs = run_repeated(run_once, lambda found: found[1], rule=spec.stop, calibration=calibration)
+    runs = run_repeated(run_once, lambda found: found[1], rule=spec.stop, calibration=calibration,
+                        variant=lambda found: None if found[2].position_torque_removed != "none"
+                        else WITHOUT_POSITION_TORQUE)
     analysed, _, corrections = runs.first  # the first run's fit and inputs, for the details
     calibration.details[NAME] = InertiaFrictionDetails(
         **runs.details(),

@@ -32,7 +32,7 @@ from hil.config import ConfigTable
 from hil.details import RunsFields
 from hil.errors import IdentificationError, ProfileError
 from hil.identify.estimate import Component, Estimate, with_budget
-from hil.measurement import MethodBiasMap, with_method_terms
+from hil.measurement import MethodBias, MethodBiasMap, with_method_terms
 from hil.profile import MeasurementSpec
 
 KEYS = ("stop_at_u_fraction", "max_runs", "stop_results")
@@ -173,7 +173,8 @@ def floor_expanded_u(estimate: Estimate, *, shared: Sequence[str] = ()) -> float
 
 def decide(estimates: Mapping[str, Estimate], specs: Mapping[str, MeasurementSpec],
            method_bias: MethodBiasMap, rule: StopRule, *, runs: int,
-           shared: Sequence[str] = ()) -> StopDecision:
+           shared: Sequence[str] = (),
+           lines: Callable[[str], MethodBias | None] | None = None) -> StopDecision:
     """Run again? Only while some result's certificate U exceeds its target and runs remain.
 
     Parameters
@@ -190,6 +191,10 @@ def decide(estimates: Mapping[str, Estimate], specs: Mapping[str, MeasurementSpe
         Runs made so far.
     shared : sequence of str
         Type A lines every run shares (see :func:`pooled`).
+    lines : callable, optional
+        Each result's method line, as the certificate will add it (its acquisition path
+        and variant, :meth:`hil.calibration.CalibrationRun.method_line`); default: the
+        map's main line.
 
     Returns
     -------
@@ -203,7 +208,8 @@ def decide(estimates: Mapping[str, Estimate], specs: Mapping[str, MeasurementSpe
         spec = specs.get(name)
         if spec is None or (rule.results is not None and name not in rule.results):
             continue
-        final = with_method_terms(estimate, spec, method_bias.entries.get(name))
+        line = method_bias.entries.get(name) if lines is None else lines(name)
+        final = with_method_terms(estimate, spec, line)
         target = target_expanded_u(spec, rule.fraction)
         if final.expanded_uncertainty > target:
             floor = floor_expanded_u(final, shared=shared)
@@ -225,7 +231,8 @@ def decide(estimates: Mapping[str, Estimate], specs: Mapping[str, MeasurementSpe
 
 def repeat_until(run_once: Callable[[], Mapping[str, Estimate]], *,
                  specs: Mapping[str, MeasurementSpec], method_bias: MethodBiasMap,
-                 rule: StopRule | None, shared: Sequence[str] = ()
+                 rule: StopRule | None, shared: Sequence[str] = (),
+                 lines: Callable[[str], MethodBias | None] | None = None
                  ) -> tuple[dict[str, Estimate], StopDecision]:
     """Run a protocol's measurement once, then again while :func:`decide` asks for it.
 
@@ -260,7 +267,8 @@ def repeat_until(run_once: Callable[[], Mapping[str, Estimate]], *,
         return now, StopDecision(again=False, runs=1, reason="one run (no stop rule)")
     rule.check(list(now))
     while True:
-        decision = decide(now, specs, method_bias, rule, runs=len(runs), shared=shared)
+        decision = decide(now, specs, method_bias, rule, runs=len(runs), shared=shared,
+                          lines=lines)
         if not decision.again:
             return now, decision
         runs.append(dict(run_once()))
@@ -288,7 +296,9 @@ class Repeated(Generic[T]):
 
 def run_repeated(run_once: Callable[[], T], results: Callable[[T], Mapping[str, Estimate]],
                  *, rule: StopRule | None, calibration: CalibrationRun,
-                 shared: Sequence[str] = ()) -> Repeated[T]:
+                 shared: Sequence[str] = (),
+                 acquisition: Callable[[T], str | None] | None = None,
+                 variant: Callable[[T], str | None] | None = None) -> Repeated[T]:
     """A protocol's excitation and analysis, run again while its rule asks for it.
 
     Parameters
@@ -303,6 +313,11 @@ def run_repeated(run_once: Callable[[], T], results: Callable[[T], Mapping[str, 
         The calibration in progress: the profile's declarations and the method map.
     shared : sequence of str
         Type A lines every run shares (see :func:`pooled`).
+    acquisition, variant : callable, optional
+        From the first run's analysis: the path its recording came over and the method's
+        variant, as the protocol records its results with them
+        (:meth:`CalibrationRun.record`), so that each run's U is judged with the method
+        line its certificate will state. Default: the map's main line.
 
     Returns
     -------
@@ -315,7 +330,13 @@ def run_repeated(run_once: Callable[[], T], results: Callable[[T], Mapping[str, 
         analyses.append(run_once())
         return results(analyses[-1])
 
+    def line(name: str) -> MethodBias | None:
+        first = analyses[0]
+        return calibration.method_line(
+            name, acquisition=None if acquisition is None else acquisition(first),
+            variant=None if variant is None else variant(first))
+
     estimates, decision = repeat_until(once, specs=calibration.profile.measurements,
                                        method_bias=calibration.method_bias, rule=rule,
-                                       shared=shared)
+                                       shared=shared, lines=line)
     return Repeated(estimates=estimates, first=analyses[0], decision=decision)
