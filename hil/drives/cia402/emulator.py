@@ -240,7 +240,9 @@ class Cia402Emulator:
         # azimuth inertia follows the elevation axis, J_az(el))
         self._elevation_of = elevation_of
         self.held_nodes: dict[str, Cia402Emulator] = {}  # other nodes started beside it
-        self._steps = 0
+        # control periods per SYNC and the interpolation ramp over them, one tuple: an SDO
+        # write (the bus's thread) drops it while the SYNC thread may be reading it
+        self._sync_grid: tuple[int, np.ndarray] | None = None
         self._compensation: dict[int, tuple[PositionHarmonic, ...]] = {1: (), 2: ()}
         self.limit_active = False  # stopped at 0x607D/0x6080 (statusword bit 11)
         self.host_lost = 0  # times the host's heartbeat stopped for the consumer time
@@ -389,7 +391,7 @@ class Cia402Emulator:
         return None
 
     def _on_write(self, *, index: int, subindex: int, od: ODVariable, data: bytes) -> None:
-        self._steps = 0
+        self._sync_grid = None
         value: Any = data
         if od.data_type in _FMT:
             value = struct.unpack("<" + _FMT[od.data_type], data)[0]
@@ -458,11 +460,19 @@ class Cia402Emulator:
 
     def steps_per_sync(self) -> int:
         """Control periods per SYNC: 0x1006 when set, else 0x60C2."""
-        if self._steps:
-            return self._steps
-        self._steps = self._steps_per_sync()
-        self._ramp = np.arange(1, self._steps + 1) / self._steps
-        return self._steps
+        return self._grid()[0]
+
+    def _grid(self) -> tuple[int, np.ndarray]:
+        """Control periods per SYNC and the linear interpolation's ramp over them, read
+        once into a local: a write between two reads of the attribute left a SYNC with no
+        periods (an intermittent CI failure: the SYNC thread died and the run lost its
+        SYNC)."""
+        grid = self._sync_grid
+        if grid is None:
+            steps = self._steps_per_sync()
+            grid = (steps, np.arange(1, steps + 1) / steps)
+            self._sync_grid = grid
+        return grid
 
     def _steps_per_sync(self) -> int:
         cycle_us = self._raw(0x1006)
@@ -750,10 +760,10 @@ class Cia402Emulator:
 
     def _advance(self) -> None:
         """One communication period of the plant with the latched target held."""
-        steps = self.steps_per_sync()
+        steps, ramp = self._grid()
         period_s = steps / self.fs_hz
         self._follow_elevation()
-        mode, command = self._command(steps, period_s)
+        mode, command = self._command(steps, period_s, ramp)
         offset = None
         if self.state == ENABLED and mode is Mode.VELOCITY:  # 0x60B2, held over the period
             offset = np.full(steps, self.targets[TORQUE_OFFSET] * self.rated_torque_nm / 1e3)
@@ -788,7 +798,8 @@ class Cia402Emulator:
         ):
             self._enter(SWITCH_ON_DISABLED)
 
-    def _command(self, steps: int, period_s: float) -> tuple[Mode, np.ndarray]:
+    def _command(self, steps: int, period_s: float,
+                 ramp: np.ndarray) -> tuple[Mode, np.ndarray]:
         cpr = self.counts_per_rev
         if self.state == QUICK_STOP:
             decel = self._raw(0x6085) / self.velocity_per_rad_s
@@ -812,7 +823,7 @@ class Cia402Emulator:
             if self._raw(0x60C0) == INTERPOLATION_HOLD:
                 waveform = np.full(steps, new)
             else:
-                waveform = old + (new - old) * self._ramp
+                waveform = old + (new - old) * ramp
         if mode is Mode.VELOCITY:
             raw = self.targets[0x60FF] if waveform is None else waveform
             value = np.asarray(raw, dtype=np.float64) / self.velocity_per_rad_s
