@@ -21,6 +21,7 @@ from typing import Final, Literal
 
 import numpy as np
 from numpy.typing import NDArray
+from scipy.signal import lfilter
 
 from hil.recording import Recording
 from plant_sim import variant_kernel as vk
@@ -226,13 +227,10 @@ def _torque_noise(rng: np.random.Generator, n: int, rms_nm: float, variant: Vari
     if variant.noise_colour == "white" or rms_nm == 0:
         return white
     decay = math.exp(-2 * math.pi * variant.noise_corner_hz / variant.sample_rate_hz)
-    coloured = np.empty(n)
-    state = white[0]
-    gain = math.sqrt(1 - decay**2)
-    for k in range(n):  # first-order low-pass scaled to the same RMS
-        state = decay * state + gain * white[k]
-        coloured[k] = state
-    return coloured
+    # first-order low-pass scaled to the same RMS, from the first sample's value
+    coloured, _ = lfilter([math.sqrt(1 - decay**2)], [1.0, -decay], white,
+                          zi=[decay * white[0]])
+    return np.asarray(coloured, dtype=np.float64)
 
 
 def simulate_variant(plant: PlantParams, firmware: Firmware, variant: Variant, *,
@@ -248,11 +246,10 @@ def simulate_variant(plant: PlantParams, firmware: Firmware, variant: Variant, *
     periods = dt * (1.0 + jitter)
     noise = _torque_noise(rng, n, plant.torque_noise_nm, variant)
     disturbance = np.asarray(rng.normal(0.0, variant.shaft_noise_nm, n), dtype=np.float64)
-    current_noise = np.zeros(n)
     t_max = plant.torque_limit_nm if math.isfinite(plant.torque_limit_nm) else 1e9
     out = [np.empty(n) for _ in range(4)]
     vk.run_variant(_parameters(plant, firmware, variant), _harmonic_rows(plant.cogging),
-                   _harmonic_rows(plant.kt_ripple), command, periods, noise, current_noise,
+                   _harmonic_rows(plant.kt_ripple), command, periods, noise,
                    disturbance, t_max, *out)
     position, velocity, torque, current = out
     target = np.cumsum(command) / variant.sample_rate_hz

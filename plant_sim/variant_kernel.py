@@ -161,7 +161,7 @@ def _step(p: np.ndarray, cogging: np.ndarray, ripple: np.ndarray, x: np.ndarray,
 
 @njit(cache=True, fastmath=False)
 def run_variant(p: np.ndarray, cogging: np.ndarray, ripple: np.ndarray, command: np.ndarray,
-                periods: np.ndarray, noise: np.ndarray, current_noise: np.ndarray,
+                periods: np.ndarray, noise: np.ndarray,
                 disturbance: np.ndarray, t_max: float, position: np.ndarray,
                 velocity: np.ndarray, torque: np.ndarray, current_out: np.ndarray) -> None:
     """Run the velocity loop over ``command`` (one value per period of length ``periods``)."""
@@ -209,9 +209,8 @@ def run_variant(p: np.ndarray, cogging: np.ndarray, ripple: np.ndarray, command:
         reference = min(max(filtered, -t_max), t_max)
         position[k] = measured
         velocity[k] = v_est
-        sensed = current + current_noise[k]
-        current_out[k] = sensed
-        reported = p[V_KT] * sensed if p[V_TAP_MEASURED] != 0.0 else reference
+        current_out[k] = current  # the measured current (its noise is the torque noise)
+        reported = p[V_KT] * current if p[V_TAP_MEASURED] != 0.0 else reference
         torque[k] = reported + noise[k]
         # mechanics over this period: the old command until the new one acts
         dt = periods[k]

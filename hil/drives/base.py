@@ -131,6 +131,12 @@ class DriveInfo:
     timing: Mapping[str, str] = dataclasses.field(default_factory=dict)
     transport: str = "none"
 
+    def identity(self) -> dict[str, str]:
+        """The drive as every recording's metadata names it (model, firmware, serial,
+        transport); each drive kind adds its address."""
+        return {"model": self.model, "firmware": self.firmware_version, "serial": self.serial,
+                "transport": self.transport}
+
     def streamed(self) -> DriveInfo:
         """This drive as one that streams every run (no recorder, its stream rate)."""
         if self.recorder is None:

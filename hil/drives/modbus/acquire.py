@@ -342,10 +342,7 @@ def run_identity(link: ModbusLink, info: DriveInfo, excitation: Excitation) -> d
     return {
         "drive": link.where,
         "unit_id": str(link.station.unit_id),
-        "model": info.model,
-        "firmware": info.firmware_version,
-        "serial": info.serial,
-        "transport": info.transport,
+        **info.identity(),
         "excitation": excitation.name,
         "control_mode": excitation.mode.value,
     }

@@ -225,10 +225,7 @@ def to_recording(excitation: Excitation, run: StreamedRun, states: OdriveStateMa
     metadata = {
         "drive": states.link.where,
         "node_id": str(station.node_id),
-        "model": info.model,
-        "firmware": info.firmware_version,
-        "serial": info.serial,
-        "transport": info.transport,
+        **info.identity(),
         "excitation": excitation.name,
         "control_mode": excitation.mode.value,
         "acquisition": (f"streamed CANSimple cyclic messages every {period_s * 1e3:g} ms "
