@@ -61,6 +61,8 @@ class InertiaFrictionResult:
         The runs fitted.
     method : {"least_squares", "orthogonal"}
         The estimator used.
+    harmonics : int
+        The harmonics the orthogonal correlation used.
     fit_pct : float
         Share of the periodic torque of the moving samples that ``J·α + B·ω + T_c·sgn(ω)``
         explains (%; constant torques excluded).
@@ -75,6 +77,7 @@ class InertiaFrictionResult:
     coulomb: Estimate  # N·m
     runs: tuple[SineRun, ...]
     method: Method
+    harmonics: int
     fit_pct: float  # periodic torque of moving samples explained by J·α + B·ω + T_c·sgn(ω)
     lack_of_fit_rms_nm: float
     noise_rms_nm: float
@@ -144,6 +147,7 @@ def identify_inertia_friction(
         coulomb=coulomb,
         runs=tuple(runs),
         method=method,
+        harmonics=harmonics,
         fit_pct=fit_pct,
         lack_of_fit_rms_nm=lack_rms,
         noise_rms_nm=noise,
@@ -314,10 +318,15 @@ def _model_fit(runs: Sequence[SineRun], theta: FloatArray) -> tuple[float, float
 
 
 def inertia_amplitude_spread(result: InertiaFrictionResult) -> Estimate:
-    """Spread of the per-amplitude inertias ``c/(V·2πf)`` in % of their mean.
+    """Spread of the inertias each amplitude shows, in % of their mean.
 
-    A position-dependent torque (cogging, cable) commensurate with the sine's travel biases
-    each amplitude differently and shows up here.
+    Each run gets a J of its own in the fit that measured J, B and T_c (the same samples,
+    instruments and reversal band; B, T_c shared): a torque bound to position (cogging,
+    cable) commensurate with the sine's travel projects onto α differently at each amplitude
+    and shows up here. The article's per-run ``c/(V·2πf)`` is not used: it takes the
+    reversals in, where the axis dwells while its loop ramps through the friction, so it
+    moved with the loop's stiffness and with friction dynamics (pre-sliding) the model does
+    not have, on units whose J was right.
 
     Parameters
     ----------
@@ -328,21 +337,46 @@ def inertia_amplitude_spread(result: InertiaFrictionResult) -> Estimate:
     -------
     Estimate
         ``inertia_amplitude_spread_pct`` (%): largest minus smallest per-run J over their
-        mean; the runs' ``c`` uncertainties combined in quadrature, degrees of freedom of
-        the run with the fewest periods (periods − 1).
+        mean; its standard uncertainty by the delete-one-period jackknife of that spread,
+        degrees of freedom the periods in all − 1.
     """
-    per_run = np.array([r.inertia_kg_m2 for r in result.runs])
-    scale = (
-        2 * math.pi * np.array([r.velocity_amplitude_rad_s * r.frequency_hz for r in result.runs])
-    )
-    u = np.array([r.quadrature_u_nm for r in result.runs]) / scale
+    n_runs = len(result.runs)
+    blocks = [
+        _with_inertia_per_run(block, index, n_runs)
+        for index, run in enumerate(result.runs)
+        for block in _run_blocks(run, index, n_runs, result.method, result.harmonics)
+    ]
+    normal = np.sum([b[0] for b in blocks], axis=0)
+    rhs = np.sum([b[1] for b in blocks], axis=0)
+
+    def spread_pct(n: FloatArray, r: FloatArray) -> float:
+        per_run = np.linalg.solve(n, r)[:n_runs]
+        return 100 * float(np.ptp(per_run) / per_run.mean())
+
+    try:
+        value = spread_pct(normal, rhs)
+        leave_out = np.array([spread_pct(normal - n, rhs - r) for n, r in blocks])
+    except np.linalg.LinAlgError as exc:
+        raise IdentificationError("a J per amplitude is not separable from these runs") from exc
+    count = len(blocks)
+    u = math.sqrt((count - 1) / count * float(np.sum((leave_out - leave_out.mean()) ** 2)))
     return Estimate(
         name="inertia_amplitude_spread_pct",
-        value=100 * float(np.ptp(per_run) / per_run.mean()),
-        standard_uncertainty=100 * float(np.sqrt(np.sum(u**2)) / per_run.mean()),
+        value=value,
+        standard_uncertainty=u,
         unit="%",
-        dof=float(min(r.periods for r in result.runs) - 1),
+        dof=float(count - 1),
     )
+
+
+def _with_inertia_per_run(block: Block, index: int, n_runs: int) -> Block:
+    """A period's normal equations with the α column (first) split into one per run, this
+    period's run in column ``index``: ``Φ' = Φ·M`` gives ``Z'ᵀΦ' = Mᵀ(ZᵀΦ)M``."""
+    columns = block[0].shape[1]
+    spread = np.zeros((columns, n_runs + columns - 1))
+    spread[0, index] = 1.0
+    spread[1:, n_runs:] = np.eye(columns - 1)
+    return spread.T @ block[0] @ spread, spread.T @ block[1]
 
 
 def stiffness_corrected_inertia(

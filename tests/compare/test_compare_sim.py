@@ -13,10 +13,10 @@ u(Δ)):
   off: the tracking error (+183 σ); compensation table not applied: the residual cogging
   ripple (+7.5 σ); current loop 2–3 × slower: its time constant (+210 σ);
 - the mechanics are identified from the measured motion and torque, so they stay, with
-  two exceptions: a softer velocity loop dwells longer at each sine reversal, which moves
-  ``inertia_amplitude_spread_pct`` (+5 to +6 at −50 %), and the filter moves ``coulomb_nm``
-  and the spread by about −1; a command delay is lag the current-loop protocol measures
-  as part of τ.
+  two exceptions: the filter moves ``coulomb_nm`` by about −1; a command delay is lag the
+  current-loop protocol measures as part of τ. (A softer loop dwells longer at each sine
+  reversal; that moved ``inertia_amplitude_spread_pct`` by +5 to +6 σ at −50 % while the
+  spread was the article's per-run ``c/(V·2πf)``, reversals included.)
 
 Every firmware edit goes through ``firmware_variants.with_firmware``.
 """
@@ -44,7 +44,6 @@ SERIAL = "CMP-1"
 BASELINE_SEED = 11
 CANDIDATE_SEED = 12
 
-SPREAD = "inertia_amplitude_spread_pct"
 TAU = "current_loop_time_constant_ms"
 #: the closed-loop protocols' results: they measure the loop, so any change may move them
 CLOSED_LOOP_PREFIXES = ("velocity_", "step_", "tracking_", "standstill_", "cogging_ripple_",
@@ -53,9 +52,9 @@ CLOSED_LOOP_PREFIXES = ("velocity_", "step_", "tracking_", "standstill_", "coggi
 MAY_FLAG: dict[str, dict[str, str]] = {
     # a loop half as stiff lets the in-loop noise stick-slip the slow staircase (4 of 9
     # speeds at × 0.5): the Stribeck protocol refuses to fit, its results go MISSING
-    "velocity_gain": {SPREAD: "CHANGED", "static_friction_nm": "MISSING",
+    "velocity_gain": {"static_friction_nm": "MISSING",
                       "stribeck_velocity_rad_s": "MISSING"},
-    "velocity_filter": {SPREAD: "CHANGED", "coulomb_nm": "CHANGED"},
+    "velocity_filter": {"coulomb_nm": "CHANGED"},
     "current_loop": {TAU: "WORSE"},
     "command_delay": {TAU: "WORSE"},
     "feedforward_off": {},
