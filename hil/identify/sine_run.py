@@ -26,6 +26,13 @@ REVERSAL_BAND = 0.15  # fraction of the velocity amplitude
 DERIVATIVE_WINDOW_PERIODS = 0.02  # Savitzky–Golay window, in periods of the sine
 PHASE_BINS = 200
 HOLD_SAMPLES = 0.5  # the drive holds each reported torque over the following period
+#: ``torque_reports`` of a torque measured after the current loop (CiA 402 maps, ODrive)
+MEASURED_TORQUE = ("measured", "measured_current")
+#: a measured torque's hold, in control periods: the sample trails the torque acting over
+#: its period by ``T/(1 − e^{−T/τ}) − T/2 − τ`` for a first-order loop sampled at the
+#: period's start, from 1/2 (τ ≪ T) to 0 (τ ≫ T); minus the middle is taken, the range is a
+#: rectangular line (:func:`measured_torque_hold_u_s`)
+MEASURED_HOLD = -0.25
 
 
 def orthogonal_components(
@@ -244,7 +251,12 @@ def torque_hold_samples(recording: Recording, *, current_loop_lag_s: float) -> f
     shaft, plus the current loop's lag.
 
     An instantaneous torque sample is held over the drive's control period (the
-    recording's own period unless ``control_period_s`` says otherwise): half of it. A
+    recording's own period unless ``control_period_s`` says otherwise): half of it. A torque
+    the drive measured (:func:`measured_torque`) has the current loop's lag inside it (give
+    none then); sampled at the period's start, it trails the torque acting over the period
+    by 0 (a loop slow against the period) to half a period (a fast one), so its motion is
+    centred before the row: a quarter period before is taken (:data:`MEASURED_HOLD`), the
+    range is :func:`measured_torque_hold_u_s`. A
     torque averaged over the row period ``T_s`` (``torque_sample = "mean"``) has its
     centroid ``T_c − T_s/2`` after the position sample, which is taken a control period
     ``T_c`` before the row.
@@ -267,9 +279,29 @@ def torque_hold_samples(recording: Recording, *, current_loop_lag_s: float) -> f
     if recording.metadata.get("torque_sample") == "mean":
         mean_s = float(recording.metadata.get("torque_mean_period_s", step_s))
         hold_s = control_s - 0.5 * mean_s
+    elif measured_torque(recording):
+        hold_s = MEASURED_HOLD * control_s
     else:
         hold_s = HOLD_SAMPLES * control_s
     return (hold_s + current_loop_lag_s) / step_s
+
+
+def measured_torque(recording: Recording) -> bool:
+    """Whether the recording's torque is one the drive measured after its current loop
+    (``torque_reports`` ``"measured"`` or ``"measured_current"``: K_t times the measured
+    current), not the torque it commanded."""
+    return recording.metadata.get("torque_reports") in MEASURED_TORQUE
+
+
+def measured_torque_hold_u_s(recording: Recording) -> float:
+    """The standard uncertainty of when a measured torque acts (s): the rectangular range
+    around :data:`MEASURED_HOLD`, a quarter of the control period each way; 0 for a torque
+    the drive commanded, or an averaged one."""
+    if not measured_torque(recording) or recording.metadata.get("torque_sample") == "mean":
+        return 0.0
+    step_s = float(np.median(np.diff(recording.time_s)))
+    control_s = float(recording.metadata.get("control_period_s", step_s))
+    return abs(MEASURED_HOLD) * control_s / math.sqrt(3)
 
 
 def without_cable_loop(recording: Recording, loop: CableLoop | None) -> Recording:

@@ -27,7 +27,12 @@ from hil.identify.inertia_friction import (
     stiffness_corrected_inertia,
 )
 from hil.identify.position_torque import PositionTorque
-from hil.identify.sine_run import analyse_sine_run, torque_hold_samples, without_cable_loop
+from hil.identify.sine_run import (
+    analyse_sine_run,
+    measured_torque_hold_u_s,
+    torque_hold_samples,
+    without_cable_loop,
+)
 from hil.motion import Excitation, Mode
 from hil.profile import UnitProfile
 from hil.recording import Recording
@@ -330,6 +335,10 @@ def with_earlier_inputs(
         inputs.append(("current-loop time constant τ taken out (current_loop)",
                        lag.standard_uncertainty, "s",
                        at(lag_s + lag.standard_uncertainty, loop)))
+    if (hold_u_s := max(measured_torque_hold_u_s(r) for r in recordings)) > 0:
+        inputs.append(("when the drive's measured torque acts: 0 to half a control period "
+                       "before its sample (rectangular)", hold_u_s, "s",
+                       at(lag_s + hold_u_s, loop)))
     if loop is not None and loop.half_width_u_nm > 0:
         wider = dataclasses.replace(loop, half_width_nm=loop.half_width_nm + loop.half_width_u_nm)
         inputs.append(("cable hysteresis loop h taken out (gravity_cable)",
