@@ -164,17 +164,36 @@ def _refuse_unsupported(plant: PlantParams, firmware: Firmware) -> None:
                          "compensation tables")
 
 
-def _substeps(plant: PlantParams, variant: Variant, sigma0: float) -> int:
-    """The variant's sub-steps, raised until the stiffest mode has ≥ 12 steps per radian
-    and a late command can act within the period (to a quarter of it)."""
+#: sub-steps the current loop's time constant spans at least, per integrator: an
+#: integrator's phase error is a lag (or lead) the unit does not have, and the first-order
+#: symplectic Euler's position leads by half a step (1.6 % of τ at 32)
+CURRENT_LOOP_STEPS: Final = {"symplectic_euler": 32, "heun": 16, "rk4": 4}
+
+
+def _substeps(plant: PlantParams, firmware: Firmware, variant: Variant, sigma0: float) -> int:
+    """The variant's sub-steps, raised until the stiffest mode has ≥ 12 steps per radian,
+    the current loop's τ is resolved (:data:`CURRENT_LOOP_STEPS`) and a late command can
+    act within the period (to a quarter of it)."""
     motor = plant.inertia_kg_m2
     stiffest = sigma0 / motor if variant.friction_law == "lugre" else 0.0
     if plant.load_inertia_kg_m2 > 0:
         reduced = motor * plant.load_inertia_kg_m2 / (motor + plant.load_inertia_kg_m2)
         stiffest = max(stiffest, plant.shaft_stiffness_nm_rad / reduced)
     needed = math.ceil(12.0 * math.sqrt(stiffest) / variant.sample_rate_hz)
+    tau_s = firmware.current_loop_time_constant_s
+    current = (math.ceil(CURRENT_LOOP_STEPS[variant.integrator]
+                         / (tau_s * variant.sample_rate_hz)) if tau_s > 0 else 1)
     timing = 4 if variant.apply_delay_rel else 1  # the command acts a quarter-period late
-    return max(variant.substeps, needed, timing)
+    return max(variant.substeps, needed, current, timing)
+
+
+def apply_delay_s(plant: PlantParams, firmware: Firmware, variant: Variant) -> float:
+    """When a new torque command acts within its period, as simulated: the drawn part of
+    the period rounded to the sub-steps the run takes (s)."""
+    static = max(plant.static_friction_nm, plant.coulomb_nm)
+    substeps = _substeps(plant, firmware, variant,
+                         static / variant.presliding_rad if static > 0 else 0.0)
+    return round(variant.apply_delay_rel * substeps) / substeps / variant.sample_rate_hz
 
 
 def _parameters(plant: PlantParams, firmware: Firmware, variant: Variant) -> FloatArray:
@@ -205,7 +224,7 @@ def _parameters(plant: PlantParams, firmware: Firmware, variant: Variant) -> Flo
     p[vk.V_KT] = plant.torque_constant_nm_a
     p[vk.V_STEP_RAD] = 2 * math.pi / counts if counts else 0.0
     p[vk.V_INTEGRATOR] = vk.INTEGRATOR_NAMES.index(variant.integrator)
-    p[vk.V_SUBSTEPS] = _substeps(plant, variant, sigma0)
+    p[vk.V_SUBSTEPS] = _substeps(plant, firmware, variant, sigma0)
     p[vk.V_LUGRE] = float(lugre)
     p[vk.V_SIGMA0] = sigma0
     p[vk.V_SIGMA1] = 2 * variant.bristle_damping_ratio * math.sqrt(sigma0 * plant.inertia_kg_m2)
@@ -262,5 +281,7 @@ def simulate_variant(plant: PlantParams, firmware: Firmware, variant: Variant, *
         columns={"time_s": time_s, "position_rad": position, "velocity_rad_s": velocity,
                  "torque_nm": torque, "velocity_cmd_rad_s": command, "current_a": current},
         metadata={"drive": "plant_sim.variant", "control_mode": "velocity", "seed": str(seed),
-                  "variant": labels},
+                  "variant": labels,
+                  "torque_reports": ("measured_current" if variant.torque_tap == "measured"
+                                     else "demand")},
         source="plant_sim.variant")

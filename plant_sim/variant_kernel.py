@@ -102,10 +102,28 @@ def _net_drive(p: np.ndarray, cogging: np.ndarray, ripple: np.ndarray, x: np.nda
 
 
 @njit(cache=True, fastmath=False)
+def _current_at(p: np.ndarray, i0: float, target: float, t: float) -> float:
+    """The current ``t`` into a step that began at ``i0``, the loop settling on ``target``
+    (first order, exact)."""
+    if p[V_TAU_I] <= 0.0:
+        return target
+    return target + (i0 - target) * math.exp(-t / p[V_TAU_I])
+
+
+@njit(cache=True, fastmath=False)
+def _mean_current(p: np.ndarray, i0: float, target: float, h: float) -> float:
+    """The current's mean over a step of ``h`` (its exact impulse over ``h``)."""
+    if p[V_TAU_I] <= 0.0:
+        return target
+    return float(target + (i0 - target) * p[V_TAU_I] / h * (1.0 - math.exp(-h / p[V_TAU_I])))
+
+
+@njit(cache=True, fastmath=False)
 def _step(p: np.ndarray, cogging: np.ndarray, ripple: np.ndarray, x: np.ndarray, h: float,
-          i0: float, i1: float, disturbance: float, z: float) -> float:
-    """Advance ``x`` over one physics step (the current ramps from ``i0`` to ``i1``);
-    returns the bristle state after it."""
+          i0: float, target: float, disturbance: float, z: float) -> float:
+    """Advance ``x`` over one physics step (the current settling from ``i0`` on ``target``,
+    taken exactly wherever the integrator evaluates it, so that no integrator's step adds
+    a lag of its own to the current loop's); returns the bristle state after it."""
     lugre = p[V_LUGRE] != 0.0
     stuck = False
     sign = 1.0 if x[1] >= 0.0 else -1.0
@@ -119,7 +137,8 @@ def _step(p: np.ndarray, cogging: np.ndarray, ripple: np.ndarray, x: np.ndarray,
     method = int(p[V_INTEGRATOR])
     before = x[1]
     if method == 0:
-        a_m, a_l = _accelerations(p, cogging, ripple, x, i0, disturbance, sign, z, stuck)
+        a_m, a_l = _accelerations(p, cogging, ripple, x, _mean_current(p, i0, target, h),
+                                  disturbance, sign, z, stuck)
         x[1] += h * a_m
         x[3] += h * a_l
         x[0] += h * x[1]
@@ -135,7 +154,7 @@ def _step(p: np.ndarray, cogging: np.ndarray, ripple: np.ndarray, x: np.ndarray,
                 scale = h * nodes[s]
                 for j in range(4):
                     y[j] = x[j] + scale * k[s - 1, j]
-            current = i0 + nodes[s] * (i1 - i0)
+            current = _current_at(p, i0, target, nodes[s] * h)
             a_m, a_l = _accelerations(p, cogging, ripple, y, current, disturbance, sign, z, stuck)
             k[s, 0] = y[1]
             k[s, 1] = a_m
@@ -217,10 +236,6 @@ def run_variant(p: np.ndarray, cogging: np.ndarray, ripple: np.ndarray, command:
         h = dt / substeps
         for s in range(substeps):
             target = (applied if s < switch else reference) / p[V_KT]
-            if p[V_TAU_I] > 0.0:
-                next_current = target + (current - target) * math.exp(-h / p[V_TAU_I])
-            else:
-                next_current = target
-            z = _step(p, cogging, ripple, x, h, current, next_current, disturbance[k], z)
-            current = next_current
+            z = _step(p, cogging, ripple, x, h, current, target, disturbance[k], z)
+            current = _current_at(p, current, target, h)
         applied = reference
