@@ -19,6 +19,7 @@ from hil.identify.current_loop import (
     torque_hold_s,
 )
 from hil.identify.estimate import Estimate
+from hil.identify.lag_model import check_lag_model
 from hil.measurement import Declared, declare
 from hil.profile import UnitProfile
 from hil.recording import Recording
@@ -71,12 +72,20 @@ def result(drive: Drive, calibration: CalibrationRun, profile: UnitProfile,
                         acquisition=lambda found: acquisition_path(found[1].metadata,
                                                                    fs_hz=spec.fs_hz))
     analysed, recording = runs.first
+    hold = torque_hold_s(recording.metadata, fs_hz=spec.fs_hz)
+    lag_model = check_lag_model(analysed, fs_hz=spec.fs_hz, hold_s=hold.hold_s,
+                                mean_samples=hold.mean_samples)
+    if (line := lag_model.message()) is not None:
+        calibration.protocol(NAME).messages.append(line)
     calibration.details[NAME] = CurrentLoopDetails(
         **runs.details(),
-        torque_hold=torque_hold_s(recording.metadata, fs_hz=spec.fs_hz),
+        torque_hold=hold,
         acquisition=acquisition_path(recording.metadata, fs_hz=spec.fs_hz),
         viscous_over_inertia_1_s=analysed.viscous_over_inertia_1_s,
         chi2_per_dof=analysed.chi2_per_dof,
+        lag_model_p_value=lag_model.p_value,
+        dead_time_ms=lag_model.dead_time_ms,
+        dead_time_u_ms=lag_model.dead_time_u_ms,
         points=tuple(
             LagPoint(frequency_hz=p.frequency_hz, lag_phase_rad=p.lag_phase_rad,
                      lag_phase_u_rad=p.lag_phase_u_rad, inertia_kg_m2=p.inertia_kg_m2,

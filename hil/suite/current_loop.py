@@ -189,6 +189,9 @@ class CurrentLoopDetails(RunDetails):
     acquisition: str  # the rows' path: its method line (hil.identify.current_loop)
     viscous_over_inertia_1_s: float
     chi2_per_dof: float
+    lag_model_p_value: float  # χ² test of the first-order lag (hil.identify.lag_model)
+    dead_time_ms: float | None  # fitted beside τ when the first-order lag is rejected
+    dead_time_u_ms: float | None
     points: tuple[LagPoint, ...]
 
 

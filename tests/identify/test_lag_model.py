@@ -1,0 +1,55 @@
+"""The current-loop protocol tests its first-order lag on its own phases: a drive whose new
+command acts late within its period (a dead time beside the loop's lag) is told apart from
+one without, and the dead time fitted beside τ is the simulated one. Recorded by the second
+simulator (:mod:`plant_sim.variant`), written apart from the analysis."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import pytest
+
+from hil.drives.sim import SimDrive
+from hil.identify.lag_model import check_lag_model
+from hil.profile import load_profile
+from hil.suite import current_loop as protocol
+from plant_sim.firmware import Firmware
+from plant_sim.params import PlantParams
+from plant_sim.variant import MAIN_LIKE, apply_delay_s, simulate_variant
+
+PROFILE = load_profile("demo_gimbal_elevation")  # its current-loop protocol and limits
+PLANT = PlantParams(inertia_kg_m2=0.0036, viscous_nm_s_rad=0.005, coulomb_nm=0.02,
+                    static_friction_nm=0.026, stribeck_velocity_rad_s=0.02,
+                    torque_noise_nm=0.0015)
+FIRMWARE = Firmware(velocity_filter_hz=300.0, velocity_kp_nm_s_rad=0.45,
+                    velocity_ki_nm_rad=12.0, current_loop_time_constant_s=0.0003)
+
+
+def _check(apply_delay_rel: float):  # type: ignore[no-untyped-def]
+    variant = dataclasses.replace(MAIN_LIKE, sample_rate_hz=4000.0, integrator="rk4",
+                                  apply_delay_rel=apply_delay_rel)
+    info = SimDrive(PLANT, firmware=FIRMWARE, limits=PROFILE.limits, fs_hz=4000.0, seed=0).info
+    spec = dataclasses.replace(protocol.Spec.from_profile(PROFILE, info), fs_hz=4000.0)
+    recording = simulate_variant(PLANT, FIRMWARE, variant,
+                                 velocity_command_rad_s=spec.carrier_command(), seed=5)
+    result = protocol.analyse(recording, spec)
+    return check_lag_model(result, fs_hz=4000.0), apply_delay_s(PLANT, FIRMWARE, variant)
+
+
+def test_a_first_order_loop_passes_its_own_test() -> None:
+    check, _ = _check(0.0)
+    assert check.adequate, check
+    assert check.message() is None and check.dead_time_ms is None
+
+
+@pytest.mark.parametrize("apply_delay_rel", [0.3, 0.6])
+def test_a_dead_time_is_found_and_stated(apply_delay_rel: float) -> None:
+    check, delay_s = _check(apply_delay_rel)
+    assert not check.adequate, check
+    assert check.dead_time_ms is not None and check.dead_time_u_ms is not None
+    assert abs(check.dead_time_ms - 1000 * delay_s) <= 2 * check.dead_time_u_ms, check
+    assert check.time_constant_ms is not None and check.time_constant_u_ms is not None
+    assert abs(check.time_constant_ms - 1000 * FIRMWARE.current_loop_time_constant_s) \
+        <= 2 * check.time_constant_u_ms, check
+    message = check.message()
+    assert message is not None and "dead time" in message
