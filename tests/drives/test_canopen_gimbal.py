@@ -22,8 +22,9 @@ from hil.drives.cia402.drive import CanOpenDrive
 from hil.drives.cia402.emulator import ENABLED
 from hil.drives.emulated import canopen_emulator
 from hil.drives.station import CanOpenStation, load_station
-from hil.errors import DriveStateError, ProfileError
+from hil.errors import DriveStateError, LimitViolationError, ProfileError
 from hil.identify.cross_coupling import fit_cross_coupling
+from hil.motion import Excitation, Mode
 from hil.profile import load_profile
 from hil.suite import cross_coupling
 from hil.suite.plan import acquisition_info
@@ -232,3 +233,45 @@ def test_hidden_products_of_inertia_are_found_over_the_bus(tmp_path: Path) -> No
         # resolved: U within 5 % of the ±0.0006 kg·m² balance limits (three periods a pass
         # give √(5/3) the simulator test's U and fewer degrees of freedom)
         assert estimate.expanded_uncertainty < 3e-5, estimate
+
+
+def test_an_elevation_path_the_bus_cannot_play_is_refused_before_motion() -> None:
+    """A path plays on the elevation's recorder beside a recorder run of the azimuth: a
+    streamed run with one is refused, as is a path outside the elevation drive's own
+    software position limits (0x607D); a station that streams everything has no
+    elevation motion at all. Nothing moves."""
+    profile = load_profile("demo_gimbal_azimuth")
+    station = load_station(STATION)
+    assert isinstance(station, CanOpenStation)
+
+    def swing(fs_hz: float, amplitude_rad: float) -> Excitation:
+        n = round(0.5 * fs_hz)
+        return Excitation(name="swinging_forward", mode=Mode.VELOCITY, fs_hz=fs_hz,
+                          command=np.full(n, 0.1),
+                          elevation_path_rad=amplitude_rad * np.sin(np.linspace(0, 3, n)))
+
+    with canopen_emulator(profile, seed=8, base_station=station) as (emulator, on_bus), \
+            CanOpenDrive(on_bus, limits=profile.limits) as drive:
+        drive.enable()
+        elevation = emulator.held_nodes["elevation"]
+        before = (drive.status().position_rad, elevation.plant.position_rad)
+        with pytest.raises(DriveStateError, match=r"at 1000 Hz would be streamed: the "
+                                                  r"elevation follows its path on its own "
+                                                  r"drive recorder"):
+            drive.run(swing(1000.0, 0.3))
+        held = drive.held.axes["elevation"]
+        held.write(0x607D, 2, round(0.2 * held.counts_per_rad))
+        with pytest.raises(LimitViolationError, match=r"node 6 \(elevation axis\): the path "
+                                                      r"spans \[\+0\.0000, \+0\.3000\] rad, "
+                                                      r"outside its drive's software position "
+                                                      r"limits \(0x607D\)"):
+            drive.run(swing(2000.0, 0.3))
+        assert (drive.status().position_rad, elevation.plant.position_rad) == pytest.approx(
+            before, abs=1e-4)
+    streaming = dataclasses.replace(station, acquisition="stream")
+    with canopen_emulator(profile, seed=8, base_station=streaming) as (_, on_bus), \
+            CanOpenDrive(on_bus, limits=profile.limits) as drive:
+        assert Capability.ELEVATION_MOTION not in drive.info.capabilities
+        drive.enable()
+        with pytest.raises(DriveStateError, match=r"lacks: elevation axis that follows a path"):
+            drive.run(swing(1000.0, 0.3))
