@@ -194,6 +194,9 @@ class CalibrationRun:
         # every result the profile declares → the protocol that measures it (the suite's
         # catalogue): what is missing at the end makes the run INCOMPLETE
         self.expected: dict[str, str] = {}
+        # results measured but not judged, each with why (a share too uncertain to decide
+        # on: its protocol judges another result instead); never make the run INCOMPLETE
+        self.unresolved: dict[str, str] = {}
         self._archived = False
 
     # -- used by protocols ----------------------------------------------------------------
@@ -339,6 +342,13 @@ class CalibrationRun:
         if message:
             record.messages.append(message)
 
+    def state_unresolved(self, protocol: str, name: str, reason: str) -> None:
+        """``name`` was measured but cannot be judged (``reason`` says why and what its
+        protocol judged instead): the certificate lists it, with the reason, under the
+        results not measured, and it does not make the run INCOMPLETE."""
+        self.protocol(protocol)  # the protocol ran
+        self.unresolved[name] = reason
+
     def report_skip(self, name: str, reason: str) -> None:
         record = self.protocol(name)
         record.skipped = True
@@ -367,6 +377,10 @@ class CalibrationRun:
         missing = []
         for name, protocol in self.expected.items():
             if name in measured:
+                continue
+            if name in self.unresolved:
+                missing.append(NotMeasured(parameter=name, protocol=protocol,
+                                           reason=self.unresolved[name], required=False))
                 continue
             record = self.protocols.get(protocol)
             if record is None:

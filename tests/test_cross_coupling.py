@@ -9,7 +9,6 @@ parallel-axis theorem, never from the code under test."""
 from __future__ import annotations
 
 import dataclasses
-import math
 from pathlib import Path
 
 import numpy as np
@@ -18,78 +17,27 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from hil.calibration import CalibrationRun
-from hil.drives.base import Drive
 from hil.drives.connect import open_drive
 from hil.errors import DriveStateError
 from hil.identify.cross_coupling import fit_cross_coupling
 from hil.motion import Excitation, Mode
 from hil.profile import UnitProfile, load_profile
-from hil.recording import Recording
-from hil.suite.cross_coupling import Spec, coupling_runs, motion
+from hil.suite.cross_coupling import Spec, coupling_runs
+from tests.gimbal_truth import InnerGimbal, plant_changes
+from tests.gimbal_truth import coupling_passes as _measure
 
+# the protocol's passes as _measure: the Hypothesis test's source as it was (its
+# derandomized draws hash it, tests/conftest.py)
 AZIMUTH = load_profile("demo_gimbal_azimuth")
 ELEVATION = load_profile("demo_gimbal_elevation")
-G = 9.81
-
-
-@dataclasses.dataclass(frozen=True)
-class InnerGimbal:
-    """The truth of a drawn inner gimbal: a payload with its own products (in its frame:
-    x the line of sight, y the elevation axis, z the zenith when level) and an imbalance
-    mass ``mass_kg`` at ``(x, y, z)`` metres from the axes' crossing."""
-
-    mass_kg: float
-    at_m: tuple[float, float, float]
-    own_xy: float  # the payload's own products of inertia (kg·m², as integrals of m·x·y)
-    own_yz: float
-
-    @property
-    def level(self) -> float:
-        """C_level: the mass matrix's (elevation, azimuth) term with the elevation level,
-        the tensor's yz element, ``−∫y·z dm``."""
-        _, y, z = self.at_m
-        return -(self.own_yz + self.mass_kg * y * z)
-
-    @property
-    def vertical(self) -> float:
-        """C_vertical: minus the tensor's xy element, ``∫x·y dm``."""
-        x, y, _ = self.at_m
-        return self.own_xy + self.mass_kg * x * y
-
-    @property
-    def gravity(self) -> tuple[float, float]:
-        """The elevation's holding torque ``m·g·e·cos(el + φ)`` of the mass."""
-        x, _, z = self.at_m
-        return self.mass_kg * G * math.hypot(x, z), math.atan2(z, x)
 
 
 def _unit(inner: InnerGimbal) -> tuple[UnitProfile, UnitProfile]:
     assert AZIMUTH.plant is not None
     assert ELEVATION.plant is not None
-    x, y, z = inner.at_m
-    m = inner.mass_kg
-    # the mass also adds to the inertias about both axes (parallel axes): ΔJ, P and J_el
-    azimuth = dataclasses.replace(AZIMUTH, plant=AZIMUTH.plant.with_changes(
-        inertia_coupling_level_kg_m2=inner.level,
-        inertia_coupling_vertical_kg_m2=inner.vertical,
-        inertia_elevation_kg_m2=AZIMUTH.plant.inertia_elevation_kg_m2 + m * (z * z - x * x),
-        inertia_product_kg_m2=AZIMUTH.plant.inertia_product_kg_m2 + m * x * z,
-        load_inertia_kg_m2=AZIMUTH.plant.load_inertia_kg_m2 + m * (x * x + y * y)))
-    mge, phase = inner.gravity
-    elevation = dataclasses.replace(ELEVATION, plant=ELEVATION.plant.with_changes(
-        inertia_kg_m2=ELEVATION.plant.inertia_kg_m2 + m * (x * x + z * z),
-        gravity_mge_nm=ELEVATION.plant.gravity_mge_nm + mge, gravity_phase_rad=phase))
-    return azimuth, elevation
-
-
-def _measure(drive: Drive, spec: Spec) -> dict[str, Recording]:
-    passes = {}
-    for e in motion(spec, position=lambda: drive.status().position_rad,
-                    set_elevation=drive.set_elevation):
-        recording = drive.run(e)
-        if e.mode is not Mode.POSITION:
-            passes[e.name] = recording
-    return passes
+    azimuth, elevation = plant_changes(inner, azimuth=AZIMUTH.plant, elevation=ELEVATION.plant)
+    return (dataclasses.replace(AZIMUTH, plant=AZIMUTH.plant.with_changes(**azimuth)),
+            dataclasses.replace(ELEVATION, plant=ELEVATION.plant.with_changes(**elevation)))
 
 
 @settings(max_examples=8, deadline=None)

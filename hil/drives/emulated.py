@@ -61,10 +61,12 @@ def canopen_emulator(
 
     A station naming a gimbal's axes (``[canopen.axes]``) gets one emulated node per axis
     on that channel: ``profile``'s axis is the node under test, every other axis a node
-    emulating the plant of its ``[canopen.emulated_profiles]`` profile; the elevation
-    node's position is the azimuth plant's elevation (J_az(el)).
+    emulating the plant of its ``[canopen.emulated_profiles]`` profile, all on one bus
+    connection; an azimuth and an elevation node are stepped as one coupled two-axis plant
+    (:mod:`hil.drives.cia402.emulator_gimbal`).
     """
     from hil.drives.cia402.emulator import Cia402Emulator
+    from hil.drives.cia402.emulator_gimbal import couple, shared_network
 
     station = base_station or load_station(builtin_station(CANOPEN_STATION))
     assert isinstance(station, CanOpenStation)
@@ -73,12 +75,14 @@ def canopen_emulator(
     station = dataclasses.replace(station, interface="virtual", channel=channel,
                                   **(station_changes or {})).for_axis(profile.axis)
     with ExitStack() as running:
-        held = {name: running.enter_context(Cia402Emulator(
+        network = running.enter_context(shared_network(
+            interface=station.interface, channel=channel)) if station.held else None
+        held = {name: Cia402Emulator(
             _plant(other, "canopen-emulator"), firmware=other.firmware,
             fs_hz=other.sample_rate_hz, seed=seed + 1000 * (n + 1), channel=channel,
             interface=station.interface, node_id=node_id,
             rated_torque_nm=rated_torque_nm(other), serial_number=serial + n + 1,
-            eds_path=station.eds_path, object_map=station.object_map))
+            eds_path=station.eds_path, object_map=station.object_map, network=network)
             for n, (name, node_id) in enumerate(station.held.items())
             for other in (_emulated_profile(station, name),)}
         elevation = held.get("elevation")
@@ -96,9 +100,15 @@ def canopen_emulator(
             eds_path=station.eds_path,
             object_map=emulated_map or station.object_map,
             clamp_output_bit=emulator_options.pop("clamp_output_bit", _clamp_bit(station)),
-            elevation_of=None if elevation is None else lambda: elevation.plant.position_rad,
+            network=network,
             **emulator_options,
         )
+        # an azimuth and an elevation node are one coupled plant; another pair of axes
+        # only has the azimuth's J follow the elevation node's position (J_az(el))
+        if couple({profile.axis: emulator, **held}, network) is None and elevation is not None:
+            emulator.follow_elevation_of(lambda: elevation.plant.position_rad)
+        for node in held.values():
+            running.enter_context(node)
         emulator.held_nodes = held  # the bus's other emulated nodes, by axis name
         running.enter_context(emulator)
         yield emulator, _with_transducer(station, emulator, running)

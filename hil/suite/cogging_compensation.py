@@ -23,6 +23,7 @@ from hil.closed_loop.ripple import position_ripple, ripple_estimate
 from hil.details import RunDetails
 from hil.drives.base import Capability, DriveInfo
 from hil.errors import IdentificationError
+from hil.gum import format_result
 from hil.identify.estimate import Component, Estimate, with_budget
 from hil.motion import CompensationTable, Excitation, Mode, PositionHarmonic
 from hil.profile import UnitProfile
@@ -35,8 +36,12 @@ from hil.suite.travel import TravelSpec, on_command_grid, runs_from_start, speed
 
 NAME = "cogging_compensation"
 TABLE_LINE = "the table's own uncertainty"  # shared by repeated runs (stop_rule)
+REMOVED = "cogging_compensation_removed_pct"
 MEASUREMENTS = ("cogging_ripple_uncompensated_urad", "cogging_ripple_compensated_urad",
-                "cogging_compensation_removed_pct")
+                REMOVED)
+#: a share removed whose U reaches this many points cannot tell a table that removes the
+#: cogging (100 %) from one that removes none (0 %): it is stated, not judged
+UNRESOLVED_U_PCT = 50.0
 #: what it takes from earlier protocols (:mod:`hil.suite.needs`)
 TABLE = Need(protocol="cogging", result="compensation_table",
              without="skipped: no compensation table to load")
@@ -197,9 +202,32 @@ def removed_fraction(without: Estimate, with_table: Estimate) -> Estimate:
     lines += [dataclasses.replace(c, source=f"{c.source} [table loaded]",
                                   sensitivity=-c.sensitivity * 100 / without.value)
               for c in with_table.components()]
-    base = Estimate(name="cogging_compensation_removed_pct", value=value,
+    base = Estimate(name=REMOVED, value=value,
                     standard_uncertainty=0.0, unit="%")
     return with_budget(base, lines, value=value)
+
+
+def unresolved(estimates: Mapping[str, Estimate]) -> str | None:
+    """Why the share removed cannot be judged, or ``None`` when it can.
+
+    The share's U is mostly the residual's U over the ripple before compensation: where
+    that ripple is not large against the residual's uncertainty (a motor with little
+    cogging, a noisy pass) the percentage says nothing, on any drive, and judging it against
+    its limits would hold a good unit for review or fail it. The residual ripple is then
+    what is judged, against its absolute limit; the share is stated with the reason.
+    """
+    removed = estimates[REMOVED]
+    if removed.expanded_uncertainty < UNRESOLVED_U_PCT:
+        return None
+    before = estimates["cogging_ripple_uncompensated_urad"]
+    after = estimates["cogging_ripple_compensated_urad"]
+    return (f"not resolvable: {format_result(removed.value, removed.expanded_uncertainty, '%')}"
+            f" (U ≥ {UNRESOLVED_U_PCT:g} points cannot tell a table that removes the cogging "
+            "from one that removes none: the ripple before compensation, "
+            f"{format_result(before.value, before.expanded_uncertainty, 'µrad')}, is not large "
+            "against the residual's U, "
+            f"{format_result(after.value, after.expanded_uncertainty, 'µrad')}); the residual "
+            "is judged against its limit instead")
 
 
 def planned_motion(profile: UnitProfile, info: DriveInfo, at: Position) -> Iterable[Excitation]:

@@ -22,10 +22,15 @@ from hil.drives.cia402.drive import CanOpenDrive
 from hil.drives.cia402.emulator import ENABLED
 from hil.drives.emulated import canopen_emulator
 from hil.drives.station import CanOpenStation, load_station
-from hil.errors import DriveStateError, ProfileError
+from hil.errors import DriveStateError, LimitViolationError, ProfileError
+from hil.identify.cross_coupling import fit_cross_coupling
+from hil.motion import Excitation, Mode
 from hil.profile import load_profile
+from hil.suite import cross_coupling
+from hil.suite.plan import acquisition_info
 from hil.suite.travel import move_excitation
 from tests.drives.conftest import sine
+from tests.gimbal_truth import InnerGimbal, coupling_passes, plant_changes
 
 STATION = builtin_fixture("station_canopen_gimbal_emulator.toml")
 
@@ -161,3 +166,112 @@ def test_a_hidden_product_of_inertia_is_found_over_the_bus(tmp_path: Path) -> No
         held = re.fullmatch(r"elevation node 6 at ([-+.0-9]+) rad", entry["held_axes"])
         assert held is not None
         assert float(held[1]) == pytest.approx(commanded, abs=0.003)
+
+
+def test_hidden_products_of_inertia_are_found_over_the_bus(tmp_path: Path) -> None:
+    """The emulated gimbal is one coupled plant (both nodes stepped together at each SYNC):
+    an inner gimbal drawn here (an imbalance mass and the payload's own products, as the
+    simulator's Hypothesis test draws them) hides the elevation axis's products of inertia;
+    the elevation drive follows the swing on its own recorder, started on the SYNC the
+    azimuth's starts on, and the cross-coupling passes find both products within their U."""
+    rng = np.random.default_rng(20261129)
+    inner = InnerGimbal(
+        mass_kg=float(rng.uniform(0.05, 0.4)),
+        at_m=(float(rng.uniform(-0.02, 0.02)), float(rng.choice([-1, 1]) * rng.uniform(0.02, 0.05)),
+              float(rng.uniform(-0.02, 0.02))),
+        own_xy=float(rng.uniform(-2e-4, 2e-4)), own_yz=float(rng.uniform(-2e-4, 2e-4)))
+    documents = {axis: tomllib.loads(builtin_fixture(f"demo_gimbal_{axis}.toml")
+                                     .read_text("utf-8")) for axis in ("azimuth", "elevation")}
+    plants = {axis: load_profile(f"demo_gimbal_{axis}").plant for axis in documents}
+    assert plants["azimuth"] is not None
+    assert plants["elevation"] is not None
+    changes = plant_changes(inner, azimuth=plants["azimuth"], elevation=plants["elevation"])
+    station_document = tomllib.loads(STATION.read_text(encoding="utf-8"))
+    for (axis, document), changed in zip(documents.items(), changes, strict=True):
+        document["plant"].update(changed)
+        path = tmp_path / f"{axis}.toml"
+        path.write_text(tomli_w.dumps(document), encoding="utf-8")
+        station_document["canopen"]["emulated_profiles"][axis] = str(path)
+    station_path = tmp_path / "station.toml"
+    station_path.write_text(tomli_w.dumps(station_document), encoding="utf-8")
+    # three steady periods a pass, not the profile's five: a test of ~30 s
+    azimuth = dataclasses.replace(
+        load_profile(tmp_path / "azimuth.toml"),
+        protocols={**documents["azimuth"]["protocols"],
+                   "cross_coupling": {**documents["azimuth"]["protocols"]["cross_coupling"],
+                                      "periods": 3}})
+    station = load_station(station_path)
+    assert isinstance(station, CanOpenStation)
+    with canopen_emulator(azimuth, seed=7, base_station=station) as (emulator, on_bus):
+        elevation = emulator.held_nodes["elevation"]
+        with CanOpenDrive(on_bus, limits=azimuth.limits) as drive:
+            assert Capability.ELEVATION_MOTION in drive.info.capabilities
+            seen, _ = acquisition_info(cross_coupling.NAME, azimuth, drive.info)
+            spec = cross_coupling.Spec.from_profile(azimuth, seen)
+            assert seen.recorder is not None  # on both drive recorders, 2 kHz
+            drive.enable()
+            passes = coupling_passes(drive, spec)
+        assert elevation.state != ENABLED
+        assert emulator.state != ENABLED
+    for name, recording in passes.items():
+        # the elevation followed its path, a row per azimuth row (its position loop lags a
+        # swing of 2.5 rad/s peak by about 0.08 rad: the fit uses where it was)
+        path = next(e for e in cross_coupling.motion(spec, position=lambda: 0.0)
+                    if e.name == name).elevation_path_rad
+        assert path is not None
+        assert len(recording.columns["elevation_rad"]) == len(path)
+        lag = np.abs(recording.columns["elevation_rad"] - path)
+        assert lag.max() < 0.25 * spec.amplitude_rad, (name, lag.max())
+    assert azimuth.plant is not None
+    gain = 1.0 + azimuth.plant.torque_constant_error_rel  # reported torque, nominal K_t
+    found = fit_cross_coupling(cross_coupling.coupling_runs(spec, passes),
+                               azimuth_inertia_kg_m2=1.03 * azimuth.plant.total_inertia_kg_m2
+                               / gain)
+    for estimate, truth in ((found.level, inner.level), (found.vertical, inner.vertical)):
+        assert abs(estimate.value - truth / gain) <= estimate.expanded_uncertainty, (
+            estimate, truth / gain)
+        # resolved: U within 5 % of the ±0.0006 kg·m² balance limits (three periods a pass
+        # give √(5/3) the simulator test's U and fewer degrees of freedom)
+        assert estimate.expanded_uncertainty < 3e-5, estimate
+
+
+def test_an_elevation_path_the_bus_cannot_play_is_refused_before_motion() -> None:
+    """A path plays on the elevation's recorder beside a recorder run of the azimuth: a
+    streamed run with one is refused, as is a path outside the elevation drive's own
+    software position limits (0x607D); a station that streams everything has no
+    elevation motion at all. Nothing moves."""
+    profile = load_profile("demo_gimbal_azimuth")
+    station = load_station(STATION)
+    assert isinstance(station, CanOpenStation)
+
+    def swing(fs_hz: float, amplitude_rad: float) -> Excitation:
+        n = round(0.5 * fs_hz)
+        return Excitation(name="swinging_forward", mode=Mode.VELOCITY, fs_hz=fs_hz,
+                          command=np.full(n, 0.1),
+                          elevation_path_rad=amplitude_rad * np.sin(np.linspace(0, 3, n)))
+
+    with canopen_emulator(profile, seed=8, base_station=station) as (emulator, on_bus), \
+            CanOpenDrive(on_bus, limits=profile.limits) as drive:
+        drive.enable()
+        elevation = emulator.held_nodes["elevation"]
+        before = (drive.status().position_rad, elevation.plant.position_rad)
+        with pytest.raises(DriveStateError, match=r"at 1000 Hz would be streamed: the "
+                                                  r"elevation follows its path on its own "
+                                                  r"drive recorder"):
+            drive.run(swing(1000.0, 0.3))
+        held = drive.held.axes["elevation"]
+        held.write(0x607D, 2, round(0.2 * held.counts_per_rad))
+        with pytest.raises(LimitViolationError, match=r"node 6 \(elevation axis\): the path "
+                                                      r"spans \[\+0\.0000, \+0\.3000\] rad, "
+                                                      r"outside its drive's software position "
+                                                      r"limits \(0x607D\)"):
+            drive.run(swing(2000.0, 0.3))
+        assert (drive.status().position_rad, elevation.plant.position_rad) == pytest.approx(
+            before, abs=1e-4)
+    streaming = dataclasses.replace(station, acquisition="stream")
+    with canopen_emulator(profile, seed=8, base_station=streaming) as (_, on_bus), \
+            CanOpenDrive(on_bus, limits=profile.limits) as drive:
+        assert Capability.ELEVATION_MOTION not in drive.info.capabilities
+        drive.enable()
+        with pytest.raises(DriveStateError, match=r"lacks: elevation axis that follows a path"):
+            drive.run(swing(1000.0, 0.3))

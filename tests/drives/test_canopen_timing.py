@@ -28,6 +28,7 @@ from hil.profile import UnitProfile
 from hil.recording import Recording
 from hil.suite import current_loop as protocol
 from plant_sim.firmware import Firmware
+from plant_sim.model import PlantTrace
 from plant_sim.params import PlantParams
 
 # the wall clock times its field-bus loops: run alone, not beside other tests (README)
@@ -129,14 +130,14 @@ def test_late_answer_stays_on_its_sync(profile: UnitProfile) -> None:
         drive.enable(Mode.TORQUE)
         start = drive.status().position_rad
         late_sync = emulator.sync_count + k0 + 10  # the run's SYNC k0 + 10 (counted from 1)
-        advance = emulator._advance
+        finish = emulator.finish
 
-        def late_advance() -> None:  # runs in the emulator's receive thread, at each SYNC
+        def late_finish(trace: PlantTrace, steps: int) -> None:  # the receive thread's SYNC
             if emulator.sync_count == late_sync:
                 time.sleep(3 * pdo_timeout_s)
-            advance()
+            finish(trace, steps)
 
-        emulator._advance = late_advance  # type: ignore[method-assign]
+        emulator.finish = late_finish  # type: ignore[method-assign]
         recording = drive.run(
             Excitation(name="step", mode=Mode.TORQUE, fs_hz=1000.0, command=command)
         )

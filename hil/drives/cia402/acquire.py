@@ -13,7 +13,8 @@ from __future__ import annotations
 import logging
 import math
 import struct
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
+from typing import Protocol
 
 import numpy as np
 
@@ -101,6 +102,17 @@ class RunSetup:
     conventions: dict[str, str]
     identity: dict[str, str]
     operation_mode: str
+
+
+class Follower(Protocol):
+    """A gimbal's other axis that follows a path on its own drive recorder while the axis
+    under test plays its run (:class:`hil.drives.cia402.held_axis.HeldAxis`)."""
+
+    def play(self, path_rad: np.ndarray, *, divider: int) -> None:
+        """Download the path and start it: it starts at the next SYNC."""
+
+    def played_rad(self) -> np.ndarray:
+        """Where it stood at each recorded sample of the path (rad)."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -407,8 +419,15 @@ def _stream_recording(
     return Recording(columns=floats, metadata=metadata, source=f"canopen:{excitation.name}")
 
 
-def run_recorder(link: CanLink, setup: RunSetup, excitation: Excitation) -> Acquired:
+def run_recorder(link: CanLink, setup: RunSetup, excitation: Excitation, *,
+                 follower: Follower | None = None) -> Acquired:
     """Play ``excitation`` from the drive's waveform table and upload its trace recorder.
+
+    With ``follower`` (the excitation has an ``elevation_path_rad``) the elevation's drive
+    plays that path from its own table, both tables started before the same SYNC (the
+    host's: nothing else produces one between the two starts), so sample k of both
+    recorders is the same control period; its recorded position is the recording's
+    ``elevation_rad`` column.
 
     Parameters
     ----------
@@ -443,6 +462,9 @@ def run_recorder(link: CanLink, setup: RunSetup, excitation: Excitation) -> Acqu
     wave = np.repeat(_raw_command(setup, excitation), divider).astype("<i4")
     link.write(waveform, 1, wave.tobytes())
     link.write(recorder, 3, divider)
+    if follower is not None:
+        assert excitation.elevation_path_rad is not None
+        follower.play(excitation.elevation_path_rad, divider=divider)
     link.write(recorder, 1, 1)
     loop_s = 1.0 / setup.recorder_rate_hz
     ticks = math.ceil(len(wave) * loop_s / st_period_s) + 1
@@ -472,7 +494,19 @@ def run_recorder(link: CanLink, setup: RunSetup, excitation: Excitation) -> Acqu
     except DriveError as exc:
         error = exc
     # a stop signal propagates: the caller quick-stops first, then uploads (recorder_upload)
-    return Acquired(recorder_upload(link, setup, excitation, divider), error)
+    recording = recorder_upload(link, setup, excitation, divider)
+    if follower is None or error is not None:
+        return Acquired(recording, error)
+    try:
+        followed = follower.played_rad()
+    except DriveError as exc:
+        return Acquired(recording, exc)
+    if len(followed) != len(recording):
+        return Acquired(recording, DriveStateError(
+            f"'{excitation.name}': the elevation's recorder holds {len(followed)} samples, "
+            f"node {setup.node_id}'s {len(recording)}: not one run"))
+    return Acquired(replace(recording, columns={**recording.columns,
+                                                "elevation_rad": followed}))
 
 
 def recorder_upload(link: CanLink, setup: RunSetup, excitation: Excitation,

@@ -9,6 +9,7 @@ a run against what the link can do before handing it to the acquisition.
 
 from __future__ import annotations
 
+import functools
 import logging
 import math
 from typing import Any
@@ -324,7 +325,8 @@ class CanOpenDrive(ClampedRotor, Drive):
             capabilities=st.equipment.capabilities() | frozenset(
                 ({Capability.COMPENSATION_TABLE}
                  if st.object_map.compensation_index is not None else set())
-                | ({Capability.ELEVATION_AXIS} if "elevation" in st.held else set())),
+                | ({Capability.ELEVATION_AXIS} if "elevation" in st.held else set())
+                | ({Capability.ELEVATION_MOTION} if self._elevation_follows else set())),
             recorder=Recorder(stream_rate_hz=rate_hz, samples=self.recorder_samples)
             if self.recorder_rate_hz > rate_hz else None,
             **sensor_fields(st.equipment),
@@ -333,6 +335,16 @@ class CanOpenDrive(ClampedRotor, Drive):
                        else {"control_period_s": f"{self.control_period_s:g}"})},
             transport=f"canopen {st.interface}:{st.channel} node {st.node_id}",
         )
+
+    @property
+    def _elevation_follows(self) -> bool:
+        """The held elevation can follow a path while this axis runs: this node's runs
+        above the stream rate play on its recorder, the elevation node has one too (the
+        station's object map), and the host produces the SYNC (both tables start before
+        the same one)."""
+        st = self.station
+        return ("elevation" in st.held and self.recorder_rate_hz > 0
+                and st.object_map.has_recorder and st.sync_producer == "host")
 
     # -- the contract ---------------------------------------------------------------------
     @property
@@ -467,13 +479,15 @@ class CanOpenDrive(ClampedRotor, Drive):
                     f"excitation '{excitation.name}' is sampled at {fs} Hz; this CANopen "
                     f"link streams at up to {self.stream_rate_hz:g} Hz (SYNC period in whole µs)"
                 )
+        follower = self._follower(excitation, use_recorder=use_recorder)
         start = self.status()
         check_limits(excitation, self.limits, start_position_rad=start.position_rad)
         if excitation.mode is not self.link.mode:
             self.states.select_mode(excitation.mode)
         if not use_recorder and round(1e6 / fs) != self._period_us:
             self._write_period(round(1e6 / fs))
-        acquire = run_recorder if use_recorder else run_stream
+        acquire = (functools.partial(run_recorder, follower=follower) if use_recorder
+                   else run_stream)
         shaft = self._shaft
         if shaft is not None:
             self._read_shaft(shaft, fs)
@@ -499,6 +513,26 @@ class CanOpenDrive(ClampedRotor, Drive):
             self.link.in_step = None
             return shaft.on_rows(acquired.recording)
         return acquired.recording
+
+    def _follower(self, excitation: Excitation, *, use_recorder: bool) -> HeldAxis | None:
+        """The held elevation that follows ``excitation``'s elevation path, if it has one.
+
+        Raises
+        ------
+        DriveStateError
+            The station cannot move the elevation along a path, or the run would be
+            streamed (the path plays on the elevation's recorder, beside this axis's).
+        """
+        if excitation.elevation_path_rad is None:
+            return None
+        if not self._elevation_follows:
+            raise self._without(Capability.ELEVATION_MOTION)
+        if not use_recorder:
+            raise DriveStateError(
+                f"excitation '{excitation.name}' at {excitation.fs_hz:g} Hz would be streamed: "
+                "the elevation follows its path on its own drive recorder, started with this "
+                f"axis's, at {self.recorder_rate_hz:g} Hz / n above {self.stream_rate_hz:g} Hz")
+        return self.held.axes["elevation"]
 
     def _read_shaft(self, shaft: TransducerReader, fs_hz: float) -> None:
         """The transducer read through the run, each reading stamped with the SYNCs since

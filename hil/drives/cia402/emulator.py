@@ -55,12 +55,13 @@ from canopen.sdo.exceptions import SdoAbortedError
 from hil.config import builtin_fixture
 from hil.drives.canopen_map import ObjectMap
 from hil.drives.cia402.emulator_map import COMPENSATION, Addresses, present_under
+from hil.drives.cia402.emulator_recorder import RUNNING as RECORDER_RUNNING
 from hil.drives.cia402.emulator_recorder import DriveRecorder
 from hil.drives.cia402.protocol import TORQUE_OFFSET, unpack_harmonics
 from hil.drives.emulator_faults import CanFaults
 from hil.motion import Mode, PositionHarmonic
 from plant_sim.firmware import Firmware
-from plant_sim.model import Plant
+from plant_sim.model import Plant, PlantTrace
 from plant_sim.params import Harmonic, PlantParams
 
 log = logging.getLogger(__name__)
@@ -171,6 +172,7 @@ class Cia402Emulator:
         elevation_of: Callable[[], float] | None = None,
         object_map: ObjectMap | None = None,
         clamp_output_bit: int | None = None,
+        network: canopen.Network | None = None,
     ) -> None:
         if exact_torque_hold and not plant.exact_torque_hold:
             plant = plant.with_changes(exact_torque_hold=True)  # the same physics as SimDrive
@@ -207,6 +209,13 @@ class Cia402Emulator:
         self._power_on_heartbeat_ms = power_on_heartbeat_ms  # 0x1017 at boot (None: the EDS)
         self._lock = threading.RLock()
         self._network: canopen.Network | None = None
+        # a gimbal's nodes share one connection (one receive thread: every node sees the
+        # frames in the order the bus carried them), opened and closed by its owner
+        self._shared_network = network
+        # what a SYNC runs: this node's own step, or its gimbal's (both nodes as one
+        # plant, :mod:`hil.drives.cia402.emulator_gimbal`), subscribed there
+        self.sync_handler: Callable[[int, bytearray, float], None] = self._on_sync
+        self.coupled = False
         self.node: canopen.LocalNode | None = None
         # drive state
         self.state = SWITCH_ON_DISABLED
@@ -267,8 +276,10 @@ class Cia402Emulator:
         # a fresh checkout that took seconds inside the first SYNC, beyond the master's PDO
         # and SDO timeouts. A copy runs it here, the plant itself untouched.
         copy.deepcopy(self.plant).run(Mode.TORQUE, np.zeros(1))
-        network = canopen.Network()
-        network.connect(interface=self.interface, channel=self.channel, bitrate=1_000_000)
+        network = self._shared_network
+        if network is None:
+            network = canopen.Network()
+            network.connect(interface=self.interface, channel=self.channel, bitrate=1_000_000)
         node = canopen.LocalNode(self.node_id, self._od)
         network.add_node(node)
         self._network, self.node = network, node
@@ -289,7 +300,8 @@ class Cia402Emulator:
         if self.faults.sdo_delay_s > 0:
             network.unsubscribe(node.sdo.rx_cobid, node.sdo.on_request)
             network.subscribe(node.sdo.rx_cobid, self._delayed_sdo)
-        network.subscribe(0x80, self._on_sync)
+        if not self.coupled:
+            network.subscribe(0x80, self._on_sync)
         network.subscribe(0, self._on_nmt)
         for n in range(4):
             network.subscribe(0x200 + 0x100 * n + self.node_id, self._on_rpdo)
@@ -327,7 +339,7 @@ class Cia402Emulator:
             if network is None or not self._producing.is_set():
                 return
             network.send_message(0x80, b"")
-            self._on_sync(0x80, bytearray(), time.time())
+            self.sync_handler(0x80, bytearray(), time.time())
 
     def stop(self) -> None:
         self._producing.clear()
@@ -340,7 +352,8 @@ class Cia402Emulator:
             self._watcher = None
         if self._network is not None and self.node is not None:
             self.node.nmt.stop_heartbeat()  # type: ignore[no-untyped-call]
-            self._network.disconnect()
+            if self._shared_network is None:
+                self._network.disconnect()
         self._network = None
 
     def __enter__(self) -> Cia402Emulator:
@@ -736,39 +749,59 @@ class Cia402Emulator:
     # -- the clock -----------------------------------------------------------------------
     def _on_sync(self, can_id: int, data: bytearray, timestamp: float) -> None:
         with self._lock:
-            self.sync_count += 1
-            self._sample = self._next_sample  # actual values latched at this SYNC
-            operational = self.nmt_state == "OPERATIONAL"
-            if operational and self._pending:
-                pending, self._pending = self._pending, {}
-                self._apply(pending)
-            if self._enable_countdown > 0:
-                self._enable_countdown -= 1
-            if self._enable_countdown == 0 and self.state == SWITCHED_ON:
-                self._enter(ENABLED)
-            if self.state == ENABLED:
-                self._check_own_limits()
-            self._advance()
-            if not operational:
-                return
-            self._pdo_tables()
-            for cob, trans, entries in self._tpdos:
-                if 1 <= trans <= 240 and self.sync_count % trans == 0:
-                    self._send_tpdo(cob, self._pack(entries))
-            self._send_event_tpdos()
-            self._inject_bus_error()
+            operational = self.latch()
+            steps, ramp = self._grid()
+            self._follow_elevation()
+            mode, command, offset = self.block(steps, ramp)
+            self.finish(self.plant.run(mode, command, offset), steps)
+            self.publish(operational)
 
-    def _advance(self) -> None:
-        """One communication period of the plant with the latched target held."""
-        steps, ramp = self._grid()
-        period_s = steps / self.fs_hz
-        self._follow_elevation()
-        mode, command = self._command(steps, period_s, ramp)
+    # the SYNC's phases (a gimbal runs them for both nodes around one step of both axes)
+    def latch(self) -> bool:
+        """At the SYNC: the actual values latched, the synchronous RPDOs' data applied, the
+        enable delay counted, the drive's own limits checked; whether it is OPERATIONAL."""
+        self.sync_count += 1
+        self._sample = self._next_sample  # actual values latched at this SYNC
+        operational = self.nmt_state == "OPERATIONAL"
+        if operational and self._pending:
+            pending, self._pending = self._pending, {}
+            self._apply(pending)
+        if self._enable_countdown > 0:
+            self._enable_countdown -= 1
+        if self._enable_countdown == 0 and self.state == SWITCHED_ON:
+            self._enter(ENABLED)
+        if self.state == ENABLED:
+            self._check_own_limits()
+        return operational
+
+    def grid(self) -> tuple[int, np.ndarray]:
+        """Control periods per SYNC and the linear interpolation's ramp over them."""
+        return self._grid()
+
+    @property
+    def period_set(self) -> bool:
+        """The host wrote this node's SYNC period (0x1006)."""
+        return bool(self._raw(0x1006))
+
+    def block(self, steps: int, ramp: np.ndarray
+              ) -> tuple[Mode, np.ndarray, np.ndarray | None]:
+        """This SYNC period's command: mode, one sample per control period, torque offset."""
+        mode, command = self._command(steps, steps / self.fs_hz, ramp)
         offset = None
         if self.state == ENABLED and mode is Mode.VELOCITY:  # 0x60B2, held over the period
             offset = np.full(steps, self.targets[TORQUE_OFFSET] * self.rated_torque_nm / 1e3)
-        trace = self.plant.run(mode, command, offset)
+        return mode, command, offset
+
+    def finish(self, trace: PlantTrace, steps: int) -> None:
+        """After the plant moved through the period: the recorder's capture, what the
+        drive latches at the next SYNC, the state's timers."""
+        period_s = steps / self.fs_hz
+        playing = self.recorder.status == RECORDER_RUNNING
         self.recorder.capture(trace, enabled=self.state == ENABLED)
+        if playing and self.recorder.status != RECORDER_RUNNING and self.mode_display == 1:
+            # profile position after a table: the profile holds where the table ended
+            self._pp_target = self._pp_position = self.recorder.last_target / self._counts_per_rad
+            self._pp_velocity = 0.0
         shaft = trace.load_torque_nm  # the transducer between the clamp and the shaft
         self.shaft_torque_nm = 0.0 if shaft is None else float(np.mean(shaft))
         # what the drive latches at the *next* SYNC: its most recent control-loop values
@@ -797,6 +830,22 @@ class Cia402Emulator:
             and self._quick_stop_option() < 5
         ):
             self._enter(SWITCH_ON_DISABLED)
+
+    def publish(self, operational: bool) -> None:
+        """The synchronous TPDOs with the latched values, and any event-driven ones."""
+        if not operational:
+            return
+        self._pdo_tables()
+        for cob, trans, entries in self._tpdos:
+            if 1 <= trans <= 240 and self.sync_count % trans == 0:
+                self._send_tpdo(cob, self._pack(entries))
+        self._send_event_tpdos()
+        self._inject_bus_error()
+
+    @property
+    def lock(self) -> threading.RLock:
+        """Held while a SYNC or a request changes the drive."""
+        return self._lock
 
     def _command(self, steps: int, period_s: float,
                  ramp: np.ndarray) -> tuple[Mode, np.ndarray]:
@@ -884,6 +933,10 @@ class Cia402Emulator:
         window = self._raw(0x6067) / self._counts_per_rad
         return (self._pp_position == self._pp_target
                 and abs(self.plant.position_rad - self._pp_target) <= window)
+
+    def follow_elevation_of(self, elevation_of: Callable[[], float]) -> None:
+        """Have this axis's J follow ``elevation_of()`` at each SYNC (J_az(el))."""
+        self._elevation_of = elevation_of
 
     def _follow_elevation(self) -> None:
         if self._elevation_of is not None:

@@ -82,6 +82,11 @@ class DriveRecorder:
             self._cursor, self._phase, self._count, self._chunks = 0, 0, 0, []
             self.status = RUNNING
 
+    @property
+    def last_target(self) -> int:
+        """The waveform's last sample: where a position table leaves the axis."""
+        return int(self._waveform[-1]) if len(self._waveform) else 0
+
     def waveform_block(self, steps: int) -> np.ndarray | None:
         """The next ``steps`` waveform samples while running (padded with the last one)."""
         if self.status != RUNNING:

@@ -18,7 +18,9 @@ import time
 from typing import Any
 
 import canopen
+import numpy as np
 
+from hil.drives.cia402.acquire import RECORDER_SAMPLE
 from hil.drives.cia402.link import CanLink, sdo_read, sdo_write, sdo_write_standard
 from hil.drives.cia402.protocol import (
     CW_DISABLE_VOLTAGE,
@@ -31,7 +33,7 @@ from hil.drives.cia402.protocol import (
     state_of,
 )
 from hil.drives.station import CanOpenStation
-from hil.errors import DriveFaultError, DriveStateError
+from hil.errors import DriveFaultError, DriveStateError, LimitViolationError
 
 log = logging.getLogger(__name__)
 
@@ -39,6 +41,7 @@ PROFILE_POSITION = 1  # 0x6060
 CW_NEW_SETPOINT = 0x0010 | 0x0020  # bit 4 new set-point, bit 5 change immediately
 SW_TARGET_REACHED = 0x0400
 SW_SETPOINT_ACKNOWLEDGE = 0x1000
+RECORDER_DONE = 2  # the recorder's state (its sub 2): finished
 STATUS_POLL_S = 0.01  # SYNC periods between two statusword reads while a held axis moves
 
 
@@ -168,6 +171,60 @@ class HeldAxis:
             while time.monotonic() < settled:
                 self.link.tick()
         log.info("node %d (%s axis) holds %+.4f rad", self.node_id, self.name, angle_rad)
+
+    @property
+    def can_play(self) -> bool:
+        """It has the drive recorder and waveform table of the station's object map (the
+        held node is the drive model the map describes)."""
+        return self.station.object_map.has_recorder
+
+    def play(self, path_rad: np.ndarray, *, divider: int) -> None:
+        """Follow ``path_rad`` from its waveform table (one sample per ``divider`` control
+        periods, in profile position: its position loop follows the table) and record
+        itself alongside: both start at the next SYNC, as does whatever else the host
+        starts before it (the axis under test's own table).
+
+        Raises
+        ------
+        LimitViolationError
+            The path leaves the node's software position limits (0x607D); nothing moved.
+        DriveStateError
+            The node refused the table (too long for its recorder, not enabled).
+        """
+        om = self.station.object_map
+        assert om.recorder_index is not None
+        assert om.waveform_index is not None
+        low, high = (int(self.read(0x607D, sub)) / self.counts_per_rad for sub in (1, 2))
+        if not low <= float(np.min(path_rad)) <= float(np.max(path_rad)) <= high:
+            raise LimitViolationError(
+                f"node {self.node_id} ({self.name} axis): the path spans "
+                f"[{np.min(path_rad):+.4f}, {np.max(path_rad):+.4f}] rad, outside its drive's "
+                f"software position limits (0x607D) [{low:+.4f}, {high:+.4f}] rad")
+        if not self.enabled:
+            self.enable()
+        counts = np.round(np.repeat(np.asarray(path_rad, dtype=np.float64), divider)
+                          * self.counts_per_rad).astype("<i4")
+        self.write(om.waveform_index, 1, counts.tobytes())
+        self.write(om.recorder_index, 3, divider)
+        self.write(om.recorder_index, 1, 1)
+
+    def played_rad(self) -> np.ndarray:
+        """Where the node's recorder saw it at each sample of the path it played (rad).
+
+        Raises
+        ------
+        DriveStateError
+            Its recorder did not finish the path (stopped, or still running).
+        """
+        om = self.station.object_map
+        assert om.recorder_index is not None
+        if int(self.read(om.recorder_index, 2)) != RECORDER_DONE:
+            raise DriveStateError(f"node {self.node_id} ({self.name} axis): its drive "
+                                  "recorder did not finish the path")
+        data = bytes(self.read(om.recorder_index, 7))
+        row = RECORDER_SAMPLE.itemsize
+        samples = np.frombuffer(data[: len(data) // row * row], dtype=RECORDER_SAMPLE)
+        return np.asarray(samples["pos"] / self.counts_per_rad, dtype=np.float64)
 
     def disable(self) -> None:
         """Disable voltage (best effort: the link may be gone)."""
