@@ -15,6 +15,7 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from scipy import stats
 
 from hil.calibration import CalibrationRun
 from hil.drives.connect import open_drive
@@ -40,7 +41,12 @@ def _unit(inner: InnerGimbal) -> tuple[UnitProfile, UnitProfile]:
             dataclasses.replace(ELEVATION, plant=ELEVATION.plant.with_changes(**elevation)))
 
 
-@settings(max_examples=8, deadline=None)
+EXAMPLES = 8
+#: two products per example; Šidák: each check at 1 − 0.95^(1/16) two-sided
+FAMILY_Z = float(stats.norm.isf((1 - 0.95 ** (1 / (2 * EXAMPLES))) / 2))
+
+
+@settings(max_examples=EXAMPLES, deadline=None)
 @given(mass_kg=st.floats(0.05, 0.4), x=st.floats(-0.02, 0.02), y=st.floats(-0.05, 0.05),
        z=st.floats(-0.02, 0.02), own_xy=st.floats(-2e-4, 2e-4),
        own_yz=st.floats(-2e-4, 2e-4), seed=st.integers(0, 2**16))
@@ -62,7 +68,9 @@ def test_hidden_products_of_inertia_are_found_within_their_uncertainty(
     found = fit_cross_coupling(coupling_runs(spec, passes), azimuth_inertia_kg_m2=j_reported)
     for estimate, truth in ((found.level, inner.level), (found.vertical, inner.vertical)):
         error = estimate.value - truth / gain
-        assert abs(error) <= estimate.expanded_uncertainty, (estimate, truth / gain)
+        # each of the 16 checks at the level that keeps the whole test's false alarms at 5 %
+        # (each within its own 95 % U would fail a good estimator in 56 % of draw sets)
+        assert abs(error) <= FAMILY_Z * estimate.standard_uncertainty, (estimate, truth / gain)
         # a detection worth the name: U small against the ±0.0006 kg·m² balance limits
         assert estimate.expanded_uncertainty < 2e-5, estimate
 
