@@ -39,17 +39,21 @@ def _check(apply_delay_rel: float):  # type: ignore[no-untyped-def]
 def test_a_first_order_loop_passes_its_own_test() -> None:
     check, _ = _check(0.0)
     assert check.adequate, check
-    assert check.message() is None and check.dead_time_ms is None
+    assert check.message() is None
+    assert check.dead_time_ms is None
 
 
 @pytest.mark.parametrize("apply_delay_rel", [0.3, 0.6])
 def test_a_dead_time_is_found_and_stated(apply_delay_rel: float) -> None:
     check, delay_s = _check(apply_delay_rel)
     assert not check.adequate, check
-    assert check.dead_time_ms is not None and check.dead_time_u_ms is not None
+    assert check.dead_time_ms is not None
+    assert check.dead_time_u_ms is not None
     assert abs(check.dead_time_ms - 1000 * delay_s) <= 2 * check.dead_time_u_ms, check
-    assert check.time_constant_ms is not None and check.time_constant_u_ms is not None
+    assert check.time_constant_ms is not None
+    assert check.time_constant_u_ms is not None
     assert abs(check.time_constant_ms - 1000 * FIRMWARE.current_loop_time_constant_s) \
         <= 2 * check.time_constant_u_ms, check
     message = check.message()
-    assert message is not None and "dead time" in message
+    assert message is not None
+    assert "dead time" in message
