@@ -42,12 +42,19 @@ import numpy as np
 from hil.errors import IdentificationError
 from hil.identify.estimate import Component, Estimate
 from hil.identify.harmonic_fit import fit_harmonics, polynomial_columns
-from hil.identify.sine_run import REVERSAL_BAND, FloatArray, SineRun, synchronous_average
+from hil.identify.sine_run import (
+    REVERSAL_BAND,
+    FloatArray,
+    SineRun,
+    band_noise_rms_nm,
+    synchronous_average,
+)
 
 Method = Literal["orthogonal", "least_squares"]
 INSTRUMENT_HARMONICS = 7
 HARMONICS = 1  # harmonics the orthogonal correlation uses (the article: the fundamental)
 TAPER_END = 0.3  # |ω|/V where the least-squares fit's weight reaches 1 (reversal_taper)
+BOUND_BAND_HARMONICS = 25  # the band whose noise level sets the stated bound (band_noise_rms_nm)
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -129,7 +136,10 @@ def identify_inertia_friction(
     ]
     theta, u, dof = _jackknife(blocks)
     noise = float(np.sqrt(np.mean([r.noise_rms_nm**2 for r in runs])))
-    crb = cramer_rao_std(runs, noise_rms_nm=noise)
+    # the bound's σ: the noise where the regressors hold their information, not its RMS
+    # over all frequencies (band_noise_rms_nm)
+    band = [band_noise_rms_nm(r, harmonics=BOUND_BAND_HARMONICS) for r in runs]
+    crb = cramer_rao_std(runs, noise_rms_nm=float(np.sqrt(np.mean(np.square(band)))))
     fit_pct, lack_rms = _model_fit(runs, theta)
     names = (("inertia_kg_m2", "kg·m²"), ("viscous_nm_s_rad", "N·m·s/rad"), ("coulomb_nm", "N·m"))
     inertia, viscous, coulomb = (
