@@ -9,7 +9,8 @@ import pytest
 
 from hil.errors import IdentificationError
 from hil.identify.inertia_friction import identify_inertia_friction
-from hil.identify.sine_run import analyse_sine_run, orthogonal_components
+from hil.identify.sine_run import analyse_sine_run, band_noise_rms_nm, orthogonal_components
+from hil.recording import Recording
 from tests.helpers import sine_model_recording
 
 ARTICLE = {"inertia": 0.0036, "viscous": 0.005, "coulomb": 0.020}
@@ -104,3 +105,23 @@ def test_too_few_periods_is_refused() -> None:
     rec = sine_model_recording(**ARTICLE, amplitude=0.5, frequency_hz=2.0, periods=3, fs_hz=2000.0)
     with pytest.raises(IdentificationError, match="whole periods"):
         analyse_sine_run(rec, frequency_hz=2.0, settle_periods=2, hold_samples=0.0)
+
+
+def test_the_stated_bound_takes_the_noise_where_the_regressors_are() -> None:
+    """High-frequency torque (a velocity loop's response to quantisation) raises the
+    non-periodic RMS but not the bound of a fit whose regressors live at the sine's first
+    harmonics: the stated bound follows the low band's σ (2 mN·m here), not the RMS."""
+    sigma, fs = 0.002, 4000.0
+    recording = sine_model_recording(**ARTICLE, amplitude=0.5, frequency_hz=2.0, periods=8,
+                                     fs_hz=fs, noise_nm=sigma, seed=3)
+    chatter = 0.006 * np.diff(np.random.default_rng(4).normal(size=len(recording.time_s) + 1))
+    runs = [
+        analyse_sine_run(recording, frequency_hz=2.0, settle_periods=1, hold_samples=0.0),
+        analyse_sine_run(
+            Recording(columns={**recording.columns, "torque_nm": 2 * recording.effort + chatter},
+                      source="synthetic"),
+            frequency_hz=2.0, settle_periods=1, hold_samples=0.0),
+    ]
+    assert runs[1].noise_rms_nm > 3 * sigma  # the differenced noise: its power is high up
+    assert band_noise_rms_nm(runs[0], harmonics=25) == pytest.approx(sigma, rel=0.08)
+    assert band_noise_rms_nm(runs[1], harmonics=25) == pytest.approx(2 * sigma, rel=0.08)
