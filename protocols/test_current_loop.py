@@ -19,7 +19,7 @@ from hil.identify.current_loop import (
     torque_hold_s,
 )
 from hil.identify.estimate import Estimate
-from hil.identify.lag_model import check_lag_model
+from hil.identify.lag_model import LagModelCheck
 from hil.measurement import Declared, declare
 from hil.profile import UnitProfile
 from hil.recording import Recording
@@ -29,7 +29,7 @@ from hil.suite.current_loop import (
     CurrentLoopDetails,
     LagPoint,
     Spec,
-    analyse,
+    analyse_checked,
     excitation,
 )
 from hil.suite.rate import sample_rate_shortfall
@@ -61,20 +61,18 @@ def result(drive: Drive, calibration: CalibrationRun, profile: UnitProfile,
     if (problem := timing_problem(drive_info.timing)) is not None:
         pytest.skip(f"[protocols.{NAME}]: {problem}")
 
-    def run_once() -> tuple[CurrentLoopResult, Recording]:
+    def run_once() -> tuple[CurrentLoopResult, LagModelCheck, Recording]:
         move, sines = excitation(spec, position_rad=drive.status().position_rad)
         calibration.run(drive, move, protocol=NAME)
         recording = calibration.run(drive, sines, protocol=NAME)
-        return analyse(recording, spec), recording
+        return *analyse_checked(recording, spec), recording
 
     runs = run_repeated(run_once, lambda found: {MEASUREMENTS[0]: found[0].time_constant},
                         rule=spec.stop, calibration=calibration,
-                        acquisition=lambda found: acquisition_path(found[1].metadata,
+                        acquisition=lambda found: acquisition_path(found[2].metadata,
                                                                    fs_hz=spec.fs_hz))
-    analysed, recording = runs.first
+    analysed, lag_model, recording = runs.first
     hold = torque_hold_s(recording.metadata, fs_hz=spec.fs_hz)
-    lag_model = check_lag_model(analysed, fs_hz=spec.fs_hz, hold_s=hold.hold_s,
-                                mean_samples=hold.mean_samples)
     if (line := lag_model.message()) is not None:
         calibration.protocol(NAME).messages.append(line)
     calibration.details[NAME] = CurrentLoopDetails(

@@ -59,7 +59,7 @@ from __future__ import annotations
 
 import itertools
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -466,6 +466,33 @@ def analyse_frequency(
     )
 
 
+def lag_phase_residual(
+    points: Sequence[FrequencyPoint], *, fs_hz: float, mean_samples: int
+) -> Callable[[FloatArray], FloatArray]:
+    """The weighted phase residual of a current-loop model at ``points``.
+
+    The model's parameters ``x``: τ (ms), B/J (1/s) and, when a third is given, a dead
+    time (ms). ``fs_hz`` is the rate of the torque's hold (``1/hold_s`` where it differs).
+    """
+    freqs = np.array([p.frequency_hz for p in points])
+    phases = np.array([p.lag_phase_rad for p in points])
+    sigma = np.array([max(p.lag_phase_u_rad, 1e-6) for p in points])
+    omega = 2 * math.pi * freqs
+    rigid = sampled_response(freqs, fs_hz=fs_hz, inertia_kg_m2=1.0,
+                             viscous_over_inertia_1_s=0.0, time_constant_s=0.0,
+                             mean_samples=mean_samples)
+
+    def residual(x: FloatArray) -> FloatArray:
+        model = sampled_response(freqs, fs_hz=fs_hz, inertia_kg_m2=1.0,
+                                 viscous_over_inertia_1_s=float(x[1]),
+                                 time_constant_s=float(x[0]) * 1e-3, mean_samples=mean_samples)
+        if len(x) > 2:
+            model = model * np.exp(-1j * omega * float(x[2]) * 1e-3)
+        return np.asarray((np.angle(model / rigid) - phases) / sigma, dtype=np.float64)
+
+    return residual
+
+
 def fit_current_loop_lag(
     points: Sequence[FrequencyPoint],
     *,
@@ -499,29 +526,9 @@ def fit_current_loop_lag(
     fs_hz = fs_hz if hold_s is None else 1.0 / hold_s  # the model only needs the hold
     if len(points) < 3:
         raise IdentificationError(f"{len(points)} frequencies, need at least 3 for τ and B/J")
+    residual = lag_phase_residual(points, fs_hz=fs_hz, mean_samples=n_mean)
     freqs = np.array([p.frequency_hz for p in points])
     phases = np.array([p.lag_phase_rad for p in points])
-    sigma = np.array([max(p.lag_phase_u_rad, 1e-6) for p in points])
-    rigid = sampled_response(
-        freqs,
-        fs_hz=fs_hz,
-        inertia_kg_m2=1.0,
-        viscous_over_inertia_1_s=0.0,
-        time_constant_s=0.0,
-        mean_samples=n_mean,
-    )
-
-    def residual(x: FloatArray) -> FloatArray:
-        model = sampled_response(
-            freqs,
-            fs_hz=fs_hz,
-            inertia_kg_m2=1.0,
-            viscous_over_inertia_1_s=float(x[1]),
-            time_constant_s=float(x[0]) * 1e-3,
-            mean_samples=n_mean,
-        )
-        return np.asarray((np.angle(model / rigid) - phases) / sigma, dtype=np.float64)
-
     omega = 2 * math.pi * freqs
     start_ms = max(float(np.median(-phases / omega)) * 1e3, 1e-3)
     fit = least_squares(residual, x0=np.array([start_ms, 1.0]), bounds=([0.0, 0.0], [1e3, 1e4]))

@@ -6,22 +6,27 @@ the lag phases at 20–150 Hz and widens u(τ) by ``√(χ²/ν)``. A drive with
 period) bends the phases away from any first-order lag: ``atan(ωτ) + ωd`` against
 ``atan(ωτ')``. The first-order τ is then the equivalent of both, larger than τ + d at the top
 of the band. This tests the first-order model on its own data (χ² against its degrees of
-freedom) and, when it is rejected, fits τ beside a dead time to say what would describe
-the phases. The two are nearly collinear over the band (only their sum is sharp), so that
-fit is stated, not certified.
+freedom) and, when it is rejected, fits τ beside a dead time. The two are nearly collinear
+over the band, so each is stated, not certified; their sum is sharp, and it is the lag the
+torque has below the band (the phase's slope at 0 Hz), which is what the sines take out
+and what a model of the loop below its bandwidth needs. When the first-order lag is
+rejected, the certified τ is that sum (:func:`certified`): over a second simulator's
+loops with a late-acting command, the first-order τ read +3.3 % (35 % of ±U held the
+truth), τ + d −0.3 ± 0.8 %.
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from scipy import stats
 from scipy.optimize import least_squares
 
 from hil.gum import rounded_pair
-from hil.identify.current_loop import CurrentLoopResult, sampled_response
+from hil.identify.current_loop import CurrentLoopResult, lag_phase_residual
+from hil.identify.estimate import Estimate
 
 #: below this probability of a χ² as large, the first-order lag is rejected
 ADEQUACY_P = 0.01
@@ -46,6 +51,9 @@ class LagModelCheck:
         τ beside that dead time (ms), likewise.
     dead_time_chi2_per_dof : float or None
         That fit's χ²/ν (ν = frequencies − 3).
+    low_frequency_lag_ms, low_frequency_lag_u_ms : float or None
+        τ + dead time, the lag below the band (the phase's slope at 0 Hz), which that
+        fit determines sharply where it cannot split the two, and its standard uncertainty.
     """
 
     chi2_per_dof: float
@@ -56,6 +64,10 @@ class LagModelCheck:
     time_constant_ms: float | None = None
     time_constant_u_ms: float | None = None
     dead_time_chi2_per_dof: float | None = None
+    low_frequency_lag_ms: float | None = None
+    low_frequency_lag_u_ms: float | None = None
+    low_frequency_lag_crb_ms: float | None = None
+    first_order_ms: float | None = None
 
     @property
     def adequate(self) -> bool:
@@ -68,16 +80,18 @@ class LagModelCheck:
             return None
         p_text = f"p = {self.p_value:.1e}" if self.p_value >= 1e-12 else "p < 1e-12"
         line = (f"the first-order current-loop lag does not describe the phases "
-                f"(χ²/ν = {self.chi2_per_dof:.3g} on {self.dof}, {p_text}); "
-                f"u(τ) is widened by √(χ²/ν)")
-        if (self.dead_time_ms is not None and self.dead_time_u_ms is not None
-                and self.time_constant_ms is not None and self.time_constant_u_ms is not None):
-            dead, dead_u = rounded_pair(self.dead_time_ms, 2 * self.dead_time_u_ms)
-            tau, tau_u = rounded_pair(self.time_constant_ms, 2 * self.time_constant_u_ms)
-            line += (f"; a dead time of {dead} ± {dead_u} ms beside τ = {tau} ± {tau_u} ms "
-                     f"(k = 2) would (χ²/ν = {self.dead_time_chi2_per_dof:.3g}): the τ "
-                     "certified is the first-order equivalent of both")
-        return line
+                f"(χ²/ν = {self.chi2_per_dof:.3g} on {self.dof}, {p_text}); ")
+        if (self.dead_time_ms is None or self.dead_time_u_ms is None
+                or self.time_constant_ms is None or self.time_constant_u_ms is None
+                or self.first_order_ms is None):
+            return line + "u(τ) is widened by √(χ²/ν)"
+        dead, dead_u = rounded_pair(self.dead_time_ms, 2 * self.dead_time_u_ms)
+        tau, tau_u = rounded_pair(self.time_constant_ms, 2 * self.time_constant_u_ms)
+        return line + (
+            f"a dead time of {dead} ± {dead_u} ms beside τ = {tau} ± {tau_u} ms (k = 2) does "
+            f"(χ²/ν = {self.dead_time_chi2_per_dof:.3g}); the τ certified is their sum, the "
+            f"lag below the band (the first-order τ, {self.first_order_ms:.4g} ms, is the "
+            "equivalent at 20–150 Hz only)")
 
 
 def check_lag_model(result: CurrentLoopResult, *, fs_hz: float, hold_s: float | None = None,
@@ -104,21 +118,7 @@ def check_lag_model(result: CurrentLoopResult, *, fs_hz: float, hold_s: float | 
     if check.adequate or dof < 2:
         return check
     rate_hz = fs_hz if hold_s is None else 1.0 / hold_s
-    freqs = np.array([p.frequency_hz for p in result.points])
-    phases = np.array([p.lag_phase_rad for p in result.points])
-    sigma = np.array([max(p.lag_phase_u_rad, 1e-6) for p in result.points])
-    omega = 2 * math.pi * freqs
-    rigid = sampled_response(freqs, fs_hz=rate_hz, inertia_kg_m2=1.0,
-                             viscous_over_inertia_1_s=0.0, time_constant_s=0.0,
-                             mean_samples=mean_samples)
-
-    def residual(x: np.ndarray) -> np.ndarray:
-        model = sampled_response(freqs, fs_hz=rate_hz, inertia_kg_m2=1.0,
-                                 viscous_over_inertia_1_s=float(x[1]),
-                                 time_constant_s=float(x[0]) * 1e-3,
-                                 mean_samples=mean_samples) * np.exp(-1j * omega * x[2] * 1e-3)
-        return np.asarray((np.angle(model / rigid) - phases) / sigma, dtype=np.float64)
-
+    residual = lag_phase_residual(result.points, fs_hz=rate_hz, mean_samples=mean_samples)
     tau_ms = result.time_constant.value
     fit = least_squares(residual, x0=np.array([tau_ms / 2, result.viscous_over_inertia_1_s,
                                                tau_ms / 2]),
@@ -128,11 +128,45 @@ def check_lag_model(result: CurrentLoopResult, *, fs_hz: float, hold_s: float | 
         covariance = np.linalg.inv(jacobian.T @ jacobian)
     except np.linalg.LinAlgError:
         return check
-    chi2_per_dof = float(np.sum(fit.fun**2)) / (len(freqs) - 3)
+    chi2_per_dof = float(np.sum(fit.fun**2)) / (len(result.points) - 3)
     scale = max(1.0, chi2_per_dof)
+    sum_variance = float(covariance[0, 0] + covariance[2, 2] + 2 * covariance[0, 2])
     return LagModelCheck(
         chi2_per_dof=result.chi2_per_dof, dof=dof, p_value=p_value,
         dead_time_ms=float(fit.x[2]), dead_time_u_ms=math.sqrt(covariance[2, 2] * scale),
         time_constant_ms=float(fit.x[0]), time_constant_u_ms=math.sqrt(covariance[0, 0] * scale),
         dead_time_chi2_per_dof=chi2_per_dof,
+        low_frequency_lag_ms=float(fit.x[0] + fit.x[2]),
+        low_frequency_lag_u_ms=math.sqrt(sum_variance * scale),
+        low_frequency_lag_crb_ms=math.sqrt(sum_variance),
+        first_order_ms=tau_ms,
     )
+
+
+def certified(result: CurrentLoopResult, check: LagModelCheck) -> CurrentLoopResult:
+    """The fit with the τ to certify: the first-order τ where that lag holds, τ + dead time
+    where it was rejected (the module's text).
+
+    Parameters
+    ----------
+    result : CurrentLoopResult
+        The first-order fit.
+    check : LagModelCheck
+        Its test (:func:`check_lag_model`).
+
+    Returns
+    -------
+    CurrentLoopResult
+        ``result`` itself, or with ``time_constant`` the sum, its u from the dead-time fit
+        (scaled by √(χ²/ν) above one, then with that fit's ν degrees of freedom).
+    """
+    if (check.adequate or check.low_frequency_lag_ms is None
+            or check.low_frequency_lag_u_ms is None or check.dead_time_chi2_per_dof is None):
+        return result
+    first = result.time_constant
+    dof = (float(len(result.points) - 3) if check.dead_time_chi2_per_dof > 1.0
+           else first.dof)
+    lag = Estimate(name=first.name, value=check.low_frequency_lag_ms,
+                   standard_uncertainty=check.low_frequency_lag_u_ms, unit=first.unit, dof=dof,
+                   cramer_rao_std=check.low_frequency_lag_crb_ms)
+    return replace(result, time_constant=lag)

@@ -22,6 +22,7 @@ from hil.identify.current_loop import (
     fit_current_loop_lag,
     torque_hold_s,
 )
+from hil.identify.lag_model import LagModelCheck, certified, check_lag_model
 from hil.motion import Excitation, Mode
 from hil.profile import UnitProfile
 from hil.recording import Recording
@@ -122,7 +123,15 @@ def excitation(spec: Spec, *, position_rad: float) -> list[Excitation]:
 
 
 def analyse(recording: Recording, spec: Spec) -> CurrentLoopResult:
-    """τ from the phase of motion against reported torque in each frequency's segment.
+    """τ from the phase of motion against reported torque in each frequency's segment:
+    :func:`analyse_checked` without its model test."""
+    return analyse_checked(recording, spec)[0]
+
+
+def analyse_checked(recording: Recording, spec: Spec) -> tuple[CurrentLoopResult, LagModelCheck]:
+    """τ from the phase of motion against reported torque in each frequency's segment, and
+    the first-order lag's test on those phases (τ + dead time certified where it fails,
+    :func:`hil.identify.lag_model.certified`).
 
     Parameters
     ----------
@@ -135,6 +144,8 @@ def analyse(recording: Recording, spec: Spec) -> CurrentLoopResult:
     -------
     CurrentLoopResult
         See :func:`hil.identify.current_loop.fit_current_loop_lag`.
+    LagModelCheck
+        See :func:`hil.identify.lag_model.check_lag_model`.
 
     Raises
     ------
@@ -160,9 +171,12 @@ def analyse(recording: Recording, spec: Spec) -> CurrentLoopResult:
             )
         )
         start += spec.segment_samples(f)
-    return fit_current_loop_lag(
+    first_order = fit_current_loop_lag(
         points, fs_hz=spec.fs_hz, hold_s=hold.hold_s, mean_samples=hold.mean_samples
     )
+    check = check_lag_model(first_order, fs_hz=spec.fs_hz, hold_s=hold.hold_s,
+                            mean_samples=hold.mean_samples)
+    return certified(first_order, check), check
 
 
 def planned_motion(profile: UnitProfile, info: DriveInfo, at: Position) -> Iterable[Excitation]:

@@ -10,7 +10,6 @@ import dataclasses
 import pytest
 
 from hil.drives.sim import SimDrive
-from hil.identify.lag_model import check_lag_model
 from hil.profile import load_profile
 from hil.suite import current_loop as protocol
 from plant_sim.firmware import Firmware
@@ -32,20 +31,21 @@ def _check(apply_delay_rel: float):  # type: ignore[no-untyped-def]
     spec = dataclasses.replace(protocol.Spec.from_profile(PROFILE, info), fs_hz=4000.0)
     recording = simulate_variant(PLANT, FIRMWARE, variant,
                                  velocity_command_rad_s=spec.carrier_command(), seed=5)
-    result = protocol.analyse(recording, spec)
-    return check_lag_model(result, fs_hz=4000.0), apply_delay_s(PLANT, FIRMWARE, variant)
+    result, check = protocol.analyse_checked(recording, spec)
+    return check, result, apply_delay_s(PLANT, FIRMWARE, variant)
 
 
 def test_a_first_order_loop_passes_its_own_test() -> None:
-    check, _ = _check(0.0)
+    check, _, _ = _check(0.0)
     assert check.adequate, check
+    assert check.low_frequency_lag_ms is None  # the first-order τ is certified
     assert check.message() is None
     assert check.dead_time_ms is None
 
 
 @pytest.mark.parametrize("apply_delay_rel", [0.3, 0.6])
 def test_a_dead_time_is_found_and_stated(apply_delay_rel: float) -> None:
-    check, delay_s = _check(apply_delay_rel)
+    check, _, delay_s = _check(apply_delay_rel)
     assert not check.adequate, check
     assert check.dead_time_ms is not None
     assert check.dead_time_u_ms is not None
@@ -57,3 +57,15 @@ def test_a_dead_time_is_found_and_stated(apply_delay_rel: float) -> None:
     message = check.message()
     assert message is not None
     assert "dead time" in message
+
+
+@pytest.mark.parametrize("apply_delay_rel", [0.3, 0.6])
+def test_with_a_dead_time_the_lag_below_the_band_is_certified(apply_delay_rel: float) -> None:
+    """The certified τ is τ + dead time, within its U; the first-order τ over the band was
+    not (it is the equivalent of both at 20–150 Hz, larger than their sum)."""
+    check, result, delay_s = _check(apply_delay_rel)
+    truth_ms = 1000 * (FIRMWARE.current_loop_time_constant_s + delay_s)
+    tau = result.time_constant
+    assert abs(tau.value - truth_ms) <= tau.expanded_uncertainty, (tau, truth_ms)
+    assert check.first_order_ms is not None
+    assert check.first_order_ms - truth_ms > abs(tau.value - truth_ms), (check, truth_ms)
