@@ -15,6 +15,7 @@ from typing import Any
 
 import tomli_w
 
+from hil.characterise.bins import binned, miss_table
 from hil.characterise.draw import PROFILES, Unit, write_population
 from hil.characterise.method_map import HEADER, bias_map, with_validation
 from hil.characterise.run import run_population
@@ -56,6 +57,8 @@ def characterise(args: argparse.Namespace) -> int:
     print(f"\n{len(units)} units, {len(rows)} results with a truth, "
           f"{time.perf_counter() - started:.0f} s {where}\n")
     print("\n".join(table(summaries)))
+    bins = binned(rows)
+    print("\n" + "\n".join(miss_table(bins)))
     population = (f"gimbal-hil characterise --units {args.units} --seed {args.seed} "
                   f"--method-bias {state['method_bias']}: {len(units)} units")
     if args.write_map is not None:
@@ -66,7 +69,8 @@ def characterise(args: argparse.Namespace) -> int:
         _write(args.validate_map, with_validation(document, summaries))
         print(f"validation added to {args.validate_map}")
     (args.out / "summary.json").write_text(json.dumps(
-        {"population": [asdict(s) for s in summaries], "rows": [asdict(r) for r in rows]},
+        {"population": [asdict(s) for s in summaries], "rows": [asdict(r) for r in rows],
+         "by_covariate": [asdict(b) for b in bins]},
         indent=1), encoding="utf-8")
     return 0
 

@@ -75,20 +75,22 @@ def by_result(rows: Iterable[Row]) -> dict[tuple[str, str], list[Row]]:
 
 def summarise(rows: Iterable[Row]) -> list[Summary]:
     """Bias, RMS normalised error and coverage per axis and result."""
-    summaries = []
-    for (axis, name), group in by_result(rows).items():
-        relative, errors, u = errors_of(group)
-        covered = sum(r.covered for r in group)
-        summaries.append(Summary(
-            axis=axis, parameter=name, n=len(group), relative=relative,
-            bias=float(np.mean(errors)),
-            rms_normalised=float(np.sqrt(np.mean((errors / u) ** 2))),
-            coverage=covered / len(group),
-            median_u=float(np.median(u)),
-            coverage_interval=wilson_interval(covered, len(group)),
-            rms_interval=rms_interval(errors / u),
-        ))
-    return summaries
+    return [summarise_group(group) for group in by_result(rows).values()]
+
+
+def summarise_group(group: Sequence[Row], z: float = 1.96) -> Summary:
+    """The summary of one result's rows (one axis), its intervals at ``z``."""
+    relative, errors, u = errors_of(group)
+    covered = sum(r.covered for r in group)
+    return Summary(
+        axis=group[0].axis, parameter=group[0].parameter, n=len(group), relative=relative,
+        bias=float(np.mean(errors)),
+        rms_normalised=float(np.sqrt(np.mean((errors / u) ** 2))),
+        coverage=covered / len(group),
+        median_u=float(np.median(u)),
+        coverage_interval=wilson_interval(covered, len(group), z),
+        rms_interval=rms_interval(errors / u, z),
+    )
 
 
 def repeatability(first: Mapping[str, Mapping[str, Any]],

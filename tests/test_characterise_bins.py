@@ -1,0 +1,58 @@
+"""Coverage in thirds of each covariate (issue 30): a population whose u is too small for
+one kind of unit shows that third as a miss; one whose u is right everywhere shows none,
+even over the hundreds of thirds looked at (the family-wise level)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from hil.characterise.bins import binned, miss_table
+from hil.characterise.run import Row
+
+UNITS = 150
+COVARIATES = ("cogging_peak_nm", "coulomb_nm", "cable_stiffness_nm_rad", "viscous_nm_s_rad")
+
+
+def _population(seed: int, *, understated_above: float | None) -> list[Row]:
+    """J with a stated u of 1 % of the truth; its error drawn with that sd, or with 3 × it
+    on the units whose cogging (a covariate the unit measured) is above a threshold. The
+    covariates are results too, each with an honest u."""
+    rng = np.random.default_rng(seed)
+    rows = []
+    for k in range(UNITS):
+        unit = f"U{k:03d}"
+        truths = {name: float(rng.uniform(0.5, 1.5)) for name in COVARIATES}
+        measured = {name: t + float(rng.normal(0, 0.01)) for name, t in truths.items()}
+        truth = 0.004
+        sd = 0.01 * truth
+        if understated_above is not None and measured["cogging_peak_nm"] > understated_above:
+            sd *= 3
+        value = truth + float(rng.normal(0, sd))
+        rows.append(Row(unit=unit, axis="elevation", parameter="inertia_kg_m2", value=value,
+                        truth=truth, standard_uncertainty=0.01 * truth,
+                        expanded_uncertainty=2 * 0.01 * truth))
+        rows += [Row(unit=unit, axis="elevation", parameter=name, value=v, truth=truths[name],
+                     standard_uncertainty=0.01, expanded_uncertainty=0.02)
+                 for name, v in measured.items()]
+    return rows
+
+
+def test_a_kind_of_unit_whose_u_is_too_small_is_named() -> None:
+    """The third of high cogging misses and is the farthest; the other two of that covariate
+    hold (the others' thirds each hold a share of the understated units, so may miss)."""
+    bins = binned(_population(1, understated_above=1.17))
+    by_cogging = {b.third: b for b in bins
+                  if b.summary.parameter == "inertia_kg_m2" and b.covariate == "cogging_peak_nm"}
+    assert by_cogging["high"].misses, miss_table(bins)
+    assert by_cogging["high"].lower > 1.1
+    assert not by_cogging["low"].misses, miss_table(bins)
+    assert not by_cogging["middle"].misses, miss_table(bins)
+    farthest = miss_table(bins)[4]
+    assert "| inertia_kg_m2 | high cogging_peak_nm |" in farthest, farthest
+
+
+def test_a_right_u_shows_no_miss_over_many_thirds() -> None:
+    for seed in range(5):
+        bins = binned(_population(seed, understated_above=None))
+        assert len(bins) == 5 * 4 * 3  # each of 5 results in thirds of the 4 others
+        assert not any(b.misses for b in bins), miss_table(bins)
