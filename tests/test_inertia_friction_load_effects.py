@@ -132,3 +132,34 @@ def test_the_loop_s_h_and_s0_are_propagated_together() -> None:
         stated_u = math.sqrt(sum(c.contribution**2 for c in loop_lines))
         scatter = float(np.std([f[name].value for f in found], ddof=1))
         assert 0.75 < scatter / stated_u < 1.3, (name, scatter / stated_u)
+
+
+def test_an_unresolved_loop_angle_is_a_line_over_its_range() -> None:
+    """A gravity sweep too coarse for the loop's turn-over leaves u(s₀) ≥ s₀: the loop is
+    taken out at the s₀ read, and a line states the results' range over s₀ from an abrupt
+    loop to s₀ + 2u (rectangular); the true loop's results lie within that range."""
+    plant = dataclasses.replace(
+        BASE, cable_hysteresis_nm=0.002, cable_hysteresis_angle_rad=0.02
+    )
+    recordings, spec = _record(plant, centre_rad=0.0)
+    loop = CableLoop(half_width_nm=0.002, half_width_u_nm=0.0003, angle_rad=0.05,
+                     angle_u_rad=0.08)
+    stated = protocol.with_earlier_inputs(recordings, spec, lag=None, loop=loop)
+    true_loop = protocol.sine_estimates(protocol.analyse(recordings, spec, cable_loop=CableLoop(
+        half_width_nm=0.002, half_width_u_nm=0.0003, angle_rad=0.02)))
+    for name in ("viscous_nm_s_rad", "coulomb_nm"):
+        (line,) = (c for c in stated[name].budget if "not resolved" in c.source)
+        half_range = math.sqrt(3) * line.contribution  # rectangular: range/√12
+        assert half_range > 0
+        assert abs(true_loop[name].value - stated[name].value) <= 2 * half_range, name
+
+
+def test_a_current_loop_not_measured_is_taken_from_the_profile_with_its_limits() -> None:
+    """No current-loop protocol (a drive too slow for it): the sines take the profile's
+    nominal τ out, its limits a rectangular line, not 0 s without a line."""
+    spec = PROFILE.measurement("current_loop_time_constant_ms")
+    lag = protocol.declared_current_loop_lag(PROFILE)
+    assert lag is not None
+    assert lag.value == pytest.approx(spec.nominal / 1000)
+    half_width_s = (spec.upper_limit - spec.nominal) / 1000
+    assert lag.standard_uncertainty == pytest.approx(half_width_s / math.sqrt(3))

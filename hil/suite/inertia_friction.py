@@ -47,7 +47,13 @@ NAME = "inertia_friction"
 MEASUREMENTS = ("inertia_kg_m2", "viscous_nm_s_rad", "coulomb_nm", "inertia_amplitude_spread_pct")
 #: what it takes from earlier protocols (:mod:`hil.suite.needs`)
 LAG = Need(protocol="current_loop", result="current_loop_time_constant_ms",
-           without="no current-loop lag taken out of the sines (0 s)")
+           without="the profile's nominal current-loop lag taken out of the sines, its "
+           "limits a rectangular budget line")
+LAG_MEASURED = "current-loop time constant τ taken out (current_loop)"
+#: an unresolved loop angle's re-analyses: s₀·scale + u(s₀)·reach, from an abrupt loop to s₀ + 2u
+UNRESOLVED_ANGLES = ((0.05, 0.0), (1.0, 0.5), (1.0, 1.0), (1.0, 2.0))
+LAG_DECLARED = ("current-loop time constant τ not measured: the profile's nominal taken out, "
+                "its limits (rectangular)")
 CABLE = Need(protocol="gravity_cable", result="cable_hysteresis_nm",
              without="the cable's hysteresis loop left in T_c")
 STIFFNESS = tuple(Need(protocol="gravity_cable", result=name,
@@ -297,6 +303,7 @@ def with_earlier_inputs(
     lag: Estimate | None,
     loop: CableLoop | None,
     position_torque: PositionTorque | None = None,
+    lag_line: str = LAG_MEASURED,
 ) -> dict[str, Estimate]:
     """Every result with the uncertainty of what earlier protocols measured and this one
     takes out as named budget lines: the sines re-analysed with the current loop's lag at
@@ -309,7 +316,10 @@ def with_earlier_inputs(
     spec : Spec
         The protocol's spec.
     lag : Estimate or None
-        The current loop's time constant (seconds), if measured.
+        The current loop's time constant (seconds), if known.
+    lag_line : str
+        Its budget line's name (:data:`LAG_MEASURED`, or :data:`LAG_DECLARED` for the
+        profile's nominal).
     loop : CableLoop or None
         The cable's hysteresis loop, if measured.
     position_torque : PositionTorque or None
@@ -332,8 +342,7 @@ def with_earlier_inputs(
     base = at(lag_s, loop)
     inputs: list[tuple[str, float, str, dict[str, Estimate]]] = []
     if lag is not None and lag.standard_uncertainty > 0:
-        inputs.append(("current-loop time constant τ taken out (current_loop)",
-                       lag.standard_uncertainty, "s",
+        inputs.append((lag_line, lag.standard_uncertainty, "s",
                        at(lag_s + lag.standard_uncertainty, loop)))
     if (hold_u_s := max(measured_torque_hold_u_s(r) for r in recordings)) > 0:
         inputs.append(("when the drive's measured torque acts: 0 to half a control period "
@@ -363,6 +372,11 @@ def with_earlier_inputs(
         _with_loop_angle(lines, base, loop, *(
             at(lag_s, dataclasses.replace(loop, angle_rad=loop.angle_rad + sign
                                           * loop.angle_u_rad)) for sign in (1, -1)))
+    elif loop is not None and loop.angle_u_rad >= loop.angle_rad > 0:
+        _with_unresolved_loop_angle(lines, base, loop, [
+            at(lag_s, dataclasses.replace(loop, angle_rad=loop.angle_rad * scale
+                                          + loop.angle_u_rad * reach))
+            for scale, reach in UNRESOLVED_ANGLES])
     return {name: estimate.with_components(*lines[name]) for name, estimate in base.items()}
 
 
@@ -399,6 +413,23 @@ def _with_loop_angle(lines: dict[str, list[Component]], base: dict[str, Estimate
         ]
 
 
+def _with_unresolved_loop_angle(lines: dict[str, list[Component]], base: dict[str, Estimate],
+                                loop: CableLoop, shifted: list[dict[str, Estimate]]) -> None:
+    """An s₀ whose u reaches s₀ itself (a gravity sweep too coarse for the loop's turn-over:
+    an ODrive at 500 Hz read s₀ 0.058 ± 0.17 rad for 0.02) is not resolved, and the results
+    move with it far beyond a linear line: they are re-analysed across ``[~0, s₀ + 2u]``
+    (:data:`UNRESOLVED_ANGLES`) and the line is a rectangular distribution over the range
+    they span (GUM 4.3.7), standard uncertainty range/√12."""
+    for name, estimate in base.items():
+        values = [estimate.value, *(found[name].value for found in shifted)]
+        spread = (max(values) - min(values)) / math.sqrt(12)
+        lines[name].append(Component(
+            source="cable hysteresis loop's angle s₀ not resolved (u ≥ s₀): the results' "
+                   "range over s₀ from an abrupt loop to s₀ + 2u, rectangular (gravity_cable)",
+            kind="B", standard_uncertainty=loop.angle_u_rad, unit="rad",
+            sensitivity=spread / loop.angle_u_rad))
+
+
 def measured_load_stiffness(calibration: CalibrationRun, *, position_rad: float) -> Estimate | None:
     """``dL/dθ`` of gravity and cable at ``position_rad`` if ``gravity_cable`` ran earlier.
 
@@ -420,6 +451,19 @@ def measured_load_stiffness(calibration: CalibrationRun, *, position_rad: float)
         return None
     mge, phase, cable = found
     return load_stiffness(mge=mge, phase=phase, cable_stiffness=cable, position_rad=position_rad)
+
+
+def declared_current_loop_lag(profile: UnitProfile) -> Estimate | None:
+    """The profile's nominal current-loop τ in seconds, its limits a rectangular
+    distribution (GUM 4.3.7): what the sines take out when the drive's rate does not let
+    the current-loop protocol run (leaving 0 s would put ``J·(2πf)²·τ`` into B, 3 % of the
+    demo's B, undeclared). ``None`` when the profile declares no such result."""
+    spec = profile.measurements.get(LAG.result)
+    if spec is None or not spec.nominal > 0:
+        return None
+    half_width_ms = max(spec.upper_limit - spec.nominal, spec.nominal - max(spec.lower_limit, 0))
+    return Estimate(name=LAG.result, value=spec.nominal / 1000, unit="s",
+                    standard_uncertainty=half_width_ms / 1000 / math.sqrt(3))
 
 
 def measured_current_loop_lag(calibration: CalibrationRun) -> Estimate | None:
@@ -489,13 +533,15 @@ def analyse_in_calibration(
     IdentificationError
         As for :func:`analyse`.
     """
-    lag = measured_current_loop_lag(calibration)
+    lag, lag_line = measured_current_loop_lag(calibration), LAG_MEASURED
+    if lag is None:
+        lag, lag_line = declared_current_loop_lag(calibration.profile), LAG_DECLARED
     lag_s = 0.0 if lag is None else lag.value
     loop = measured_cable_loop(calibration)
     analysed = analyse(recordings, spec, current_loop_lag_s=lag_s, cable_loop=loop,
                        position_torque=position_torque)
     estimates = with_earlier_inputs(recordings, spec, lag=lag, loop=loop,
-                                    position_torque=position_torque)
+                                    position_torque=position_torque, lag_line=lag_line)
     centre_rad = float(np.mean([np.mean(r.position) for r in recordings]))
     stiffness = measured_load_stiffness(calibration, position_rad=centre_rad)
     if stiffness is not None:
