@@ -48,8 +48,10 @@ from numba import njit
     P_FEEDFORWARD,  # firmware: 1 adds the torque offset input to the command
     P_COMPENSATION,  # firmware: 1 applies the loaded cogging / K_t ripple table
     P_LF_DECAY,  # low-frequency shaft disturbance: its first-order filter's decay per period
+    P_SIGMA0,  # LuGre bristle stiffness (N·m/rad); 0: the static Stribeck map with sticking
+    P_SIGMA1,  # LuGre bristle damping (N·m·s/rad)
     N_PARAMS,
-) = range(33)
+) = range(35)
 
 # state vector layout
 (
@@ -67,8 +69,9 @@ from numba import njit
     S_TORQUE_CMD,  # this period's demand on the current loop (after delay and sensor noise)
     S_DISTURBANCE,  # this period's shaft disturbance (N·m)
     S_ACCEL,  # the carrier's acceleration over the last physics step (rad/s²)
+    S_BRISTLE,  # LuGre: the bristles' mean deflection (rad)
     N_STATE,
-) = range(15)
+) = range(16)
 
 # rows of the in-loop noise array (one column per control period, drawn by the caller)
 (
@@ -329,8 +332,12 @@ def mechanics_substep(params: np.ndarray, state: np.ndarray, cogging: np.ndarray
         t_drive = t_motor - t_shaft
     else:
         t_drive = t_motor - t_load
+    if params[P_SIGMA0] > 0.0:
+        state[S_BRISTLE], t_fric = lugre_friction(params, state[S_BRISTLE], omega_m, h,
+                                                  derived[D_INV_VS])
+        omega_m += h * (t_drive - t_fric) * inv_j_m
     # friction with sticking: at rest until |t_drive| exceeds the breakaway torque
-    if omega_m == 0.0:
+    elif omega_m == 0.0:
         if abs(t_drive) <= ts:
             if not two_mass:
                 state[S_ACCEL] = 0.0
@@ -361,6 +368,33 @@ def mechanics_substep(params: np.ndarray, state: np.ndarray, cogging: np.ndarray
     state[S_OMEGA_M] = omega_m
     if not two_mass:
         state[S_ACCEL] = (omega_m - carrier_before) / h
+
+
+@njit(cache=True, fastmath=True)
+def lugre_friction(params: np.ndarray, bristle_rad: float, omega_m: float, h: float,
+                   inv_vs: float) -> tuple[float, float]:
+    """One physics step of LuGre friction (Canudas de Wit 1995): the bristles deflect as
+    ``ż = ω − σ0·|ω|·z/g(ω)`` (``g`` the Stribeck map, so the steady state is that map)
+    and push with ``σ0·z + σ1·ż + B·ω``; no sticking, pre-sliding instead. The deflection is
+    advanced exactly for the step's ω (its relaxation is stiff at speed). Returns the new
+    deflection and the friction torque."""
+    if omega_m >= 0.0:
+        tc = params[P_TC_POS]
+        b = params[P_B_POS]
+    else:
+        tc = params[P_TC_NEG]
+        b = params[P_B_NEG]
+    g = tc
+    if params[P_TS] > tc:
+        ratio = omega_m * inv_vs
+        g += (params[P_TS] - tc) * math.exp(-ratio * ratio)
+    sigma0 = params[P_SIGMA0]
+    z_new = bristle_rad
+    if omega_m != 0.0:
+        rate = sigma0 * abs(omega_m) / g
+        steady = omega_m / rate
+        z_new = steady + (bristle_rad - steady) * math.exp(-rate * h)
+    return z_new, sigma0 * z_new + params[P_SIGMA1] * (z_new - bristle_rad) / h + b * omega_m
 
 
 @njit(cache=True, fastmath=True)
@@ -467,6 +501,8 @@ def run_kernel(
     integrator = state[S_INTEGRATOR]
     pos_prev = state[S_POS_MEAS_PREV]
     hyst = state[S_HYST]
+    bristle = state[S_BRISTLE]
+    lugre = params[P_SIGMA0] > 0.0
     slot = int(state[S_DELAY_INDEX])
     noisy = loop_noise.shape[1] > 0
     lf_decay = params[P_LF_DECAY]
@@ -561,8 +597,11 @@ def run_kernel(
                 t_drive = t_motor - t_shaft
             else:
                 t_drive = t_motor - t_load
+            if lugre:
+                bristle, t_fric = lugre_friction(params, bristle, omega_m, h, inv_vs)
+                omega_m += h * (t_drive - t_fric) * inv_j_m
             # friction with sticking: at rest until |t_drive| exceeds the breakaway torque
-            if omega_m == 0.0:
+            elif omega_m == 0.0:
                 if abs(t_drive) <= ts:
                     continue
                 t_fric = math.copysign(ts, t_drive)
@@ -599,6 +638,7 @@ def run_kernel(
     state[S_HYST] = hyst
     state[S_DELAY_INDEX] = slot
     state[S_DISTURBANCE_LF] = disturbance_lf
+    state[S_BRISTLE] = bristle
     return int(done)
 
 

@@ -113,6 +113,10 @@ def pack_params(params: PlantParams, firmware: Firmware) -> FloatArray:
     vector[kernel.P_DELAY] = firmware.command_delay_samples
     vector[kernel.P_FEEDFORWARD] = float(firmware.feedforward)
     vector[kernel.P_COMPENSATION] = float(firmware.cogging_compensation)
+    sigma0 = params.bristle_stiffness_nm_rad
+    vector[kernel.P_SIGMA0] = sigma0
+    vector[kernel.P_SIGMA1] = 2 * params.bristle_damping_ratio * math.sqrt(
+        sigma0 * params.motor_inertia_kg_m2)
     return vector
 
 
@@ -154,12 +158,15 @@ def loop_noise_scale(params: PlantParams, fs_hz: float) -> LoopNoiseScale:
 
 
 def substeps_for(params: PlantParams, fs_hz: float) -> int:
-    """Physics steps per control period: enough for the shaft resonance (ω·h ≤ 0.2)."""
+    """Physics steps per control period: enough for the shaft resonance and the LuGre
+    bristles' mode on the motor (ω·h ≤ 0.2)."""
     if params.substeps > 0:
         return params.substeps
-    if params.resonance_hz <= 0:
+    bristle_rad_s = math.sqrt(params.bristle_stiffness_nm_rad / params.motor_inertia_kg_m2)
+    fastest_rad_s = max(2 * math.pi * params.resonance_hz, bristle_rad_s)
+    if fastest_rad_s <= 0:
         return 1
-    return max(1, math.ceil(2 * math.pi * params.resonance_hz / (0.2 * fs_hz)))
+    return max(1, math.ceil(fastest_rad_s / (0.2 * fs_hz)))
 
 
 class Plant:

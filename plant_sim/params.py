@@ -67,6 +67,10 @@ class PlantParams:
     coulomb_neg_nm: float | None = None  # asymmetric friction: negative direction
     viscous_neg_nm_s_rad: float | None = None
     torque_offset_nm: float = 0.0  # constant load torque the motor must hold
+    # LuGre friction instead of the static map with sticking: the bristles' deflection at the
+    # breakaway torque (σ0 = max(T_s, T_c)/presliding_rad); 0: the static map
+    presliding_rad: float = 0.0
+    bristle_damping_ratio: float = 0.7  # LuGre: σ1 = 2ζ·√(σ0·J_motor)
     load_inertia_kg_m2: float = 0.0  # > 0: two-mass model
     shaft_stiffness_nm_rad: float = 0.0
     shaft_damping_nm_s_rad: float = 0.0
@@ -131,6 +135,7 @@ class PlantParams:
             "shaft_damping_nm_s_rad",
             "cable_stiffness_nm_rad",
             "cable_hysteresis_nm",
+            "presliding_rad",
             "torque_noise_nm",
             "load_torque_noise_nm",
             *LOOP_NOISE_DEFAULTS,
@@ -193,6 +198,13 @@ class PlantParams:
             return 0.0
         reduced = self.motor_inertia_kg_m2 * load / self.total_inertia_kg_m2
         return math.sqrt(self.shaft_stiffness_nm_rad / reduced) / (2 * math.pi)
+
+    @property
+    def bristle_stiffness_nm_rad(self) -> float:
+        """LuGre's σ0 (0 for the static map)."""
+        if self.presliding_rad <= 0:
+            return 0.0
+        return max(self.static_friction_nm, self.coulomb_nm) / self.presliding_rad
 
     def with_changes(self, **changes: Any) -> PlantParams:
         return replace(self, **changes)

@@ -4,6 +4,8 @@ even over the hundreds of thirds looked at (the family-wise level)."""
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 
 from hil.characterise.bins import binned, miss_table
@@ -56,3 +58,23 @@ def test_a_right_u_shows_no_miss_over_many_thirds() -> None:
         bins = binned(_population(seed, understated_above=None))
         assert len(bins) == 5 * 4 * 3  # each of 5 results in thirds of the 4 others
         assert not any(b.misses for b in bins), miss_table(bins)
+
+
+def test_a_variant_that_misses_is_named_in_the_map_note() -> None:
+    """Validated per drawn variant: a result whose ±U fails on one friction law says so in
+    its note (which the certificate prints); one that holds on both gets no note."""
+    from hil.characterise.method_map import with_validation
+    from hil.characterise.summary import by_variant, summarise
+
+    good = _population(3, understated_above=None)
+    bad = _population(4, understated_above=0.0)  # every unit's J error 3 × its u
+    rows = ([dataclasses.replace(r, unit="S" + r.unit, variant="friction: static") for r in good]
+            + [dataclasses.replace(r, unit="L" + r.unit, variant="friction: LuGre") for r in bad])
+    document = {"population": "test", "results": {"elevation": {
+        name: {"scale": "relative", "bias": 0.0, "scatter": 0.0, "units": 1}
+        for name in ("inertia_kg_m2", *COVARIATES)}}}
+    validated = with_validation(document, summarise(rows), by_variant(rows))["results"]
+    note = validated["elevation"]["inertia_kg_m2"]["note"]
+    assert note.startswith("±U held the truth by variant: friction: LuGre ")
+    assert "friction: static 9" in note  # 93-100 % of 150
+    assert "note" not in validated["elevation"]["coulomb_nm"]

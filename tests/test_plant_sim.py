@@ -189,3 +189,43 @@ def test_a_vanishing_cable_hysteresis_moves_the_axis_as_none_does(
         for h in (0.0, hysteresis_nm)
     ]
     np.testing.assert_allclose(traces[1].position_rad, traces[0].position_rad, atol=1e-9)
+
+
+LUGRE = PlantParams(inertia_kg_m2=0.003, viscous_nm_s_rad=0.004, coulomb_nm=0.02,
+                    static_friction_nm=0.03, stribeck_velocity_rad_s=0.02,
+                    presliding_rad=5e-5)
+
+
+def test_lugre_sliding_friction_is_the_stribeck_map() -> None:
+    """LuGre's steady state is the static map: at each constant speed the drive's torque is
+    T_c + (T_s − T_c)·exp(−(v/v_s)²) + B·v, as with the static law."""
+    for speed in (0.005, 0.05, 0.3):
+        held = Plant(LUGRE, firmware=Firmware(velocity_kp_nm_s_rad=0.5, velocity_ki_nm_rad=20.0),
+                     fs_hz=FS, seed=0).run(Mode.VELOCITY, np.full(16000, speed))
+        expected = 0.02 + 0.01 * math.exp(-((speed / 0.02) ** 2)) + 0.004 * speed
+        assert np.mean(held.torque_nm[-4000:]) == pytest.approx(expected, rel=0.01)
+
+
+def test_lugre_pre_slides_where_the_static_law_sticks() -> None:
+    """Below breakaway the static law holds the rotor still; under LuGre the rotor moves
+    by more than the bristles' final deflection torque/σ0 (σ0 = T_s / presliding: part of
+    the transient's motion slips) and less than twice it, then stands still."""
+    torque = 0.5 * LUGRE.static_friction_nm
+    static = Plant(dataclasses.replace(LUGRE, presliding_rad=0.0), fs_hz=FS, seed=0)
+    assert np.all(static.run(Mode.TORQUE, np.full(4000, torque)).position_rad == 0.0)
+    moved = Plant(LUGRE, fs_hz=FS, seed=0).run(Mode.TORQUE, np.full(4000, torque)).position_rad
+    deflection = torque / LUGRE.bristle_stiffness_nm_rad
+    assert deflection < moved[-1] < 2 * deflection
+    assert np.ptp(moved[-2000:]) < 1e-3 * deflection  # settled: no sliding
+
+
+def test_stiff_bristles_raise_the_physics_steps() -> None:
+    from plant_sim.model import substeps_for
+
+    stiff = dataclasses.replace(LUGRE, presliding_rad=1e-6)
+    assert substeps_for(LUGRE, FS) < substeps_for(stiff, FS)
+    held = Plant(stiff, firmware=Firmware(velocity_kp_nm_s_rad=0.5, velocity_ki_nm_rad=20.0),
+                 fs_hz=FS, seed=0).run(Mode.VELOCITY, np.full(8000, 0.05))
+    assert np.all(np.isfinite(held.torque_nm))
+    assert np.mean(held.torque_nm[-2000:]) == pytest.approx(
+        0.02 + 0.01 * math.exp(-6.25) + 0.004 * 0.05, rel=0.01)

@@ -2,6 +2,9 @@
 ``[firmware]`` current-loop lag, gains and filter) across its measurement's tolerance range
 (parameters without a declared measurement: ±20 %; ``T_s`` as ``T_c·(1.1 … 1.5)``, so that
 every unit has the Stribeck peak ``v_s`` describes), every effect on, a noise seed each.
+The friction law is drawn too (issue 30: a map no single simulator's habits shape): the
+static Stribeck map with sticking or LuGre at the same T_c/T_s/v_s, its pre-sliding and
+bristle damping drawn (:data:`LUGRE_SHARE`, :data:`PRESLIDING_LOG10_RAD`).
 """
 
 from __future__ import annotations
@@ -21,6 +24,9 @@ from hil.profile import resolve_profile_path
 PROFILES = ("demo_gimbal_elevation", "demo_gimbal_azimuth")
 NUISANCE_SPREAD = 0.2  # ± relative spread of plant parameters with no declared measurement
 STRIBECK_RISE = (1.1, 1.5)  # T_s / T_c: a peak of 10–50 % (below ~10 % v_s is not defined)
+LUGRE_SHARE = 0.5  # of the units whose friction is LuGre's
+PRESLIDING_LOG10_RAD = (-5.0, -3.7)  # LuGre: the bristles' deflection at T_s, 10 … 200 µrad
+BRISTLE_DAMPING = (0.3, 1.0)  # LuGre: σ1 = 2ζ·√(σ0·J), ζ drawn in this range
 
 # plant parameter → the measurement whose tolerance sets its spread
 MEASURED_BY = {
@@ -102,6 +108,10 @@ def draw_unit(profile_raw: Mapping[str, Any], rng: np.random.Generator
                    if isinstance(v, float) and k not in merged})
     drawn = draw_plant({**profile_raw, "plant": merged}, rng)
     drawn_firmware = {k: drawn.pop(k) if k in drawn else v for k, v in firmware.items()}
+    lugre = rng.uniform() < LUGRE_SHARE
+    presliding, damping = 10 ** rng.uniform(*PRESLIDING_LOG10_RAD), rng.uniform(*BRISTLE_DAMPING)
+    if lugre:
+        drawn.update(presliding_rad=float(presliding), bristle_damping_ratio=float(damping))
     return drawn, drawn_firmware
 
 
@@ -124,7 +134,8 @@ def write_population(
             drawn = {**raw, "plant": plant, "firmware": firmware}
             unit_path.write_text(tomli_w.dumps(drawn), encoding="utf-8")
             units.append(Unit(profile_path=unit_path, serial=serial, axis=raw["unit"]["axis"],
-                              seed=int(rng.integers(1, 2**31 - 1))))
+                              seed=int(rng.integers(1, 2**31 - 1)),
+                              variant=friction_law(plant)))
     return units
 
 
@@ -136,3 +147,9 @@ class Unit:
     serial: str
     seed: int
     axis: str
+    variant: str = ""  # the simulator's drawn choices (friction_law)
+
+
+def friction_law(plant: Mapping[str, Any]) -> str:
+    """The drawn unit's friction law, as its validation groups units."""
+    return "friction: LuGre" if plant.get("presliding_rad", 0.0) > 0 else "friction: static"

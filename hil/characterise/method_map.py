@@ -12,7 +12,7 @@ import numpy as np
 from scipy.optimize import brentq
 
 from hil.characterise.run import Row
-from hil.characterise.summary import FloatArray, Summary, by_result, errors_of
+from hil.characterise.summary import FloatArray, Summary, by_result, errors_of, verdict
 
 HEADER = """\
 # Each method's error over a simulated population of units, per axis, written by
@@ -54,10 +54,13 @@ def bias_map(rows: Iterable[Row], *, population: str) -> dict[str, Any]:
     return {"population": population, "results": results}
 
 
-def with_validation(document: Mapping[str, Any], summaries: Iterable[Summary]
+def with_validation(document: Mapping[str, Any], summaries: Iterable[Summary],
+                    per_variant: Mapping[str, Iterable[Summary]] | None = None
                     ) -> dict[str, Any]:
     """The map ``document`` with each result's coverage on this (out-of-sample)
-    population: ``validated_coverage`` and ``validated_units`` (notes are kept)."""
+    population: ``validated_coverage`` and ``validated_units``; where a drawn variant of
+    the simulator misses the goal on its own, its coverage per variant as the ``note`` the
+    certificate prints (other notes are kept)."""
     results = {axis: {name: dict(entry) for name, entry in table.items()}
                for axis, table in document["results"].items()}
     for s in summaries:
@@ -65,6 +68,19 @@ def with_validation(document: Mapping[str, Any], summaries: Iterable[Summary]
         if entry is not None:
             entry["validated_coverage"] = round(s.coverage, 4)
             entry["validated_units"] = s.n
+    by_result: dict[tuple[str, str], list[tuple[str, Summary]]] = {}
+    for variant, group in (per_variant or {}).items():
+        for s in group:
+            by_result.setdefault((s.axis, s.parameter), []).append((variant, s))
+    for (axis, name), found in by_result.items():
+        entry = results.get(axis, {}).get(name)
+        if entry is None or all(verdict(s) != "MISSED" for _, s in found):
+            continue
+        said = "; ".join(f"{v} {100 * s.coverage:.0f} % of {s.n}" for v, s in found)
+        note = f"±U held the truth by variant: {said}"
+        old = str(entry.get("note", "")).split(" | ±U held the truth by variant")[0]
+        old = "" if old.startswith("±U held the truth by variant") else old
+        entry["note"] = f"{old} | {note}" if old else note
     return {**document, "results": results}
 
 

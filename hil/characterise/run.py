@@ -58,6 +58,7 @@ class Row:
     truth: float
     standard_uncertainty: float
     expanded_uncertainty: float
+    variant: str = ""  # the unit's drawn simulator choices (hil.characterise.draw)
 
     @property
     def normalised_error(self) -> float:
@@ -103,6 +104,6 @@ def _rows(unit: Unit, results: dict[str, dict[str, Any]]) -> list[Row]:
     return [
         Row(unit=unit.serial, axis=unit.axis, parameter=name, value=float(r["value"]),
             truth=truth[name], standard_uncertainty=float(r["standard_uncertainty"]),
-            expanded_uncertainty=float(r["expanded_uncertainty"]))
+            expanded_uncertainty=float(r["expanded_uncertainty"]), variant=unit.variant)
         for name, r in results.items() if name in truth and r["standard_uncertainty"]
     ]

@@ -19,7 +19,7 @@ from hil.characterise.bins import binned, miss_table
 from hil.characterise.draw import PROFILES, Unit, write_population
 from hil.characterise.method_map import HEADER, bias_map, with_validation
 from hil.characterise.run import run_population
-from hil.characterise.summary import summarise, table
+from hil.characterise.summary import by_variant, summarise, table, variant_table
 from hil.errors import InputError
 from hil.profile import resolve_profile_path
 
@@ -59,6 +59,9 @@ def characterise(args: argparse.Namespace) -> int:
     print("\n".join(table(summaries)))
     bins = binned(rows)
     print("\n" + "\n".join(miss_table(bins)))
+    per_variant = by_variant(rows)
+    if per_variant:
+        print("\nBy the simulator's drawn variant:\n" + "\n".join(variant_table(per_variant)))
     population = (f"gimbal-hil characterise --units {args.units} --seed {args.seed} "
                   f"--method-bias {state['method_bias']}: {len(units)} units")
     if args.write_map is not None:
@@ -66,11 +69,12 @@ def characterise(args: argparse.Namespace) -> int:
         print(f"method-bias map: {args.write_map}")
     if args.validate_map is not None:
         document = tomllib.loads(args.validate_map.read_text(encoding="utf-8"))
-        _write(args.validate_map, with_validation(document, summaries))
+        _write(args.validate_map, with_validation(document, summaries, per_variant))
         print(f"validation added to {args.validate_map}")
     (args.out / "summary.json").write_text(json.dumps(
         {"population": [asdict(s) for s in summaries], "rows": [asdict(r) for r in rows],
-         "by_covariate": [asdict(b) for b in bins]},
+         "by_covariate": [asdict(b) for b in bins],
+         "by_variant": {v: [asdict(s) for s in group] for v, group in per_variant.items()}},
         indent=1), encoding="utf-8")
     return 0
 

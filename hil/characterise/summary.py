@@ -78,6 +78,27 @@ def summarise(rows: Iterable[Row]) -> list[Summary]:
     return [summarise_group(group) for group in by_result(rows).values()]
 
 
+def by_variant(rows: Iterable[Row]) -> dict[str, list[Summary]]:
+    """:func:`summarise` per drawn simulator variant (none when the units have one)."""
+    groups: dict[str, list[Row]] = {}
+    for row in rows:
+        groups.setdefault(row.variant, []).append(row)
+    return {} if len(groups) < 2 else {v: summarise(g) for v, g in sorted(groups.items())}
+
+
+def variant_table(per_variant: Mapping[str, Sequence[Summary]]) -> list[str]:
+    """Per variant, how many results meet the goal, and the ones that miss it."""
+    lines = []
+    for variant, summaries in per_variant.items():
+        verdicts = [verdict(s) for s in summaries]
+        missed = [s for s, v in zip(summaries, verdicts, strict=True) if v == "MISSED"]
+        lines.append(f"{variant}: {verdicts.count('met')} met, {verdicts.count('consistent')} "
+                     f"consistent, {len(missed)} missed" + "".join(
+                         f"; {s.axis} {s.parameter} {100 * s.coverage:.0f} % / RMS "
+                         f"{s.rms_normalised:.2f} (n {s.n})" for s in missed))
+    return lines
+
+
 def summarise_group(group: Sequence[Row], z: float = 1.96) -> Summary:
     """The summary of one result's rows (one axis), its intervals at ``z``."""
     relative, errors, u = errors_of(group)
