@@ -146,6 +146,9 @@ class MethodBias:
         The acquisition path the population was recorded on.
     variant : str
         The method's variant it was measured for ("": as the main map assumes).
+    gross_errors : int
+        Units of the population left out of bias and scatter as gross errors (many of their
+        total u from the line; ``hil.characterise.method_map.bias_map``).
     """
 
     name: str
@@ -158,6 +161,7 @@ class MethodBias:
     note: str = ""
     acquisition: str = EVERY_CONTROL_PERIOD  # the path its population was recorded on
     variant: str = ""  # the method run without an input the main map assumes
+    gross_errors: int = 0  # units left out of the figures as gross errors
 
     def validation(self) -> dict[str, object] | None:
         """What the certificate states of the map's out-of-sample check, if made."""
@@ -274,6 +278,7 @@ def _method_bias(name: str, table: ConfigTable) -> MethodBias:
         validated_units=(table.integer("validated_units")
                          if "validated_units" in table else None),
         note=table.string("note", ""),
+        gross_errors=table.integer("gross_errors") if "gross_errors" in table else 0,
     )
     table.done()
     return bias

@@ -78,3 +78,22 @@ def test_a_variant_that_misses_is_named_in_the_map_note() -> None:
     assert note.startswith("±U held the truth by variant: friction: LuGre ")
     assert "friction: static 9" in note  # 93-100 % of 150
     assert "note" not in validated["elevation"]["coulomb_nm"]
+
+
+def test_a_rare_gross_error_is_set_aside_from_the_line_but_common_ones_are_scatter() -> None:
+    """One unit 30 u off in 150 would make every unit's line wide: it is left out of the
+    fit and counted; at 6 % of the units such errors are the method's scatter."""
+    from hil.characterise.method_map import bias_map
+
+    rows = [r for r in _population(5, understated_above=None) if r.parameter == "inertia_kg_m2"]
+
+    def off(row: Row) -> Row:
+        return dataclasses.replace(row, value=row.truth - 30 * row.standard_uncertainty)
+
+    one = bias_map([off(rows[0]), *rows[1:]], population="t")["results"]["elevation"]
+    line = one["inertia_kg_m2"]
+    assert line["gross_errors"] == 1
+    assert line["scatter"] < 0.2 * 0.01  # a fifth of the units' own u: no scatter to speak of
+    many = bias_map([*map(off, rows[:9]), *rows[9:]], population="t")["results"]["elevation"]
+    assert "gross_errors" not in many["inertia_kg_m2"]
+    assert many["inertia_kg_m2"]["scatter"] > 0.05  # 5 × the units' own u

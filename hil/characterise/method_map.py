@@ -25,6 +25,12 @@ HEADER = """\
 """
 
 
+#: a unit this many of its total u from the line is a gross error of the method, not scatter
+GROSS_Z = 6.0
+#: at most this share of a population is set aside so (more is the method's scatter)
+GROSS_SHARE = 0.02
+
+
 def bias_map(rows: Iterable[Row], *, population: str) -> dict[str, Any]:
     """The method-bias map (``fixtures/method_bias.toml``) the rows show, per axis.
 
@@ -34,24 +40,47 @@ def bias_map(rows: Iterable[Row], *, population: str) -> dict[str, Any]:
     ``u`` already covers the errors), the bias ``b`` the mean of ``e`` weighted by
     ``1/(u² + s²)``; the bias's own standard error is added to ``s``. Units whose ``u``
     differs a lot (an ill-determined cable loop) then count by their own ``u``, which a
-    moment estimate ``var(e) − mean(u²)`` would not do. Computed on results calibrated
-    with ``--method-bias off``.
+    moment estimate ``var(e) − mean(u²)`` would not do. A unit more than ``GROSS_Z`` total
+    u from the line is a gross error and is left out of the fit, if such units are at most
+    ``GROSS_SHARE`` of the population (``gross_errors`` counts them): one unit's K_t 30 u off
+    made every other unit's line 5 × wider; they still count in the validation. Computed
+    on results calibrated with ``--method-bias off``.
     """
     results: dict[str, dict[str, Any]] = {}
     for (axis, name), group in by_result(rows).items():
         relative, errors, u = errors_of(group)
-        bias, scatter = float(np.mean(errors)), 0.0
-        for _ in range(20):
-            scatter = _excess_scatter(errors - bias, u)
-            weights = 1 / (u**2 + scatter**2)
-            bias = float(np.sum(weights * errors) / np.sum(weights))
-        results.setdefault(axis, {})[name] = {
+        kept = np.ones(len(errors), dtype=bool)
+        bias, scatter, weight = _line(errors, u)
+        for _ in range(5):
+            gross = np.abs(errors - bias) > GROSS_Z * np.sqrt(u**2 + scatter**2)
+            if gross.sum() > GROSS_SHARE * len(errors):
+                kept[:] = True
+                bias, scatter, weight = _line(errors, u)
+                break
+            if np.array_equal(~gross, kept):
+                break
+            kept = ~gross
+            bias, scatter, weight = _line(errors[kept], u[kept])
+        entry = {
             "scale": "relative" if relative else "absolute",
             "bias": bias,
-            "scatter": math.hypot(scatter, 1 / math.sqrt(float(np.sum(weights)))),
+            "scatter": math.hypot(scatter, 1 / math.sqrt(weight)),
             "units": len(group),
         }
+        if not kept.all():
+            entry["gross_errors"] = int(np.sum(~kept))
+        results.setdefault(axis, {})[name] = entry
     return {"population": population, "results": results}
+
+
+def _line(errors: FloatArray, u: FloatArray) -> tuple[float, float, float]:
+    """Bias, excess scatter and the sum of weights of ``errors`` (:func:`bias_map`)."""
+    bias, scatter = float(np.mean(errors)), 0.0
+    for _ in range(20):
+        scatter = _excess_scatter(errors - bias, u)
+        weights = 1 / (u**2 + scatter**2)
+        bias = float(np.sum(weights * errors) / np.sum(weights))
+    return bias, scatter, float(np.sum(weights))
 
 
 def with_validation(document: Mapping[str, Any], summaries: Iterable[Summary],
