@@ -35,8 +35,8 @@ def test_every_need_names_a_protocol_and_what_it_leaves() -> None:
             assert need.protocol != name, (name, need)
             assert need.without, (name, need)
     # the lag the issue names, with both fallbacks
-    assert "0 s" in next(n.without for n in NEEDS["inertia_friction"]
-                         if n.result == "current_loop_time_constant_ms")
+    assert "nominal" in next(n.without for n in NEEDS["inertia_friction"]
+                             if n.result == "current_loop_time_constant_ms")
     assert "0.0002 s" in next(n.without for n in NEEDS["resonance"]
                               if n.result == "current_loop_time_constant_ms")
 
@@ -78,8 +78,8 @@ def test_the_refusal_comes_before_any_motion(tmp_path: Path) -> None:
 @pytest.mark.slow
 def test_a_need_not_configured_runs_on_its_fallback_and_says_so(tmp_path: Path) -> None:
     """inertia_friction without current_loop (and gravity_cable) in the profile: the lag
-    taken out is 0 s, and its certificate entry names each fallback. Failed before: the
-    certificate said nothing of it."""
+    taken out is the profile's nominal τ (0 s here: the subset declares none), and its
+    certificate entry names each fallback. Failed before: the certificate said nothing."""
     profile = subset_profile(tmp_path, "inertia_friction")
     done = run_command(
         ["calibrate", "--profile", str(profile),
@@ -91,7 +91,8 @@ def test_a_need_not_configured_runs_on_its_fallback_and_says_so(tmp_path: Path) 
     assert path.is_file(), done.stdout + done.stderr
     cert = json.loads(path.read_text(encoding="utf-8"))
     messages = cert["method"]["protocols"]["inertia_friction"]["messages"]
-    assert ("without current_loop's current_loop_time_constant_ms: no current-loop lag taken "
-            "out of the sines (0 s)") in messages
+    assert ("without current_loop's current_loop_time_constant_ms: the profile's nominal "
+            "current-loop lag taken out of the sines, its limits a rectangular budget line (0 s "
+            "where the profile declares no τ)") in messages
     assert any(m.startswith("without gravity_cable's cable_hysteresis_nm:") for m in messages)
     assert cert["method"]["details"]["inertia_friction"]["current_loop_lag_compensated_s"] == 0

@@ -48,7 +48,7 @@ MEASUREMENTS = ("inertia_kg_m2", "viscous_nm_s_rad", "coulomb_nm", "inertia_ampl
 #: what it takes from earlier protocols (:mod:`hil.suite.needs`)
 LAG = Need(protocol="current_loop", result="current_loop_time_constant_ms",
            without="the profile's nominal current-loop lag taken out of the sines, its "
-           "limits a rectangular budget line")
+           "limits a rectangular budget line (0 s where the profile declares no τ)")
 LAG_MEASURED = "current-loop time constant τ taken out (current_loop)"
 #: an unresolved loop angle's re-analyses: s₀·scale + u(s₀)·reach, from an abrupt loop to s₀ + 2u
 UNRESOLVED_ANGLES = ((0.05, 0.0), (1.0, 0.5), (1.0, 1.0), (1.0, 2.0))
