@@ -68,15 +68,15 @@ def test_a_variant_that_misses_is_named_in_the_map_note() -> None:
 
     good = _population(3, understated_above=None)
     bad = _population(4, understated_above=0.0)  # every unit's J error 3 × its u
-    rows = ([dataclasses.replace(r, unit="S" + r.unit, variant="friction: static") for r in good]
-            + [dataclasses.replace(r, unit="L" + r.unit, variant="friction: LuGre") for r in bad])
+    rows = ([dataclasses.replace(r, unit="S" + r.unit, variant="static friction") for r in good]
+            + [dataclasses.replace(r, unit="L" + r.unit, variant="LuGre friction") for r in bad])
     document = {"population": "test", "results": {"elevation": {
         name: {"scale": "relative", "bias": 0.0, "scatter": 0.0, "units": 1}
         for name in ("inertia_kg_m2", *COVARIATES)}}}
     validated = with_validation(document, summarise(rows), by_variant(rows))["results"]
     note = validated["elevation"]["inertia_kg_m2"]["note"]
-    assert note.startswith("±U held the truth by variant: friction: LuGre ")
-    assert "friction: static 9" in note  # 93-100 % of 150
+    assert note.startswith("by variant: LuGre friction ")
+    assert "static friction 9" in note  # 93-100 % of 150
     assert "note" not in validated["elevation"]["coulomb_nm"]
 
 

@@ -238,6 +238,12 @@ class Validation:
     units: int | None
     note: str = ""
 
+    def sentence(self) -> str:
+        """What a reader is told under the result's budget."""
+        note = f": {self.note}" if self.note else ""
+        return (f"validated: ±U held the truth for {100 * self.coverage:.0f} % of "
+                f"{self.units} simulated units{note}")
+
 
 @dataclasses.dataclass(frozen=True, slots=True, kw_only=True)
 class Result:

@@ -248,9 +248,6 @@ def _budgets(results: Sequence[Result]) -> list[str]:
                 f"→ {significant(line.contribution):<9}{100 * share:>4.0f} %  "
                 f"{line.component}"
             )
-        validation = r.validation
-        if validation:
-            note = f": {validation.note}" if validation.note else ""
-            lines.append(f"    validated: ±U held the truth for {100 * validation.coverage:.0f} "
-                         f"% of {validation.units} simulated units{note}")
+        if r.validation:
+            lines.append(f"    {r.validation.sentence()}")
     return lines

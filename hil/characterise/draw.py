@@ -152,4 +152,4 @@ class Unit:
 
 def friction_law(plant: Mapping[str, Any]) -> str:
     """The drawn unit's friction law, as its validation groups units."""
-    return "friction: LuGre" if plant.get("presliding_rad", 0.0) > 0 else "friction: static"
+    return "LuGre friction" if plant.get("presliding_rad", 0.0) > 0 else "static friction"

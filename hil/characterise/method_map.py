@@ -106,9 +106,9 @@ def with_validation(document: Mapping[str, Any], summaries: Iterable[Summary],
         if entry is None or all(verdict(s) != "MISSED" for _, s in found):
             continue
         said = "; ".join(f"{v} {100 * s.coverage:.0f} % of {s.n}" for v, s in found)
-        note = f"±U held the truth by variant: {said}"
-        old = str(entry.get("note", "")).split(" | ±U held the truth by variant")[0]
-        old = "" if old.startswith("±U held the truth by variant") else old
+        note = f"by variant: {said}"
+        old = str(entry.get("note", "")).split(" | by variant: ")[0]
+        old = "" if old.startswith("by variant: ") else old
         entry["note"] = f"{old} | {note}" if old else note
     return {**document, "results": results}
 

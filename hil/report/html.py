@@ -100,6 +100,8 @@ def render_html(view: Mapping[str, Any], *, plots_png: Mapping[str, bytes]) -> s
                           [[line["component"], line["type"], line["u"], line["c"],
                             line["contribution"], line["share"]] for line in b["lines"]],
                           numeric={2, 3, 4, 5}))
+        if b["validated"]:
+            out.append(f"<p class=desc>{escape(b['validated'])}</p>")
     out.append("<h2>Protocols</h2>")
     out.append(_table(("protocol", "outcome", "motion", "messages"),
                       [[f"{p['title']} ({p['name']})", p["outcome"], p["motion"],

@@ -144,6 +144,7 @@ def _budget(r: Result) -> dict[str, Any]:
         "summary": f"{with_unit(f'{value} ± {expanded}', r.unit)} "
                    f"(k = {r.coverage_factor:.2f}); u = {with_unit(significant(u), r.unit)}",
         "lines": lines,
+        "validated": r.validation.sentence() if r.validation else "",
     }
 
 
