@@ -86,6 +86,24 @@ def test_pdf_results_are_gum_rounded_with_the_conformity_statement(elevation_run
 
 
 @needs_poppler
+def test_every_document_tells_how_often_a_result_s_u_held_the_truth(elevation_run: Run) -> None:
+    """The map's out-of-sample check under each budget, in the HTML and the PDF as in the
+    TXT (the HTML and PDF left it out)."""
+    cert = certificate(elevation_run)
+    validated = [r for r in cert["results"] if r.get("validation")]
+    assert validated
+    html = (elevation_run.unit_dir / "certificate.html").read_text(encoding="utf-8")
+    pdf = flat("\n".join(pdf_pages(elevation_run.unit_dir / "certificate.pdf")))
+    for r in validated:
+        check = r["validation"]
+        sentence = (f"validated: ±U held the truth for {100 * check['coverage']:.0f} % of "
+                    f"{check['units']} simulated units")
+        assert sentence in html, r["parameter"]
+        assert flat(sentence) in pdf, r["parameter"]
+    assert html.count("validated: ±U held the truth") == len(validated)
+
+
+@needs_poppler
 def test_the_json_attached_to_the_pdf_is_the_certificate(elevation_run: Run,
                                                          tmp_path: Path) -> None:
     subprocess.run(["pdfdetach", "-saveall", "-o", str(tmp_path),
