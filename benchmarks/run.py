@@ -2,7 +2,8 @@
 
     python -m benchmarks.run [--runs 200] [--json OUT.json]
 
-- simulator: × real time at 4 kHz, rigid and with every effect on, and the demo gimbal's two
+- simulator: × real time at 4 kHz, rigid and with every effect on (static or LuGre
+  friction), and the demo gimbal's two
   coupled axes against its azimuth alone (``--speed-only``: these rows only);
 - J, B, T_c: RMSE over Monte Carlo runs divided by the Cramér–Rao bound σ·sqrt(diag((ΦᵀΦ)⁻¹)),
   under white torque noise only, then with current-loop lag and encoder quantisation on;
@@ -164,6 +165,9 @@ def main() -> None:
         "simulator_x_real_time_rigid": simulator_speed(white, white_firmware),
         "simulator_x_real_time_all_effects": simulator_speed(demo, profile.firmware),
         "simulator_x_real_time_all_effects_two_mass": simulator_speed(two_mass, profile.firmware),
+        # LuGre friction at the stiffest pre-sliding characterise draws (10 µrad)
+        "simulator_x_real_time_all_effects_lugre": simulator_speed(
+            dataclasses.replace(demo, presliding_rad=1e-5), profile.firmware),
         **gimbal_speed(),
     }
     if not args.speed_only:
