@@ -37,8 +37,9 @@ B_NOT_HELD = pytest.mark.xfail(strict=True, reason=(
     "B reads 0.00638 for 0.00495 N·m·s/rad (+29 %, U 0.00109): at 500 Hz the gravity sweep "
     "reads the cable loop at h 0.00063 ± 0.00052 N·m, s₀ 0.058 ± 0.17 rad (truth 0.001, "
     "0.02), and the sines with that loop taken out read B high; without the loop in the "
-    "plant B is right (0.00487), with it left in +11 %. Not traced (issue 30); before the "
-    "tapered instruments it passed by 1.5 % of U"))
+    "plant B is right (0.00487), with it left in +11 %. The simulator at 500 Hz resolves the "
+    "loop (s₀ 0.015 ± 0.0065) and reads B −5 %, within U: the ODrive path's, not traced "
+    "(issue 30); before the tapered instruments it passed by 1.5 % of U"))
 
 
 @pytest.mark.parametrize("name", ["inertia_kg_m2",
