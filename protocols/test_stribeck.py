@@ -12,7 +12,7 @@ from hil.calibration import CalibrationRun
 from hil.drives.base import Drive, DriveInfo
 from hil.identify.estimate import Estimate
 from hil.identify.stribeck import StribeckResult
-from hil.measurement import WITHOUT_POSITION_TORQUE, Declared, declare
+from hil.measurement import Declared, declare
 from hil.profile import UnitProfile
 from hil.suite.needs import note_fallbacks
 from hil.suite.stop_rule import run_repeated
@@ -30,7 +30,7 @@ from hil.suite.stribeck import (
     finite_or_none,
     without_cable_loop,
 )
-from hil.suite.torque_constant import kt_ripple_from_cogging
+from hil.suite.torque_constant import kt_ripple_from_cogging, ripple_variant
 from hil.suite.travel import on_command_grid
 
 pytestmark = pytest.mark.protocol(NAME)
@@ -52,8 +52,7 @@ def result(drive: Drive, calibration: CalibrationRun, profile: UnitProfile,
     spec = Spec.from_profile(profile, drive_info)
     note_fallbacks(calibration, NAME, NEEDS)
     ripple = kt_ripple_from_cogging(calibration)
-    # without the cogging protocol's ripple table the method's error is the wider line's
-    variant = None if ripple else WITHOUT_POSITION_TORQUE
+    variant = ripple_variant(calibration)
 
     def run_once() -> tuple[StribeckResult, int]:
         move, stairs = excitation(spec, position_rad=drive.status().position_rad)
@@ -95,9 +94,6 @@ def result(drive: Drive, calibration: CalibrationRun, profile: UnitProfile,
 @pytest.mark.parametrize("parameter", MEASUREMENTS)
 def test_stribeck(parameter: str, result: dict[str, Estimate],
                   calibration: CalibrationRun) -> None:
-    details = calibration.details[NAME]
-    taken_out = (isinstance(details, StribeckDetails)
-                 and details.kt_ripple_correction != "none")
     measurement = calibration.record(NAME, result[parameter], declared=DECLARED[parameter],
-                                     variant=None if taken_out else WITHOUT_POSITION_TORQUE)
+                                     variant=ripple_variant(calibration))
     assert measurement.conforms, measurement.verdict()

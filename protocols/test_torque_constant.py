@@ -21,7 +21,7 @@ from hil.identify.torque_constant import (
     datasheet_torque_constant_nm_a,
     identify_torque_constant,
 )
-from hil.measurement import WITHOUT_POSITION_TORQUE, Declared, declare
+from hil.measurement import Declared, declare
 from hil.motion import Mode
 from hil.profile import UnitProfile
 from hil.suite.needs import note_fallbacks
@@ -39,6 +39,7 @@ from hil.suite.torque_constant import (
     kt_ripple_from_cogging,
     locked_angles,
     motion,
+    ripple_variant,
 )
 
 pytestmark = pytest.mark.protocol(NAME)
@@ -83,8 +84,7 @@ def result(
             sweeps.append(analyse_sweep(recording, spec, angle_rad=angle, excitation=e))
         return identify_torque_constant(sweeps, ripple=ripple), sweeps
 
-    # without the cogging protocol's ripple table the method's error is the wider line's
-    variant = None if ripple else WITHOUT_POSITION_TORQUE
+    variant = ripple_variant(calibration)
     runs = run_repeated(run_once, lambda found: estimates(found[0], spec), rule=spec.stop,
                         calibration=calibration, variant=lambda _: variant)
     sweeps = runs.first[1]
@@ -112,9 +112,6 @@ def test_torque_constant(
 ) -> None:
     if parameter not in result:
         pytest.skip("the profile's [unit] has no kv_rpm_per_v (datasheet KV)")
-    details = calibration.details[NAME]
-    taken_out = (isinstance(details, TorqueConstantDetails)
-                 and details.kt_ripple_correction != "none")
     measurement = calibration.record(NAME, result[parameter], declared=DECLARED[parameter],
-                                     variant=None if taken_out else WITHOUT_POSITION_TORQUE)
+                                     variant=ripple_variant(calibration))
     assert measurement.conforms, measurement.verdict()

@@ -50,10 +50,10 @@ LAG = Need(protocol="current_loop", result="current_loop_time_constant_ms",
            without="the profile's nominal current-loop lag taken out of the sines, its "
            "limits a rectangular budget line (0 s where the profile declares no τ)")
 LAG_MEASURED = "current-loop time constant τ taken out (current_loop)"
-#: an unresolved loop angle's re-analyses: s₀·scale + u(s₀)·reach, from an abrupt loop to s₀ + 2u
-UNRESOLVED_ANGLES = ((0.05, 0.0), (1.0, 0.5), (1.0, 1.0), (1.0, 2.0))
 LAG_DECLARED = ("current-loop time constant τ not measured: the profile's nominal taken out, "
                 "its limits (rectangular)")
+#: an unresolved loop angle's re-analyses: s₀·scale + u(s₀)·reach, from an abrupt loop to s₀ + 2u
+UNRESOLVED_ANGLES = ((0.05, 0.0), (1.0, 0.5), (1.0, 1.0), (1.0, 2.0))
 CABLE = Need(protocol="gravity_cable", result="cable_hysteresis_nm",
              without="the cable's hysteresis loop left in T_c")
 STIFFNESS = tuple(Need(protocol="gravity_cable", result=name,

@@ -27,6 +27,7 @@ from hil.identify.torque_constant import (
     balanced_angles,
     datasheet_deviation,
 )
+from hil.measurement import WITHOUT_POSITION_TORQUE
 from hil.motion import Excitation, Mode
 from hil.profile import UnitProfile
 from hil.recording import Recording
@@ -313,6 +314,13 @@ def kt_ripple_from_cogging(calibration: CalibrationRun) -> list[tuple[int, float
     if not isinstance(cogging, CoggingDetails):
         return []
     return [(h.order, h.amplitude, h.phase_rad) for h in cogging.kt_ripple]
+
+
+def ripple_variant(calibration: CalibrationRun) -> str | None:
+    """The method line's variant of a protocol that takes the cogging protocol's K_t ripple
+    table out: the main line with the table, the wider one
+    (:data:`hil.measurement.WITHOUT_POSITION_TORQUE`) without it."""
+    return None if kt_ripple_from_cogging(calibration) else WITHOUT_POSITION_TORQUE
 
 
 def planned_motion(profile: UnitProfile, info: DriveInfo, at: Position) -> Iterable[Excitation]:
