@@ -44,9 +44,9 @@ def calibrate(document: dict[str, Any], out: Path, *, drive: str, only: str,
     return path
 
 
-def compare(baseline: Path, candidate: Path, out: Path,
-            capsys: pytest.CaptureFixture[str]) -> tuple[int, dict[str, str], str]:
-    code = main(["compare", str(baseline), str(candidate), "--json", str(out)])
+def compare(baseline: Path, candidate: Path, out: Path, capsys: pytest.CaptureFixture[str],
+            *options: str) -> tuple[int, dict[str, str], str]:
+    code = main(["compare", str(baseline), str(candidate), "--json", str(out), *options])
     rows = json.loads(out.read_text(encoding="utf-8"))["results"]
     return code, {r["parameter"]: r["verdict"] for r in rows}, capsys.readouterr().err
 
@@ -69,10 +69,16 @@ def test_modbus_identical_firmware_flags_nothing(tmp_path: Path,
     one-period setpoint ramp each late poll held the setpoint, a jerk the 100 Hz rows cannot
     resolve, and J read up to 5.5 % low (CHANGED in 2 of 4 full-suite runs). The setpoint is
     now sent ahead (station ``setpoint_lead_periods``), and a run whose host fell behind
-    even that is refused (``setpoint_holds``), not measured."""
+    even that is refused (``setpoint_holds``), not measured.
+
+    The Modbus emulator runs against the wall clock: two runs differ beyond their seeds, and
+    at compare's default family-wise α = 0.05 two runs of one unit are flagged in 1 of 20
+    comparisons by design (the amplitude spread CHANGED in one CI run, its u right: sd 0.16 %
+    over 10 seeds against a median u of 0.16 %). One comparison is judged at α = 10⁻³; the
+    bug this guards (J 5.5 % low, u 0.75 %) lies far beyond that."""
     runs = [calibrate(with_firmware(PROFILE), tmp_path / f"s{seed}", drive="modbus-emulator",
                       only="inertia_friction", seed=seed) for seed in (1, 2)]
-    code, verdicts, err = compare(*runs, tmp_path / "c.json", capsys)
+    code, verdicts, err = compare(*runs, tmp_path / "c.json", capsys, "--alpha", "0.001")
     assert code == 0, (verdicts, err)
     assert set(verdicts) >= {"inertia_kg_m2", "viscous_nm_s_rad", "coulomb_nm"}
     assert set(verdicts.values()) == {"SAME"}

@@ -30,7 +30,7 @@ from hil.drives.station import ModbusStation, load_station
 from hil.errors import DriveFaultError, DriveStateError, ProfileError
 from hil.identify.current_loop import acquisition_path, torque_hold_s
 from hil.motion import CompensationTable, Excitation, Mode, PositionHarmonic
-from hil.profile import UnitProfile
+from hil.profile import UnitProfile, load_profile
 from hil.recording import EVERY_CONTROL_PERIOD, read_recording
 from plant_sim.firmware import Firmware
 from plant_sim.params import PlantParams
@@ -301,18 +301,41 @@ def test_a_map_without_the_recorder_means_no_recorder(tmp_path: Path,
         load_register_map(part)
 
 
-RECORDER_RESULTS = {  # the protocols that run on the recorder, and their truths
-    "azimuth": {"current_loop_time_constant_ms": 0.2, "resonance_frequency_hz": 81.6,
-                "antiresonance_frequency_hz": 50.0, "velocity_bandwidth_hz": None},
-    "elevation": {"current_loop_time_constant_ms": 0.3, "velocity_bandwidth_hz": None},
-}
+def _recorder_truths() -> dict[str, dict[str, float | None]]:
+    """The protocols that run on the recorder, and their truths from the demo gimbal's
+    plants: τ as drawn, the azimuth's two-mass modes with the elevation level (the angle it
+    is held at), f_a = √(k/J_l)/2π and f_r = f_a·√(1 + J_l/J_m)."""
+    azimuth = load_profile("demo_gimbal_azimuth")
+    elevation = load_profile("demo_gimbal_elevation")
+    assert azimuth.plant is not None
+    motor = azimuth.plant.inertia_kg_m2
+    load = azimuth.plant.load_inertia_kg_m2 + azimuth.plant.inertia_elevation_kg_m2  # cos² 0 = 1
+    antiresonance = math.sqrt(azimuth.plant.shaft_stiffness_nm_rad / load) / (2 * math.pi)
+    return {
+        "azimuth": {
+            "current_loop_time_constant_ms": 1e3 * azimuth.firmware.current_loop_time_constant_s,
+            "resonance_frequency_hz": antiresonance * math.sqrt(1 + load / motor),
+            "antiresonance_frequency_hz": antiresonance, "velocity_bandwidth_hz": None},
+        "elevation": {
+            "current_loop_time_constant_ms":
+                1e3 * elevation.firmware.current_loop_time_constant_s,
+            "velocity_bandwidth_hz": None},
+    }
+
+
+# One run checks each value against twice its U (about 4 u): a value whose u is right lands
+# outside in ~1 of 10⁴ runs. Against U itself, a right u fails 1 value in 20, and with four
+# values one run in 6: over 28 runs by hand the recorder's error/u had RMS 1.03 (elevation
+# τ, one at 2.85) and 1.04 (azimuth τ); U's 95 % is measured over populations
+# (tests/test_coverage.py), not in one run.
+SINGLE_RUN_BOUND_U = 2.0
 
 
 @pytest.mark.slow
 def test_the_demo_gimbal_runs_its_fast_protocols_on_the_recorders(tmp_path: Path) -> None:
     """Both axes behind one Modbus server: the current loop, the resonance and the velocity
-    FRF run on each unit's drive recorder at 4 kHz and PASS, their values within U of the
-    plants' (a truth given). Only those protocols run: the whole gimbal takes 5 min, too
+    FRF run on each unit's drive recorder at 4 kHz and PASS, their values consistent with
+    the plants' (a truth given). Only those protocols run: the whole gimbal takes 5 min, too
     long for every CI run, and certified PASS in 2 of 3 runs by hand (docs/drives.md)."""
     done = subprocess.run(
         [sys.executable, "-m", "hil.cli", "calibrate", "--gimbal", "demo_gimbal",
@@ -324,14 +347,15 @@ def test_the_demo_gimbal_runs_its_fast_protocols_on_the_recorders(tmp_path: Path
     folder = tmp_path / "GMB-MR"
     assert (folder / "gimbal-certificate.json").is_file(), (done.stdout[-4000:]
                                                            + done.stderr[-4000:])
-    for axis, truths in RECORDER_RESULTS.items():
+    for axis, truths in _recorder_truths().items():
         document = json.loads((folder / axis / "GMB-MR" / "certificate.json").read_text("utf-8"))
         results = {r["parameter"]: r for r in document["results"]}
         for parameter, truth in truths.items():
             found = results[parameter]
             assert found["outcome"] == "PASS", (axis, found)
             if truth is not None:
-                assert abs(found["value"] - truth) <= found["expanded_uncertainty"], (axis, found)
+                error = abs(found["value"] - truth)
+                assert error <= SINGLE_RUN_BOUND_U * found["expanded_uncertainty"], (axis, found)
         sines = read_recording(folder / axis / "GMB-MR" / "recordings"
                                / "current_loop__sines.csv.gz", log_warnings=False)
         assert sines.metadata["acquisition"] == "drive recorder"
