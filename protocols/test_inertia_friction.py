@@ -31,6 +31,7 @@ from hil.suite.inertia_friction import (
 )
 from hil.suite.needs import note_fallbacks
 from hil.suite.position_torque import measured_position_torque
+from hil.suite.shaft_input import shaft_input
 from hil.suite.stop_rule import run_repeated
 
 pytestmark = pytest.mark.protocol(NAME)
@@ -66,11 +67,13 @@ def result(
 
     # cogging and K_t ripple from the gravity sweep: the ripple modulates J·α over the travel
     position_torque = measured_position_torque(calibration, profile, drive.info, protocol=NAME)
+    # a two-mass axis's load driven through the shaft the resonance protocol measured
+    shaft = shaft_input(calibration)
 
     def run_once() -> tuple[InertiaFrictionResult, dict[str, Estimate], EarlierInputs]:
         recordings = [calibration.run(drive, e, protocol=NAME) for e in sines]
         return analyse_in_calibration(recordings, spec, calibration,
-                                      position_torque=position_torque)
+                                      position_torque=position_torque, shaft=shaft)
 
     runs = run_repeated(run_once, lambda found: found[1], rule=spec.stop, calibration=calibration,
                         variant=lambda found: None if found[2].position_torque_removed != "none"
@@ -86,6 +89,7 @@ def result(
         cable_loop_removed=corrections.cable_loop_removed,
         current_loop_lag_compensated_s=corrections.current_loop_lag_compensated_s,
         position_torque_removed=corrections.position_torque_removed,
+        shaft_modes=corrections.shaft_modes,
         fit_pct=round(analysed.fit_pct, 2),
         noise_rms_nm=analysed.noise_rms_nm,
         components=tuple(

@@ -48,10 +48,10 @@ MEASUREMENTS = (
     "azimuth_inertia_ratio",
 )
 #: what it takes from earlier protocols (:mod:`hil.suite.needs`): the K_t protocol's gain,
-#: and what the sine analysis takes (:data:`hil.suite.inertia_friction.NEEDS`)
+#: and what the sine analysis takes (:data:`hil.suite.inertia_friction.SINE_NEEDS`)
 GAIN = Need(protocol="torque_constant", result="reported_torque_gain_error_pct",
             without="J in reported-torque units (no shaft-torque gain applied)")
-NEEDS: tuple[Need, ...] = (GAIN, *sine.NEEDS)
+NEEDS: tuple[Need, ...] = (GAIN, *sine.SINE_NEEDS)
 #: what the station must have beyond the drive contract
 REQUIRES: tuple[Capability, ...] = (Capability.ELEVATION_AXIS,)
 

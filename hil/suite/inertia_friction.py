@@ -28,17 +28,20 @@ from hil.identify.inertia_friction import (
 )
 from hil.identify.position_torque import PositionTorque
 from hil.identify.sine_run import (
+    SineRun,
     analyse_sine_run,
     measured_torque_hold_u_s,
     torque_hold_samples,
     without_cable_loop,
 )
+from hil.identify.two_mass import ShaftModes, driven_acceleration
 from hil.motion import Excitation, Mode
 from hil.profile import UnitProfile
 from hil.recording import Recording
 from hil.suite.gravity_cable import GravityCableDetails
 from hil.suite.needs import Need
 from hil.suite.protocol import Position, Protocol
+from hil.suite.shaft_input import SHAFT, ShaftInput, declared_rectangular
 from hil.suite.stop_rule import StopRule
 from hil.suite.travel import move_excitation, move_speed_rad_s
 
@@ -59,7 +62,10 @@ CABLE = Need(protocol="gravity_cable", result="cable_hysteresis_nm",
 STIFFNESS = tuple(Need(protocol="gravity_cable", result=name,
                        without="J not corrected for the load's stiffness")
                   for name in ("gravity_mge_nm", "gravity_phase_rad", "cable_stiffness_nm_rad"))
-NEEDS: tuple[Need, ...] = (LAG, CABLE, *STIFFNESS)
+#: what every sine analysis takes; the J/B/T_c protocol also drives a two-mass axis's load
+#: through the shaft the resonance protocol measured (:mod:`hil.suite.shaft_input`)
+SINE_NEEDS: tuple[Need, ...] = (LAG, CABLE, *STIFFNESS)
+NEEDS: tuple[Need, ...] = (*SINE_NEEDS, SHAFT)
 #: what the station must have beyond the drive contract
 REQUIRES: tuple[Capability, ...] = ()
 
@@ -207,11 +213,14 @@ def analyse(
     current_loop_lag_s: float = 0.0,
     cable_loop: CableLoop | None = None,
     position_torque: PositionTorque | None = None,
+    shaft: ShaftModes | None = None,
 ) -> InertiaFrictionResult:
     """J, B, T_c. The reported torque reaches the shaft half a control period (zero-order
     hold) plus the current loop's lag later, which would otherwise leak into B as
     ``c·2πf·τ``; the cable's hysteresis loop, when measured, is taken out first (it acts as
     a stiff spring just after each reversal: −1.5 % on J, +20 % on B on the demo unit).
+    A two-mass axis's load is driven through its shaft (the ringing after each friction
+    reversal: B −3.7 % on the demo azimuth left rigid).
 
     Parameters
     ----------
@@ -226,6 +235,9 @@ def analyse(
     position_torque : PositionTorque or None
         Cogging and K_t ripple to take out, if measured (the K_t ripple modulates the
         inertial torque over the sine's travel: :mod:`hil.identify.position_torque`).
+    shaft : ShaftModes or None
+        A two-mass axis's shaft: the regression's α becomes the acceleration the motor
+        torque drives (:func:`hil.identify.two_mass.driven_acceleration`); ``None``: rigid.
 
     Returns
     -------
@@ -249,7 +261,14 @@ def analyse(
         )
         for r in recordings
     ]
+    if shaft is not None:
+        runs = [_driving_the_load(run, shaft) for run in runs]
     return identify_inertia_friction(runs, method=spec.method, harmonics=spec.harmonics)
+
+
+def _driving_the_load(run: SineRun, shaft: ShaftModes) -> SineRun:
+    driven = driven_acceleration(run.acceleration_rad_s2, time_s=run.time_s, shaft=shaft)
+    return dataclasses.replace(run, acceleration_rad_s2=driven)
 
 
 def measured_cable_loop(calibration: CalibrationRun) -> CableLoop | None:
@@ -304,6 +323,7 @@ def with_earlier_inputs(
     loop: CableLoop | None,
     position_torque: PositionTorque | None = None,
     lag_line: str = LAG_MEASURED,
+    shaft: ShaftInput | None = None,
 ) -> dict[str, Estimate]:
     """Every result with the uncertainty of what earlier protocols measured and this one
     takes out as named budget lines: the sines re-analysed with the current loop's lag at
@@ -325,6 +345,8 @@ def with_earlier_inputs(
     position_torque : PositionTorque or None
         Cogging and K_t ripple, if measured: their amplitudes at ``1 + u`` and their
         phases at ``+u`` rad (``u`` the map's relative uncertainty) give two lines.
+    shaft : ShaftInput or None
+        A two-mass axis's shaft modes: one line per figure, re-analysed at ``+u``.
 
     Returns
     -------
@@ -333,11 +355,14 @@ def with_earlier_inputs(
         Type B line per input.
     """
     lag_s = 0.0 if lag is None else lag.value
+    modes = None if shaft is None else shaft.modes
 
     def at(lag_s: float, loop: CableLoop | None,
-           angle_map: PositionTorque | None = position_torque) -> dict[str, Estimate]:
+           angle_map: PositionTorque | None = position_torque,
+           shaft_modes: ShaftModes | None = modes) -> dict[str, Estimate]:
         return sine_estimates(analyse(recordings, spec, current_loop_lag_s=lag_s,
-                                      cable_loop=loop, position_torque=angle_map))
+                                      cable_loop=loop, position_torque=angle_map,
+                                      shaft=shaft_modes))
 
     base = at(lag_s, loop)
     inputs: list[tuple[str, float, str, dict[str, Estimate]]] = []
@@ -361,6 +386,9 @@ def with_earlier_inputs(
             (f"cogging and K_t ripple taken out: their phases {found_on}", u, "rad",
              at(lag_s, loop, position_torque.perturbed(phase_rad=u))),
         ]
+    if shaft is not None:
+        inputs += [(source, u, unit, at(lag_s, loop, shaft_modes=moved))
+                   for source, u, unit, moved in shaft.lines()]
     lines = {
         name: [Component.from_change(source=source, standard_uncertainty=u, unit=unit,
                                      change=shifted[name].value - estimate.value)
@@ -458,12 +486,12 @@ def declared_current_loop_lag(profile: UnitProfile) -> Estimate | None:
     distribution (GUM 4.3.7): what the sines take out when the drive's rate does not let
     the current-loop protocol run (leaving 0 s would put ``J·(2πf)²·τ`` into B, 3 % of the
     demo's B, undeclared). ``None`` when the profile declares no such result."""
-    spec = profile.measurements.get(LAG.result)
-    if spec is None or not spec.nominal > 0:
+    declared = declared_rectangular(profile, LAG.result)
+    if declared is None:
         return None
-    half_width_ms = max(spec.upper_limit - spec.nominal, spec.nominal - max(spec.lower_limit, 0))
-    return Estimate(name=LAG.result, value=spec.nominal / 1000, unit="s",
-                    standard_uncertainty=half_width_ms / 1000 / math.sqrt(3))
+    nominal_ms, u_ms = declared
+    return Estimate(name=LAG.result, value=nominal_ms / 1000, unit="s",
+                    standard_uncertainty=u_ms / 1000)
 
 
 def measured_current_loop_lag(calibration: CalibrationRun) -> Estimate | None:
@@ -495,11 +523,13 @@ class EarlierInputs:
     cable_loop_removed: CableLoop | None
     current_loop_lag_compensated_s: float
     position_torque_removed: str  # cogging and K_t ripple taken out, or "none"
+    shaft_modes: str  # a two-mass axis's shaft the load was driven through, or "rigid"
 
 
 def analyse_in_calibration(
     recordings: list[Recording], spec: Spec, calibration: CalibrationRun, *,
     position_torque: PositionTorque | None = None,
+    shaft: ShaftInput | None = None,
 ) -> tuple[InertiaFrictionResult, dict[str, Estimate], EarlierInputs]:
     """J, B, T_c and the amplitude spread with what earlier protocols measured taken out:
     the current loop's lag and the cable's hysteresis loop (their uncertainties as budget
@@ -517,6 +547,8 @@ def analyse_in_calibration(
     position_torque : PositionTorque or None
         Cogging and K_t ripple measured on the gravity sweep
         (:func:`hil.suite.position_torque.position_torque_of_sweep`), taken out too.
+    shaft : ShaftInput or None
+        A two-mass axis's shaft (:func:`hil.suite.shaft_input.shaft_input`); ``None``: rigid.
 
     Returns
     -------
@@ -539,9 +571,11 @@ def analyse_in_calibration(
     lag_s = 0.0 if lag is None else lag.value
     loop = measured_cable_loop(calibration)
     analysed = analyse(recordings, spec, current_loop_lag_s=lag_s, cable_loop=loop,
-                       position_torque=position_torque)
+                       position_torque=position_torque,
+                       shaft=None if shaft is None else shaft.modes)
     estimates = with_earlier_inputs(recordings, spec, lag=lag, loop=loop,
-                                    position_torque=position_torque, lag_line=lag_line)
+                                    position_torque=position_torque, lag_line=lag_line,
+                                    shaft=shaft)
     centre_rad = float(np.mean([np.mean(r.position) for r in recordings]))
     stiffness = measured_load_stiffness(calibration, position_rad=centre_rad)
     if stiffness is not None:
@@ -553,6 +587,7 @@ def analyse_in_calibration(
         load_stiffness_nm_rad=None if stiffness is None else stiffness.value,
         cable_loop_removed=loop, current_loop_lag_compensated_s=lag_s,
         position_torque_removed=_described(position_torque),
+        shaft_modes="rigid" if shaft is None else shaft.described(),
     )
 
 
@@ -594,6 +629,7 @@ class InertiaFrictionDetails(RunDetails):
     fit_pct: float
     noise_rms_nm: float
     components: tuple[SineComponent, ...]
+    shaft_modes: str = "rigid"  # EarlierInputs' too (certificates before it: rigid)
 
 
 PROTOCOL = Protocol(name=NAME, measurements=tuple(MEASUREMENTS), needs=NEEDS,
