@@ -34,12 +34,13 @@ def certificate(tmp_path_factory: pytest.TempPathFactory) -> dict[str, object]:
 
 
 B_NOT_HELD = pytest.mark.xfail(strict=True, reason=(
-    "B reads 0.00638 for 0.00495 N·m·s/rad (+29 %, U 0.00109): at 500 Hz the gravity sweep "
-    "reads the cable loop at h 0.00063 ± 0.00052 N·m, s₀ 0.058 ± 0.17 rad (truth 0.001, "
-    "0.02), and the sines with that loop taken out read B high; without the loop in the "
-    "plant B is right (0.00487), with it left in +11 %. The simulator at 500 Hz resolves the "
-    "loop (s₀ 0.015 ± 0.0065) and reads B −5 %, within U: the ODrive path's, not traced "
-    "(issue 30); before the tapered instruments it passed by 1.5 % of U"))
+    "B reads 0.00638 for 0.00495 N·m·s/rad (+29 %, U 0.00109). Traced in part (benchmarks/"
+    "RESULTS.md, session 26): the 500 Hz rows sample the 4 kHz loop's torque at one instant, "
+    "its chatter aliases into the gravity sweep and the cable loop comes out 4-15 x less "
+    "determined (h 0.00063 ± 0.00052 N·m, s0 0.058 ± 0.17 rad for 0.001, 0.02), about 11 of "
+    "the 29 points; with the true loop taken out the ODrive's sines still read +17.5 %, where "
+    "the simulator's own 4 kHz run sampled so (setpoint stairs, instantaneous torque) reads "
+    "+3 to +6 %: the rest lies in the emulated ODrive's path, not traced (issue 30)"))
 
 
 @pytest.mark.parametrize("name", ["inertia_kg_m2",
