@@ -40,7 +40,8 @@ B_NOT_HELD = pytest.mark.xfail(strict=True, reason=(
     "determined (h 0.00063 ± 0.00052 N·m, s0 0.058 ± 0.17 rad for 0.001, 0.02), about 11 of "
     "the 29 points; with the true loop taken out the ODrive's sines still read +17.5 %, where "
     "the simulator's own 4 kHz run sampled so (setpoint stairs, instantaneous torque) reads "
-    "+3 to +6 %: the rest lies in the emulated ODrive's path, not traced (issue 30)"))
+    "+3 to +6 %; its torque behaves as if it trailed the position by 0.9 row (each row's "
+    "torque taken from the next: B -2.6 %), not traced further (issue 30)"))
 
 
 @pytest.mark.parametrize("name", ["inertia_kg_m2",
