@@ -34,14 +34,12 @@ def certificate(tmp_path_factory: pytest.TempPathFactory) -> dict[str, object]:
 
 
 B_NOT_HELD = pytest.mark.xfail(strict=True, reason=(
-    "B reads 0.00638 for 0.00495 N·m·s/rad (+29 %, U 0.00109). Traced in part (benchmarks/"
+    "B reads 0.00638 for 0.00495 N·m·s/rad (+29 %, U 0.00109). Traced (benchmarks/"
     "RESULTS.md, session 26): the 500 Hz rows sample the 4 kHz loop's torque at one instant, "
     "its chatter aliases into the gravity sweep and the cable loop comes out 4-15 x less "
-    "determined (h 0.00063 ± 0.00052 N·m, s0 0.058 ± 0.17 rad for 0.001, 0.02), about 11 of "
-    "the 29 points; with the true loop taken out the ODrive's sines still read +17.5 %, where "
-    "the simulator's own 4 kHz run sampled so (setpoint stairs, instantaneous torque) reads "
-    "+3 to +6 %; its torque behaves as if it trailed the position by 0.9 row (each row's "
-    "torque taken from the next: B -2.6 %), not traced further (issue 30)"))
+    "determined (h 0.00063 ± 0.00052 N·m, s0 0.058 ± 0.17 rad for 0.001, 0.02): about 11 of "
+    "the 29 points, beyond the loop's linear budget line; with the true loop this run's sines "
+    "read +17.5 %, where fresh runs of this path average +7 % (sd 8 %) (issue 30)"))
 
 
 @pytest.mark.parametrize("name", ["inertia_kg_m2",
