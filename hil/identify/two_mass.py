@@ -19,7 +19,7 @@ load would make the load's own equation carry it.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from numpy.typing import NDArray
@@ -43,10 +43,8 @@ class ShaftModes:
 
     def shifted(self, **changes: float) -> ShaftModes:
         """These modes with some figures moved (a budget line's re-analysis)."""
-        values = {"resonance_hz": self.resonance_hz, "antiresonance_hz": self.antiresonance_hz,
-                  "damping_ratio": self.damping_ratio}
-        values.update({name: values[name] + change for name, change in changes.items()})
-        return ShaftModes(**values)
+        return replace(self, **{name: getattr(self, name) + change
+                                for name, change in changes.items()})
 
 
 def driven_acceleration(

@@ -39,9 +39,9 @@ from hil.motion import Excitation, Mode
 from hil.profile import UnitProfile
 from hil.recording import Recording
 from hil.suite.gravity_cable import GravityCableDetails
-from hil.suite.needs import Need
+from hil.suite.needs import Need, declared_rectangular
 from hil.suite.protocol import Position, Protocol
-from hil.suite.shaft_input import SHAFT, ShaftInput, declared_rectangular
+from hil.suite.shaft_input import SHAFT, ShaftInput
 from hil.suite.stop_rule import StopRule
 from hil.suite.travel import move_excitation, move_speed_rad_s
 

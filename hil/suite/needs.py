@@ -5,11 +5,13 @@ certificate (its messages)."""
 
 from __future__ import annotations
 
+import math
 from collections.abc import Iterable
 from dataclasses import dataclass
 
 from hil.calibration import CalibrationRun
 from hil.identify.estimate import Estimate
+from hil.profile import UnitProfile
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -42,3 +44,14 @@ def note_fallbacks(calibration: CalibrationRun, protocol: str, needs: Iterable[N
     record = calibration.protocol(protocol)
     record.messages.extend(line for line in lines if line not in record.messages)
     return lines
+
+
+def declared_rectangular(profile: UnitProfile, result: str) -> tuple[float, float] | None:
+    """A need's declared fallback: the profile's nominal of ``result`` and the standard
+    uncertainty of a rectangular distribution over its limits (GUM 4.3.7); ``None`` unless
+    it declares a nominal > 0."""
+    spec = profile.measurements.get(result)
+    if spec is None or not spec.nominal > 0:
+        return None
+    half_width = max(spec.upper_limit - spec.nominal, spec.nominal - max(spec.lower_limit, 0))
+    return spec.nominal, half_width / math.sqrt(3)

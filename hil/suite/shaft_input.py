@@ -5,13 +5,11 @@ uncertainties as budget lines."""
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
 from hil.calibration import CalibrationRun
 from hil.identify.two_mass import ShaftModes
-from hil.profile import UnitProfile
-from hil.suite.needs import Need
+from hil.suite.needs import Need, declared_rectangular
 
 #: the resonance protocol's results, in :class:`ShaftModes`' order
 RESULTS = ("resonance_frequency_hz", "antiresonance_frequency_hz", "resonance_damping_ratio")
@@ -48,34 +46,18 @@ class ShaftInput:
                 f"ζ_r {m.damping_ratio:.3g} ({'measured' if self.measured else 'nominal'})")
 
 
-def declared_rectangular(profile: UnitProfile, result: str) -> tuple[float, float] | None:
-    """The profile's nominal of ``result`` and the standard uncertainty of a rectangular
-    distribution over its limits (GUM 4.3.7); ``None`` unless it declares a nominal > 0."""
-    spec = profile.measurements.get(result)
-    if spec is None or not spec.nominal > 0:
-        return None
-    half_width = max(spec.upper_limit - spec.nominal, spec.nominal - max(spec.lower_limit, 0))
-    return spec.nominal, half_width / math.sqrt(3)
-
-
 def shaft_input(calibration: CalibrationRun) -> ShaftInput | None:
     """The shaft measured by the resonance protocol earlier in this calibration, else the
     profile's declared modes, else ``None`` (a rigid axis)."""
     found = calibration.results(*RESULTS)
-    if found is not None:
-        values = tuple(e.value for e in found)
-        uncertainties = tuple(e.standard_uncertainty for e in found)
-        measured = True
-    else:
-        declared = [declared_rectangular(calibration.profile, name) for name in RESULTS]
-        if any(d is None for d in declared):
-            return None
-        values = tuple(d[0] for d in declared if d is not None)
-        uncertainties = tuple(d[1] for d in declared if d is not None)
-        measured = False
-    modes = ShaftModes(**dict(zip(FIELDS, values, strict=True)))
+    measured = found is not None
+    pairs = ([(e.value, e.standard_uncertainty) for e in found] if found is not None
+             else [declared_rectangular(calibration.profile, name) for name in RESULTS])
+    if any(pair is None for pair in pairs):
+        return None
+    (f_r, u_r), (f_a, u_a), (zeta, u_zeta) = (pair for pair in pairs if pair is not None)
+    modes = ShaftModes(resonance_hz=f_r, antiresonance_hz=f_a, damping_ratio=zeta)
     if not modes.load_to_motor_inertia > 0:
         return None
     return ShaftInput(modes=modes, measured=measured,
-                      standard_uncertainties=(uncertainties[0], uncertainties[1],
-                                              uncertainties[2]))
+                      standard_uncertainties=(u_r, u_a, u_zeta))
