@@ -23,6 +23,7 @@ from types import FrameType
 
 import pytest
 
+from hil.beside import ALONE, Planned
 from hil.budget import (
     CALIBRATE_BYTES_PER_SAMPLE,
     StorageError,
@@ -55,7 +56,7 @@ from hil.report.junit import PYTEST_DEFAULT_SUITE_NAME, measurement_properties, 
 from hil.report.junit import suite_properties as junit_suite_properties
 from hil.store.engine import resolve_store_url
 from hil.store.record import record_run
-from hil.suite.catalogue import PROTOCOL_OF, check_profile
+from hil.suite.catalogue import CATALOGUE, PROTOCOL_OF, check_profile
 from hil.suite.plan import check_protocol_settings, planned_motion_s
 
 log = logging.getLogger(__name__)
@@ -307,9 +308,11 @@ def _method_bias(option: str | None, profile: UnitProfile) -> MethodBiasMap | No
 
 @pytest.fixture(scope="session")
 def drive_connection(
-    pytestconfig: pytest.Config, profile: UnitProfile, calibration: CalibrationRun
+    request: pytest.FixtureRequest, pytestconfig: pytest.Config, profile: UnitProfile,
+    calibration: CalibrationRun
 ) -> Iterator[Drive]:
     """The open drive for the whole session; closed (and disabled) at the end."""
+    link = pytestconfig.getoption("--gimbal-link")
     with open_drive(
         drive_kind(pytestconfig),
         profile=profile,
@@ -318,6 +321,8 @@ def drive_connection(
         seed=pytestconfig.getoption("--seed"),
         gimbal_axes=pytestconfig.stash.get(GIMBAL_AXES_KEY, {}),
         sim_pace=pytestconfig.getoption("--sim-pace"),
+        gimbal_link=link,
+        protocols=() if link is None else _planned(request.session.items, profile),
     ) as drive:
         calibration.drive_info = drive.info
         yield drive
@@ -328,6 +333,9 @@ def drive(request: pytest.FixtureRequest, drive_connection: Drive) -> Iterator[D
     """The drive, enabled for one protocol module; afterwards quick-stopped if anything in
     the module failed or the run was interrupted (SIGINT, SIGTERM, SIGHUP), always disabled."""
     failures_before = request.session.testsfailed
+    marker = request.node.get_closest_marker(PROTOCOL_MARK)
+    if marker is not None:
+        drive_connection.begin_protocol(str(marker.args[0]))
     drive_connection.enable()
     try:
         yield drive_connection
@@ -338,6 +346,8 @@ def drive(request: pytest.FixtureRequest, drive_connection: Drive) -> Iterator[D
                 drive_connection.quick_stop()
         finally:
             drive_connection.disable()
+            if marker is not None:
+                drive_connection.end_protocol()
 
 
 @pytest.fixture(scope="module")
@@ -387,6 +397,17 @@ def _last_of_protocol(item: pytest.Item, name: str) -> bool:
     items = item.session.items
     later = items[items.index(item) + 1:] if item in items else []
     return all(_protocol_name(other) != name for other in later)
+
+
+def _planned(items: list[pytest.Item], profile: UnitProfile) -> tuple[Planned, ...]:
+    """The protocols this session will run, in order, with their planned motion and how
+    each shares a gimbal with the other axis (a shared gimbal plans from them)."""
+    names = list(dict.fromkeys(n for n in map(_protocol_name, items)
+                               if n is not None and n in profile.protocols))
+    motion = planned_motion_s(profile, _planning_info(profile))
+    return tuple(Planned(name=name, motion_s=motion.get(name, 0.0),
+                         beside=CATALOGUE[name].beside if name in CATALOGUE else ALONE)
+                 for name in names)
 
 
 def _protocol_name(item: pytest.Item) -> str | None:

@@ -137,6 +137,12 @@ def build_parser() -> argparse.ArgumentParser:
                           "(calibrate --gimbal passes them): with --drive sim the axes are "
                           "simulated together, coupled, the other held by its drive "
                           "(default: none, a one-axis unit)")
+    cal.add_argument("--together", action="store_true",
+                     help="with --gimbal and --drive sim: both axes at the same time on one "
+                          "shared simulated gimbal, each protocol beside the other axis's "
+                          "where neither disturbs the other (default: one axis after the "
+                          "other)")
+    cal.add_argument("--gimbal-link", default=None, help=argparse.SUPPRESS)
     cal.add_argument("pytest_args", nargs="*", metavar="PYTEST_ARG",
                      help="extra pytest arguments (after --; default: none)")
 
@@ -318,6 +324,7 @@ def _calibrate(args: argparse.Namespace) -> int:
     options += ["--reference"] if args.reference else []
     for sibling in args.gimbal_axis or []:
         options += ["--gimbal-axis", sibling]
+    options += ["--gimbal-link", args.gimbal_link] if args.gimbal_link else []
     return int(pytest.main([*suite_arguments(), *options, *args.pytest_args]))
 
 
@@ -338,7 +345,7 @@ def _calibrate_gimbal(args: argparse.Namespace) -> int:
     options += ["--reference"] if args.reference else []
     options += ["--", *args.pytest_args] if args.pytest_args else []
     return calibrate_gimbal(gimbal, serial=serial, out=args.out, store_url=store,
-                            options=options)
+                            options=options, together=args.together)
 
 
 def _check_unit_folder(out: Path, serial: str) -> None:

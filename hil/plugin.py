@@ -72,6 +72,14 @@ def pytest_addoption(parser: pytest.Parser) -> None:
         "drive (default: none, a one-axis unit)",
     )
     group.addoption(
+        "--gimbal-link",
+        default=None,
+        metavar="ADDRESS",
+        help="with --drive sim: join the shared simulated gimbal at ADDRESS instead of "
+        "simulating it here (calibrate --gimbal --together passes it; its key in "
+        "$GIMBAL_HIL_LINK_KEY); default: none",
+    )
+    group.addoption(
         "--method-bias",
         default=None,
         help="method-bias map (TOML) the results are corrected with; 'off' for none "

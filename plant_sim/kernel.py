@@ -70,8 +70,9 @@ from numba import njit
     S_DISTURBANCE,  # this period's shaft disturbance (N·m)
     S_ACCEL,  # the carrier's acceleration over the last physics step (rad/s²)
     S_BRISTLE,  # LuGre: the bristles' mean deflection (rad)
+    S_EXTERNAL,  # a gimbal's other axis's torque on this carrier, last physics step (N·m)
     N_STATE,
-) = range(16)
+) = range(17)
 
 # rows of the in-loop noise array (one column per control period, drawn by the caller)
 (
@@ -268,7 +269,7 @@ def control_period(params: np.ndarray, state: np.ndarray, cogging: np.ndarray,
         held = params[P_KT_SCALE] * torque_act * (1.0 + _periodic(theta_m, kt_ripple))
         held -= _periodic(theta_m, cogging) + params[P_OFFSET] + state[S_HYST]
         held -= params[P_MGE] * math.cos(theta_m + params[P_GRAV_PHASE]) + disturbance
-        held -= params[P_K_CABLE] * (theta_m - params[P_CABLE_ZERO])
+        held -= params[P_K_CABLE] * (theta_m - params[P_CABLE_ZERO]) + state[S_EXTERNAL]
         out[O_LOAD_TORQUE, k] = held
         decay = derived[D_DECAY] ** int(derived[D_SUBSTEPS])
         state[S_TORQUE_ACT] = torque_cmd + decay * (torque_act - torque_cmd)
@@ -690,6 +691,8 @@ def run_gimbal_kernel(outer: tuple[np.ndarray, ...], outer_mode: int,
             dc = -coupling[C_CC] * sin_el + coupling[C_CS] * cos_el
             on_outer = c * s_in[S_ACCEL] + dj_outer * el_rate * az_rate + dc * el_rate * el_rate
             on_inner = c * s_out[S_ACCEL] - 0.5 * dj_outer * az_rate * az_rate
+            s_out[S_EXTERNAL] = on_outer  # a clamped rotor's sensor holds it too
+            s_in[S_EXTERNAL] = on_inner
             if first == RUN_MECHANICS:
                 mechanics_substep(p_out, s_out, cog_out, rip_out, d_outer, j_outer, on_outer)
             if second == RUN_MECHANICS:

@@ -229,6 +229,7 @@ class Plant:
         if locked:
             self._state[kernel.S_OMEGA_M] = 0.0
             self._state[kernel.S_OMEGA_L] = 0.0
+            self._state[kernel.S_ACCEL] = 0.0
 
     def set_elevation(self, elevation_rad: float) -> None:
         """Move the other axis (elevation) of the station: the inertia about this axis

@@ -94,3 +94,29 @@ def test_products_of_inertia_beyond_a_mass_matrix_are_refused() -> None:
     inner = PlantParams(inertia_kg_m2=0.0036)
     with pytest.raises(ProfileError, match="inertia_coupling_level_kg_m2"):
         GimbalPlant(Plant(outer, fs_hz=FS, seed=0), Plant(inner, fs_hz=FS, seed=0))
+
+
+def test_a_clamped_azimuths_sensor_holds_the_torque_of_the_swinging_elevation() -> None:
+    """With the azimuth's rotor clamped through its shaft sensor, the elevation's swing
+    reaches the clamp: the sensor reads −(c·θ̈ + c'·θ̇²) more than without products."""
+    level, vertical = 4e-4, -3e-4
+    t = np.arange(8000) / FS
+    swing = 0.4 * 2 * np.pi * 1.5 * np.cos(2 * np.pi * 1.5 * t)  # ±0.4 rad at 1.5 Hz
+    read = []
+    for products in ((level, vertical), (0.0, 0.0)):
+        gimbal = _free_gimbal(*products)
+        gimbal.outer.set_locked_rotor(True)
+        clamped, elevation = gimbal.run(AxisBlock(mode=Mode.TORQUE, command=np.zeros(t.size)),
+                                        AxisBlock(mode=Mode.VELOCITY, command=swing))
+        assert clamped.load_torque_nm is not None
+        read.append(clamped.load_torque_nm)
+    theta = elevation.position_rad
+    rate = np.gradient(theta, 1 / FS)
+    accel = np.gradient(rate, 1 / FS)
+    c = level * np.cos(theta) + vertical * np.sin(theta)
+    dc = -level * np.sin(theta) + vertical * np.cos(theta)
+    expected = -(c * accel + dc * rate**2)
+    got = read[0] - read[1]
+    inside = slice(400, -400)  # the start's transient and the differences' edges
+    assert np.corrcoef(got[inside], expected[inside])[0, 1] > 0.99
+    assert np.std(got[inside]) == pytest.approx(np.std(expected[inside]), rel=0.05)

@@ -425,6 +425,13 @@ class Drive(abc.ABC):
         """
         raise self._without(Capability.ELEVATION_AXIS)
 
+    def begin_protocol(self, name: str) -> None:  # noqa: B027 (a hook: most drives need none)
+        """Protocol ``name`` is about to start (a drive shared with another axis's
+        calibration may wait here until it can run beside the other's)."""
+
+    def end_protocol(self) -> None:  # noqa: B027 (a hook: most drives need none)
+        """The protocol begun last has ended."""
+
     def _without(self, capability: Capability) -> DriveStateError:
         return DriveStateError(f"the station ({self.info.transport}) lacks: "
                                f"{capability.value}")

@@ -14,6 +14,8 @@ from hil.errors import ProfileError
 from hil.profile import UnitProfile
 
 if TYPE_CHECKING:
+    from hil.beside import Planned
+    from hil.drives.gimbal_link import GimbalLink
     from hil.drives.sim import GimbalPartner
 
 #: a gimbal's axes the simulator couples: the outer carries the inner
@@ -30,6 +32,8 @@ def open_drive(
     seed: int = 0,
     gimbal_axes: Mapping[str, UnitProfile] | None = None,
     sim_pace: float | None = None,
+    gimbal_link: str | None = None,
+    protocols: tuple[Planned, ...] = (),
 ) -> Iterator[Drive]:
     """Open the drive named by ``kind``; on leaving, the drive is quick-stopped on error
     and always disabled and closed. Emulator kinds start (and stop) their emulator.
@@ -37,6 +41,9 @@ def open_drive(
     azimuth and an elevation as one coupled gimbal, the other axis held by its drive (the
     emulators take theirs from the station file). ``sim_pace`` keeps the simulator's
     motion to the wall clock (:class:`hil.drives.sim.SimDrive`'s ``pace``).
+    ``gimbal_link``: the address of a shared gimbal (:mod:`hil.drives.shared_gimbal`) the
+    simulator's axis joins instead of simulating the gimbal itself, telling it
+    ``protocols`` (this axis's, in run order) to plan which run beside the other axis's.
     """
     opened = drive_kind(kind)  # an unknown kind: one line naming the known ones
     if opened.opens == "simulator":
@@ -44,6 +51,9 @@ def open_drive(
 
         if profile.plant is None:
             raise ProfileError(f"--drive {kind} needs a [plant] table", source=profile.source)
+        partner = _gimbal_partner(profile, gimbal_axes or {})
+        link = None if gimbal_link is None else _join(gimbal_link, profile, partner,
+                                                      seed=seed, protocols=protocols)
         with SimDrive(
             profile.plant,
             firmware=profile.firmware,
@@ -51,8 +61,9 @@ def open_drive(
             fs_hz=profile.sample_rate_hz,
             seed=seed,
             serial=unit_serial,
-            partner=_gimbal_partner(profile, gimbal_axes or {}),
+            partner=partner,
             pace=sim_pace,
+            link=link,
         ) as drive:
             yield drive
         return
@@ -60,6 +71,22 @@ def open_drive(
         opened, profile=profile, unit_serial=unit_serial, station=station, seed=seed
     ) as drive:
         yield drive
+
+
+def _join(address: str, profile: UnitProfile, partner: GimbalPartner | None, *, seed: int,
+          protocols: tuple[Planned, ...]) -> GimbalLink:
+    """This axis's end of the shared gimbal at ``address`` (connected: both axes are)."""
+    from hil.drives.gimbal_link import AxisHello, GimbalLink
+
+    if partner is None:
+        raise ProfileError("a shared gimbal needs the other axis (--gimbal-axis NAME=PROFILE) "
+                           f"of an azimuth-over-elevation gimbal; this is '{profile.axis}'",
+                           source=profile.source)
+    assert profile.plant is not None
+    return GimbalLink(address, AxisHello(
+        axis=profile.axis, plant=profile.plant.with_changes(exact_torque_hold=True),
+        firmware=profile.firmware, fs_hz=profile.sample_rate_hz, seed=seed,
+        protocols=protocols))
 
 
 def _gimbal_partner(profile: UnitProfile,

@@ -21,6 +21,7 @@ from hil.drives.base import (
     check_limits,
     interrupted,
 )
+from hil.drives.gimbal_link import GimbalLink
 from hil.drives.held import trapezoid_rad
 from hil.errors import DriveStateError
 from hil.motion import CompensationTable, Excitation, Limits, Mode, PositionHarmonic
@@ -71,14 +72,22 @@ class SimDrive(Drive):
         exact_torque_hold: bool = True,
         partner: GimbalPartner | None = None,
         pace: float | None = None,
+        link: GimbalLink | None = None,
     ) -> None:
         """``pace``: ``None`` runs each excitation as fast as it computes; a number keeps
         the motion to the wall clock at that multiple of real time (1.0: as a drive does),
         a piece of :data:`PACE_PIECE_S` at a time, so a stop signal lands mid-motion (a
-        rehearsal of a station's timing and stops)."""
+        rehearsal of a station's timing and stops). ``link``: the gimbal (this axis and
+        ``partner``) is not simulated here but shared with the partner's own calibration
+        (:mod:`hil.drives.shared_gimbal`), which may move it at the same time."""
         if pace is not None and not pace > 0:
             raise ValueError(f"pace must be a positive multiple of real time, not {pace}")
+        if link is not None and (partner is None or pace is not None):
+            raise ValueError("a shared gimbal needs the partner axis, and runs on its own "
+                             "virtual clock (no pace)")
         self._pace = pace
+        self._link = link
+        self._fs_hz = float(fs_hz)
         if exact_torque_hold and not plant.exact_torque_hold:
             plant = plant.with_changes(exact_torque_hold=True)
         self._plant_params = plant
@@ -86,15 +95,16 @@ class SimDrive(Drive):
         self._plant = Plant(plant, fs_hz=fs_hz, seed=seed, firmware=firmware)
         self._partner = partner
         self._gimbal: GimbalPlant | None = None
-        if partner is not None:
+        if partner is not None and link is None:
             held = Plant(partner.plant.with_changes(exact_torque_hold=exact_torque_hold),
                          fs_hz=fs_hz, seed=seed + (PARTNER_SEED << 32),
                          firmware=partner.firmware, initial_position_rad=partner.at_rad)
             self._held_plant = held
-            self._partner_limits = partner.limits
             self._hold_rad = partner.at_rad
             self._gimbal = (GimbalPlant(held, self._plant) if partner.outer
                             else GimbalPlant(self._plant, held))
+        if partner is not None:
+            self._partner_limits = partner.limits
         moves_elevation = partner is None or partner.name == "elevation"
         follows = partner is not None and partner.name == "elevation"
         self._state = DriveState.DISABLED
@@ -122,7 +132,35 @@ class SimDrive(Drive):
 
     @property
     def plant(self) -> Plant:
+        """The simulated axis (not here when the gimbal is shared)."""
+        if self._link is not None:
+            raise DriveStateError("the shared gimbal's plant lives in its server")
         return self._plant
+
+    def _position(self) -> float:
+        return self._link.state().position_rad if self._link else self._plant.position_rad
+
+    def _velocity(self) -> float:
+        return self._link.state().velocity_rad_s if self._link else self._plant.velocity_rad_s
+
+    def _other_position(self) -> float:
+        if self._link is not None:
+            return self._link.state().other_position_rad
+        return self._held_plant.position_rad
+
+    def begin_protocol(self, name: str) -> None:
+        """On a shared gimbal: wait until ``name`` may run beside the other axis's."""
+        if self._link is not None:
+            self._link.begin(name)
+
+    def end_protocol(self) -> None:
+        if self._link is not None:
+            self._link.end()
+
+    def close(self) -> None:
+        super().close()
+        if self._link is not None:
+            self._link.close()
 
     @contextlib.contextmanager
     def locked_rotor(self) -> Iterator[None]:
@@ -130,11 +168,12 @@ class SimDrive(Drive):
         block, released afterwards (the simulated station's locked-rotor fixture)."""
         if Capability.LOCKED_ROTOR not in self._info.capabilities:
             raise self._without(Capability.LOCKED_ROTOR)
-        self._plant.set_locked_rotor(True)
+        clamp = self._link or self._plant
+        clamp.set_locked_rotor(True)
         try:
             yield
         finally:
-            self._plant.set_locked_rotor(False)
+            clamp.set_locked_rotor(False)
 
     def set_elevation(self, elevation_rad: float) -> None:
         """Put the station's elevation axis at ``elevation_rad``: with the gimbal's
@@ -154,18 +193,19 @@ class SimDrive(Drive):
             return
         if self._partner.name != "elevation":
             raise self._without(Capability.ELEVATION_AXIS)
-        fs = self._plant.fs_hz
-        path = trapezoid_rad(self._held_plant.position_rad, elevation_rad,
+        fs = self._fs_hz
+        start = self._other_position()
+        path = trapezoid_rad(start, elevation_rad,
                              speed_rad_s=HOLD_SPEED_RAD_S, accel_rad_s2=HOLD_ACCEL_RAD_S2,
                              step_s=1.0 / fs)
         path = np.concatenate([path, np.full(math.ceil(HOLD_SETTLE_S * fs), elevation_rad)])
         check_limits(Excitation(name=f"elevation to {elevation_rad:+.4f} rad",
                                 mode=Mode.POSITION, command=path, fs_hz=fs),
-                     self._partner_limits, start_position_rad=self._held_plant.position_rad)
-        here = np.full(path.shape, self._plant.position_rad)
+                     self._partner_limits, start_position_rad=start)
+        here = np.full(path.shape, self._position())
         self._step_gimbal(AxisBlock(mode=Mode.POSITION, command=here), held_command=path)
         self._hold_rad = elevation_rad
-        log.info("sim: elevation moved to %+.4f rad", self._held_plant.position_rad)
+        log.info("sim: elevation moved to %+.4f rad", self._other_position())
 
     @property
     def held_text(self) -> str:
@@ -174,17 +214,18 @@ class SimDrive(Drive):
         if self._partner is None:
             return ""
         return (f"{self._partner.name} (simulated, held by its drive) at "
-                f"{self._held_plant.position_rad:+.4f} rad")
+                f"{self._other_position():+.4f} rad")
 
     def load_compensation(self, table: CompensationTable | None) -> None:
         """Load (or clear) the drive's cogging compensation table."""
+        drive = self._link or self._plant
         if table is None:
-            self._plant.load_compensation(())
+            drive.load_compensation(())
             return
-        self._plant.load_compensation(_harmonics(table.cogging_nm), _harmonics(table.kt_ripple))
+        drive.load_compensation(_harmonics(table.cogging_nm), _harmonics(table.kt_ripple))
 
     def enable(self) -> None:
-        self._plant.hold()
+        (self._link or self._plant).hold()
         self._state = DriveState.ENABLED
 
     def disable(self) -> None:
@@ -197,9 +238,13 @@ class SimDrive(Drive):
         its monitor trips), so between runs the axis already stands."""
         if self._state is DriveState.ENABLED:
             self._state = DriveState.QUICK_STOPPED
-            log.info("sim: quick stop, axis at %.3g rad/s", self._plant.velocity_rad_s)
+            log.info("sim: quick stop, axis at %.3g rad/s", self._velocity())
 
     def status(self) -> DriveStatus:
+        if self._link is not None:
+            now = self._link.state()
+            return DriveStatus(state=self._state, position_rad=now.position_rad,
+                               velocity_rad_s=now.velocity_rad_s)
         return DriveStatus(
             state=self._state,
             position_rad=self._plant.position_rad,
@@ -209,12 +254,12 @@ class SimDrive(Drive):
     def run(self, excitation: Excitation) -> Recording:
         if self._state is not DriveState.ENABLED:
             raise DriveStateError(f"cannot run '{excitation.name}': drive is {self._state.value}")
-        if excitation.fs_hz != self._plant.fs_hz:
+        if excitation.fs_hz != self._fs_hz:
             raise DriveStateError(
                 f"excitation '{excitation.name}' is sampled at {excitation.fs_hz} Hz, "
-                f"the simulated drive runs at {self._plant.fs_hz} Hz"
+                f"the simulated drive runs at {self._fs_hz} Hz"
             )
-        check_limits(excitation, self._info.limits, start_position_rad=self._plant.position_rad)
+        check_limits(excitation, self._info.limits, start_position_rad=self._position())
         log.info("sim: running %s (%.2f s)", excitation.name, excitation.duration_s)
         envelope = self._envelope
         guard = MotionGuard(position_min_rad=envelope.position_min_rad,
@@ -230,12 +275,12 @@ class SimDrive(Drive):
                                  mode=Mode.POSITION, command=path,
                                  torque_offset_nm=None, elevation_path_rad=None),
                          self._partner_limits,
-                         start_position_rad=self._held_plant.position_rad)
+                         start_position_rad=self._other_position())
         try:
             trace, held = self._move(block, path) if self._pace is None else self._paced(
                 block, path, pace=self._pace)
         except _PacedStop as stop:  # between two pieces: the axis was moving
-            log.info("sim: quick stop, axis at %.3g rad/s", self._plant.velocity_rad_s)
+            log.info("sim: quick stop, axis at %.3g rad/s", self._velocity())
             self._brake()
             self._state = DriveState.QUICK_STOPPED
             moved, moved_held = stop.so_far
@@ -303,7 +348,7 @@ class SimDrive(Drive):
         _PacedStop
             A stop signal: the pieces moved so far attached.
         """
-        fs = self._plant.fs_hz
+        fs = self._fs_hz
         size = max(1, round(PACE_PIECE_S * fs))
         offset = block.torque_offset
         started = time.monotonic()
@@ -326,15 +371,18 @@ class SimDrive(Drive):
     def _brake(self) -> None:
         """The quick-stop ramp: velocity mode from the axis' speed to rest at
         :data:`QUICK_STOP_DECEL_RAD_S2`, then held (unguarded: the axis is already out)."""
-        fs = self._plant.fs_hz
-        start = self._plant.velocity_rad_s
+        fs = self._fs_hz
+        start = self._velocity()
         ramp = max(1, math.ceil(abs(start) / QUICK_STOP_DECEL_RAD_S2 * fs))
         hold = math.ceil(QUICK_STOP_HOLD_S * fs)
         command = np.concatenate([start * (1.0 - np.arange(1, ramp + 1) / ramp), np.zeros(hold)])
         self._advance(AxisBlock(mode=Mode.VELOCITY, command=command))
 
     def _advance(self, block: AxisBlock) -> PlantTrace:
-        """Run this axis through ``block``; the gimbal's other axis, if simulated, holds."""
+        """Run this axis through ``block``; the gimbal's other axis, if simulated, holds
+        (shared: it does what its own calibration says)."""
+        if self._link is not None:
+            return self._link.run(block)[0]
         if self._gimbal is None:
             return self._plant.run(block.mode, block.command, block.torque_offset,
                                    guard=block.guard)
@@ -345,6 +393,10 @@ class SimDrive(Drive):
                      held_command: np.ndarray) -> tuple[PlantTrace, PlantTrace]:
         """This axis through ``block``, the other following ``held_command`` in position
         mode: (this axis's trace, the other's)."""
+        if self._link is not None:
+            mine, other = self._link.run(block, held_command)
+            assert other is not None
+            return mine, other
         assert self._gimbal is not None
         assert self._partner is not None
         held = AxisBlock(mode=Mode.POSITION, command=held_command)

@@ -42,8 +42,11 @@ def verdict(outcomes: Sequence[str]) -> str:
 
 
 def build(gimbal: GimbalProfile, *, serial: str, folder: Path,
-          axes: Sequence[AxisOutcome]) -> dict[str, Any]:
-    """The gimbal certificate as a JSON-ready dict (paths relative to ``folder``)."""
+          axes: Sequence[AxisOutcome],
+          together: Mapping[str, Any] | None = None) -> dict[str, Any]:
+    """The gimbal certificate as a JSON-ready dict (paths relative to ``folder``);
+    ``together``: the shared gimbal's clock when the axes ran at the same time
+    (:func:`together_time`)."""
     issued = datetime.now(UTC)
     sections = [_section(axis, folder) for axis in axes]
     return {
@@ -54,22 +57,48 @@ def build(gimbal: GimbalProfile, *, serial: str, folder: Path,
                    "profile": Path(gimbal.source).name, "profile_sha256": gimbal.sha256},
         "issued": issued.isoformat(timespec="seconds"),
         "axes": sections,
-        "cycle_time": cycle_time(sections),
+        "cycle_time": cycle_time(sections, together),
         "outcome": verdict([s["outcome"] for s in sections]),
     }
 
 
-def cycle_time(sections: Sequence[Mapping[str, Any]]) -> dict[str, Any] | None:
+def cycle_time(sections: Sequence[Mapping[str, Any]],
+               together: Mapping[str, Any] | None = None) -> dict[str, Any] | None:
     """The gimbal's motion time: each axis's (its certificate's), their sum (the axes run
     one after the other) and that sum over the slowest axis's (1.0 would be every axis at
-    once); ``None`` when an axis has no certificate."""
+    once); with ``together``, the gimbal's own clock over the slowest axis's instead, and
+    which protocols ran beside which. ``None`` when an axis has no certificate."""
     found = {s["axis"]: s.get("motion_time_s") for s in sections}
     times = {axis: float(t) for axis, t in found.items() if isinstance(t, int | float) and t > 0}
     if not times or len(times) != len(found):
         return None
     total, slowest = sum(times.values()), max(times.values())
-    return {"motion_time_s": times, "one_after_the_other_s": total,
-            "slowest_axis_s": slowest, "ratio_to_slowest": total / slowest}
+    if together is None:
+        return {"motion_time_s": times, "one_after_the_other_s": total,
+                "slowest_axis_s": slowest, "ratio_to_slowest": total / slowest}
+    own = together["own_motion_s"]
+    slowest_own = max(own.values())
+    return {"motion_time_s": times, "together_s": together["gimbal_s"],
+            "own_motion_s": own, "one_after_the_other_s": sum(own.values()),
+            "beside": together["beside"], "slowest_axis_s": slowest_own,
+            "ratio_to_slowest": together["gimbal_s"] / slowest_own}
+
+
+def together_time(gimbal_s: float, own_motion_s: Mapping[str, float],
+                  intervals: Sequence[tuple[str, str, float, float]]) -> dict[str, Any]:
+    """The shared gimbal's clock, each axis's own motion on it (its runs, and the other
+    axis's moves it commanded: more than its certificate's protocol motion, which leaves
+    out the moves between excitations) and the protocols that overlapped: ``intervals``
+    are (axis, protocol, start, end) in seconds."""
+    beside = []
+    for axis, protocol, start, end in intervals:
+        for other, theirs, their_start, their_end in intervals:
+            overlap = min(end, their_end) - max(start, their_start)
+            if axis < other and overlap > 0:
+                beside.append({axis: protocol, other: theirs, "overlap_s": round(overlap, 3)})
+    return {"gimbal_s": round(gimbal_s, 3),
+            "own_motion_s": {axis: round(t, 3) for axis, t in own_motion_s.items()},
+            "beside": beside}
 
 
 def cycle_time_text(cycle: Mapping[str, Any] | None) -> str:
@@ -78,6 +107,15 @@ def cycle_time_text(cycle: Mapping[str, Any] | None) -> str:
     if cycle is None:
         return "not stated: an axis has no certificate"
     each = ", ".join(f"{axis} {t:.1f} s" for axis, t in cycle["motion_time_s"].items())
+    if "together_s" in cycle:
+        own = ", ".join(f"{axis} {t:.1f} s" for axis, t in cycle["own_motion_s"].items())
+        pairs = "; ".join(" beside ".join(f"{axis} {name}" for axis, name in pair.items()
+                                           if axis != "overlap_s")
+                          + f" ({pair['overlap_s']:.1f} s)" for pair in cycle["beside"])
+        return (f"protocols {each}; each axis's own motion with its moves {own}, one after "
+                f"the other {cycle['one_after_the_other_s']:.1f} s; at the same time "
+                f"{cycle['together_s']:.1f} s, {cycle['ratio_to_slowest']:.2f} × the "
+                f"slowest axis (beside each other: {pairs or 'none'})")
     return (f"{each}; one after the other {cycle['one_after_the_other_s']:.1f} s, "
             f"{cycle['ratio_to_slowest']:.2f} × the slowest axis")
 

@@ -12,6 +12,7 @@ from __future__ import annotations
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 
+from hil.beside import ALONE, Beside
 from hil.details import Details
 from hil.drives.base import Capability, DriveInfo
 from hil.motion import Excitation
@@ -46,6 +47,9 @@ class Protocol:
     details : type of Details
         The type of what it tells the certificate besides its results
         (:mod:`hil.details`: one writer, one reader).
+    beside : Beside
+        How it shares a gimbal with the other axis's protocol (:mod:`hil.beside`):
+        by default it needs the other axis held, and disturbs it.
     """
 
     name: str
@@ -54,3 +58,4 @@ class Protocol:
     requires: tuple[Capability, ...]
     planned_motion: Motion
     details: type[Details]
+    beside: Beside = ALONE

@@ -16,6 +16,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from hil.beside import Beside
 from hil.calibration import CalibrationRun
 from hil.details import RunDetails
 from hil.drives.base import Capability, DriveInfo
@@ -354,4 +355,5 @@ class TorqueConstantDetails(RunDetails):
 
 PROTOCOL = Protocol(name=NAME, measurements=tuple(MEASUREMENTS), needs=NEEDS,
                     requires=REQUIRES, planned_motion=planned_motion,
-                    details=TorqueConstantDetails)
+                    details=TorqueConstantDetails,
+                    beside=Beside(still=True))  # the rotor clamped: nothing moves
