@@ -28,11 +28,12 @@ pytestmark = pytest.mark.slow(seconds=40)
 SERIAL = "GMB-0042"
 
 
-def _gimbal(directory: Path, *, elevation_text: str | None = None) -> Path:
+def _gimbal(directory: Path, *, elevation_text: str | None = None,
+            protocols: tuple[str, ...] = ("inertia_friction",)) -> Path:
     """A two-axis gimbal profile over quick axis profiles (``elevation_text`` replaces the
     elevation axis profile's text)."""
-    azimuth = subset_profile(directory, "inertia_friction", base="demo_gimbal_azimuth")
-    elevation = subset_profile(directory, "inertia_friction")
+    azimuth = subset_profile(directory, *protocols, base="demo_gimbal_azimuth")
+    elevation = subset_profile(directory, *protocols)
     if elevation_text is not None:
         elevation.write_text(elevation_text, encoding="utf-8")
     path = directory / "gimbal.toml"
@@ -42,9 +43,9 @@ def _gimbal(directory: Path, *, elevation_text: str | None = None) -> Path:
     return path
 
 
-def _calibrate(gimbal: Path, out: Path) -> tuple[int, str]:
+def _calibrate(gimbal: Path, out: Path, *options: str) -> tuple[int, str]:
     done = run_command(["calibrate", "--gimbal", str(gimbal), "--unit-serial", SERIAL,
-                        "--out", str(out)], timeout_s=600)
+                        "--out", str(out), *options], timeout_s=600)
     return done.returncode, done.stdout + done.stderr
 
 
@@ -238,3 +239,44 @@ def test_a_second_calibration_of_the_gimbal_at_once_is_refused_before_motion(
     assert done.returncode == 2, done.stdout + done.stderr
     assert "is not a unit serial" in done.stderr
     assert sorted(p.name for p in tmp_path.iterdir() if p.is_dir()) == ["certs"]
+
+
+def test_the_axes_together_run_a_clamped_rotor_beside_a_clamped_rotor_only(
+        tmp_path: Path) -> None:
+    """``--together``: both axes' calibrations at once on one shared simulated gimbal; the
+    two locked-rotor K_t protocols run beside each other, the mechanical ones one after the
+    other; the gimbal certificate states the clock and the pair."""
+    out = tmp_path / "certs"
+    gimbal = _gimbal(tmp_path, protocols=("inertia_friction", "torque_constant"))
+    code, text = _calibrate(gimbal, out, "--together", "--store", "off")
+    assert code == 0, text
+    assert "azimuth   | " in text and "elevation | " in text  # each line says whose it is
+    issued = json.loads((out / SERIAL / "gimbal-certificate.json").read_text(encoding="utf-8"))
+    assert issued["outcome"] == "PASS"
+    assert [a["outcome"] for a in issued["axes"]] == ["PASS", "PASS"]
+    cycle = issued["cycle_time"]
+    (pair,) = cycle["beside"]
+    assert pair["azimuth"] == pair["elevation"] == "torque_constant"
+    assert pair["overlap_s"] > 0
+    assert cycle["together_s"] == pytest.approx(cycle["one_after_the_other_s"]
+                                                - pair["overlap_s"], abs=0.01)
+    assert cycle["ratio_to_slowest"] < cycle["one_after_the_other_s"] / cycle["slowest_axis_s"]
+    txt = (out / SERIAL / "gimbal-certificate.txt").read_text(encoding="utf-8")
+    assert "azimuth torque_constant beside elevation torque_constant" in txt
+
+
+def test_a_stop_sent_to_the_axes_together_stops_both_and_nothing_passes(
+        tmp_path: Path) -> None:
+    out = tmp_path / "out"
+    run = RunningCalibration(tmp_path, ["--gimbal", "demo_gimbal", "--unit-serial", SERIAL,
+                                        "--out", str(out), "--together"], sigint_ignored=True)
+    run.wait_for_console("▶ protocol 2")
+    code = run.stop_with(signal.SIGTERM)
+    assert code != 0, run.console
+    assert "Traceback" not in run.console, run.console
+    issued = json.loads((out / SERIAL / "gimbal-certificate.json").read_text(encoding="utf-8"))
+    assert issued["outcome"] == "ERROR"
+    for axis in ("azimuth", "elevation"):
+        certificate = out / SERIAL / axis / SERIAL / "certificate.json"
+        if certificate.exists():  # an axis stopped before its first protocol writes none
+            assert json.loads(certificate.read_text(encoding="utf-8"))["outcome"] != "PASS"

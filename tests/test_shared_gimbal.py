@@ -20,7 +20,7 @@ from hil.drives.base import Drive
 from hil.drives.connect import open_drive
 from hil.drives.gimbal_link import KEY_VARIABLE
 from hil.drives.shared_gimbal import SharedGimbal
-from hil.errors import InputError
+from hil.errors import DriveStateError, InputError
 from hil.gimbal.profile import load_gimbal_profile
 from hil.gimbal.run import calibrate_gimbal
 from hil.motion import Excitation, Mode
@@ -208,3 +208,15 @@ def test_a_protocol_that_moves_the_other_axis_shares_the_gimbal_with_nothing() -
     assert not together(INDIFFERENT, CLAMPED)
     assert not together(INDIFFERENT, ALONE)
     assert not together(ALONE, ALONE)
+
+
+def test_an_axis_that_never_joins_stops_the_other_before_any_motion(
+        server: SharedGimbal) -> None:
+    thread, found = _in_thread(lambda: _stand(AZIMUTH, ELEVATION, server.address))
+    time.sleep(0.2)  # the azimuth waits for the elevation's hello
+    server.gone("elevation")  # its calibration was refused: it never connected
+    thread.join(timeout=10)
+    (error,) = found
+    assert isinstance(error, DriveStateError)
+    assert "the elevation calibration ended before it joined the shared gimbal" in str(error)
+    assert server.elapsed_s == 0.0

@@ -142,11 +142,12 @@ class SharedGimbal:
         accepting.start()
         try:
             while not all(a.gone for a in self._axes):
-                conns = [a.conn for a in self._axes if a.conn is not None and not a.gone]
                 with self._lock:
                     fresh, pending[:] = list(pending), []
                 for conn in fresh:
                     self._greet(conn)
+                self._refuse_if_alone()
+                conns = [a.conn for a in self._axes if a.conn is not None and not a.gone]
                 for ready in wait(conns, timeout=0.05) if conns else []:
                     assert isinstance(ready, Connection)
                     self._answer(ready)
@@ -187,6 +188,22 @@ class SharedGimbal:
         state.conn, state.hello = conn, hello
         if all(a.hello is not None for a in self._axes):
             self._build()
+
+    def _refuse_if_alone(self) -> None:
+        """An axis ended without joining (its calibration was refused or crashed): the
+        gimbal cannot be simulated without its plant, so the axes waiting to start hear why
+        (their calibrations stop before any motion)."""
+        if self._gimbal is not None:
+            return
+        missing = [a.name for a in self._axes if a.gone and a.hello is None]
+        if not missing:
+            return
+        for state in self._axes:
+            if state.conn is not None and not state.gone:
+                _reply(state.conn, "error", f"the {', '.join(missing)} calibration ended "
+                                            "before it joined the shared gimbal")
+                state.conn.close()
+                state.gone = True
 
     def _build(self) -> None:
         outer, inner = (a.hello for a in self._axes)
@@ -241,9 +258,9 @@ class SharedGimbal:
             plant.load_compensation(args[0], args[1])
         elif kind == "hold":
             plant.hold()
-        elif kind == "bye":
+        elif kind == "bye":  # an answer it no longer waits for is dropped with it
             self._end(state)
-            state.gone = True
+            state.gone, state.run, state.waiting = True, None, None
         else:
             _reply(conn, "error", f"unknown request {kind!r}")
             return
