@@ -9,7 +9,7 @@ import random
 import threading
 import time
 from collections.abc import Callable, Iterator, Sequence
-from contextlib import AbstractContextManager
+from contextlib import AbstractContextManager, nullcontext
 from pathlib import Path
 
 import numpy as np
@@ -119,7 +119,8 @@ EL_PROTOCOLS = (Planned(name="q1", motion_s=0.1), Planned(name="clamp", motion_s
 
 def _session(opened: AbstractContextManager[Drive], profile: UnitProfile,
              protocols: Sequence[Planned], pause: Callable[[], None]) -> list[np.ndarray]:
-    """Each protocol: begin, two runs of half its planned motion (a pause between), end."""
+    """Each protocol: begin, two runs of half its planned motion (a pause between; the
+    rotor clamped for a still one), end."""
     efforts = []
     with opened as drive:
         drive.enable()
@@ -128,8 +129,10 @@ def _session(opened: AbstractContextManager[Drive], profile: UnitProfile,
             drive.begin_protocol(protocol.name)
             for half in range(2):
                 pause()
-                efforts.append(drive.run(_sine(profile, f"{protocol.name}{half}",
-                                               protocol.motion_s / 2, hz=2.0 + index)).effort)
+                sine = _sine(profile, f"{protocol.name}{half}", protocol.motion_s / 2,
+                             hz=2.0 + index)
+                with drive.locked_rotor() if protocol.beside.still else nullcontext():
+                    efforts.append(drive.run(sine).effort)
             drive.end_protocol()
     return efforts
 
@@ -162,9 +165,13 @@ def test_protocols_run_beside_each_other_only_where_neither_disturbs(
                 assert together(kinds[axis, name], kinds[other, theirs]), (name, theirs)
                 overlapped.add((name, theirs))
     assert overlapped == {("clamp", "clamp")}  # the one pair the plan can put together
-    # the clock: everything one after the other, less the shorter clamp (they overlap)
-    total_s = sum(p.motion_s for p in (*AZ_PROTOCOLS, *EL_PROTOCOLS)) - 0.25
-    assert server.elapsed_s == pytest.approx(total_s, abs=2 / AZIMUTH.sample_rate_hz)
+    # the clock: every axis's motion one after the other, less the shorter clamp (the two
+    # overlap); the azimuth's includes the station's moves of the elevation back to level
+    fs = AZIMUTH.sample_rate_hz
+    own_s = {axis: n / fs for axis, n in server.busy.items()}
+    assert own_s["elevation"] == pytest.approx(sum(p.motion_s for p in EL_PROTOCOLS), abs=1e-9)
+    assert own_s["azimuth"] > sum(p.motion_s for p in AZ_PROTOCOLS) + 0.2  # a settle at least
+    assert server.elapsed_s == pytest.approx(sum(own_s.values()) - 0.25, abs=1e-9)
 
 
 def test_the_shared_gimbal_does_not_depend_on_how_fast_either_axis_computes(
@@ -220,3 +227,38 @@ def test_an_axis_that_never_joins_stops_the_other_before_any_motion(
     assert isinstance(error, DriveStateError)
     assert "the elevation calibration ended before it joined the shared gimbal" in str(error)
     assert server.elapsed_s == 0.0
+
+
+def test_an_azimuth_protocol_finds_the_elevation_where_its_profile_holds_it(
+        server: SharedGimbal) -> None:
+    """Between its own protocols the elevation is moved back to the angle the azimuth's
+    profile holds it at (level) before an azimuth protocol begins: the azimuth is
+    calibrated at its stated elevation whatever the elevation did before."""
+    def elevation() -> None:
+        with _linked(ELEVATION, AZIMUTH, server.address) as drive:
+            drive.enable()
+            drive.begin_protocol("tilt")
+            fs = ELEVATION.sample_rate_hz
+            ramp = np.minimum(np.arange(round(0.6 * fs)) / fs, 0.3)  # 1 rad/s, then held
+            drive.run(Excitation(name="to 0.3", mode=Mode.POSITION, fs_hz=fs, command=ramp))
+            drive.end_protocol()
+
+    thread, found = _in_thread(elevation)
+    with _linked(AZIMUTH, ELEVATION, server.address) as drive:
+        drive.enable()
+        stood = []
+        # both ask at once: the azimuth first (axis order), then the elevation, which
+        # asked before the azimuth's second
+        for protocol in ("first", "second"):
+            drive.begin_protocol(protocol)
+            stood.append(drive.held_text)  # type: ignore[attr-defined]
+            drive.run(_sine(AZIMUTH, protocol, 0.2))
+            drive.end_protocol()
+    thread.join()
+    assert found == [None]
+    assert [name for _, name, _, _ in server.intervals] == ["first", "tilt", "second"]
+    at = [float(text.removeprefix("elevation (simulated, held by its drive) at ")
+                .removesuffix(" rad")) for text in stood]
+    assert at == [pytest.approx(0.0, abs=1e-4)] * 2
+    fs = AZIMUTH.sample_rate_hz
+    assert server.busy["azimuth"] > round(0.4 * fs) + round(0.2 * fs)  # the move was its

@@ -86,7 +86,8 @@ def _join(address: str, profile: UnitProfile, partner: GimbalPartner | None, *, 
     return GimbalLink(address, AxisHello(
         axis=profile.axis, plant=profile.plant.with_changes(exact_torque_hold=True),
         firmware=profile.firmware, fs_hz=profile.sample_rate_hz, seed=seed,
-        protocols=protocols))
+        protocols=protocols, holds_other_at_rad=partner.at_rad if partner.name == INNER_AXIS
+        else None))
 
 
 def _gimbal_partner(profile: UnitProfile,

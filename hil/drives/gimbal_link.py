@@ -35,6 +35,8 @@ class AxisHello:
     fs_hz: float
     seed: int
     protocols: tuple[Planned, ...]
+    #: where this axis's protocols need the other axis held (``None``: anywhere)
+    holds_other_at_rad: float | None = None
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)

@@ -17,6 +17,7 @@ the other axis is in (:func:`hil.beside.together`).
 from __future__ import annotations
 
 import logging
+import math
 import secrets
 import tempfile
 import threading
@@ -28,20 +29,23 @@ import numpy as np
 
 from hil.beside import ALONE, Beside, plan_together, together
 from hil.drives.gimbal_link import AxisHello, AxisState
+from hil.drives.held import trapezoid_rad
+from hil.drives.sim import HOLD_ACCEL_RAD_S2, HOLD_SETTLE_S, HOLD_SPEED_RAD_S, PARTNER_SEED
 from hil.motion import Mode
 from plant_sim.gimbal import AxisBlock, GimbalPlant
 from plant_sim.model import MotionGuard, Plant, PlantTrace
 
 log = logging.getLogger(__name__)
 
-#: the held elevation's noise seed: as the azimuth's own simulation seeds its partner
-PARTNER_SEED = 0x6A
+STANDING_RAD = 1e-4  # an idle axis this near its stated angle is not moved there
 
 
 @dataclass(slots=True)
 class _Run:
     block: AxisBlock
     other_path_rad: np.ndarray | None
+    asked: int  # its place in the order runs were asked for
+    station: str | None = None  # the station's move of this axis, for that axis's protocol
     done: int = 0
     mine: list[PlantTrace] = field(default_factory=list)
     other: list[PlantTrace] = field(default_factory=list)
@@ -107,6 +111,7 @@ class SharedGimbal:
         #: each axis's own motion (its runs, and the other axis moved by them), in periods
         self.busy = {outer: 0, inner: 0}
         self._began: dict[str, int] = {}
+        self._requests = 0
 
     @property
     def fs_hz(self) -> float:
@@ -241,7 +246,7 @@ class SharedGimbal:
             state.waiting, state.waiting_since = str(args[0]), self.samples
             return  # answered when granted
         if kind == "run":
-            state.run = _Run(block=args[0], other_path_rad=args[1])
+            state.run = _Run(block=args[0], other_path_rad=args[1], asked=self._asked())
             return  # answered when the clock reaches its end
         if kind == "end":
             self._end(state)
@@ -265,6 +270,10 @@ class SharedGimbal:
             _reply(conn, "error", f"unknown request {kind!r}")
             return
         _reply(conn, "ok")
+
+    def _asked(self) -> int:
+        self._requests += 1
+        return self._requests
 
     def _other(self, state: _Axis) -> _Axis:
         return self._axes[1] if state is self._axes[0] else self._axes[0]
@@ -299,6 +308,8 @@ class SharedGimbal:
             assert state.waiting is not None
             assert state.conn is not None
             if self._may_begin(state, state.waiting):
+                if self._move_other_to_its_angle(state):
+                    return False  # the station moves the other axis first: the clock runs
                 index = state.index(state.waiting)
                 if index is not None:
                     state.passed = max(state.passed, index + 1)
@@ -307,6 +318,27 @@ class SharedGimbal:
                 _reply(state.conn, "go")
                 return True
         return False
+
+    def _move_other_to_its_angle(self, state: _Axis) -> bool:
+        """Before ``state``'s protocol: the other axis, between protocols of its own, to
+        the angle ``state``'s profile holds it at (as its own calibration would find it);
+        whether a move was started."""
+        other = self._other(state)
+        assert state.hello is not None
+        assert other.plant is not None
+        target = state.hello.holds_other_at_rad
+        if (target is None or other.protocol is not None or other.run is not None
+                or abs(other.plant.position_rad - target) <= STANDING_RAD):
+            return False
+        fs = other.plant.fs_hz
+        path = trapezoid_rad(other.plant.position_rad, target, speed_rad_s=HOLD_SPEED_RAD_S,
+                             accel_rad_s2=HOLD_ACCEL_RAD_S2, step_s=1.0 / fs)
+        path = np.concatenate([path, np.full(math.ceil(HOLD_SETTLE_S * fs), target)])
+        other.run = _Run(block=AxisBlock(mode=Mode.POSITION, command=path),
+                         other_path_rad=None, asked=self._asked(), station=state.name)
+        log.info("shared gimbal: %s to %+.4f rad for %s's %s", other.name, target, state.name,
+                 state.waiting)
+        return True
 
     def _may_begin(self, state: _Axis, protocol: str) -> bool:
         """``protocol`` may begin on ``state``'s axis now: it may run beside what the other
@@ -325,41 +357,67 @@ class SharedGimbal:
         step = self._steps[state.name][index]
         return all(other.over(j) for j, s in enumerate(self._steps[other.name]) if s < step)
 
+    def _moving(self) -> list[_Axis]:
+        """The axes whose runs go now: both, or where one run would disturb the other's
+        measurement (a moving axis beside a clamped one whose protocol is not indifferent
+        to it), the one started or asked for first; the other stands meanwhile."""
+        runs = sorted((a for a in self._axes if a.run is not None),
+                      key=lambda a: (a.run.done == 0, a.run.asked))  # type: ignore[union-attr]
+        if len(runs) < 2 or self._runs_together(*runs):
+            return runs
+        return runs[:1]
+
+    def _runs_together(self, first: _Axis, second: _Axis) -> bool:
+        def moves(state: _Axis) -> bool:
+            assert state.plant is not None
+            return not state.plant.params.locked_rotor
+
+        def indifferent(state: _Axis) -> bool:
+            return state.beside(state.protocol).indifferent
+
+        if any(a.run is not None and (a.run.other_path_rad is not None or a.run.station)
+               for a in (first, second)):
+            return False
+        return ((not moves(first) or indifferent(second))
+                and (not moves(second) or indifferent(first)))
+
     def _step(self) -> None:
         assert self._gimbal is not None
-        runs = [a.run for a in self._axes if a.run is not None]
-        n = min(run.left for run in runs)
-        blocks = [self._block(state, n) for state in self._axes]
+        moving = self._moving()
+        n = min(a.run.left for a in moving if a.run is not None)
+        blocks = [self._block(state, n, moving) for state in self._axes]
         traces = self._gimbal.run(blocks[0], blocks[1])
         done = len(traces[0].time_s)
         self.samples += done
         for state, trace in zip(self._axes, traces, strict=True):
             other = self._other(state)
-            self.busy[state.name] += done if state.run is not None else 0
-            if state.run is not None:
+            if state in moving and state.run is not None:
+                self.busy[state.run.station or state.name] += done
                 state.run.mine.append(trace)
                 state.run.done += done
-            elif other.run is not None and other.run.other_path_rad is not None:
+            elif other in moving and other.run is not None and other.run.other_path_rad is not None:
                 other.run.other.append(trace)
         tripped = done < n
         finished = [state for state, trace in zip(self._axes, traces, strict=True)
-                    if state.run is not None and (state.run.left == 0 or (
+                    if state in moving and state.run is not None and (state.run.left == 0 or (
                         tripped and _left_guard(state.run.block.guard, trace)))]
         if tripped and not finished:  # stopped, and neither monitor says why: end both
-            finished = [state for state in self._axes if state.run is not None]
+            finished = [state for state in moving if state.run is not None]
         for state in finished:
             assert state.run is not None
             self._finish(state, state.run)
 
-    def _block(self, state: _Axis, n: int) -> AxisBlock:
+    def _block(self, state: _Axis, n: int, moving: list[_Axis]) -> AxisBlock:
+        """What ``state``'s axis does over the next ``n`` periods: its run, the other's
+        path for it, or standing where it was left."""
         other = self._other(state)
-        if state.run is not None:
+        if state in moving and state.run is not None:
             run, part = state.run, slice(state.run.done, state.run.done + n)
             offset = run.block.torque_offset
             return AxisBlock(mode=run.block.mode, command=run.block.command[part],
                              torque_offset=None if offset is None or not len(offset)
                              else offset[part], guard=run.block.guard)
-        if other.run is not None and other.run.other_path_rad is not None:
+        if other in moving and other.run is not None and other.run.other_path_rad is not None:
             path = other.run.other_path_rad[other.run.done:other.run.done + n]
             return AxisBlock(mode=Mode.POSITION, command=path)
         return AxisBlock(mode=Mode.POSITION, command=np.full(n, state.hold_rad))
@@ -376,7 +434,8 @@ class SharedGimbal:
         if run.other_path_rad is not None and run.done:
             self._other(state).hold_rad = float(run.other_path_rad[run.done - 1])
         state.run = None
-        _reply(state.conn, "ran", mine, other)
+        if run.station is None:  # the station's own move answers nobody
+            _reply(state.conn, "ran", mine, other)
 
 
 def _left_guard(guard: MotionGuard | None, trace: PlantTrace) -> bool:

@@ -112,10 +112,10 @@ def cycle_time_text(cycle: Mapping[str, Any] | None) -> str:
         pairs = "; ".join(" beside ".join(f"{axis} {name}" for axis, name in pair.items()
                                            if axis != "overlap_s")
                           + f" ({pair['overlap_s']:.1f} s)" for pair in cycle["beside"])
-        return (f"protocols {each}; each axis's own motion with its moves {own}, one after "
-                f"the other {cycle['one_after_the_other_s']:.1f} s; at the same time "
+        return (f"protocols {each}. With the moves between them {own}, one after the "
+                f"other {cycle['one_after_the_other_s']:.1f} s. At the same time "
                 f"{cycle['together_s']:.1f} s, {cycle['ratio_to_slowest']:.2f} × the "
-                f"slowest axis (beside each other: {pairs or 'none'})")
+                f"slowest axis ({pairs or 'no protocols beside each other'})")
     return (f"{each}; one after the other {cycle['one_after_the_other_s']:.1f} s, "
             f"{cycle['ratio_to_slowest']:.2f} × the slowest axis")
 
