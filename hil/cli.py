@@ -142,7 +142,10 @@ def build_parser() -> argparse.ArgumentParser:
                           "shared simulated gimbal, each protocol beside the other axis's "
                           "where neither disturbs the other (default: one axis after the "
                           "other)")
-    cal.add_argument("--gimbal-link", default=None, help=argparse.SUPPRESS)
+    cal.add_argument("--gimbal-link", default=None, metavar="ADDRESS",
+                     help="with --drive sim: join the shared simulated gimbal at ADDRESS "
+                          "(calibrate --gimbal --together passes it to each axis; default: "
+                          "none, the gimbal simulated in this process)")
     cal.add_argument("pytest_args", nargs="*", metavar="PYTEST_ARG",
                      help="extra pytest arguments (after --; default: none)")
 

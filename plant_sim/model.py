@@ -335,6 +335,19 @@ class Plant:
         )
 
 
+def concatenate_traces(traces: list[PlantTrace]) -> PlantTrace:
+    """Consecutive traces as one (empty when there are none); the shaft sensor's column
+    only when every one has it."""
+    def joined(name: str) -> FloatArray:
+        return np.concatenate([getattr(t, name) for t in traces]) if traces else np.zeros(0)
+    load = [t.load_torque_nm for t in traces if t.load_torque_nm is not None]
+    return PlantTrace(time_s=joined("time_s"), position_rad=joined("position_rad"),
+                      velocity_rad_s=joined("velocity_rad_s"), torque_nm=joined("torque_nm"),
+                      current_a=joined("current_a"), torque_actual_nm=joined("torque_actual_nm"),
+                      load_torque_nm=np.concatenate(load) if traces and len(load) == len(traces)
+                      else None)
+
+
 @dataclass(frozen=True, slots=True)
 class KernelBlock:
     """One axis's arrays for a kernel call (``kernel.A_*`` order), its in-loop noise rows

@@ -259,9 +259,10 @@ def test_the_axes_together_run_a_clamped_rotor_beside_a_clamped_rotor_only(
     (pair,) = cycle["beside"]
     assert pair["azimuth"] == pair["elevation"] == "torque_constant"
     assert pair["overlap_s"] > 0
-    assert cycle["together_s"] == pytest.approx(cycle["one_after_the_other_s"]
-                                                - pair["overlap_s"], abs=0.01)
-    assert cycle["ratio_to_slowest"] < cycle["one_after_the_other_s"] / cycle["slowest_axis_s"]
+    # the clamped sweeps overlap (each axis's moves between them wait for the other's)
+    saved_s = cycle["one_after_the_other_s"] - cycle["together_s"]
+    assert 1.0 < saved_s < pair["overlap_s"]
+    assert cycle["together_s"] >= max(cycle["own_motion_s"].values())
     txt = (out / SERIAL / "gimbal-certificate.txt").read_text(encoding="utf-8")
     assert "azimuth torque_constant beside elevation torque_constant" in txt
 

@@ -33,7 +33,7 @@ from hil.drives.held import trapezoid_rad
 from hil.drives.sim import HOLD_ACCEL_RAD_S2, HOLD_SETTLE_S, HOLD_SPEED_RAD_S, PARTNER_SEED
 from hil.motion import Mode
 from plant_sim.gimbal import AxisBlock, GimbalPlant
-from plant_sim.model import MotionGuard, Plant, PlantTrace
+from plant_sim.model import MotionGuard, Plant, PlantTrace, concatenate_traces
 
 log = logging.getLogger(__name__)
 
@@ -425,8 +425,8 @@ class SharedGimbal:
     def _finish(self, state: _Axis, run: _Run) -> None:
         assert state.conn is not None
         assert state.plant is not None
-        mine = _joined(run.mine)
-        other = _joined(run.other) if run.other_path_rad is not None else None
+        mine = concatenate_traces(run.mine)
+        other = concatenate_traces(run.other) if run.other_path_rad is not None else None
         if run.block.mode is Mode.POSITION and run.done:
             state.hold_rad = float(run.block.command[run.done - 1])
         else:
@@ -445,18 +445,6 @@ def _left_guard(guard: MotionGuard | None, trace: PlantTrace) -> bool:
     position, velocity = trace.position_rad[-1], trace.velocity_rad_s[-1]
     return bool(not guard.position_min_rad <= position <= guard.position_max_rad
                 or abs(velocity) > guard.velocity_max_rad_s)
-
-
-def _joined(traces: list[PlantTrace]) -> PlantTrace:
-    def column(name: str) -> np.ndarray:
-        return np.concatenate([getattr(t, name) for t in traces]) if traces else np.zeros(0)
-    load = [t.load_torque_nm for t in traces if t.load_torque_nm is not None]
-    return PlantTrace(time_s=column("time_s"), position_rad=column("position_rad"),
-                      velocity_rad_s=column("velocity_rad_s"), torque_nm=column("torque_nm"),
-                      current_a=column("current_a"),
-                      torque_actual_nm=column("torque_actual_nm"),
-                      load_torque_nm=np.concatenate(load) if traces and len(load) == len(traces)
-                      else None)
 
 
 def _reply(conn: Connection, *message: object) -> None:

@@ -28,7 +28,13 @@ from hil.motion import CompensationTable, Excitation, Limits, Mode, PositionHarm
 from hil.recording import Recording
 from plant_sim.firmware import Firmware
 from plant_sim.gimbal import AxisBlock, GimbalPlant
-from plant_sim.model import FloatArray, MotionGuard, Plant, PlantTrace, trace_to_recording
+from plant_sim.model import (
+    MotionGuard,
+    Plant,
+    PlantTrace,
+    concatenate_traces,
+    trace_to_recording,
+)
 from plant_sim.params import Harmonic, PlantParams
 
 log = logging.getLogger(__name__)
@@ -420,24 +426,9 @@ Moved = tuple[PlantTrace, PlantTrace | None]  # this axis's trace, the elevation
 
 def _joined(pieces: list[Moved]) -> Moved:
     """The traces of consecutive pieces as one (empty when there are none)."""
-    if not pieces:
-        empty = np.zeros(0)
-        return PlantTrace(time_s=empty, position_rad=empty, velocity_rad_s=empty,
-                          torque_nm=empty, current_a=empty, torque_actual_nm=empty), None
-    mine = _concatenated([axis for axis, _ in pieces])
+    mine = concatenate_traces([axis for axis, _ in pieces])
     held = [other for _, other in pieces if other is not None]
-    return mine, _concatenated(held) if held else None
-
-
-def _concatenated(traces: list[PlantTrace]) -> PlantTrace:
-    def joined(name: str) -> FloatArray:
-        return np.concatenate([getattr(trace, name) for trace in traces])
-    load = [trace.load_torque_nm for trace in traces if trace.load_torque_nm is not None]
-    return PlantTrace(time_s=joined("time_s"), position_rad=joined("position_rad"),
-                      velocity_rad_s=joined("velocity_rad_s"), torque_nm=joined("torque_nm"),
-                      current_a=joined("current_a"), torque_actual_nm=joined("torque_actual_nm"),
-                      load_torque_nm=np.concatenate(load) if len(load) == len(traces)
-                      else None)
+    return mine, concatenate_traces(held) if held else None
 
 
 def _harmonics(table: tuple[PositionHarmonic, ...]) -> tuple[Harmonic, ...]:
