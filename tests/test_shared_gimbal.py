@@ -262,3 +262,13 @@ def test_an_azimuth_protocol_finds_the_elevation_where_its_profile_holds_it(
     assert at == [pytest.approx(0.0, abs=1e-4)] * 2
     fs = AZIMUTH.sample_rate_hz
     assert server.busy["azimuth"] > round(0.4 * fs) + round(0.2 * fs)  # the move was its
+
+
+def test_a_paced_simulator_cannot_join_a_shared_gimbal(server: SharedGimbal) -> None:
+    with pytest.raises(InputError, match="shared gimbal keeps its own virtual clock"), \
+            open_drive("sim", profile=AZIMUTH, unit_serial="SIM-0001",
+                       gimbal_axes={"elevation": ELEVATION}, gimbal_link=server.address,
+                       sim_pace=1.0):
+        pass
+    server.gone("azimuth")
+    server.gone("elevation")

@@ -10,7 +10,7 @@ from typing import TYPE_CHECKING
 
 from hil.drives.base import Drive
 from hil.drives.kinds import DriveKind, drive_kind
-from hil.errors import ProfileError
+from hil.errors import InputError, ProfileError
 from hil.profile import UnitProfile
 
 if TYPE_CHECKING:
@@ -51,6 +51,10 @@ def open_drive(
 
         if profile.plant is None:
             raise ProfileError(f"--drive {kind} needs a [plant] table", source=profile.source)
+        if gimbal_link is not None and sim_pace is not None:
+            raise InputError("--sim-pace and --gimbal-link: a shared gimbal keeps its own "
+                             "virtual clock (calibrate the gimbal without --together to "
+                             "pace it)")
         partner = _gimbal_partner(profile, gimbal_axes or {})
         link = None if gimbal_link is None else _join(gimbal_link, profile, partner,
                                                       seed=seed, protocols=protocols)
