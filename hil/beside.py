@@ -5,8 +5,9 @@ The baseline every protocol is calibrated under is the other axis *held still by
 drive*. A protocol may run beside another when neither's motion reaches the other's
 measurement beyond that baseline:
 
-- ``still``: its axis does not move (clamped, or standing under position control as a held
-  axis does), so the other axis sees the baseline it is calibrated under;
+- ``still``: it measures with its rotor clamped, so the other axis sees the baseline it is
+  calibrated under (a shared gimbal runs its clamped runs beside the other axis's clamped
+  runs only: a move between them waits, since a clamp's sensor feels the other's motion);
 - ``indifferent``: its result does not depend on the other axis's motion (an electrical
   measurement, not a mechanical one);
 - ``moves_other``: it moves the other axis itself (the azimuth's inertia across elevation,
