@@ -4,7 +4,8 @@ in the gimbal profile's order, each by today's axis calibration in a process of 
 for all of them (resolved once, as a one-axis calibration would); then the gimbal
 certificate in ``OUT/SERIAL/`` (JSON, TXT, HTML, PDF). A refused or interrupted axis stops
 the gimbal (the axes after it are not started); a failed one does not (the gimbal's picture
-stays whole)."""
+stays whole). With ``--together`` (the simulator) both axes' processes run at once on one
+shared gimbal, each line of their output after its axis's name; a stop reaches both."""
 
 from __future__ import annotations
 
