@@ -1,15 +1,17 @@
 """The gimbal's axes at the same time (``calibrate --gimbal --together``) against one after
 the other: the cycle time, and whether any result moved.
 
-    python -m benchmarks.bench_together --seeds 1 2 3 4 5 6 7 8
+    python -m benchmarks.bench_together --seeds 1 2 3 4 5 6 7 8 [--gimbal PROFILE]
 
-Each seed calibrates the demo gimbal on the simulator both ways (``--store off --
+Each seed calibrates the gimbal (default: the demo) on the simulator both ways (``--store off --
 --no-documents``). Per result, the difference together − one after the other over the
 seeds: its mean and that mean's standard error against the result's median expanded
 uncertainty U. The two ways share the azimuth's noise streams, not the elevation's (its
 own plant is seeded as the held partner's when shared), so the differences also hold the
 noise; a result moved by running beside the other axis shows a mean difference beyond its
-standard error, and a large one against U.
+standard error, and a large one against U. This is the evidence a gimbal profile's
+``[together] beside`` pair needs (:mod:`hil.gimbal.profile`): declare it, run this, keep it
+only if no result moves.
 """
 
 from __future__ import annotations
@@ -28,9 +30,9 @@ from typing import Any
 GIMBAL = "demo_gimbal"
 
 
-def calibrate(out: Path, seed: int, together: bool) -> dict[str, Any]:
-    """One calibration of the demo gimbal; its gimbal certificate."""
-    argv = [sys.executable, "-m", "hil.cli", "calibrate", "--gimbal", GIMBAL, "--drive", "sim",
+def calibrate(out: Path, seed: int, together: bool, gimbal: str = GIMBAL) -> dict[str, Any]:
+    """One calibration of the gimbal; its gimbal certificate."""
+    argv = [sys.executable, "-m", "hil.cli", "calibrate", "--gimbal", gimbal, "--drive", "sim",
             "--unit-serial", f"BENCH-{seed:04d}", "--out", str(out), "--seed", str(seed),
             "--store", "off", *(["--together"] if together else []), "--", "--no-documents"]
     subprocess.run(argv, check=True, capture_output=True, text=True)
@@ -53,6 +55,7 @@ def results(issued: dict[str, Any], folder: Path) -> dict[tuple[str, str], tuple
 def main(argv: Sequence[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seeds", type=int, nargs="+", default=[1, 2, 3, 4, 5, 6, 7, 8])
+    parser.add_argument("--gimbal", default=GIMBAL, help="gimbal profile (default: the demo)")
     args = parser.parse_args(argv)
     differences: dict[tuple[str, str], list[float]] = {}
     uncertainties: dict[tuple[str, str], list[float]] = {}
@@ -62,7 +65,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             ways = {}
             for together in (False, True):
                 out = Path(scratch) / f"{seed}-{together}"
-                issued = calibrate(out, seed, together)
+                issued = calibrate(out, seed, together, args.gimbal)
                 ways[together] = results(issued, out)
                 if together:
                     cycles.append(issued["cycle_time"])

@@ -20,7 +20,7 @@ azimuth's motion puts centrifugal and reaction torques on the elevation.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from functools import cache
 
@@ -69,15 +69,22 @@ class Step:
     second: int | None
 
 
-def plan_together(first: Sequence[Planned], second: Sequence[Planned]) -> tuple[Step, ...]:
+def plan_together(first: Sequence[Planned], second: Sequence[Planned],
+                  allowed: Callable[[Planned, Planned], bool] | None = None
+                  ) -> tuple[Step, ...]:
     """The shortest schedule of two axes' protocols, each axis's in its own order, two of
-    them at a time only where :func:`together` allows (a step lasts its longer protocol).
+    them at a time only where ``allowed`` (default: :func:`together` of their
+    declarations) says so (a step lasts its longer protocol).
 
     Returns
     -------
     tuple of Step
         In order; each protocol of each axis appears in exactly one step.
     """
+    if allowed is None:
+        def allowed(a: Planned, b: Planned) -> bool:
+            return together(a.beside, b.beside)
+
     @cache
     def best(i: int, j: int) -> tuple[float, tuple[Step, ...]]:
         if i == len(first) and j == len(second):
@@ -89,7 +96,7 @@ def plan_together(first: Sequence[Planned], second: Sequence[Planned]) -> tuple[
         if j < len(second):
             rest, steps = best(i, j + 1)
             options.append((second[j].motion_s + rest, (Step(None, j), *steps)))
-        if i < len(first) and j < len(second) and together(first[i].beside, second[j].beside):
+        if i < len(first) and j < len(second) and allowed(first[i], second[j]):
             rest, steps = best(i + 1, j + 1)
             options.append((max(first[i].motion_s, second[j].motion_s) + rest,
                             (Step(i, j), *steps)))

@@ -6,6 +6,7 @@ how fast either process is."""
 from __future__ import annotations
 
 import random
+import re
 import threading
 import time
 from collections.abc import Callable, Iterator, Sequence
@@ -20,7 +21,7 @@ from hil.drives.base import Drive
 from hil.drives.connect import open_drive
 from hil.drives.gimbal_link import KEY_VARIABLE
 from hil.drives.shared_gimbal import SharedGimbal
-from hil.errors import DriveStateError, InputError
+from hil.errors import DriveStateError, InputError, ProfileError
 from hil.gimbal.profile import load_gimbal_profile
 from hil.gimbal.run import calibrate_gimbal
 from hil.motion import Excitation, Mode
@@ -272,3 +273,50 @@ def test_a_paced_simulator_cannot_join_a_shared_gimbal(server: SharedGimbal) -> 
         pass
     server.gone("azimuth")
     server.gone("elevation")
+
+
+def test_a_pair_the_gimbal_declares_runs_together_with_its_runs_overlapping(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """Two mechanical protocols the suite keeps apart run at once when the gimbal profile
+    declares them (its own evidence); the clock then moves for both at once."""
+    az, el = (Planned(name="sines", motion_s=0.4),), (Planned(name="sweep", motion_s=0.3),)
+    shared = SharedGimbal(declared=[("sines", "sweep")]).start()
+    monkeypatch.setenv(KEY_VARIABLE, shared.key.hex())
+    try:
+        thread, found = _in_thread(lambda: _session(
+            _linked(ELEVATION, AZIMUTH, shared.address, el), ELEVATION, el, lambda: None))
+        _session(_linked(AZIMUTH, ELEVATION, shared.address, az), AZIMUTH, az, lambda: None)
+        thread.join()
+    finally:
+        shared.close()
+    assert isinstance(found[0], list)
+    assert shared.elapsed_s == pytest.approx(0.4, abs=1e-9)  # the longer one: not 0.7 s
+    assert {name for _, name, _, _ in shared.intervals} == {"sines", "sweep"}
+
+
+def _gimbal_profile(tmp_path: Path, together: str) -> Path:
+    path = tmp_path / "gimbal.toml"
+    path.write_text('[gimbal]\npart_number = "GMB-2"\n\n'
+                    '[axes.azimuth]\nprofile = "demo_gimbal_azimuth"\n\n'
+                    '[axes.elevation]\nprofile = "demo_gimbal_elevation"\n\n'
+                    f'[together]\nbeside = [{together}]\n', encoding="utf-8")
+    return path
+
+
+def test_a_declared_pair_names_a_protocol_of_each_axis_and_why(tmp_path: Path) -> None:
+    good = load_gimbal_profile(_gimbal_profile(tmp_path, (
+        '{elevation = "gravity_cable", azimuth = "stribeck", why = "bench_together: 0.1 U"}')))
+    (pair,) = good.beside
+    assert pair.protocols == (("azimuth", "stribeck"), ("elevation", "gravity_cable"))
+    assert pair.why == "bench_together: 0.1 U"
+    for text, says in [
+        ('{azimuth = "stribeck", elevation = "gravity_cable"}', "lacks 'why'"),
+        ('{azimuth = "stribeck", why = "x"}', "a protocol of each of two axes"),
+        ('{azimuth = "stribek", elevation = "gravity_cable", why = "x"}',
+         "the azimuth profile has no protocol 'stribek'"),
+        ('{azimuth = "cross_coupling", elevation = "gravity_cable", why = "x"}',
+         "moves the other axis"),
+        ('{azimuth = "stribeck", roll = "gravity_cable", why = "x"}', "unknown setting 'roll'"),
+    ]:
+        with pytest.raises(ProfileError, match=re.escape(says)):
+            load_gimbal_profile(_gimbal_profile(tmp_path, text))

@@ -21,6 +21,7 @@ import math
 import secrets
 import tempfile
 import threading
+from collections.abc import Iterable
 from dataclasses import dataclass, field
 from multiprocessing.connection import Connection, Listener, wait
 from pathlib import Path
@@ -94,7 +95,12 @@ class SharedGimbal:
     """The server: an azimuth (outer) and an elevation (inner), each axis's calibration
     connected over a local socket; run in a thread with :meth:`start`."""
 
-    def __init__(self, outer: str = "azimuth", inner: str = "elevation") -> None:
+    def __init__(self, outer: str = "azimuth", inner: str = "elevation", *,
+                 declared: Iterable[tuple[str, str]] = ()) -> None:
+        """``declared``: (outer protocol, inner protocol) pairs the gimbal's profile lets
+        run at the same time, their runs overlapping freely (its own evidence that they do
+        not disturb each other, :mod:`hil.gimbal.profile`)."""
+        self._declared = frozenset(declared)
         self._folder = tempfile.TemporaryDirectory(prefix="gimbal-hil-shared-")
         self.address = str(Path(self._folder.name) / "gimbal.sock")
         self.key = secrets.token_bytes(16)
@@ -222,7 +228,9 @@ class SharedGimbal:
             state.plant, state.hold_rad = plant, plant.position_rad
         steps: dict[str, list[int]] = {outer.axis: [0] * len(outer.protocols),
                                        inner.axis: [0] * len(inner.protocols)}
-        for number, step in enumerate(plan_together(outer.protocols, inner.protocols)):
+        plan = plan_together(outer.protocols, inner.protocols,
+                             lambda a, b: self._beside(a.name, b.name, a.beside, b.beside))
+        for number, step in enumerate(plan):
             if step.first is not None:
                 steps[outer.axis][step.first] = number
             if step.second is not None:
@@ -348,8 +356,8 @@ class SharedGimbal:
             return True
         if other.run is not None and other.run.other_path_rad is not None:
             return False  # the other axis is moving this one
-        if other.protocol is not None and not together(state.beside(protocol),
-                                                       other.beside(other.protocol)):
+        if other.protocol is not None and not self._beside(
+                *self._outer_first((state, protocol), (other, other.protocol))):
             return False
         index = state.index(protocol)
         if index is None:  # not in its plan (it said nothing of it): beside-rule only
@@ -367,6 +375,17 @@ class SharedGimbal:
             return runs
         return runs[:1]
 
+    def _outer_first(self, one: tuple[_Axis, str], two: tuple[_Axis, str]
+                     ) -> tuple[str, str, Beside, Beside]:
+        """Two axes' protocols as (outer's, inner's, their declarations)."""
+        (a, p), (b, q) = (one, two) if one[0] is self._axes[0] else (two, one)
+        return p, q, a.beside(p), b.beside(q)
+
+    def _beside(self, outer: str, inner: str, outer_kind: Beside, inner_kind: Beside) -> bool:
+        """Whether the outer's protocol may run beside the inner's: declared by the
+        gimbal, or :func:`hil.beside.together`."""
+        return (outer, inner) in self._declared or together(outer_kind, inner_kind)
+
     def _runs_together(self, first: _Axis, second: _Axis) -> bool:
         def moves(state: _Axis) -> bool:
             assert state.plant is not None
@@ -378,6 +397,9 @@ class SharedGimbal:
         if any(a.run is not None and (a.run.other_path_rad is not None or a.run.station)
                for a in (first, second)):
             return False
+        outer, inner = (first, second) if first is self._axes[0] else (second, first)
+        if (outer.protocol, inner.protocol) in self._declared:
+            return True  # the gimbal's evidence: their runs overlap freely
         return ((not moves(first) or indifferent(second))
                 and (not moves(second) or indifferent(first)))
 

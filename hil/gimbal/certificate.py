@@ -80,16 +80,20 @@ def cycle_time(sections: Sequence[Mapping[str, Any]],
     slowest_own = max(own.values())
     return {"motion_time_s": times, "together_s": together["gimbal_s"],
             "own_motion_s": own, "one_after_the_other_s": sum(own.values()),
-            "beside": together["beside"], "slowest_axis_s": slowest_own,
+            "beside": together["beside"],
+            "declared_beside": together.get("declared_beside", {}),
+            "slowest_axis_s": slowest_own,
             "ratio_to_slowest": together["gimbal_s"] / slowest_own}
 
 
 def together_time(gimbal_s: float, own_motion_s: Mapping[str, float],
-                  intervals: Sequence[tuple[str, str, float, float]]) -> dict[str, Any]:
+                  intervals: Sequence[tuple[str, str, float, float]],
+                  declared: Mapping[str, str] | None = None) -> dict[str, Any]:
     """The shared gimbal's clock, each axis's own motion on it (its runs, and the other
     axis's moves it commanded: more than its certificate's protocol motion, which leaves
     out the moves between excitations) and the protocols that overlapped: ``intervals``
-    are (axis, protocol, start, end) in seconds."""
+    are (axis, protocol, start, end) in seconds; ``declared``: the pairs the gimbal profile
+    lets run together (``azimuth X beside elevation Y``) and why."""
     beside = []
     for axis, protocol, start, end in intervals:
         for other, theirs, their_start, their_end in intervals:
@@ -98,7 +102,7 @@ def together_time(gimbal_s: float, own_motion_s: Mapping[str, float],
                 beside.append({axis: protocol, other: theirs, "overlap_s": round(overlap, 3)})
     return {"gimbal_s": round(gimbal_s, 3),
             "own_motion_s": {axis: round(t, 3) for axis, t in own_motion_s.items()},
-            "beside": beside}
+            "beside": beside, "declared_beside": dict(declared or {})}
 
 
 def cycle_time_text(cycle: Mapping[str, Any] | None) -> str:
@@ -112,10 +116,12 @@ def cycle_time_text(cycle: Mapping[str, Any] | None) -> str:
         pairs = "; ".join(" beside ".join(f"{axis} {name}" for axis, name in pair.items()
                                            if axis != "overlap_s")
                           + f" ({pair['overlap_s']:.1f} s)" for pair in cycle["beside"])
+        declared = "".join(f". Declared by the gimbal profile: {pair} ({why})"
+                           for pair, why in cycle.get("declared_beside", {}).items())
         return (f"protocols {each}. With the moves between them {own}, one after the "
                 f"other {cycle['one_after_the_other_s']:.1f} s. At the same time "
                 f"{cycle['together_s']:.1f} s, {cycle['ratio_to_slowest']:.2f} × the "
-                f"slowest axis ({pairs or 'no protocols beside each other'})")
+                f"slowest axis ({pairs or 'no protocols beside each other'}){declared}")
     return (f"{each}; one after the other {cycle['one_after_the_other_s']:.1f} s, "
             f"{cycle['ratio_to_slowest']:.2f} × the slowest axis")
 

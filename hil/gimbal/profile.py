@@ -12,7 +12,15 @@ profile = "demo_gimbal_azimuth.toml"   # beside this file, or a built-in profile
 
 [axes.elevation]
 profile = "demo_gimbal_elevation.toml"
+
+[together]  # optional: for `calibrate --gimbal --together`, beyond what the suite knows
+beside = [{azimuth = "stribeck", elevation = "gravity_cable",
+           why = "benchmarks/bench_together.py on this gimbal: no result moved beyond 0.2 U"}]
 ```
+
+A ``beside`` pair runs at the same time, its runs overlapping freely: the gimbal's own
+evidence (its coupling is weak enough) that the suite's physics-based rule
+(:mod:`hil.beside`) cannot know. The certificate names the pairs that ran so.
 """
 
 from __future__ import annotations
@@ -36,6 +44,14 @@ class GimbalAxis:
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
+class DeclaredBeside:
+    """Two protocols on different axes the gimbal profile lets run at the same time."""
+
+    protocols: tuple[tuple[str, str], ...]  # (axis, protocol), in the gimbal's axis order
+    why: str
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
 class GimbalProfile:
     """The gimbal: what identifies its type, and its axes in calibration order."""
 
@@ -45,6 +61,7 @@ class GimbalProfile:
     revision: str
     description: str
     axes: tuple[GimbalAxis, ...]
+    beside: tuple[DeclaredBeside, ...] = ()
 
 
 def is_gimbal_profile(name_or_path: str | Path) -> bool:
@@ -85,10 +102,38 @@ def load_gimbal_profile(name_or_path: str | Path) -> GimbalProfile:
     if not axes:
         raise ProfileError("a gimbal profile needs at least one [axes.NAME] table",
                            source=str(path))
+    together = document.table_at("together", required=False)
+    beside = tuple(_declared(pair, axes) for pair in together.table_list("beside"))
+    together.done()
     document.done()
     return GimbalProfile(source=str(path), sha256=hashlib.sha256(payload).hexdigest(),
                          part_number=part_number, revision=revision, description=description,
-                         axes=tuple(axes))
+                         axes=tuple(axes), beside=beside)
+
+
+def _declared(pair: ConfigTable, axes: list[GimbalAxis]) -> DeclaredBeside:
+    """One ``[together] beside`` entry: a protocol of each of two axes, and why."""
+    from hil.suite.catalogue import CATALOGUE
+
+    why = pair.string("why")
+    chosen = []
+    for axis in axes:
+        if axis.name not in pair:
+            continue
+        protocol = pair.string(axis.name)
+        if protocol not in axis.profile.protocols:
+            raise pair.error(axis.name, f"the {axis.name} profile has no protocol "
+                                        f"'{protocol}' (it has: "
+                                        f"{', '.join(axis.profile.protocols)})")
+        if protocol in CATALOGUE and CATALOGUE[protocol].beside.moves_other:
+            raise pair.error(axis.name, f"'{protocol}' moves the other axis: nothing runs "
+                                        "beside it")
+        chosen.append((axis.name, protocol))
+    pair.done()  # a key naming no axis of the gimbal is refused here
+    if len(chosen) != 2:
+        raise pair.error("why", "a pair names a protocol of each of two axes "
+                                f"({', '.join(a.name for a in axes)}), and why")
+    return DeclaredBeside(protocols=(chosen[0], chosen[1]), why=why)
 
 
 def _path(name_or_path: str | Path) -> Path:

@@ -125,7 +125,9 @@ def _axes_together(gimbal: GimbalProfile, *, serial: str, folder: Path, store_ur
     from hil.drives.gimbal_link import KEY_VARIABLE
     from hil.drives.shared_gimbal import SharedGimbal
 
-    server = SharedGimbal(outer=OUTER, inner=INNER).start()
+    declared = {(pair[OUTER], pair[INNER]): d.why
+                for d in gimbal.beside for pair in [dict(d.protocols)]}
+    server = SharedGimbal(outer=OUTER, inner=INNER, declared=declared).start()
     environment = {**os.environ, KEY_VARIABLE: server.key.hex()}
     print(f"gimbal {serial}: {', '.join(a.name for a in gimbal.axes)} at the same time "
           "(one shared gimbal; protocols beside each other where neither disturbs the "
@@ -145,7 +147,9 @@ def _axes_together(gimbal: GimbalProfile, *, serial: str, folder: Path, store_ur
         together = None if server.error else certificate.together_time(
             server.elapsed_s, {axis: n / server.fs_hz for axis, n in server.busy.items()},
             [(axis, name, start / server.fs_hz, end / server.fs_hz)
-             for axis, name, start, end in server.intervals])
+             for axis, name, start, end in server.intervals],
+            declared={f"{OUTER} {a} beside {INNER} {b}": why
+                      for (a, b), why in declared.items()})
         if server.error:
             print(f"gimbal {serial}: the shared gimbal stopped: {server.error}")
         outcomes = [_outcome(axis, written[axis.name], before[axis.name],

@@ -24,6 +24,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from hil.beside import Beside
 from hil.calibration import CalibrationRun
 from hil.details import RunDetails
 from hil.drives.base import Capability, DriveInfo
@@ -213,4 +214,5 @@ class CrossCouplingDetails(RunDetails):
 
 
 PROTOCOL = Protocol(name=NAME, measurements=MEASUREMENTS, needs=NEEDS, requires=REQUIRES,
-                    planned_motion=planned_motion, details=CrossCouplingDetails)
+                    planned_motion=planned_motion, details=CrossCouplingDetails,
+                    beside=Beside(moves_other=True))  # the elevation swings

@@ -23,6 +23,7 @@ from __future__ import annotations
 from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass, replace
 
+from hil.beside import Beside
 from hil.calibration import CalibrationRun
 from hil.config import ConfigTable
 from hil.details import RunDetails
@@ -235,4 +236,5 @@ class InertiaElevationDetails(RunDetails):
 
 PROTOCOL = Protocol(name=NAME, measurements=tuple(MEASUREMENTS), needs=NEEDS,
                     requires=REQUIRES, planned_motion=planned_motion,
-                    details=InertiaElevationDetails)
+                    details=InertiaElevationDetails,
+                    beside=Beside(moves_other=True))  # the elevation to each angle
