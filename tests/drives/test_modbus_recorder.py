@@ -29,6 +29,7 @@ from hil.drives.modbus.regmap import RECORDER_ABORTED, RECORDER_DONE, load_regis
 from hil.drives.station import ModbusStation, load_station
 from hil.errors import DriveFaultError, DriveStateError, ProfileError
 from hil.identify.current_loop import acquisition_path, torque_hold_s
+from hil.identify.lag_model import ADEQUACY_P
 from hil.motion import CompensationTable, Excitation, Mode, PositionHarmonic
 from hil.profile import UnitProfile, load_profile
 from hil.recording import EVERY_CONTROL_PERIOD, read_recording
@@ -329,6 +330,14 @@ def _recorder_truths() -> dict[str, dict[str, float | None]]:
 # τ, one at 2.85) and 1.04 (azimuth τ); U's 95 % is measured over populations
 # (tests/test_coverage.py), not in one run.
 SINGLE_RUN_BOUND_U = 2.0
+# τ's lag-model check rejected the azimuth's true first-order lag in 2 of 20 runs of this
+# test by hand (the second simulator's clean loop: 1 of 40), not its nominal 1 in 100: each
+# phase's variance comes from 5 blocks (4 degrees of freedom), so χ² is a sum of F(1, 4)
+# terms, heavier-tailed than the χ² table it is read against (issue 30). A rejected run
+# certifies τ + dead time with its wider U (k from 2 degrees of freedom), which may reach a
+# limit: MARGINAL, as designed. Read against the F null the check loses its power for a
+# dead time of 0.3 of a period (tests/identify/test_lag_model.py); more blocks would keep
+# it. Not changed yet.
 
 
 @pytest.mark.slow
@@ -350,9 +359,13 @@ def test_the_demo_gimbal_runs_its_fast_protocols_on_the_recorders(tmp_path: Path
     for axis, truths in _recorder_truths().items():
         document = json.loads((folder / axis / "GMB-MR" / "certificate.json").read_text("utf-8"))
         results = {r["parameter"]: r for r in document["results"]}
+        loop = document["method"]["details"]["current_loop"]
         for parameter, truth in truths.items():
             found = results[parameter]
-            assert found["outcome"] == "PASS", (axis, found)
+            widened = (parameter == "current_loop_time_constant_ms"
+                       and loop["lag_model_p_value"] < ADEQUACY_P)
+            assert found["outcome"] == ("MARGINAL" if widened and found["outcome"] != "PASS"
+                                        else "PASS"), (axis, found, loop)
             if truth is not None:
                 error = abs(found["value"] - truth)
                 assert error <= SINGLE_RUN_BOUND_U * found["expanded_uncertainty"], (axis, found)
