@@ -11,7 +11,10 @@ does when the axes are calibrated one after the other.
 Which protocols run at the same time is planned from both axes' protocol lists
 (:func:`hil.beside.plan_together`): a protocol begins when every protocol the plan puts
 before it on the other axis has ended (or was passed over) and it may run beside the one
-the other axis is in (:func:`hil.beside.together`).
+the other axis is in (:func:`hil.beside.together`, or a pair the gimbal profile declares).
+Within such a pair two runs overlap only where neither axis's motion reaches the other's
+measurement (clamped beside clamped; a move waits), except in a declared pair. Before an
+azimuth protocol an idle elevation is moved to the angle the azimuth's profile holds it at.
 """
 
 from __future__ import annotations
