@@ -20,7 +20,6 @@ azimuth protocol an idle elevation is moved to the angle the azimuth's profile h
 from __future__ import annotations
 
 import logging
-import math
 import secrets
 import tempfile
 import threading
@@ -33,8 +32,7 @@ import numpy as np
 
 from hil.beside import ALONE, Beside, plan_together, together
 from hil.drives.gimbal_link import AxisHello, AxisState
-from hil.drives.held import trapezoid_rad
-from hil.drives.sim import HOLD_ACCEL_RAD_S2, HOLD_SETTLE_S, HOLD_SPEED_RAD_S, PARTNER_SEED
+from hil.drives.sim import PARTNER_SEED, station_move_rad
 from hil.motion import Mode
 from plant_sim.gimbal import AxisBlock, GimbalPlant
 from plant_sim.model import MotionGuard, Plant, PlantTrace, concatenate_traces
@@ -184,7 +182,7 @@ class SharedGimbal:
                 pending.append(conn)
 
     def _greet(self, conn: Connection) -> None:
-        """A new connection: an axis's hello (or a poke, closed at once)."""
+        """A new connection: an axis's hello (anything else is answered and closed)."""
         if not conn.poll(1.0):
             conn.close()
             return
@@ -341,10 +339,7 @@ class SharedGimbal:
         if (target is None or other.protocol is not None or other.run is not None
                 or abs(other.plant.position_rad - target) <= STANDING_RAD):
             return False
-        fs = other.plant.fs_hz
-        path = trapezoid_rad(other.plant.position_rad, target, speed_rad_s=HOLD_SPEED_RAD_S,
-                             accel_rad_s2=HOLD_ACCEL_RAD_S2, step_s=1.0 / fs)
-        path = np.concatenate([path, np.full(math.ceil(HOLD_SETTLE_S * fs), target)])
+        path = station_move_rad(other.plant.position_rad, target, fs_hz=other.plant.fs_hz)
         other.run = _Run(block=AxisBlock(mode=Mode.POSITION, command=path),
                          other_path_rad=None, asked=self._asked(), station=state.name)
         log.info("shared gimbal: %s to %+.4f rad for %s's %s", other.name, target, state.name,

@@ -201,10 +201,7 @@ class SimDrive(Drive):
             raise self._without(Capability.ELEVATION_AXIS)
         fs = self._fs_hz
         start = self._other_position()
-        path = trapezoid_rad(start, elevation_rad,
-                             speed_rad_s=HOLD_SPEED_RAD_S, accel_rad_s2=HOLD_ACCEL_RAD_S2,
-                             step_s=1.0 / fs)
-        path = np.concatenate([path, np.full(math.ceil(HOLD_SETTLE_S * fs), elevation_rad)])
+        path = station_move_rad(start, elevation_rad, fs_hz=fs)
         check_limits(Excitation(name=f"elevation to {elevation_rad:+.4f} rad",
                                 mode=Mode.POSITION, command=path, fs_hz=fs),
                      self._partner_limits, start_position_rad=start)
@@ -410,6 +407,15 @@ class SimDrive(Drive):
             other, mine = self._gimbal.run(held, block)
             return mine, other
         return self._gimbal.run(block, held)
+
+
+def station_move_rad(start_rad: float, target_rad: float, *, fs_hz: float) -> np.ndarray:
+    """How the simulated station moves a held axis: a trapezoid at :data:`HOLD_SPEED_RAD_S`
+    and :data:`HOLD_ACCEL_RAD_S2`, then :data:`HOLD_SETTLE_S` standing (one command per
+    control period)."""
+    path = trapezoid_rad(start_rad, target_rad, speed_rad_s=HOLD_SPEED_RAD_S,
+                         accel_rad_s2=HOLD_ACCEL_RAD_S2, step_s=1.0 / fs_hz)
+    return np.concatenate([path, np.full(math.ceil(HOLD_SETTLE_S * fs_hz), target_rad)])
 
 
 class _PacedStop(KeyboardInterrupt):

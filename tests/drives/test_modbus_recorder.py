@@ -330,7 +330,7 @@ def _recorder_truths() -> dict[str, dict[str, float | None]]:
 # τ, one at 2.85) and 1.04 (azimuth τ); U's 95 % is measured over populations
 # (tests/test_coverage.py), not in one run.
 SINGLE_RUN_BOUND_U = 2.0
-# τ's lag-model check rejected the azimuth's true first-order lag in 2 of 20 runs of this
+# τ's lag-model check rejected the azimuth's true first-order lag in 2 of 22 runs of this
 # test by hand (the second simulator's clean loop: 1 of 40), not its nominal 1 in 100: each
 # phase's variance comes from 5 blocks (4 degrees of freedom), so χ² is a sum of F(1, 4)
 # terms, heavier-tailed than the χ² table it is read against (issue 30). A rejected run
