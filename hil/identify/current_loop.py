@@ -49,8 +49,9 @@ not removed: measured on the emulator τ = +0.4 %, +1.5 %, +0.4 % at 0.21, 0.3, 
 (point sample: −2.9 %, −1.7 %, −1.0 %); not modelled. (The +3.5 % once measured at 0.21 ms
 was the simulator's exact-hold artefact, since fixed.)
 
-Per frequency the run is cut into blocks of whole periods; the phase uncertainty is the
-scatter of the block phases (Type A). τ and B/J are a weighted least-squares fit of the
+Per frequency the run is cut into blocks of whole periods (all of them: the blocks differ by
+at most one period); the phase uncertainty is the scatter of the block phases, each weighed
+by its periods (Type A). τ and B/J are a weighted least-squares fit of the
 phases; the standard uncertainty of τ is from the fit's covariance, scaled by
 ``√(χ²/ν)`` when the scatter about the model exceeds the block estimate.
 """
@@ -73,6 +74,7 @@ from hil.recording import EVERY_CONTROL_PERIOD
 
 FloatArray = NDArray[np.float64]
 ComplexArray = NDArray[np.complex128]
+IntArray = NDArray[np.int64]
 IMAGES = 200  # aliases summed on each side in the sampled-data response
 TREND_ORDER = 1  # constant + linear (the carrier) with each block's sine: higher orders are
 # nearly collinear with a one-period sine and inflate the variance (benchmarks/bench_frf.py)
@@ -430,9 +432,10 @@ def analyse_frequency(
             f"{frequency_hz:g} Hz: {periods} whole periods, need at least 2 blocks"
         )
     omega = 2 * math.pi * frequency_hz
-    per_block = periods // blocks
+    block_periods = np.diff(np.arange(blocks + 1) * periods // blocks)  # all periods, ±1
     edges = np.searchsorted(
-        time_s - time_s[0], np.arange(blocks + 1) * per_block / frequency_hz - 0.5 / fs_hz
+        time_s - time_s[0], np.concatenate(([0], np.cumsum(block_periods))) / frequency_hz
+        - 0.5 / fs_hz
     )
     p_list, t_list = [], []
     for a, b in itertools.pairwise(edges):
@@ -459,11 +462,20 @@ def analyse_frequency(
         frequency_hz=frequency_hz,
         response_rad_nm=mean,
         lag_phase_rad=float(np.angle(mean / rigid)),
-        lag_phase_u_rad=float(np.std(phases, ddof=1) / math.sqrt(blocks)),
+        lag_phase_u_rad=_mean_phase_u_rad(phases, block_periods),
         inertia_kg_m2=abs(rigid) / abs(mean),
         torque_amplitude_nm=float(np.mean(np.abs(t_arr))),
         blocks=blocks,
     )
+
+
+def _mean_phase_u_rad(phases: FloatArray, block_periods: IntArray) -> float:
+    """The standard uncertainty of the phase over all the blocks' periods, from the scatter
+    of the block phases (each block's variance is that of one period over its periods)."""
+    weights = block_periods / np.sum(block_periods)
+    mean = float(np.sum(weights * phases))
+    one_period_variance = float(np.sum(block_periods * (phases - mean) ** 2)) / (len(phases) - 1)
+    return math.sqrt(one_period_variance / float(np.sum(block_periods)))
 
 
 def lag_phase_residual(

@@ -78,7 +78,7 @@ class Spec(SteppedSineSpec):
             segment_s=settings.number("segment_s", 0.25),
             settle_s=settings.number("settle_s", 0.05),
             ramp_s=settings.number("ramp_s", 0.1),
-            blocks=settings.integer("blocks", 5),
+            blocks=settings.integer("blocks", 10),
             stop=StopRule.from_settings(settings),
         )
         spec.require_carrier_travel(protocol=NAME, source=profile.source)

@@ -6,10 +6,14 @@ simulator (:mod:`plant_sim.variant`), written apart from the analysis."""
 from __future__ import annotations
 
 import dataclasses
+import math
 
+import numpy as np
 import pytest
 
 from hil.drives.sim import SimDrive
+from hil.identify.current_loop import FrequencyPoint, fit_current_loop_lag, sampled_response
+from hil.identify.lag_model import ADEQUACY_P, check_lag_model
 from hil.profile import load_profile
 from hil.suite import current_loop as protocol
 from plant_sim.firmware import Firmware
@@ -20,6 +24,7 @@ PROFILE = load_profile("demo_gimbal_elevation")  # its current-loop protocol and
 PLANT = PlantParams(inertia_kg_m2=0.0036, viscous_nm_s_rad=0.005, coulomb_nm=0.02,
                     static_friction_nm=0.026, stribeck_velocity_rad_s=0.02,
                     torque_noise_nm=0.0015)
+PROFILE_FREQUENCIES_HZ = (20.0, 40.0, 70.0, 110.0, 150.0)
 FIRMWARE = Firmware(velocity_filter_hz=300.0, velocity_kp_nm_s_rad=0.45,
                     velocity_ki_nm_rad=12.0, current_loop_time_constant_s=0.0003)
 
@@ -69,3 +74,37 @@ def test_with_a_dead_time_the_lag_below_the_band_is_certified(apply_delay_rel: f
     assert abs(tau.value - truth_ms) <= tau.expanded_uncertainty, (tau, truth_ms)
     assert check.first_order_ms is not None
     assert check.first_order_ms - truth_ms > abs(tau.value - truth_ms), (check, truth_ms)
+
+
+def _first_order_points(rng: np.random.Generator, *, blocks: int) -> list[FrequencyPoint]:
+    """The phases of a first-order lag (τ 0.3 ms, B/J 1.4/s at 4 kHz), each the mean of
+    ``blocks`` block phases with its own scatter, as :func:`analyse_frequency` states them."""
+    freqs = np.array(PROFILE_FREQUENCIES_HZ)
+    model = sampled_response(freqs, fs_hz=4000.0, inertia_kg_m2=0.0036,
+                             viscous_over_inertia_1_s=1.4, time_constant_s=3e-4)
+    rigid = sampled_response(freqs, fs_hz=4000.0, inertia_kg_m2=0.0036,
+                             viscous_over_inertia_1_s=0.0, time_constant_s=0.0)
+    points = []
+    for f, g, r, sigma in zip(freqs, model, rigid, (2e-3, 1.5e-3, 1e-3, 1e-3, 2e-3),
+                              strict=True):
+        block_phases = np.angle(g / r) + rng.normal(0.0, sigma, blocks)
+        phase = float(np.mean(block_phases))
+        points.append(FrequencyPoint(
+            frequency_hz=float(f), response_rad_nm=complex(r * np.exp(1j * phase)),
+            lag_phase_rad=phase, lag_phase_u_rad=float(np.std(block_phases, ddof=1))
+            / math.sqrt(blocks), inertia_kg_m2=0.0036, torque_amplitude_nm=0.1, blocks=blocks))
+    return points
+
+
+@pytest.mark.parametrize("blocks", [5, 10])
+def test_a_first_order_lag_is_rejected_at_the_stated_rate(blocks: int) -> None:
+    """Each phase's weight is estimated from its blocks, so each χ² term is an F(1, blocks − 1):
+    read against the χ² table, 5 blocks reject a right model several times too often."""
+    rng = np.random.default_rng(11)
+    p_values = np.array([
+        check_lag_model(fit_current_loop_lag(_first_order_points(rng, blocks=blocks),
+                                             fs_hz=4000.0), fs_hz=4000.0).p_value
+        for _ in range(600)])
+    # binomial: at 1 %, 6 expected, ≥ 16 has probability < 1e-3; at 20 %, 120 ± 10
+    assert np.count_nonzero(p_values < ADEQUACY_P) < 16
+    assert 90 < np.count_nonzero(p_values < 0.2) < 150
