@@ -152,7 +152,7 @@ def identify_inertia_friction(
             value=float(theta[i]),
             standard_uncertainty=float(u[i]),
             unit=unit,
-            dof=dof,
+            dof=float(dof[i]),
             cramer_rao_std=float(crb[i]),
         )
         for i, (name, unit) in enumerate(names)
@@ -307,8 +307,9 @@ def _harmonic_components(
     return components[:, :3], components[:, 3]
 
 
-def _jackknife(blocks: list[Block]) -> tuple[FloatArray, FloatArray, float]:
-    """Estimate, delete-one-block jackknife standard uncertainty, and dof (= blocks − 1)."""
+def _jackknife(blocks: list[Block]) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """Estimate, delete-one-block jackknife standard uncertainty, and its effective degrees
+    of freedom per parameter (:func:`jackknife_dof`)."""
     normal = np.sum([b[0] for b in blocks], axis=0)
     rhs = np.sum([b[1] for b in blocks], axis=0)
     size = 3
@@ -322,7 +323,26 @@ def _jackknife(blocks: list[Block]) -> tuple[FloatArray, FloatArray, float]:
     count = len(blocks)
     spread = leave_out - leave_out.mean(axis=0)
     u = np.sqrt((count - 1) / count * np.sum(spread**2, axis=0))
-    return theta, u, float(count - 1)
+    return theta, u, jackknife_dof(normal, [b[0] for b in blocks], size=size)
+
+
+def jackknife_dof(normal: FloatArray, block_normals: Sequence[FloatArray], *,
+                  size: int) -> FloatArray:
+    """The effective degrees of freedom of a delete-one-block jackknife variance, per
+    parameter (Welch–Satterthwaite).
+
+    Each block adds ``a_i = [N⁻¹·G_i·N⁻ᵀ]_kk`` to the variance of parameter ``k`` (``G_i``
+    its normal matrix, white noise), so the jackknife's sum of squared deletions weighs the
+    blocks by ``a_i``: ``ν = (n − 1)/n · (Σ a_i)² / Σ a_i²``, ``n − 1`` for equal blocks.
+    Periods at two amplitudes are not equal: the larger one's carry about four times the
+    information on J and B, and their jackknife about 6.6 degrees of freedom, not 9.
+    """
+    inverse = np.linalg.inv(normal)
+    shares = np.array([np.diag(inverse @ (0.5 * (g + g.T)) @ inverse.T)[:size]
+                       for g in block_normals])
+    count = len(block_normals)
+    return np.asarray((count - 1) / count * np.sum(shares, axis=0) ** 2
+                      / np.sum(shares**2, axis=0), dtype=np.float64)
 
 
 def cramer_rao_std(runs: Sequence[SineRun], *, noise_rms_nm: float) -> FloatArray:

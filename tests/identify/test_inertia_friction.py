@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from hil.errors import IdentificationError
-from hil.identify.inertia_friction import identify_inertia_friction
+from hil.identify.inertia_friction import _jackknife, identify_inertia_friction, jackknife_dof
 from hil.identify.sine_run import analyse_sine_run, band_noise_rms_nm, orthogonal_components
 from hil.recording import Recording
 from tests.helpers import sine_model_recording
@@ -125,3 +125,31 @@ def test_the_stated_bound_takes_the_noise_where_the_regressors_are() -> None:
     assert runs[1].noise_rms_nm > 3 * sigma  # the differenced noise: its power is high up
     assert band_noise_rms_nm(runs[0], harmonics=25) == pytest.approx(sigma, rel=0.08)
     assert band_noise_rms_nm(runs[1], harmonics=25) == pytest.approx(2 * sigma, rel=0.08)
+
+
+def test_the_jackknife_states_the_degrees_of_freedom_its_variance_has() -> None:
+    """Ten periods at two amplitudes (5 each, a regressor twice as large in the second):
+    the delete-one-period jackknife's variance of that regressor's coefficient scatters as a
+    χ² of the Satterthwaite degrees of freedom, not of 9. Measured from 4000 draws of white
+    noise (the scatter of u²: ν = 2·E[u²]²/var u²)."""
+    rng = np.random.default_rng(3)
+    samples = 40
+    phase = np.linspace(0, 2 * math.pi, samples, endpoint=False)
+    designs = [np.column_stack([scale * np.cos(phase), scale * np.sin(phase), np.ones(samples)])
+               for scale in (1.0,) * 5 + (2.0,) * 5]
+    normals = [x.T @ x for x in designs]
+    total = np.sum(normals, axis=0)
+    stated = jackknife_dof(total, normals, size=3)
+    u_sq = []
+    for _ in range(4000):
+        blocks = [(n, x.T @ rng.normal(0.0, 1.0, samples)) for n, x in zip(normals, designs,
+                                                                             strict=True)]
+        _, u, _ = _jackknife(blocks)
+        u_sq.append(u**2)
+    u_sq_arr = np.array(u_sq)
+    measured = 2 * u_sq_arr.mean(axis=0) ** 2 / u_sq_arr.var(axis=0, ddof=1)
+    # ν from 4000 draws: relative sd ≈ √(2/4000 · (1 + ν·kurtosis)) ≈ 7 % here
+    assert stated[0] == pytest.approx(9 * 25**2 / (10 * (5 * 16 + 5)), rel=1e-6)  # 6.6
+    assert stated[2] == pytest.approx(9.0)  # the constant: equal blocks
+    assert measured[:2] == pytest.approx(stated[:2], rel=0.2)
+    assert measured[2] == pytest.approx(9.0, rel=0.2)
