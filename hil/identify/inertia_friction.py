@@ -26,7 +26,8 @@ mean over periods. It ignores broadband torques a time-domain fit partly absorbs
 commensurate cogging biases its J about half as much) at the cost of efficiency.
 
 Standard uncertainties are Type A by delete-one-period jackknife (robust to coloured noise
-and loop jitter), ``P − 1`` degrees of freedom for ``P`` periods in all.
+and loop jitter), with the degrees of freedom its variance has (:func:`jackknife_dof`: at
+most ``P − 1`` for ``P`` periods in all, fewer when the periods' shares differ).
 """
 
 
@@ -116,7 +117,7 @@ def identify_inertia_friction(
     -------
     InertiaFrictionResult
         J, B, T_c as :class:`~hil.identify.estimate.Estimate` (delete-one-period jackknife
-        standard uncertainties, P − 1 degrees of freedom), the runs, the fit's share of the
+        standard uncertainties and their degrees of freedom), the runs, the fit's share of the
         periodic torque, its lack of fit and the noise.
 
     Raises
