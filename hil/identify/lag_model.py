@@ -7,10 +7,10 @@ period) bends the phases away from any first-order lag: ``atan(ωτ) + ωd`` aga
 ``atan(ωτ')``. The first-order τ is then the equivalent of both, larger than τ + d at the top
 of the band. This tests the first-order model on its own data (its χ² against the χ²'s
 distribution when each phase's weight is itself estimated from a few blocks,
-:func:`null_p_value`) and, when it is rejected, fits τ beside a dead time. The two are nearly collinear
-over the band, so each is stated, not certified; their sum is sharp, and it is the lag the
-torque has below the band (the phase's slope at 0 Hz), which is what the sines take out
-and what a model of the loop below its bandwidth needs. When the first-order lag is
+:func:`null_p_value`) and, when it is rejected, fits τ beside a dead time. The two are
+nearly collinear over the band, so each is stated, not certified; their sum is sharp, and
+it is the lag the torque has below the band (the phase's slope at 0 Hz), which is what the
+sines take out and what a model of the loop below its bandwidth needs. When the first-order lag is
 rejected, the certified τ is that sum (:func:`certified`): over a second simulator's
 loops with a late-acting command, the first-order τ read +3.3 % (35 % of ±U held the
 truth), τ + d −0.3 ± 0.8 %.
