@@ -1,6 +1,6 @@
 """The velocity-mode identifications over recordings no single simulator shapes.
 
-    python -m benchmarks.bench_variant_methods [--units 120] [--seed 3]
+    python -m benchmarks.bench_variant_methods [--units 120] [--seed 3] [--write-notes MAP]
 
 Each unit is the demo elevation's friction and inertia drawn ±20 %, recorded by the second
 simulator (:mod:`plant_sim.variant`) with every one of its own choices drawn (integrator,
@@ -20,11 +20,16 @@ import argparse
 import dataclasses
 import math
 import time
+import tomllib
 from collections import defaultdict
 from collections.abc import Callable
+from pathlib import Path
 
 import numpy as np
+import tomli_w
 
+from hil.characterise.method_map import HEADER
+from hil.characterise.summary import Summary, rms_interval, verdict, wilson_interval
 from hil.drives.sim import SimDrive
 from hil.errors import IdentificationError
 from hil.identify.current_loop import conventions_problem
@@ -46,6 +51,7 @@ from plant_sim.variant import (
 )
 
 PROFILE = "demo_gimbal_elevation"
+AXIS = "elevation"  # the profile's axis: the map lines it is checked against
 DRAWN = ("inertia_kg_m2", "viscous_nm_s_rad", "coulomb_nm", "stribeck_velocity_rad_s")
 
 
@@ -202,14 +208,82 @@ def report(outcomes: list[Outcome]) -> str:
     return "\n".join(lines)
 
 
+def _summary(name: str, members: list[Outcome]) -> Summary | None:
+    """How the certificate's ±U held over ``members`` (:mod:`hil.characterise.summary`)."""
+    found = [m for m in members if name in m.error_over_u]
+    if not found:
+        return None
+    ratios = np.array([m.error_over_u[name] for m in found])
+    covered = int(np.sum(np.abs(ratios) <= np.array([m.k[name] for m in found])))
+    return Summary(axis=AXIS, parameter=name, n=len(found), relative=True,
+                   bias=float(np.nanmean([m.error_pct[name] for m in found])) / 100,
+                   rms_normalised=float(np.sqrt(np.mean(ratios**2))),
+                   coverage=covered / len(found),
+                   median_u=float(np.nanmedian([m.u_pct[name] for m in found])) / 100,
+                   coverage_interval=wilson_interval(covered, len(found)),
+                   rms_interval=rms_interval(ratios))
+
+
+def statements(outcomes: list[Outcome], *, seed: int) -> dict[str, str]:
+    """Per result, the sentence the certificate prints under its budget: the pooled
+    coverage and RMS of error/u over the second simulator, and each drawn choice whose
+    own figures miss the goal beyond what its units can tell (``MISSED``); when the pooled
+    figures miss it too, the choice where ±U held least."""
+    names = list(dict.fromkeys(n for m in outcomes for n in m.error_over_u))
+    choices: dict[str, list[Outcome]] = defaultdict(list)
+    for outcome in outcomes:
+        for choice, label in outcome.labels.items():
+            choices[f"{choice} {label}"].append(outcome)
+    said = {}
+    for name in names:
+        pooled = _summary(name, outcomes)
+        assert pooled is not None
+        missed = [(choice, s) for choice, members in sorted(choices.items())
+                  if (s := _summary(name, members)) is not None and verdict(s) == "MISSED"]
+        if verdict(pooled) == "MISSED" and missed:
+            choice, worst = min(missed, key=lambda found: found[1].coverage)
+            tail = (f"; missed over the choices as a whole, least on {choice} "
+                    f"({100 * worst.coverage:.0f} % of {worst.n}, RMS "
+                    f"{worst.rms_normalised:.2f})")
+        elif missed:
+            tail = "; missed on " + ", ".join(
+                f"{choice} ({100 * s.coverage:.0f} % of {s.n}, RMS {s.rms_normalised:.2f})"
+                for choice, s in missed)
+        else:
+            tail = "; no drawn choice missed"
+        said[name] = (f"over a second simulator's drawn choices (plant_sim.variant, "
+                      f"{pooled.n} units, seed {seed}) for "
+                      f"{100 * pooled.coverage:.0f} % (RMS of error/u "
+                      f"{pooled.rms_normalised:.2f}){tail}")
+    return said
+
+
+def write_notes(path: Path, said: dict[str, str]) -> None:
+    """Put each result's sentence into the map at ``path`` (its ``AXIS`` lines)."""
+    document = tomllib.loads(path.read_text(encoding="utf-8"))
+    lines = document["results"][AXIS]
+    for name, sentence in said.items():
+        if name in lines:
+            lines[name]["second_simulator"] = sentence
+    path.write_text(HEADER + tomli_w.dumps(document), encoding="utf-8")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--units", type=int, default=120)
     parser.add_argument("--seed", type=int, default=3)
+    parser.add_argument("--write-notes", type=Path, default=None, metavar="MAP",
+                        help="put each result's coverage over the variants, and the choices "
+                             "that miss, into the method-bias map MAP (its elevation lines)")
     args = parser.parse_args()
     start = time.perf_counter()
     outcomes = population(args.units, args.seed)
     print(report(outcomes))
+    said = statements(outcomes, seed=args.seed)
+    print("\n" + "\n".join(f"{name}: {sentence}" for name, sentence in said.items()))
+    if args.write_notes is not None:
+        write_notes(args.write_notes, said)
+        print(f"written into {args.write_notes}")
     print(f"\n{args.units} units in {time.perf_counter() - start:.0f} s")
 
 

@@ -142,6 +142,9 @@ class MethodBias:
         Size of that population.
     note : str
         What keeps a result's validated coverage from 95 %, when something does.
+    second_simulator : str
+        How its ±U held over a second simulator's drawn choices (``plant_sim.variant``;
+        ``benchmarks/bench_variant_methods.py --write-notes``), the choices that miss named.
     acquisition : str
         The acquisition path the population was recorded on.
     variant : str
@@ -159,6 +162,7 @@ class MethodBias:
     validated_coverage: float | None = None
     validated_units: int | None = None
     note: str = ""
+    second_simulator: str = ""  # its validation over plant_sim.variant's drawn choices
     acquisition: str = EVERY_CONTROL_PERIOD  # the path its population was recorded on
     variant: str = ""  # the method run without an input the main map assumes
     gross_errors: int = 0  # units left out of the figures as gross errors
@@ -167,8 +171,9 @@ class MethodBias:
         """What the certificate states of the map's out-of-sample check, if made."""
         if self.validated_coverage is None:
             return None
+        note = "; ".join(part for part in (self.note, self.second_simulator) if part)
         return {"coverage": self.validated_coverage, "units": self.validated_units,
-                "note": self.note}
+                "note": note}
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -278,6 +283,7 @@ def _method_bias(name: str, table: ConfigTable) -> MethodBias:
         validated_units=(table.integer("validated_units")
                          if "validated_units" in table else None),
         note=table.string("note", ""),
+        second_simulator=table.string("second_simulator", ""),
         gross_errors=table.integer("gross_errors") if "gross_errors" in table else 0,
     )
     table.done()

@@ -154,6 +154,21 @@ def test_validated_coverage_reaches_the_certificate(tmp_path: Path) -> None:
     assert bare.validation() is None
 
 
+def test_a_second_simulators_check_reaches_the_certificate(tmp_path: Path) -> None:
+    """Where a result's coverage depends on the simulator's drawn choices, the certificate
+    says so after the map's own note (issue 30)."""
+    path = tmp_path / "bias.toml"
+    path.write_text('population = "p"\n[results.elevation.x]\nscale = "relative"\n'
+                    'bias = 0.1\nscatter = 0.01\nunits = 3\nvalidated_coverage = 0.95\n'
+                    'validated_units = 100\nnote = "heavy tails"\n'
+                    'second_simulator = "88 %; missed on rate 4000 Hz jittered"\n',
+                    encoding="utf-8")
+    entry = load_method_bias(path, axis="elevation").entries["x"]
+    validation = entry.validation()
+    assert validation is not None
+    assert validation["note"] == "heavy tails; 88 %; missed on rate 4000 Hz jittered"
+
+
 def test_shipped_method_bias_map_loads() -> None:
     shipped = load_method_bias()
     assert all(e.units > 0 and e.scatter >= 0 for e in shipped.entries.values())

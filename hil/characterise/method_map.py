@@ -21,7 +21,9 @@ HEADER = """\
 # line of its budget. `--method-bias off` calibrates without it.
 # validated_coverage / validated_units: how often the certificate's ±U held the truth on a
 # second population not used for these figures (--validate-map); note: what keeps a
-# result's coverage from 95 %, where that was traced. Both are printed on the certificate.
+# result's coverage from 95 %, where that was traced; second_simulator: how ±U held over a
+# second simulator's drawn choices (benchmarks/bench_variant_methods.py --write-notes).
+# All are printed on the certificate.
 """
 
 

@@ -1,0 +1,39 @@
+"""The sentence `bench_variant_methods --write-notes` puts on the certificate: the pooled
+coverage over the second simulator, and the drawn choices that miss on their own."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from benchmarks.bench_variant_methods import Outcome, statements
+
+
+def _outcomes(ratios: np.ndarray, labels: list[str]) -> list[Outcome]:
+    return [Outcome(labels={"rate": label}, error_over_u={"x": float(r)},
+                    error_over_u_a={"x": float(r)}, k={"x": 2.0}, k_a={"x": 2.0},
+                    error_pct={"x": 0.1 * float(r)}, u_pct={"x": 0.1}, spread_pct=0.0)
+            for r, label in zip(ratios, labels, strict=True)]
+
+
+def test_a_choice_that_misses_on_its_own_is_named() -> None:
+    rng = np.random.default_rng(1)
+    good = rng.standard_normal(300)
+    bad = 2.2 * rng.standard_normal(40)
+    said = statements(_outcomes(np.concatenate([good, bad]),
+                                ["1000 Hz"] * 300 + ["4000 Hz jittered"] * 40), seed=1)["x"]
+    assert "340 units" in said
+    assert "missed on rate 4000 Hz jittered" in said
+    assert "1000 Hz" not in said
+
+
+def test_where_the_whole_misses_the_least_held_choice_is_named() -> None:
+    rng = np.random.default_rng(3)
+    ratios = np.concatenate([1.6 * rng.standard_normal(150), 3.0 * rng.standard_normal(50)])
+    said = statements(_outcomes(ratios, ["1000 Hz"] * 150 + ["4000 Hz"] * 50), seed=3)["x"]
+    assert "missed over the choices as a whole, least on rate 4000 Hz" in said
+
+
+def test_no_choice_named_where_every_one_holds() -> None:
+    ratios = np.random.default_rng(2).standard_normal(200)
+    said = statements(_outcomes(ratios, ["1000 Hz", "2000 Hz"] * 100), seed=2)["x"]
+    assert said.endswith("no drawn choice missed")
