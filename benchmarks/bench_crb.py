@@ -91,6 +91,8 @@ def _stribeck(runs: int) -> list[MonteCarlo]:
         ),
         crb_slow.stribeck(bare, white, runs, "white"),
         crb_slow.stribeck(profile, profile.plant, runs, "demo unit"),
+        crb_slow.stribeck(profile, profile.plant, runs, "demo unit, ripple and cable loop known",
+                          earlier_inputs=True),
     ]
 
 

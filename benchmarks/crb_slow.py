@@ -87,8 +87,15 @@ def stribeck(
     case: str,
     *,
     exact_torque_hold: bool = True,
+    earlier_inputs: bool = False,
 ) -> MonteCarlo:
+    """``earlier_inputs``: analyse as a calibration does, with the K_t ripple table and the
+    cable loop's half-width its earlier protocols measure (here their true values, so the
+    staircase's own bias shows apart from theirs)."""
     scale = reported_scale(plant)
+    ripple = (tuple((h.order, h.amplitude, h.phase_rad) for h in plant.kt_ripple)
+              if earlier_inputs else ())
+    half_width = plant.cable_hysteresis_nm * scale if earlier_inputs else 0.0
     truth = (
         plant.coulomb_nm * scale,
         max(plant.static_friction_nm, plant.coulomb_nm) * scale,
@@ -119,7 +126,8 @@ def stribeck(
         drive.run(move)
         rec = drive.run(stairs)
         try:
-            found = stribeck_protocol.analyse(rec.time_s, rec.position, rec.effort, spec)
+            found = stribeck_protocol.analyse(rec.time_s, rec.position, rec.effort, spec,
+                                              ripple=ripple)
         except IdentificationError:
             return None
         plan = spec.stairs
@@ -141,8 +149,8 @@ def stribeck(
             info.append(sum(4 / (sigma**2 * (1 / nf + 1 / nb)) for nf, nb in counts))
         crb = stribeck_crb(np.array(speeds), np.array(info), truth)
         values = [
-            found.coulomb.value,
-            found.static.value,
+            found.coulomb.value - half_width,
+            found.static.value - half_width,
             found.stribeck_velocity.value,
             found.viscous.value,
         ]
