@@ -32,7 +32,8 @@ combination naming a spring without gravity is not kept when the torque it leave
 (:meth:`Evaluator.curved`: a spring has no curvature, gravity's is minus its own value).
 Once causes are chosen, every effect not named is proposed in each one's place
 (:func:`_exchange`), so that which of two alike effects the forward path met first does not
-decide.
+decide; and a combination holding a function of the position (offset, gravity, spring) is
+judged with its harmonic orders searched beside it when they were searched without it.
 """
 
 from __future__ import annotations
@@ -942,7 +943,9 @@ def best_subset(evaluator: Evaluator, base: Fit,
     kept = [(verdict[0], effects, verdict[1])
             for size in range(1, min(MAX_CAUSES, len(screened)) + 1)
             for effects in itertools.combinations(screened, size)
-            if (verdict := _judge_set(evaluator, base, parts, effects)
+            if (verdict := (_judge_reproposed(evaluator, base, parts, effects)
+                            if _searched_without_the_position(parts, effects) else None)
+                or _judge_set(evaluator, base, parts, effects)
                 or _judge_reproposed(evaluator, base, parts, effects)) is not None]
     if not kept:
         return ()
@@ -976,6 +979,25 @@ def best_subset(evaluator: Evaluator, base: Fit,
 RESEARCHED = ("cogging", "kt_ripple")
 #: Combinations up to this size are judged again with such effects searched on the others.
 RESEARCH_SIZE = 3
+
+
+#: Functions of the position alone: harmonic orders searched on a model without one fit it.
+POSITION_SHAPES = frozenset({"offset", "gravity", "cable_spring"})
+
+
+def _searched_without_the_position(parts: dict[str, list[Part]],
+                                   effects: tuple[str, ...]) -> bool:
+    """Whether a harmonic effect of ``effects`` comes with orders searched on a model
+    without a function of the position that the others hold: they fit what that model
+    missed of it, and the combination is judged with them searched again beside it (a
+    spring beside cogging orders searched beside gravity lost to the gravity)."""
+    for effect in effects:
+        if effect not in RESEARCHED:
+            continue
+        others = frozenset(effects) - {effect}
+        if (others & POSITION_SHAPES) - _variant(parts[effect], effects)[0]:
+            return True
+    return False
 
 
 def _judge_reproposed(evaluator: Evaluator, base: Fit, parts: dict[str, list[Part]],
