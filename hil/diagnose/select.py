@@ -901,6 +901,47 @@ def joint_model(base: Model, rounds: tuple[tuple[Candidate, ...], ...],
     return _joint(base, _parts(rounds, effects), effects)
 
 
+def researched_model(designer: Designer, signals: Signals, rows: IndexArray,
+                     counts_per_rev: int | None, base: Model,
+                     rounds: tuple[tuple[Candidate, ...], ...],
+                     effects: tuple[str, ...]) -> Model:
+    """:func:`joint_model`, with the harmonic orders searched again beside the others
+    where :func:`best_subset` judges them so (:func:`_searched_without_the_position`).
+
+    Parameters
+    ----------
+    designer : Designer
+    signals : Signals
+    rows : ndarray of intp
+        The training rows.
+    counts_per_rev : int or None
+        Encoder counts per revolution (bounds the orders searched).
+    base : Model
+    rounds : tuple of tuple of Candidate
+        :attr:`Selection.rounds`.
+    effects : tuple of str
+        Effects proposed in ``rounds``.
+
+    Returns
+    -------
+    Model
+    """
+    parts = _parts(rounds, effects)
+    for effect in effects:
+        others = tuple(e for e in effects if e != effect)
+        if effect not in RESEARCHED or not (
+                (frozenset(others) & POSITION_SHAPES) - _variant(parts[effect], effects)[0]):
+            continue
+        ctx = Context(designer=designer, signals=signals, rows=rows,
+                      current=designer.fit(_joint(base, parts, others), signals, rows),
+                      counts_per_rev=counts_per_rev)
+        model = propose(effect, ctx)
+        if model is not None:
+            terms = tuple(term for term in model.terms if term.effect == effect)
+            parts[effect].append((frozenset(others), terms, 0.0, math.nan, math.nan))
+    return _joint(base, parts, effects)
+
+
 def _holds(gain: Gain) -> bool:
     """The decision rule (:attr:`Gain.significant`)."""
     return gain.significant
