@@ -30,7 +30,14 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
 from hil.diagnose import interpret, intervals
-from hil.diagnose.select import DELTA_BIC_MAX, KEY_LABELS, joint_model, screened_effects, wald
+from hil.diagnose.select import (
+    DELTA_BIC_MAX,
+    KEY_LABELS,
+    joint_model,
+    researched_model,
+    screened_effects,
+    wald,
+)
 
 if TYPE_CHECKING:
     from hil.diagnose.core import Diagnosis
@@ -112,6 +119,9 @@ def find(diagnosis: Diagnosis) -> tuple[Alias, ...]:
     base = diagnosis.base.model
     signals, rows = diagnosis.train.signals, diagnosis.train.rows
     current = diagnosis.designer.fit(joint_model(base, rounds, named), signals, rows)
+    counts = next((issue.values.get("counts_per_rev") for issue in diagnosis.issues
+                   if issue.kind == "quantisation"), None)
+    counts = counts if isinstance(counts, int) else None
     found: list[Alias] = []
     for other in screened_effects(rounds):
         if other in named or other not in KEY_PARAMETER:
@@ -126,8 +136,10 @@ def find(diagnosis: Diagnosis) -> tuple[Alias, ...]:
             instead_bic = math.nan
             if not evidence:  # nothing of E beside C: can E stand for C?
                 swapped = tuple(other if e == cause else e for e in named)
-                instead_bic = diagnosis.designer.fit(joint_model(base, rounds, swapped),
-                                                     signals, rows).bic - current.bic
+                # judged as the best subset judged it: harmonic orders searched beside it
+                model = researched_model(diagnosis.designer, signals, rows, counts, base,
+                                         rounds, swapped)
+                instead_bic = diagnosis.designer.fit(model, signals, rows).bic - current.bic
                 if instead_bic >= -EVIDENCE_BIC:
                     continue
             before, after = _key_std(cause, current), _key_std(cause, joint)
