@@ -928,18 +928,26 @@ def researched_model(designer: Designer, signals: Signals, rows: IndexArray,
     """
     parts = _parts(rounds, effects)
     for effect in effects:
-        others = tuple(e for e in effects if e != effect)
-        if effect not in RESEARCHED or not (
-                (frozenset(others) & POSITION_SHAPES) - _variant(parts[effect], effects)[0]):
+        if not _position_missed(parts, effect, effects):
             continue
-        ctx = Context(designer=designer, signals=signals, rows=rows,
-                      current=designer.fit(_joint(base, parts, others), signals, rows),
-                      counts_per_rev=counts_per_rev)
-        model = propose(effect, ctx)
-        if model is not None:
-            terms = tuple(term for term in model.terms if term.effect == effect)
-            parts[effect].append((frozenset(others), terms, 0.0, math.nan, math.nan))
+        others = tuple(e for e in effects if e != effect)
+        _propose_beside(Context(designer=designer, signals=signals, rows=rows,
+                                current=designer.fit(_joint(base, parts, others), signals, rows),
+                                counts_per_rev=counts_per_rev),
+                        parts, effect, frozenset(others))
     return _joint(base, parts, effects)
+
+
+def _propose_beside(ctx: Context, parts: dict[str, list[Part]], effect: str,
+                    others: frozenset[str]) -> bool:
+    """Propose ``effect`` on ``ctx``'s model of ``others`` and add its columns to ``parts``
+    as found beside them; False when nothing was proposed."""
+    model = propose(effect, ctx)
+    if model is None:
+        return False
+    terms = tuple(term for term in model.terms if term.effect == effect)
+    parts[effect].append((others, terms, 0.0, math.nan, math.nan))
+    return True
 
 
 def _holds(gain: Gain) -> bool:
@@ -1032,13 +1040,16 @@ def _searched_without_the_position(parts: dict[str, list[Part]],
     without a function of the position that the others hold: they fit what that model
     missed of it, and the combination is judged with them searched again beside it (a
     spring beside cogging orders searched beside gravity lost to the gravity)."""
-    for effect in effects:
-        if effect not in RESEARCHED:
-            continue
-        others = frozenset(effects) - {effect}
-        if (others & POSITION_SHAPES) - _variant(parts[effect], effects)[0]:
-            return True
-    return False
+    return any(_position_missed(parts, effect, effects) for effect in effects)
+
+
+def _position_missed(parts: dict[str, list[Part]], effect: str,
+                     effects: tuple[str, ...]) -> bool:
+    """Whether harmonic ``effect``'s orders were searched on a model without a function of
+    the position that the rest of ``effects`` holds."""
+    others = frozenset(effects) - {effect}
+    return effect in RESEARCHED and bool(
+        (others & POSITION_SHAPES) - _variant(parts[effect], effects)[0])
 
 
 def _judge_reproposed(evaluator: Evaluator, base: Fit, parts: dict[str, list[Part]],
@@ -1058,12 +1069,7 @@ def _judge_reproposed(evaluator: Evaluator, base: Fit, parts: dict[str, list[Par
         ctx = Context(designer=evaluator.designer, signals=evaluator.train.signals,
                       rows=evaluator.train.rows, current=current,
                       counts_per_rev=evaluator.counts_per_rev)
-        model = propose(effect, ctx)
-        if model is None:
-            continue
-        terms = tuple(term for term in model.terms if term.effect == effect)
-        parts[effect].append((others, terms, 0.0, math.nan, math.nan))
-        changed = True
+        changed = _propose_beside(ctx, parts, effect, others) or changed
     return _judge_set(evaluator, base, parts, effects) if changed else None
 
 
