@@ -59,17 +59,19 @@ def test_matches_the_load_integrated_from_its_own_equation(irregular: bool) -> N
         twist = theta_m[0] - y[0]
         return [y[1], (stiffness * twist + damping * (omega_m[0] - y[1])) / load]
 
-    settle = 40 / f  # > 20 decay times of the shaft mode
+    modes = _modes(motor, load, stiffness, damping)
+    decay_s = 1 / (modes.damping_ratio * 2 * math.pi * modes.resonance_hz)  # the shaft mode's
+    settle = math.ceil(40 * decay_s * f) / f  # whole periods past 40 decay times (e⁻⁴⁰)
     t = settle + np.arange(round(periods * fs / f)) / fs
     if irregular:
         t = t + np.random.default_rng(1).uniform(-0.05, 0.05, len(t)) / fs
     solved = solve_ivp(load_rhs, (0.0, t[-1]), [motor_path(np.zeros(1))[0][0], 0.0],
-                       t_eval=t, rtol=1e-9, atol=1e-12, max_step=0.25 / fs)
+                       t_eval=t, rtol=1e-9, atol=1e-12, method="DOP853")
     theta_m, omega_m, alpha_m = motor_path(t)
     load_acceleration = (stiffness * (theta_m - solved.y[0])
                          + damping * (omega_m - solved.y[1])) / load
     truth = (motor * alpha_m + load * load_acceleration) / (motor + load)
-    found = driven_acceleration(alpha_m, time_s=t, shaft=_modes(motor, load, stiffness, damping))
+    found = driven_acceleration(alpha_m, time_s=t, shaft=modes)
     scale = float(np.max(np.abs(alpha_m - truth)))  # what the rigid model misses
     assert scale > 0.05 * float(np.max(np.abs(alpha_m)))  # the shaft matters here
     tolerance = 0.03 if irregular else 0.01
