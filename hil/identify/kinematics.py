@@ -17,6 +17,8 @@ band-limit by itself differentiates twice with a gain 4 % low at half its cutoff
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 from numpy.typing import NDArray
 from scipy.interpolate import CubicSpline
@@ -155,9 +157,17 @@ def zero_phase_lowpass(
         A filtered copy of ``values``; segments of 30 samples or fewer, and samples
         outside every segment, are copied unfiltered.
     """
-    sos = butter(2, cutoff_hz, fs=fs_hz, output="sos")  # doubled by filtfilt: 4th order
+    sos = _butterworth_sos(cutoff_hz, fs_hz).copy()  # sosfiltfilt wants it writable
     out = np.array(values, dtype=np.float64, copy=True)
     for start, stop in segments:
         if stop - start > MIN_FILTER_SAMPLES:
             out[start:stop] = sosfiltfilt(sos, values[start:stop])
     return out
+
+
+@functools.lru_cache(maxsize=64)
+def _butterworth_sos(cutoff_hz: float, fs_hz: float) -> FloatArray:
+    """The 2nd-order Butterworth's sections (doubled by filtfilt: 4th order), designed once
+    per rate and cutoff (diagnosis filters thousands of columns with a handful of them);
+    the cache shares it: copy before use."""
+    return np.asarray(butter(2, cutoff_hz, fs=fs_hz, output="sos"), dtype=np.float64)
