@@ -37,3 +37,21 @@ def test_no_choice_named_where_every_one_holds() -> None:
     ratios = np.random.default_rng(2).standard_normal(200)
     said = statements(_outcomes(ratios, ["1000 Hz", "2000 Hz"] * 100), seed=2)["x"]
     assert said.endswith("no drawn choice missed")
+
+
+def test_a_right_u_names_no_choice_by_chance() -> None:
+    """Eight drawn choices of four labels each, none with an effect, ±U a little wide of
+    1 (coverage 93 %): a statement names a choice in at most about 5 % of populations
+    (the family-wise level), not in one of four as per-choice 95 % intervals did."""
+    rng = np.random.default_rng(29)
+    named = 0
+    for _ in range(60):
+        labels = rng.integers(0, 4, size=(400, 8))
+        ratios = 1.1 * rng.standard_normal(400)
+        outcomes = [Outcome(labels={f"choice{j}": f"label{labels[i, j]}" for j in range(8)},
+                            error_over_u={"x": float(r)}, error_over_u_a={"x": float(r)},
+                            k={"x": 2.0}, k_a={"x": 2.0}, error_pct={"x": 0.1 * float(r)},
+                            u_pct={"x": 0.1}, spread_pct=0.0)
+                    for i, r in enumerate(ratios)]
+        named += not statements(outcomes, seed=1)["x"].endswith("no drawn choice missed")
+    assert named <= 7  # binomial(60, 0.05): P(> 7) < 3 %

@@ -69,8 +69,7 @@ def binned(rows: Sequence[Row]) -> list[BinSummary]:
             order = np.argsort(values, kind="stable")
             splits.append((covariate, [[present[i] for i in part]
                                        for part in np.array_split(order, len(THIRDS))]))
-    cells = len(THIRDS) * len(splits)
-    z = float(stats.norm.isf((1 - (1 - FAMILY_ALPHA) ** (1 / max(cells, 1))) / 2))
+    z = family_z(len(THIRDS) * len(splits))
     found = []
     for covariate, parts in splits:
         for third, part in zip(THIRDS, parts, strict=True):
@@ -78,6 +77,13 @@ def binned(rows: Sequence[Row]) -> list[BinSummary]:
             found.append(BinSummary(covariate=covariate, third=third, lower=min(span),
                                     upper=max(span), summary=summarise_group(part, z)))
     return found
+
+
+def family_z(cells: int, alpha: float = FAMILY_ALPHA) -> float:
+    """The normal quantile that puts ``cells`` two-sided intervals at a family-wise level
+    ``1 − alpha`` (Šidák): a population whose ±U is right shows no miss by chance in any of
+    them but with probability ``alpha``."""
+    return float(stats.norm.isf((1 - (1 - alpha) ** (1 / max(cells, 1))) / 2))
 
 
 def miss_table(bins: Sequence[BinSummary], *, rows: int = 20) -> list[str]:
