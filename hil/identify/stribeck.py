@@ -297,13 +297,13 @@ def speed_point(
             if mask.sum() < 2:
                 break
             means.append(float(q[a:b][mask].mean()))
-            rates.append(float(np.ptp(p[a:b][mask]) / max(float(np.ptp(t[a:b][mask])), 1e-12)))
+            rates.append(_slope(t[a:b][mask], p[a:b][mask]))
         if len(means) == 2:
             diffs.append((means[0] - means[1]) / 2)
             sums.append((means[0] + means[1]) / 2)
             speeds += rates
     cv = max(cvs)
-    # each block's speed is its span over its time: a block inside one encoder step has none
+    # a block inside one encoder step has no speed
     # (passes overlapping by 10 steps, a weak loop at 0.02 rad/s, measured 0 rad/s)
     resolved = high - low >= MIN_STEPS_PER_BLOCK * BLOCKS * resolution_rad
     stick = not (resolved and len(diffs) >= BLOCKS // 2 and cv < JUMP_CV)
@@ -321,6 +321,16 @@ def speed_point(
         stick_slip=stick,
         velocity_cv=cv,
     )
+
+
+def _slope(time_s: FloatArray, position_rad: FloatArray) -> float:
+    """A block's speed: the least-squares slope of its encoder positions over time (rad/s,
+    magnitude). Its span over its time read a block of N encoder steps 1/N slow (the time
+    runs from the first level's first sample to the last level's last, one step more than
+    the span), which moved v_s −2.6 % on 2¹⁷ counts; the slope's error is of order 1/N²."""
+    centred = time_s - time_s.mean()
+    spread = float(centred @ centred)
+    return abs(float(centred @ position_rad)) / spread if spread > 0 else 0.0
 
 
 def stribeck_curve(

@@ -253,3 +253,22 @@ def test_fit_refuses_a_clean_speed_of_zero_with_a_clear_error() -> None:
                               "speed_rad_s": 0.0})
     with pytest.raises(IdentificationError, match="speeds must be > 0"):
         fit_stribeck(points)
+
+
+@pytest.mark.parametrize("steps_per_block", [10, 20, 40])
+def test_a_coarse_encoders_speed_is_not_read_slow(steps_per_block: int) -> None:
+    """Sub-windows of 10–40 encoder steps (2¹⁷ counts at the demo's slow steps): the speed
+    each pass's positions show, rounded to the nearest step, within 1 % of the motion's (its
+    span over its time read them 1/N slow: −10 % at 10 steps)."""
+    fs, v, n = 4000.0, 0.005, 40000
+    travel = v * n / fs
+    step = travel / (steps_per_block * 8 * 1.05)  # 8 sub-windows over the matched range
+    load = lambda p: 0.0 * p  # noqa: E731
+    fwd = _ramp(v, 1.0, 0.3, n, fs, load, 0.025)
+    bwd = _ramp(v, -1.0, 0.3 + travel, n, fs, load, 0.025)
+    offset = 0.37 * step  # the encoder's zero anywhere within a step
+    fwd, bwd = ((t, np.round((p + offset) / step) * step, q) for t, p, q in (fwd, bwd))
+    point = speed_point(fwd, bwd, speed_rad_s=v, settle_s=0.1, counts_per_window=20,
+                        resolution_rad=step)
+    assert not point.stick_slip
+    assert point.speed_rad_s == pytest.approx(v, rel=0.01)
