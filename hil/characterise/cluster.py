@@ -16,8 +16,10 @@ has its own seed and its own process.
 
 from __future__ import annotations
 
+import socket
 from collections.abc import Callable, Sequence
 from typing import Any
+from urllib.parse import urlsplit
 
 from hil.characterise.draw import Unit
 from hil.errors import InputError
@@ -58,6 +60,7 @@ def map_on_cluster(address: str, calibrate: Callable[[Unit], Results], units: Se
     except ImportError:
         raise InputError("needs Dask distributed: pip install 'gimbal-hil[cluster]'",
                          source="--scheduler") from None
+    _refuse_a_closed_port(address)
     try:
         client = Client(address, timeout=f"{CONNECT_TIMEOUT_S}s")  # type: ignore[no-untyped-call]
     except ValueError as exc:  # not an address (no port, unknown protocol)
@@ -75,3 +78,22 @@ def map_on_cluster(address: str, calibrate: Callable[[Unit], Results], units: Se
             done[i] = future.result()
             progress(units[i], done[i] or {})
     return [results or {} for results in done]
+
+
+def _refuse_a_closed_port(address: str) -> None:
+    """Say at once when nothing listens at a ``tcp://HOST:PORT`` address (Dask's client
+    retries a refused connection until its timeout); other addresses are left to it."""
+    try:
+        parts = urlsplit(address)
+        host, port = parts.hostname, parts.port
+    except ValueError:
+        return
+    if parts.scheme != "tcp" or host is None or port is None:
+        return
+    try:
+        socket.create_connection((host, port), timeout=CONNECT_TIMEOUT_S).close()
+    except ConnectionRefusedError:
+        raise InputError(f"cannot reach the Dask scheduler at {address}: nothing listens "
+                         "there (connection refused)", source="--scheduler") from None
+    except OSError:
+        return  # unresolved or unreachable host: Dask's own error names it
