@@ -15,8 +15,9 @@ collect_ignore = ["benchmarks", "docs", "build"]
 
 ROOT = Path(__file__).parent
 #: A test file marked slow as a whole, with the machine time it takes on one core if stated
-#: (``pytestmark = pytest.mark.slow(seconds=240)``).
-SLOW_FILE = re.compile(r"^pytestmark = .*pytest\.mark\.slow(?:\(seconds=(\d+)\))?", re.M)
+#: (``pytestmark = pytest.mark.slow(seconds=240)``, or in a list, on a continuation line too).
+SLOW_FILE = re.compile(
+    r"^pytestmark = (?:[^\n]*\n[ \t]+)*?[^\n]*?pytest\.mark\.slow(?:\(seconds=(\d+)\))?", re.M)
 
 
 @functools.cache

@@ -12,6 +12,8 @@ from pathlib import Path
 
 import pytest
 
+pytestmark = pytest.mark.slow(seconds=30)  # scheduled early (conftest.py)
+
 REPOSITORY = Path(__file__).resolve().parents[1]
 
 # What `pip install -e .` alone leaves out: the test extras. A package of that name on the

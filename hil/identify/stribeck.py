@@ -33,7 +33,7 @@ from hil.identify.quantisation import quantisation_step
 FloatArray = NDArray[np.float64]
 BLOCKS = 8  # sub-windows per matched range, for the Type A scatter
 STALL_FRACTION = 0.25  # a velocity window below this fraction of the command has stuck
-MIN_STEPS_PER_BLOCK = 10  # encoder steps a sub-window spans at least (its speed to ~10 %)
+MIN_STEPS_PER_BLOCK = 10  # encoder steps a sub-window spans at least (its speed resolved)
 JUMP_CV = 0.5  # coefficient of variation of window velocities above which motion is jerky
 RESOLVED_FRACTION = 0.6  # a clean speed at or below this fraction of v_s is required
 

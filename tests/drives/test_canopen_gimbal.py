@@ -32,6 +32,8 @@ from hil.suite.travel import move_excitation
 from tests.drives.conftest import sine
 from tests.gimbal_truth import InnerGimbal, coupling_passes, plant_changes
 
+pytestmark = pytest.mark.slow(seconds=80)  # scheduled early (conftest.py)
+
 STATION = builtin_fixture("station_canopen_gimbal_emulator.toml")
 
 

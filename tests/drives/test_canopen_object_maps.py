@@ -19,6 +19,8 @@ from hil.errors import ProfileError
 from hil.profile import load_profile
 from hil.recording import read_recording
 
+pytestmark = pytest.mark.slow(seconds=55)  # scheduled early (conftest.py)
+
 PROFILE = builtin_fixture("demo_gimbal_elevation.toml")
 EMULATOR_STATION = builtin_fixture("station_canopen_emulator.toml")
 

@@ -46,6 +46,8 @@ from hil.store.query import history
 from hil.store.record import record_run
 from tests.helpers import subset_profile
 
+pytestmark = pytest.mark.slow(seconds=30)  # scheduled early (conftest.py)
+
 pytest_plugins = ["pytester"]
 
 PASSWORD = "Sekrit-Pw-42"
