@@ -81,8 +81,9 @@ def map_on_cluster(address: str, calibrate: Callable[[Unit], Results], units: Se
 
 
 def _refuse_a_closed_port(address: str) -> None:
-    """Say at once when nothing listens at a ``tcp://HOST:PORT`` address (Dask's client
-    retries a refused connection until its timeout); other addresses are left to it."""
+    """Refuse a ``tcp://HOST:PORT`` address that takes no connection, at once when nothing
+    listens there (Dask's client retries a refused connection until its timeout), else
+    within :data:`CONNECT_TIMEOUT_S`; other addresses are left to Dask."""
     try:
         parts = urlsplit(address)
         host, port = parts.hostname, parts.port
@@ -95,5 +96,6 @@ def _refuse_a_closed_port(address: str) -> None:
     except ConnectionRefusedError:
         raise InputError(f"cannot reach the Dask scheduler at {address}: nothing listens "
                          "there (connection refused)", source="--scheduler") from None
-    except OSError:
-        return  # unresolved or unreachable host: Dask's own error names it
+    except OSError as exc:  # unresolved, unreachable, no answer within the timeout
+        raise InputError(f"cannot reach the Dask scheduler at {address}: {exc}",
+                         source="--scheduler") from None

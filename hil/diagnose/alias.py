@@ -30,6 +30,7 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
 from hil.diagnose import interpret, intervals
+from hil.diagnose.data_issues import encoder_counts
 from hil.diagnose.select import (
     DELTA_BIC_MAX,
     KEY_LABELS,
@@ -119,9 +120,7 @@ def find(diagnosis: Diagnosis) -> tuple[Alias, ...]:
     base = diagnosis.base.model
     signals, rows = diagnosis.train.signals, diagnosis.train.rows
     current = diagnosis.designer.fit(joint_model(base, rounds, named), signals, rows)
-    counts = next((issue.values.get("counts_per_rev") for issue in diagnosis.issues
-                   if issue.kind == "quantisation"), None)
-    counts = counts if isinstance(counts, int) else None
+    counts = encoder_counts(diagnosis.issues)
     found: list[Alias] = []
     for other in screened_effects(rounds):
         if other in named or other not in KEY_PARAMETER:

@@ -228,10 +228,8 @@ def diagnose(
         split = (f"interleaved {BLOCK_S:g} s blocks, every {HELDOUT_EVERY}rd held out "
                  f"({test.rows.size} of {train.rows.size + test.rows.size} rows)")
     issues = data_issues.find_issues(recording, signals)
-    counts = next((i.values.get("counts_per_rev") for i in issues if i.kind == "quantisation"),
-                  None)
     designer = Designer()
-    evaluator = Evaluator(designer, train, test, counts if isinstance(counts, int) else None)
+    evaluator = Evaluator(designer, train, test, data_issues.encoder_counts(issues))
     selection = select(evaluator, Model(terms=base_terms()), hold_samples=hold_samples)
     prediction = designer.predict(selection.base, signals)
     command = recording.velocity_cmd

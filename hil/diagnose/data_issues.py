@@ -8,6 +8,7 @@ fields of the extended profile (``encoder_counts_per_rev``, ``velocity_filter_hz
 from __future__ import annotations
 
 import math
+from collections.abc import Iterable
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -137,6 +138,14 @@ def velocity_delay_samples(signals: Signals) -> float:
         shift = 0.5 * (left - right) / curvature if curvature != 0 else 0.0
         return float(lags[best] + shift)
     return float(lags[best])
+
+
+def encoder_counts(issues: Iterable[DataIssue]) -> int | None:
+    """The encoder's counts per revolution the quantisation issue found (``None``: not found,
+    or not a whole number of counts per revolution)."""
+    counts = next((i.values.get("counts_per_rev") for i in issues if i.kind == "quantisation"),
+                  None)
+    return counts if isinstance(counts, int) else None
 
 
 def find_issues(recording: Recording, signals: Signals) -> list[DataIssue]:
