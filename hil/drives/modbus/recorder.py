@@ -172,6 +172,10 @@ def play(link: ModbusLink, feedback: Feedback, excitation: Excitation, *, rate_h
              excitation.name, len(raw), rate_hz / divider, duration_s)
     deadline = t0 + duration_s + FINISH_MARGIN_S
     while True:
+        # the recorder's state before the status: a fault that aborts the recorder between
+        # the two reads then shows as the fault it is, not as an aborted recorder (CI,
+        # session 29: the status read just before the fault, the state just after)
+        state = round(link.read_values((RECORDER_STATE,))[RECORDER_STATE])
         stamp, values = feedback.read()
         violation = envelope.violation(
             position_rad=values["position"], velocity_rad_s=values["velocity"],
@@ -182,7 +186,6 @@ def play(link: ModbusLink, feedback: Feedback, excitation: Excitation, *, rate_h
             raise DriveFaultError(
                 f"{link.where}: drive fault at t = {stamp - t0:.3f} s of '{excitation.name}' "
                 "(drive recorder)", code=int(values["fault_code"]))
-        state = round(link.read_values((RECORDER_STATE,))[RECORDER_STATE])
         if state == RECORDER_DONE:
             return
         if not feedback.bit(values, "enabled"):
