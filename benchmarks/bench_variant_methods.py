@@ -47,9 +47,9 @@ from plant_sim.params import PlantParams
 from plant_sim.variant import (
     UnstableLoopError,
     Variant,
-    apply_delay_s,
     draw_variant,
     simulate_variant,
+    torque_lag_s,
 )
 
 PROFILE = "demo_gimbal_elevation"
@@ -126,12 +126,11 @@ LAG = "current_loop_time_constant_ms"
 
 
 def _truth(name: str, plant: PlantParams, firmware: Firmware, variant: Variant) -> float:
-    """The value a result should read. τ: the lag the shaft's torque has behind the
-    reported torque, the loop's time constant plus the part of a period before a command
-    acts (as a command delay, the protocol measures it as part of τ)."""
+    """The value a result should read. τ: the lag the motion has behind the reported
+    torque below the loop's bandwidth (:func:`plant_sim.variant.torque_lag_s`)."""
     if name != LAG:
         return float(getattr(plant, name))
-    return 1000 * (firmware.current_loop_time_constant_s + apply_delay_s(plant, firmware, variant))
+    return 1000 * torque_lag_s(plant, firmware, variant)
 
 
 def population(units: int, seed: int, *, progress: Callable[[str], None] = print) -> list[Outcome]:

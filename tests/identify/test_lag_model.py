@@ -29,23 +29,54 @@ FIRMWARE = Firmware(velocity_filter_hz=300.0, velocity_kp_nm_s_rad=0.45,
                     velocity_ki_nm_rad=12.0, current_loop_time_constant_s=0.0003)
 
 
-def _check(apply_delay_rel: float):  # type: ignore[no-untyped-def]
+def _check(apply_delay_rel: float, *, seed: int = 5,  # type: ignore[no-untyped-def]
+           encoder_counts_per_rev: int = MAIN_LIKE.encoder_counts_per_rev):
     variant = dataclasses.replace(MAIN_LIKE, sample_rate_hz=4000.0, integrator="rk4",
-                                  apply_delay_rel=apply_delay_rel)
+                                  apply_delay_rel=apply_delay_rel,
+                                  encoder_counts_per_rev=encoder_counts_per_rev)
     info = SimDrive(PLANT, firmware=FIRMWARE, limits=PROFILE.limits, fs_hz=4000.0, seed=0).info
     spec = dataclasses.replace(protocol.Spec.from_profile(PROFILE, info), fs_hz=4000.0)
     recording = simulate_variant(PLANT, FIRMWARE, variant,
-                                 velocity_command_rad_s=spec.carrier_command(), seed=5)
+                                 velocity_command_rad_s=spec.carrier_command(), seed=seed)
     result, check = protocol.analyse_checked(recording, spec)
     return check, result, apply_delay_s(PLANT, FIRMWARE, variant)
 
 
 def test_a_first_order_loop_passes_its_own_test() -> None:
-    check, _, _ = _check(0.0)
+    check, result, _ = _check(0.0)
     assert check.adequate, check
-    assert check.low_frequency_lag_ms is None  # the first-order τ is certified
     assert check.message() is None
-    assert check.dead_time_ms is None
+    assert check.dead_time_ms is not None
+    assert check.dead_time_u_ms is not None
+    assert abs(check.dead_time_ms) <= 2 * check.dead_time_u_ms, check  # none, within its u
+    tau = result.time_constant
+    truth_ms = 1000 * FIRMWARE.current_loop_time_constant_s
+    assert tau.value == check.low_frequency_lag_ms
+    assert abs(tau.value - truth_ms) <= tau.expanded_uncertainty, (tau, truth_ms)
+
+
+def test_a_dead_time_the_test_does_not_see_is_still_in_the_certified_lag() -> None:
+    """Commands acting 0.02–0.25 of a 4 kHz period late, encoders of 2¹⁷–2²² counts: where
+    the χ² test holds the first-order lag adequate, that lag's τ' reads above τ + d (about
+    τ²·d·ω² at the band's top); the certified sum does not. Failed before: τ' was certified
+    wherever the test held. (The encoder's steps bend the phases too, differently for each
+    count: their error is the scatter the errors are judged against, not Type A's u.)"""
+    rng = np.random.default_rng(23)
+    certified, first_order = [], []
+    for rel in rng.uniform(0.02, 0.25, 30):
+        counts = int(2 ** rng.uniform(17, 22))
+        check, result, delay_s = _check(float(rel), seed=int(rng.integers(2**31)),
+                                        encoder_counts_per_rev=counts)
+        if not check.adequate:
+            continue
+        assert check.first_order_ms is not None
+        truth_ms = 1000 * (FIRMWARE.current_loop_time_constant_s + delay_s)
+        certified.append(result.time_constant.value / truth_ms - 1)
+        first_order.append(check.first_order_ms / truth_ms - 1)
+    assert len(certified) >= 10, len(certified)
+    standard_error = np.std(certified, ddof=1) / math.sqrt(len(certified))
+    assert abs(np.mean(certified)) < 3 * standard_error, certified
+    assert np.mean(first_order) > 3 * standard_error, first_order  # the bias the sum removes
 
 
 @pytest.mark.parametrize("apply_delay_rel", [0.3, 0.6])
