@@ -12,11 +12,13 @@ for 53–68 % of those units. So the fit beside a dead time is made on every rec
 the τ certified is its τ + d (:func:`certified`): the phase's slope at 0 Hz, the lag the
 torque has below the band, which is what the sines take out and what a model of the loop
 below its bandwidth needs. τ and d alone are nearly collinear over the band and are
-stated, not certified; d's sign is left free (an integrator's or filter's lead is a negative
-one). The sum's u is ~1.15 × the first-order τ's (median; the price of not assuming d = 0).
-Over the same units that sum read +0.04 %, its Type A ±U (k = 2) holding the truth for 99 %
-(RMS of error/u 0.88). The χ² test still tells the certificate when the first-order lag
-does not describe the phases, with d and τ.
+stated, not certified. d is bounded below by 0 (a torque does not act before its command);
+where the fit puts it there, the first-order τ is the fit and is certified. Over the same
+units the certified τ read −0.05 %, its Type A ±U (k = 2) holding the truth for 97 % (RMS
+of error/u 0.94), with u 1.0 × the first-order τ's (median; 0.2–2.1 × for 80 % of units, the
+low end where the first-order fit's χ² had widened its own).
+The χ² test still tells the certificate when the first-order lag does not describe the
+phases, with d and τ.
 """
 
 from __future__ import annotations
@@ -51,8 +53,10 @@ class LagModelCheck:
     p_value : float
         The probability of a χ² as large under the first-order model.
     dead_time_ms, dead_time_u_ms : float or None
-        The dead time fitted beside τ and B/J (ms) and its standard uncertainty (scaled by
-        its own √(χ²/ν) when above one); ``None`` with fewer than four frequencies.
+        The dead time fitted beside τ and B/J (ms, ≥ 0) and its standard uncertainty
+        (scaled by its own √(χ²/ν) when above one); ``None`` with fewer than four
+        frequencies, 0 without u where the fit puts it at 0 (then every other field of that
+        fit is ``None``: the first-order lag is the fit).
     time_constant_ms, time_constant_u_ms : float or None
         τ beside that dead time (ms), likewise.
     dead_time_chi2_per_dof : float or None
@@ -100,8 +104,8 @@ class LagModelCheck:
         return line + (
             f"a dead time of {dead} ± {dead_u} ms beside τ = {tau} ± {tau_u} ms (k = 2) does "
             f"(χ²/ν = {self.dead_time_chi2_per_dof:.3g}); the τ certified is their sum, the "
-            f"lag below the band (the first-order τ, {self.first_order_ms:.4g} ms, is the "
-            "equivalent at 20–150 Hz only)")
+            f"lag below the band (the first-order τ, {self.first_order_ms:.4g} ms, is their "
+            "equivalent over the band only)")
 
 
 def check_lag_model(result: CurrentLoopResult, *, fs_hz: float, hold_s: float | None = None,
@@ -129,8 +133,11 @@ def check_lag_model(result: CurrentLoopResult, *, fs_hz: float, hold_s: float | 
     rate_hz = fs_hz if hold_s is None else 1.0 / hold_s
     residual = lag_phase_residual(result.points, fs_hz=rate_hz, mean_samples=mean_samples)
     tau_ms = result.time_constant.value
-    fit = least_squares(residual, x0=np.array([tau_ms, result.viscous_over_inertia_1_s, 0.0]),
-                        bounds=([0.0, 0.0, -1e3], [1e3, 1e4, 1e3]))
+    fit = least_squares(residual, x0=np.array([tau_ms / 2, result.viscous_over_inertia_1_s,
+                                               tau_ms / 2]),
+                        bounds=([0.0, 0.0, 0.0], [1e3, 1e4, 1e3]))
+    if fit.active_mask[2] != 0:  # no dead time: the first-order lag is the fit
+        return replace(check, dead_time_ms=0.0, first_order_ms=tau_ms)
     jacobian = np.asarray(fit.jac, dtype=np.float64)
     try:
         covariance = np.linalg.inv(jacobian.T @ jacobian)
@@ -192,7 +199,7 @@ def _jacobian(residual: Callable[[FloatArray], FloatArray], x: FloatArray) -> Fl
 
 def certified(result: CurrentLoopResult, check: LagModelCheck) -> CurrentLoopResult:
     """The fit with the τ to certify: τ + dead time (the module's text), or the first-order
-    τ where there were too few frequencies to fit both.
+    τ where the fit beside a dead time put it at 0 or there were too few frequencies.
 
     Parameters
     ----------

@@ -130,7 +130,7 @@ def analyse(recording: Recording, spec: Spec) -> CurrentLoopResult:
 
 def analyse_checked(recording: Recording, spec: Spec) -> tuple[CurrentLoopResult, LagModelCheck]:
     """τ from the phase of motion against reported torque in each frequency's segment, and
-    the first-order lag's test on those phases (τ + dead time certified where it fails,
+    the first-order lag's test on those phases (τ + dead time certified,
     :func:`hil.identify.lag_model.certified`).
 
     Parameters
@@ -204,7 +204,7 @@ class CurrentLoopDetails(RunDetails):
     viscous_over_inertia_1_s: float
     chi2_per_dof: float
     lag_model_p_value: float  # χ² test of the first-order lag (hil.identify.lag_model)
-    dead_time_ms: float | None  # fitted beside τ when the first-order lag is rejected
+    dead_time_ms: float | None  # fitted beside τ (the τ certified is their sum)
     dead_time_u_ms: float | None
     points: tuple[LagPoint, ...]
 
