@@ -151,8 +151,8 @@ def test_a_run_whose_budget_has_other_lines_is_left_out_and_the_rule_says_so() -
 
 def test_a_streamed_run_is_judged_with_its_paths_method_line() -> None:
     """τ over a 1 kHz stream gets its path's method line on the certificate (a band of
-    |bias| + 2·scatter: ±1.6 % of τ for the averaged torque, against the simulator's
-    0.28 % scatter), so the stop rule judges the run's U with that line too: the same
+    |bias| + 2·scatter: ±2.9 % of τ for the point-sampled torque, against the simulator's
+    0.05 % scatter), so the stop rule judges the run's U with that line too: the same
     estimate that stops under the simulator's line runs again under the stream's (the
     stop rule used the simulator's line for every path before)."""
     from hil.measurement import load_method_bias
@@ -160,12 +160,12 @@ def test_a_streamed_run_is_judged_with_its_paths_method_line() -> None:
     name = "current_loop_time_constant_ms"
     spec = PROFILE.measurement(name)  # 0.3 ms ± 0.09: half-width 0.09 ms
     shipped = load_method_bias(axis="elevation")
-    path = "one row per 4 control periods, torque mean"
+    path = "one row per 4 control periods, torque instantaneous"
     noise = Component(source="phase noise", kind="A", standard_uncertainty=1e-3, unit="ms",
                       dof=30)
     tau = Estimate(name=name, value=0.3, standard_uncertainty=1e-3, unit="ms", dof=30,
                    budget=(noise,))
-    # U target 0.0045 ms; U 0.0026 ms with the simulator's line, 0.0057 with the stream's
+    # U target 0.0045 ms; U 0.0021 ms with the simulator's line, 0.010 with the stream's
     rule = StopRule(fraction=0.05, max_runs=3, results=None)
     main = decide({name: tau}, {name: spec}, shipped, rule, runs=1)
     streamed = decide({name: tau}, {name: spec}, shipped, rule, runs=1,
