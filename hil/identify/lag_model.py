@@ -18,17 +18,13 @@ units the certified τ read −0.05 %, its Type A ±U (k = 2) holding the truth 
 of error/u 0.94), with u 1.0 × the first-order τ's (median; 0.2–2.1 × for 80 % of units, the
 low end where the first-order fit's χ² had widened its own).
 The χ² test still tells the certificate when the first-order lag does not describe the
-phases, with d and τ. A fit's u is widened by √(χ²/ν) only where its χ² is improbable
-under its own model (:func:`drawn_null_p_value`): on ν = 2 a χ²/ν above 1 by chance (a
-third of recordings) widened u by its own noise and set k from 2 degrees of freedom (4.3);
-otherwise k comes from the phases' block scatter (:func:`weighted_fit_dof`). Over the same
-units the certificate's ±U then held the truth for 97 % (RMS of error/u 1.05).
+phases, with d and τ.
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Sequence
+from collections.abc import Callable
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -63,10 +59,8 @@ class LagModelCheck:
         fit is ``None``: the first-order lag is the fit).
     time_constant_ms, time_constant_u_ms : float or None
         τ beside that dead time (ms), likewise.
-    dead_time_chi2_per_dof, dead_time_p_value : float or None
-        That fit's χ²/ν (ν = frequencies − 3), and the probability of one as large under
-        that model (drawn as :func:`null_p_value` draws the first-order's). Its u is widened
-        by √(χ²/ν) only where that probability is below :data:`ADEQUACY_P`.
+    dead_time_chi2_per_dof : float or None
+        That fit's χ²/ν (ν = frequencies − 3).
     low_frequency_lag_ms, low_frequency_lag_u_ms : float or None
         τ + dead time, the lag below the band (the phase's slope at 0 Hz), which that
         fit determines sharply where it cannot split the two, and its standard uncertainty.
@@ -74,10 +68,6 @@ class LagModelCheck:
         That sum's standard deviation from the fit's weights alone (its Cramér–Rao bound).
     first_order_ms : float or None
         The first-order τ', the equivalent of τ and d over the band.
-    low_frequency_lag_dof, first_order_dof : float or None
-        The degrees of freedom of the sum's and of τ''s unwidened u: each phase's variance
-        is estimated from its blocks, and u² is their weighted sum (Welch–Satterthwaite,
-        :func:`weighted_fit_dof`).
     """
 
     chi2_per_dof: float
@@ -88,13 +78,10 @@ class LagModelCheck:
     time_constant_ms: float | None = None
     time_constant_u_ms: float | None = None
     dead_time_chi2_per_dof: float | None = None
-    dead_time_p_value: float | None = None
     low_frequency_lag_ms: float | None = None
     low_frequency_lag_u_ms: float | None = None
     low_frequency_lag_crb_ms: float | None = None
-    low_frequency_lag_dof: float | None = None
     first_order_ms: float | None = None
-    first_order_dof: float | None = None
 
     @property
     def adequate(self) -> bool:
@@ -140,51 +127,35 @@ def check_lag_model(result: CurrentLoopResult, *, fs_hz: float, hold_s: float | 
     if dof <= 0 or not math.isfinite(result.chi2_per_dof):
         return LagModelCheck(chi2_per_dof=result.chi2_per_dof, dof=dof, p_value=math.nan)
     p_value = null_p_value(result, fs_hz=fs_hz, hold_s=hold_s, mean_samples=mean_samples)
+    check = LagModelCheck(chi2_per_dof=result.chi2_per_dof, dof=dof, p_value=p_value)
+    if dof < 2:
+        return check
     rate_hz = fs_hz if hold_s is None else 1.0 / hold_s
     residual = lag_phase_residual(result.points, fs_hz=rate_hz, mean_samples=mean_samples)
     tau_ms = result.time_constant.value
-    blocks = [p.blocks for p in result.points]
-    first_design = _jacobian(residual, np.array([tau_ms, result.viscous_over_inertia_1_s]))
-    check = LagModelCheck(chi2_per_dof=result.chi2_per_dof, dof=dof, p_value=p_value,
-                          first_order_ms=tau_ms, first_order_dof=weighted_fit_dof(
-                              first_design, np.array([1.0, 0.0]), blocks))
-    if dof < 2:
-        return check
     fit = least_squares(residual, x0=np.array([tau_ms / 2, result.viscous_over_inertia_1_s,
                                                tau_ms / 2]),
                         bounds=([0.0, 0.0, 0.0], [1e3, 1e4, 1e3]))
     if fit.active_mask[2] != 0:  # no dead time: the first-order lag is the fit
-        return replace(check, dead_time_ms=0.0)
+        return replace(check, dead_time_ms=0.0, first_order_ms=tau_ms)
     jacobian = np.asarray(fit.jac, dtype=np.float64)
     try:
         covariance = np.linalg.inv(jacobian.T @ jacobian)
     except np.linalg.LinAlgError:
         return check
-    chi2 = float(np.sum(fit.fun**2))
-    chi2_per_dof = chi2 / (len(result.points) - 3)
-    own_p = drawn_null_p_value(residual, fit.x, blocks=blocks, observed_chi2=chi2)
-    scale = _widening(chi2_per_dof, own_p)
+    chi2_per_dof = float(np.sum(fit.fun**2)) / (len(result.points) - 3)
+    scale = max(1.0, chi2_per_dof)
     sum_variance = float(covariance[0, 0] + covariance[2, 2] + 2 * covariance[0, 2])
-    return replace(
-        check,
+    return LagModelCheck(
+        chi2_per_dof=result.chi2_per_dof, dof=dof, p_value=p_value,
         dead_time_ms=float(fit.x[2]), dead_time_u_ms=math.sqrt(covariance[2, 2] * scale),
         time_constant_ms=float(fit.x[0]), time_constant_u_ms=math.sqrt(covariance[0, 0] * scale),
-        dead_time_chi2_per_dof=chi2_per_dof, dead_time_p_value=own_p,
+        dead_time_chi2_per_dof=chi2_per_dof,
         low_frequency_lag_ms=float(fit.x[0] + fit.x[2]),
         low_frequency_lag_u_ms=math.sqrt(sum_variance * scale),
         low_frequency_lag_crb_ms=math.sqrt(sum_variance),
-        low_frequency_lag_dof=weighted_fit_dof(jacobian, np.array([1.0, 0.0, 1.0]), blocks),
+        first_order_ms=tau_ms,
     )
-
-
-def weighted_fit_dof(design: FloatArray, combination: FloatArray,
-                     blocks: Sequence[int]) -> float:
-    """Welch–Satterthwaite degrees of freedom of ``combination``·x's u from a weighted fit
-    whose rows (``design``, already divided by each phase's u) each carry a variance
-    estimated from ``blocks`` − 1 degrees of freedom (GUM G.4.2)."""
-    gain = combination @ np.linalg.solve(design.T @ design, design.T)
-    parts = gain**2
-    return float(np.sum(parts) ** 2 / np.sum(parts**2 / (np.asarray(blocks, dtype=float) - 1)))
 
 
 def null_p_value(result: CurrentLoopResult, *, fs_hz: float, hold_s: float | None = None,
@@ -200,19 +171,8 @@ def null_p_value(result: CurrentLoopResult, *, fs_hz: float, hold_s: float | Non
     rate_hz = fs_hz if hold_s is None else 1.0 / hold_s
     residual = lag_phase_residual(result.points, fs_hz=rate_hz, mean_samples=mean_samples)
     x = np.array([result.time_constant.value, result.viscous_over_inertia_1_s])
-    return drawn_null_p_value(residual, x, blocks=[p.blocks for p in result.points],
-                              observed_chi2=result.chi2_per_dof * (len(result.points) - 2),
-                              draws=draws)
-
-
-def drawn_null_p_value(residual: Callable[[FloatArray], FloatArray], x: FloatArray, *,
-                       blocks: Sequence[int], observed_chi2: float,
-                       draws: int = NULL_DRAWS) -> float:
-    """The probability of a χ² as large as ``observed_chi2`` when the model of ``residual``
-    (at its fit ``x``) is right, each phase's weight estimated from its ``blocks``
-    (:func:`null_p_value`'s draws, for any number of parameters)."""
     design = _jacobian(residual, x)
-    dof_each = np.array([b - 1 for b in blocks], dtype=np.float64)
+    dof_each = np.array([p.blocks - 1 for p in result.points], dtype=np.float64)
     rng = np.random.default_rng(0)
     errors = rng.standard_normal((draws, len(dof_each)))
     variance_ratio = rng.chisquare(dof_each, size=(draws, len(dof_each))) / dof_each
@@ -223,14 +183,8 @@ def drawn_null_p_value(residual: Callable[[FloatArray], FloatArray], x: FloatArr
     beta = np.linalg.solve(normal, right[:, :, None])[:, :, 0]
     misfit = errors - np.einsum("ik,dk->di", design, beta)
     statistic = np.sum(weights * misfit**2, axis=1)
-    return float((1 + np.count_nonzero(statistic >= observed_chi2)) / (1 + draws))
-
-
-def _widening(chi2_per_dof: float, p_value: float) -> float:
-    """The variance factor for a fit's misfit: χ²/ν where its χ² is improbable under its
-    model (below :data:`ADEQUACY_P`), else 1: a χ²/ν above 1 by chance on ν = 2 or 3 (a
-    third of recordings) would widen u by its own noise and cut k's degrees of freedom."""
-    return chi2_per_dof if p_value < ADEQUACY_P and chi2_per_dof > 1.0 else 1.0
+    observed = result.chi2_per_dof * (len(result.points) - 2)
+    return float((1 + np.count_nonzero(statistic >= observed)) / (1 + draws))
 
 
 def _jacobian(residual: Callable[[FloatArray], FloatArray], x: FloatArray) -> FloatArray:
@@ -257,26 +211,16 @@ def certified(result: CurrentLoopResult, check: LagModelCheck) -> CurrentLoopRes
     Returns
     -------
     CurrentLoopResult
-        ``result`` with ``time_constant`` the sum, its u from the dead-time fit (widened by
-        √(χ²/ν) only where that fit's χ² is improbable, then with its ν degrees of freedom);
-        or the first-order τ, its u widened likewise only where the first-order test
-        rejected its lag (:func:`hil.identify.current_loop.fit_current_loop_lag` widens it
-        wherever χ²/ν > 1).
+        ``result`` itself, or with ``time_constant`` the sum, its u from the dead-time fit
+        (scaled by √(χ²/ν) above one, then with that fit's ν degrees of freedom).
     """
-    first = result.time_constant
     if (check.low_frequency_lag_ms is None or check.low_frequency_lag_u_ms is None
-            or check.dead_time_chi2_per_dof is None or check.dead_time_p_value is None
-            or check.low_frequency_lag_dof is None):
-        if (not (math.isfinite(check.p_value) and check.adequate)
-                or first.cramer_rao_std is None or check.first_order_dof is None):
-            return result
-        unwidened = replace(first, standard_uncertainty=first.cramer_rao_std,
-                            dof=check.first_order_dof)
-        return replace(result, time_constant=unwidened)
-    widened = _widening(check.dead_time_chi2_per_dof, check.dead_time_p_value) > 1.0
+            or check.dead_time_chi2_per_dof is None):
+        return result
+    first = result.time_constant
+    dof = (float(len(result.points) - 3) if check.dead_time_chi2_per_dof > 1.0
+           else first.dof)
     lag = Estimate(name=first.name, value=check.low_frequency_lag_ms,
-                   standard_uncertainty=check.low_frequency_lag_u_ms, unit=first.unit,
-                   dof=(float(len(result.points) - 3) if widened
-                        else check.low_frequency_lag_dof),
+                   standard_uncertainty=check.low_frequency_lag_u_ms, unit=first.unit, dof=dof,
                    cramer_rao_std=check.low_frequency_lag_crb_ms)
     return replace(result, time_constant=lag)
