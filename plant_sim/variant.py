@@ -190,10 +190,15 @@ def _substeps(plant: PlantParams, firmware: Firmware, variant: Variant, sigma0: 
 def apply_delay_s(plant: PlantParams, firmware: Firmware, variant: Variant) -> float:
     """When a new torque command acts within its period, as simulated: the drawn part of
     the period rounded to the sub-steps the run takes (s)."""
-    static = max(plant.static_friction_nm, plant.coulomb_nm)
-    substeps = _substeps(plant, firmware, variant,
-                         static / variant.presliding_rad if static > 0 else 0.0)
+    substeps = _run_substeps(plant, firmware, variant)
     return round(variant.apply_delay_rel * substeps) / substeps / variant.sample_rate_hz
+
+
+def _run_substeps(plant: PlantParams, firmware: Firmware, variant: Variant) -> int:
+    """The sub-steps a run of ``plant`` takes (:func:`_substeps` at its bristles' σ0)."""
+    static = max(plant.static_friction_nm, plant.coulomb_nm)
+    return _substeps(plant, firmware, variant,
+                     static / variant.presliding_rad if static > 0 else 0.0)
 
 
 def torque_lag_s(plant: PlantParams, firmware: Firmware, variant: Variant) -> float:
@@ -205,10 +210,7 @@ def torque_lag_s(plant: PlantParams, firmware: Firmware, variant: Variant) -> fl
     lag = firmware.current_loop_time_constant_s + apply_delay_s(plant, firmware, variant)
     if variant.integrator != "symplectic_euler":
         return lag
-    static = max(plant.static_friction_nm, plant.coulomb_nm)
-    substeps = _substeps(plant, firmware, variant,
-                         static / variant.presliding_rad if static > 0 else 0.0)
-    return lag - 0.5 / (substeps * variant.sample_rate_hz)
+    return lag - 0.5 / (_run_substeps(plant, firmware, variant) * variant.sample_rate_hz)
 
 
 def _parameters(plant: PlantParams, firmware: Firmware, variant: Variant) -> FloatArray:

@@ -7,8 +7,8 @@ from any first-order lag: ``atan(ωτ) + ωd`` against ``atan(ωτ')``, and the 
 the equivalent of both over the band, above τ + d by about ``τ²·d·ω²`` at its top. A small
 dead time is not seen by the first-order lag's χ² test (:func:`null_p_value`) and still
 biases τ': over a second simulator's loops (300 units, commands acting 0–0.6 of a period
-late), τ' read +1.0 to +1.7 % where the test held it adequate, and its ±U held the truth
-for 53–68 % of those units. So the fit beside a dead time is made on every recording, and
+late), τ' read +0.9 to +1.7 % where the test held it adequate, and its ±U held the truth
+for 57–68 % of those units. So the fit beside a dead time is made on every recording, and
 the τ certified is its τ + d (:func:`certified`): the phase's slope at 0 Hz, the lag the
 torque has below the band, which is what the sines take out and what a model of the loop
 below its bandwidth needs. τ and d alone are nearly collinear over the band and are
