@@ -40,8 +40,9 @@ pytestmark = pytest.mark.protocol(NAME)
 # what the certificate calls each result, and one line on what it is
 DECLARED = declare(
     Declared("current_loop_time_constant_ms", "Current-loop time constant",
-             "Lag τ of the drive's current (torque) loop, from the phase of velocity sines at "
-             "20–150 Hz against the reported torque", non_negative=True),
+             "Lag τ of the drive's current (torque) loop below its bandwidth, its time "
+             "constant plus any dead time, from the phase of velocity sines against the "
+             "reported torque", non_negative=True),
 )
 
 
