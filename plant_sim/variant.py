@@ -206,7 +206,7 @@ def torque_lag_s(plant: PlantParams, firmware: Firmware, variant: Variant) -> fl
     loop's bandwidth (s): the loop's τ, plus the part of a period before a command acts,
     less symplectic Euler's lead (its position steps with the step's new velocity, half a
     sub-step ahead of the motion it integrates: a lead the unit does not have but the
-    recording does, 1.0 % of τ over 300 of this module's units)."""
+    recording does, −1.05 % of τ over 100 of this module's units)."""
     lag = firmware.current_loop_time_constant_s + apply_delay_s(plant, firmware, variant)
     if variant.integrator != "symplectic_euler":
         return lag
