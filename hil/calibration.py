@@ -38,6 +38,7 @@ from hil.measurement import (
 from hil.motion import Excitation
 from hil.profile import UnitProfile
 from hil.recording import Recording, write_atomic, write_recording
+from hil.stop_request import StopRequest
 
 log = logging.getLogger(__name__)
 SERIAL_PATTERN = r"[A-Za-z0-9][A-Za-z0-9._-]{0,63}"
@@ -169,6 +170,7 @@ class CalibrationRun:
         operator: str = "",
         reference: bool = False,
         identity: StationIdentity | None = None,
+        stop: StopRequest | None = None,
     ) -> None:
         if not re.fullmatch(SERIAL_PATTERN, unit_serial):
             raise ValueError(
@@ -198,6 +200,7 @@ class CalibrationRun:
         # on: its protocol judges another result instead); never make the run INCOMPLETE
         self.unresolved: dict[str, str] = {}
         self._archived = False
+        self.stop = stop or StopRequest()  # a stop signal's request: no motion after it
 
     # -- used by protocols ----------------------------------------------------------------
     def protocol(self, name: str) -> ProtocolRecord:
@@ -209,6 +212,7 @@ class CalibrationRun:
         if excitation.elevation_path_rad is not None and (
                 lacking := drive.info.lacking((Capability.ELEVATION_MOTION,))) is not None:
             raise DriveStateError(f"'{excitation.name}' moves the elevation axis: {lacking}")
+        self.stop.honour(f"'{excitation.name}'")
         record = self.protocol(protocol)
         started = time.perf_counter()
         try:

@@ -54,6 +54,7 @@ from hil.profile import UnitProfile, load_profile
 from hil.report.console import outcome_banner, protocol_start
 from hil.report.junit import PYTEST_DEFAULT_SUITE_NAME, measurement_properties, suite_name
 from hil.report.junit import suite_properties as junit_suite_properties
+from hil.stop_request import StopRequest
 from hil.store.engine import resolve_store_url
 from hil.store.record import record_run
 from hil.suite.catalogue import CATALOGUE, PROTOCOL_OF, check_profile
@@ -70,6 +71,7 @@ STATION_KEY = pytest.StashKey[StationIdentity]()
 GIMBAL_AXES_KEY = pytest.StashKey[dict[str, UnitProfile]]()
 REFUSALS_KEY = pytest.StashKey[list[HilError]]()
 STORAGE_FAILURE_KEY = pytest.StashKey[str]()  # the certificate could not be written
+STOP_KEY = pytest.StashKey[StopRequest]()  # a stop signal, kept should its interrupt be lost
 PROTOCOL_MARK = "protocol"
 
 
@@ -218,17 +220,19 @@ def _stop_on_signals(config: pytest.Config) -> None:
     repeated signal while stopping is ignored (Ctrl-C under ``--gimbal`` reaches the axis
     twice: from the terminal and passed on). SIGINT is honoured even when the process
     started with it ignored (a background job of a script, an axis of a gimbal started
-    so): a stop request always stops the motion. The previous handlers return at the end."""
+    so): a stop request always stops the motion. The request is kept too (``STOP_KEY``):
+    an interrupt raised inside a finaliser is dropped by Python, the request is not. The
+    previous handlers return at the end."""
+    request = config.stash[STOP_KEY] = StopRequest()
     if threading.current_thread() is not threading.main_thread():
         return  # signal handlers can only be set from the main thread
-    stopping: list[str] = []
 
     def interrupt(signum: int, _frame: FrameType | None) -> None:
         name = signal.Signals(signum).name
-        if stopping:
-            log.warning("%s while stopping after %s: ignored", name, stopping[0])
+        if request.signal_name is not None:
+            log.warning("%s while stopping after %s: ignored", name, request.signal_name)
             return
-        stopping.append(name)
+        request.ask(name)
         raise KeyboardInterrupt(f"{name}: the calibration stops")
 
     for name in STOP_SIGNALS:
@@ -275,6 +279,7 @@ def calibration(pytestconfig: pytest.Config, profile: UnitProfile) -> Calibratio
             operator=operator,
             reference=reference,
             identity=pytestconfig.stash[STATION_KEY],
+            stop=pytestconfig.stash[STOP_KEY],
         )
         pytestconfig.stash[RUN_KEY].expected = {name: PROTOCOL_OF[name]
                                                  for name in profile.measurements}
@@ -470,11 +475,13 @@ def _planning_info(profile: UnitProfile) -> DriveInfo:
 
 
 def pytest_runtest_setup(item: pytest.Item) -> None:
-    """A protocol the unit's profile does not configure, or a result it does not declare
-    (``gravity_phase_rad`` on an axis without gravity), is skipped, with the reason."""
+    """No protocol starts after a stop signal. A protocol the unit's profile does not
+    configure, or a result it does not declare (``gravity_phase_rad`` on an axis without
+    gravity), is skipped, with the reason."""
     name = _protocol_name(item)
     if name is None:
         return
+    item.config.stash[STOP_KEY].honour(f"protocol {name}")
     profile = item.config.stash[PROFILE_KEY]
     if name not in profile.protocols:
         pytest.skip(f"the unit profile has no [protocols.{name}] table: not calibrated here")
@@ -548,7 +555,8 @@ def pytest_sessionfinish(session: pytest.Session, exitstatus: int) -> None:
     run = session.config.stash.get(RUN_KEY, None)
     if run is None or not run.active:
         return
-    aborted = exitstatus == pytest.ExitCode.INTERRUPTED or session.shouldstop is not False
+    aborted = (exitstatus == pytest.ExitCode.INTERRUPTED or session.shouldstop is not False
+               or session.config.stash[STOP_KEY].asked)
     try:
         path = write_certificate(run, aborted=bool(aborted))
     except OSError as exc:  # nothing half-written (atomic writes); no certificate to store

@@ -218,6 +218,30 @@ def test_a_stop_sent_to_the_gimbal_stops_the_running_axis_and_nothing_passes(
     assert not (out / SERIAL / "elevation").exists()
 
 
+def test_a_stop_the_axis_runs_on_past_still_stops_the_gimbal(tmp_path: Path) -> None:
+    """An axis process that ignores the stop passed on to it (here a plugin ignores
+    SIGINT; a stop lost in the axis is another way) and ends its calibration: the gimbal was
+    still told to stop, so the elevation is not started and the gimbal exits interrupted
+    (2) with an ERROR certificate. Before, it went on to the next axis."""
+    (tmp_path / "runs_on.py").write_text(
+        "import signal\n\n\ndef pytest_sessionstart(session):\n"
+        "    signal.signal(signal.SIGINT, signal.SIG_IGN)\n", encoding="utf-8")
+    out = tmp_path / "out"
+    run = RunningCalibration(tmp_path, ["--gimbal", str(_gimbal(tmp_path)), "--unit-serial",
+                                        SERIAL, "--out", str(out)],
+                             ("-p", "runs_on", "--sim-pace", "1"))  # the stop lands in motion
+    run.wait_for_log(r"sim: running", timeout_s=120)
+    code = run.stop_with(signal.SIGTERM)
+    assert code == 2, run.console
+    azimuth = json.loads((out / SERIAL / "azimuth" / SERIAL / "certificate.json").read_text(
+        encoding="utf-8"))
+    assert azimuth["aborted"] is False  # it ran on to its end
+    issued = json.loads((out / SERIAL / "gimbal-certificate.json").read_text(encoding="utf-8"))
+    assert issued["outcome"] == "ERROR"
+    assert issued["axes"][1]["outcome"] == "ERROR"
+    assert not (out / SERIAL / "elevation").exists()
+
+
 def test_a_second_calibration_of_the_gimbal_at_once_is_refused_before_motion(
         tmp_path: Path) -> None:
     """The gimbal folder is locked for the whole run (the axes lock their own folders

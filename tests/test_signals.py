@@ -104,6 +104,7 @@ def test_the_handlers_raise_once_and_are_restored_at_the_end() -> None:
     class Config:
         def __init__(self) -> None:
             self.cleanups: list[Callable[[], None]] = []
+            self.stash = pytest.Stash()
 
         def add_cleanup(self, cleanup: Callable[[], None]) -> None:
             self.cleanups.append(cleanup)
@@ -120,6 +121,49 @@ def test_the_handlers_raise_once_and_are_restored_at_the_end() -> None:
         for cleanup in config.cleanups:
             cleanup()
     assert signal.getsignal(signal.SIGTERM) is before
+
+
+# a pytest plugin for the calibration's process: after protocol 1, a finaliser that is
+# running when a SIGTERM arrives (Python prints its KeyboardInterrupt and drops it)
+LOSES_THE_INTERRUPT = """
+import os, signal
+
+
+class _Finaliser:
+    def __del__(self):
+        os.kill(os.getpid(), signal.SIGTERM)
+        for _ in range(100_000):  # the handler runs here, and its interrupt is dropped
+            pass
+
+
+def pytest_runtest_teardown(item, nextitem):
+    if "current_loop" in item.nodeid and not os.environ.get("LOST_STOP_SENT"):
+        os.environ["LOST_STOP_SENT"] = "1"
+        _Finaliser()
+        open("interrupt-dropped", "w").close()  # reached: the interrupt did not propagate
+"""
+
+
+def test_a_stop_whose_interrupt_python_drops_still_stops_the_run(tmp_path: Path) -> None:
+    """A stop signal landing in a finaliser (Python drops the interrupt its handler raises:
+    session 30's one CI failure of the gimbal's stop test, a certificate not aborted, fits
+    this): the request is kept, so no later protocol or motion starts, the certificate is
+    aborted and the drive ends disabled. Before, the run went on to its end and passed."""
+    (tmp_path / "lost_stop.py").write_text(LOSES_THE_INTERRUPT, encoding="utf-8")
+    run = RunningCalibration(tmp_path, ["--unit-serial", "SIG-2", "--out",
+                                        str(tmp_path / "out")], ("-p", "lost_stop"))
+    code = run.process.wait(600)
+    run._reader.join(10)
+    assert (tmp_path / "interrupt-dropped").is_file(), run.console
+    assert code != 0, run.console
+    certificate = json.loads((tmp_path / "out" / "SIG-2" / "certificate.json").read_text(
+        encoding="utf-8"))
+    assert certificate["aborted"] is True, run.console
+    assert certificate["outcome"] != "PASS"
+    log = run.log_file.read_text(encoding="utf-8")
+    assert "gravity_cable not started" in run.console, run.console
+    assert "sim: running sweep" not in log, log  # protocol 2's motion
+    assert re.findall(r"sim: (running|drive disabled)", log)[-1] == "drive disabled", log
 
 
 def test_a_canopen_drive_stops_when_the_hosts_heartbeat_stops() -> None:

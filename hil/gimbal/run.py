@@ -103,11 +103,12 @@ def _each_axis(gimbal: GimbalProfile, *, serial: str, folder: Path, store_url: s
                       flush=True)
                 written = _certificate_of(folder, axis, serial)
                 before = _stamp(written)
-                code = _calibrate_axis(_axis_argv(gimbal, axis, serial=serial, folder=folder,
-                                                  store_url=store_url, options=options))
-                codes.append(code)
+                code, stopped = _calibrate_axis(_axis_argv(
+                    gimbal, axis, serial=serial, folder=folder, store_url=store_url,
+                    options=options))
+                codes.append(INTERRUPTED if stopped else code)
                 outcomes.append(_outcome(axis, written, before, code))
-                if code in STOPS_THE_GIMBAL:
+                if stopped or code in STOPS_THE_GIMBAL:
                     break
     except KeyboardInterrupt:  # between two axes: the next is not started
         codes.append(INTERRUPTED)
@@ -230,16 +231,19 @@ def _conclude(gimbal: GimbalProfile, *, serial: str, folder: Path, store_url: st
     print(f"gimbal {serial}: {issued['outcome']} ({each}) -> {json_path}")
 
 
-def _calibrate_axis(argv: list[str]) -> int:
-    """Run one axis's calibration to its end, and its exit code. A stop (Ctrl-C, or SIGTERM
-    or SIGHUP sent to this process alone) is passed on and waited out: the axis's
-    calibration stops the drive, disables it and writes its aborted certificate (killing
-    it, or leaving it to run on, would not)."""
+def _calibrate_axis(argv: list[str]) -> tuple[int, bool]:
+    """Run one axis's calibration to its end: its exit code, and whether a stop came. A
+    stop (Ctrl-C, or SIGTERM or SIGHUP sent to this process alone) is passed on and waited
+    out: the axis's calibration stops the drive, disables it and writes its aborted
+    certificate (killing it, or leaving it to run on, would not). The gimbal stops after
+    it whatever the axis made of the stop."""
     process = subprocess.Popen(argv)
+    stopped = False
     while True:
         try:
-            return process.wait()
+            return process.wait(), stopped
         except KeyboardInterrupt:  # a second stop while it stops is ignored there
+            stopped = True
             process.send_signal(signal.SIGINT)
 
 
