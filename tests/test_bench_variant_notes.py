@@ -55,3 +55,34 @@ def test_a_right_u_names_no_choice_by_chance() -> None:
                     for i, r in enumerate(ratios)]
         named += not statements(outcomes, seed=1)["x"].endswith("no drawn choice missed")
     assert named <= 7  # binomial(60, 0.05): P(> 7) < 3 %
+
+
+def test_the_twins_line_is_the_line_characterise_measures() -> None:
+    """A result whose twins (this project's simulator) read 0.3 % high, the variants the
+    same: the twins' line corrects it and ±U holds about 95 %; a variant population read
+    1 % high beside the same twins (a simulator choice the line does not know) misses."""
+    from benchmarks.bench_variant_methods import LAG, Unit, judge, twin_lines
+    from hil.identify.estimate import Estimate
+
+    rng = np.random.default_rng(4)
+
+    def unit(shift: float) -> Unit:
+        def found(offset: float) -> dict[str, Estimate]:
+            value = 1.0 + offset + 0.002 * rng.standard_normal()
+            return {LAG: Estimate(name=LAG, value=value, standard_uncertainty=0.002,
+                                  unit="ms", dof=50.0),
+                    "inertia_amplitude_spread_pct": Estimate(
+                        name="inertia_amplitude_spread_pct", value=0.1,
+                        standard_uncertainty=0.1, unit="%")}
+        return Unit(labels={"rate": "1000 Hz"}, found=found(0.003 + shift),
+                    truth={LAG: 1.0}, twin=found(0.003), twin_truth={LAG: 1.0})
+
+    same = [unit(0.0) for _ in range(300)]
+    line = twin_lines(same)[LAG]
+    assert abs(line.bias - 0.003) < 0.0005
+    held = np.mean([abs(o.error_over_u[LAG]) <= o.k[LAG] for o in judge(same, {LAG: line}.get)])
+    assert 0.92 <= held <= 0.98
+    apart = [unit(0.01) for _ in range(300)]
+    missed = np.mean([abs(o.error_over_u[LAG]) <= o.k[LAG]
+                      for o in judge(apart, twin_lines(apart).get)])
+    assert missed < 0.5

@@ -51,28 +51,36 @@ def bias_map(rows: Iterable[Row], *, population: str) -> dict[str, Any]:
     results: dict[str, dict[str, Any]] = {}
     for (axis, name), group in by_result(rows).items():
         relative, errors, u = errors_of(group)
-        kept = np.ones(len(errors), dtype=bool)
-        bias, scatter, weight = _line(errors, u)
-        for _ in range(5):
-            gross = np.abs(errors - bias) > GROSS_Z * np.sqrt(u**2 + scatter**2)
-            if gross.sum() > GROSS_SHARE * len(errors):
-                kept[:] = True
-                bias, scatter, weight = _line(errors, u)
-                break
-            if np.array_equal(~gross, kept):
-                break
-            kept = ~gross
-            bias, scatter, weight = _line(errors[kept], u[kept])
+        bias, scatter, gross_errors = fitted_line(errors, u)
         entry = {
             "scale": "relative" if relative else "absolute",
             "bias": bias,
-            "scatter": math.hypot(scatter, 1 / math.sqrt(weight)),
+            "scatter": scatter,
             "units": len(group),
         }
-        if not kept.all():
-            entry["gross_errors"] = int(np.sum(~kept))
+        if gross_errors:
+            entry["gross_errors"] = gross_errors
         results.setdefault(axis, {})[name] = entry
     return {"population": population, "results": results}
+
+
+def fitted_line(errors: FloatArray, u: FloatArray) -> tuple[float, float, int]:
+    """One result's method line from its units' ``errors`` and stated (Type A) ``u``
+    (:func:`bias_map`): the bias, the scatter beyond ``u`` with the bias's own standard
+    error added, and how many units were left out as gross errors."""
+    kept = np.ones(len(errors), dtype=bool)
+    bias, scatter, weight = _line(errors, u)
+    for _ in range(5):
+        gross = np.abs(errors - bias) > GROSS_Z * np.sqrt(u**2 + scatter**2)
+        if gross.sum() > GROSS_SHARE * len(errors):
+            kept[:] = True
+            bias, scatter, weight = _line(errors, u)
+            break
+        if np.array_equal(~gross, kept):
+            break
+        kept = ~gross
+        bias, scatter, weight = _line(errors[kept], u[kept])
+    return bias, math.hypot(scatter, 1 / math.sqrt(weight)), int(np.sum(~kept))
 
 
 def _line(errors: FloatArray, u: FloatArray) -> tuple[float, float, float]:
