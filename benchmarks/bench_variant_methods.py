@@ -64,6 +64,9 @@ from plant_sim.variant import (
 PROFILE = "demo_gimbal_elevation"
 AXIS = "elevation"  # the profile's axis: the map lines it is checked against
 DRAWN = ("inertia_kg_m2", "viscous_nm_s_rad", "coulomb_nm", "stribeck_velocity_rad_s")
+LAG = "current_loop_time_constant_ms"
+RESULTS = ("inertia_kg_m2", "viscous_nm_s_rad", "coulomb_nm", "static_friction_nm",
+           "stribeck_velocity_rad_s", LAG)  # judged against a truth
 
 
 @dataclasses.dataclass(frozen=True, slots=True)
@@ -107,8 +110,8 @@ def _one_unit(profile: UnitProfile, plant: PlantParams, firmware: Firmware, rate
     # sines take no lag out (it is inside the torque)
     lag = (None if conventions_problem(lag_run.metadata)
            else lag_protocol.analyse(lag_run, lag_spec).time_constant)
-    sine_spec = dataclasses.replace(sines.Spec(frequency_hz=2.0, amplitudes_rad_s=(0.5, 1.0),
-                                               settle_periods=1, periods=5, fs_hz=rate))
+    sine_spec = sines.Spec(frequency_hz=2.0, amplitudes_rad_s=(0.5, 1.0), settle_periods=1,
+                           periods=5, fs_hz=rate)
     recordings = [run(e.command, seed + i) for i, e in enumerate(sines.excitation(sine_spec))]
     lag_s = None if lag is None else dataclasses.replace(
         lag, value=lag.value / 1000, unit="s", budget=(),
@@ -130,14 +133,16 @@ def _one_unit(profile: UnitProfile, plant: PlantParams, firmware: Firmware, rate
     return found
 
 
-LAG = "current_loop_time_constant_ms"
 
-
-def _truth(name: str, plant: PlantParams, firmware: Firmware, variant: Variant) -> float:
+def _truth(name: str, plant: PlantParams, firmware: Firmware,
+           variant: Variant | None) -> float:
     """The value a result should read. τ: the lag the motion has behind the reported
-    torque below the loop's bandwidth (:func:`plant_sim.variant.torque_lag_s`)."""
+    torque below the loop's bandwidth (:func:`plant_sim.variant.torque_lag_s`; on this
+    project's simulator, ``variant`` ``None``, the loop's τ as ``characterise`` takes it)."""
     if name != LAG:
         return float(getattr(plant, name))
+    if variant is None:
+        return 1000 * firmware.current_loop_time_constant_s
     return 1000 * torque_lag_s(plant, firmware, variant)
 
 
@@ -189,8 +194,8 @@ def population(units: int, seed: int, *, progress: Callable[[str], None] = print
             labels=variant.labels(), found=found,
             truth={n: _truth(n, plant, firmware, variant) for n in found if n in RESULTS},
             twin=twin_found,
-            twin_truth={n: (1000 * firmware.current_loop_time_constant_s if n == LAG
-                            else float(getattr(plant, n))) for n in twin_found if n in RESULTS}))
+            twin_truth={n: _truth(n, plant, firmware, None) for n in twin_found
+                        if n in RESULTS}))
     return drawn
 
 
@@ -209,12 +214,8 @@ def twin_lines(drawn: list[Unit]) -> dict[str, MethodBias]:
     return lines
 
 
-RESULTS = ("inertia_kg_m2", "viscous_nm_s_rad", "coulomb_nm", "static_friction_nm",
-           "stribeck_velocity_rad_s", LAG)
 
-
-def judge(drawn: list[Unit],
-             line: Callable[[str], MethodBias | None]) -> list[Outcome]:
+def judge(drawn: list[Unit], line: Callable[[str], MethodBias | None]) -> list[Outcome]:
     """Each unit's variant results with the method ``line`` applied as the certificate
     applies it."""
     profile = load_profile(PROFILE)

@@ -80,9 +80,14 @@ class RunningCalibration:
 
     def stop_with(self, signum: signal.Signals) -> int:
         """Send ``signum``; the exit code (the process killed if it does not end)."""
+        self.process.send_signal(signum)
+        return self.wait(120)
+
+    def wait(self, timeout_s: float) -> int:
+        """The exit code once the process ends (killed if it has not in ``timeout_s``),
+        its console read to the end."""
         try:
-            self.process.send_signal(signum)
-            return self.process.wait(120)
+            return self.process.wait(timeout_s)
         finally:
             if self.process.poll() is None:
                 self.process.kill()

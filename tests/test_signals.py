@@ -152,8 +152,7 @@ def test_a_stop_whose_interrupt_python_drops_still_stops_the_run(tmp_path: Path)
     (tmp_path / "lost_stop.py").write_text(LOSES_THE_INTERRUPT, encoding="utf-8")
     run = RunningCalibration(tmp_path, ["--unit-serial", "SIG-2", "--out",
                                         str(tmp_path / "out")], ("-p", "lost_stop"))
-    code = run.process.wait(600)
-    run._reader.join(10)
+    code = run.wait(600)
     assert (tmp_path / "interrupt-dropped").is_file(), run.console
     assert code != 0, run.console
     certificate = json.loads((tmp_path / "out" / "SIG-2" / "certificate.json").read_text(
