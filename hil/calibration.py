@@ -276,11 +276,14 @@ class CalibrationRun:
                     acquisition: str | None = None,
                     variant: str | None = None) -> MethodBias | None:
         """The method line :meth:`record` adds to result ``name`` (the stop rule judges
-        each run's U with the same, :func:`hil.suite.stop_rule.run_repeated`)."""
+        each run's U with the same, :func:`hil.suite.stop_rule.run_repeated`), at this
+        unit's earlier results where the line follows one (:meth:`MethodBias.at`)."""
         bias = self.method_bias.line(method_of or name, path=acquisition, variant=variant)
         if bias is not None and method_of is not None and not bias.relative:
             return None
-        return bias
+        if bias is None:
+            return None
+        return bias.at({m.spec.name: m.estimate.value for m in self.measurements})
 
     def record(self, protocol: str, estimate: Estimate, *, method_of: str | None = None,
                declared: Declared | None = None, acquisition: str | None = None,

@@ -119,6 +119,39 @@ def judge(estimate: Estimate, spec: MeasurementSpec, *, non_negative: bool = Fal
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
+class MethodCovariate:
+    """A method's error that follows another result the unit measured before (issue 30:
+    a line for this kind of unit, not only the population's average one): mean error
+    ``bias + slope·(x − center)`` at the unit's measured ``x``, ``scatter`` about that line,
+    fitted over the population's range ``[low, high]`` of ``x``
+    (:func:`hil.characterise.method_map.bias_map`).
+
+    Attributes
+    ----------
+    name : str
+        The covariate, an earlier protocol's declared measurement.
+    center, low, high : float
+        Its mean and range over the population, in its own unit.
+    bias : float
+        Mean error at ``center`` (relative or absolute as the line it conditions).
+    slope, slope_uncertainty : float
+        Change of the mean error per unit of the covariate, and its standard error.
+    scatter : float
+        Scatter about the conditioned line beyond Type A, with its intercept's standard
+        error.
+    """
+
+    name: str
+    center: float
+    low: float
+    high: float
+    bias: float
+    slope: float
+    slope_uncertainty: float
+    scatter: float
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
 class MethodBias:
     """A method's error over a simulated population of units (``bench_coverage.py``).
 
@@ -152,6 +185,11 @@ class MethodBias:
     gross_errors : int
         Units of the population left out of bias and scatter as gross errors (many of their
         total u from the line; ``hil.characterise.method_map.bias_map``).
+    covariate : MethodCovariate or None
+        The line conditioned on an earlier result, where the population showed its error
+        following one (:meth:`at`).
+    condition : str
+        Where :meth:`at` placed this line (``""``: the population-wide line).
     """
 
     name: str
@@ -166,6 +204,21 @@ class MethodBias:
     acquisition: str = EVERY_CONTROL_PERIOD  # the path its population was recorded on
     variant: str = ""  # the method run without an input the main map assumes
     gross_errors: int = 0  # units left out of the figures as gross errors
+    covariate: MethodCovariate | None = None
+    condition: str = ""
+
+    def at(self, measured: Mapping[str, float]) -> MethodBias:
+        """This line for a unit whose earlier results are ``measured`` (by name): the
+        conditioned line at the unit's covariate, with the slope's uncertainty there, when
+        the unit measured it inside the population's range; else the population-wide one."""
+        line = self.covariate
+        x = None if line is None else measured.get(line.name)
+        if line is None or x is None or not line.low <= x <= line.high:
+            return self
+        offset = x - line.center
+        return replace(self, bias=line.bias + line.slope * offset,
+                       scatter=math.hypot(line.scatter, offset * line.slope_uncertainty),
+                       condition=f"{line.name} {x:.4g}")
 
     def validation(self) -> dict[str, object] | None:
         """What the certificate states of the map's out-of-sample check, if made."""
@@ -285,9 +338,24 @@ def _method_bias(name: str, table: ConfigTable) -> MethodBias:
         note=table.string("note", ""),
         second_simulator=table.string("second_simulator", ""),
         gross_errors=table.integer("gross_errors") if "gross_errors" in table else 0,
+        covariate=_method_covariate(table.table_at("covariate"))
+        if "covariate" in table else None,
     )
     table.done()
     return bias
+
+
+def _method_covariate(table: ConfigTable) -> MethodCovariate:
+    covariate = MethodCovariate(
+        name=table.string("name"), center=table.number("center"), low=table.number("low"),
+        high=table.number("high"), bias=table.number("bias"), slope=table.number("slope"),
+        slope_uncertainty=table.non_negative("slope_uncertainty"),
+        scatter=table.non_negative("scatter"))
+    if not covariate.low <= covariate.center <= covariate.high:
+        raise table.error("center", f"must lie in [low, high], got {covariate.center!r} "
+                                    f"outside [{covariate.low!r}, {covariate.high!r}]")
+    table.done()
+    return covariate
 
 
 def with_method_terms(
@@ -323,7 +391,8 @@ def with_method_terms(
         size = f"{100 * abs(bias.bias):.2g} %" if bias.relative else f"{abs(bias.bias):.2g}"
         added.append(Component(
             source=f"method: error over {bias.units} simulated units beyond Type A"
-                   f"{', ' + bias.variant if bias.variant else ''} "
+                   f"{', ' + bias.variant if bias.variant else ''}"
+                   f"{', at ' + bias.condition if bias.condition else ''} "
                    f"(mean {sign}{size} corrected)",
             kind="B", standard_uncertainty=scatter, unit=estimate.unit))
     if spec.allowance_rel:

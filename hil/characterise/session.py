@@ -17,7 +17,7 @@ import tomli_w
 
 from hil.characterise.bins import binned, miss_table
 from hil.characterise.draw import PROFILES, Unit, write_population
-from hil.characterise.method_map import HEADER, bias_map, with_validation
+from hil.characterise.method_map import HEADER, bias_map, earlier_results, with_validation
 from hil.characterise.run import run_population
 from hil.characterise.summary import by_variant, summarise, table, variant_table
 from hil.errors import InputError
@@ -65,7 +65,8 @@ def characterise(args: argparse.Namespace) -> int:
     population = (f"gimbal-hil characterise --units {args.units} --seed {args.seed} "
                   f"--method-bias {state['method_bias']}: {len(units)} units")
     if args.write_map is not None:
-        _write(args.write_map, bias_map(rows, population=population))
+        _write(args.write_map, bias_map(rows, population=population,
+                                        earlier=earlier_results(units)))
         print(f"method-bias map: {args.write_map}")
     if args.validate_map is not None:
         document = tomllib.loads(args.validate_map.read_text(encoding="utf-8"))
