@@ -30,7 +30,10 @@ HEADER = """\
 # second population not used for these figures (--validate-map); note: what keeps a
 # result's coverage from 95 %, where that was traced; second_simulator: how ±U held over a
 # second simulator's drawn choices (benchmarks/bench_variant_methods.py --write-notes).
-# All are printed on the certificate.
+# covariate: where the population's error follows a result measured before this one, the
+# line a calibration applies at the unit's own value x of it: mean error
+# bias + slope·(x − center), its scatter about that line, for x in [low, high] (else the
+# population-wide line above). All are printed on the certificate.
 """
 
 
