@@ -163,3 +163,32 @@ def test_a_current_loop_not_measured_is_taken_from_the_profile_with_its_limits()
     assert lag.value == pytest.approx(spec.nominal / 1000)
     half_width_s = (spec.upper_limit - spec.nominal) / 1000
     assert lag.standard_uncertainty == pytest.approx(half_width_s / math.sqrt(3))
+
+
+def test_a_cable_spring_is_taken_out_where_gravitys_phase_is_not_measured(tmp_path) -> None:  # type: ignore[no-untyped-def]
+    """The azimuth measures m·g·e (to check the axis is level) but no phase: its cable's
+    spring was left in J (−k/(ω²J): the demo azimuth's whole −0.21 % method bias, session
+    32). Now k_cable is taken out and gravity, whose phase is unknown, bounds it."""
+    from hil.calibration import CalibrationRun
+    from hil.measurement import MethodBiasMap
+    from hil.profile import builtin_profile_path
+
+    k, mge = 0.02, 1e-4
+    plant = dataclasses.replace(BASE, cable_stiffness_nm_rad=k)
+    recordings, spec = _record(plant, centre_rad=0.0)
+    azimuth = load_profile(builtin_profile_path("demo_gimbal_azimuth"))
+    run = CalibrationRun(profile=azimuth, unit_serial="X", out_dir=tmp_path, drive_kind="sim",
+                         method_bias=MethodBiasMap(source="none", sha256="", entries={}))
+    assert "gravity_phase_rad" not in azimuth.measurements
+    assert protocol.measured_load_stiffness(run, position_rad=0.0) is None  # nothing yet
+    run.record("gravity_cable", _estimate(k, 1e-4, "cable_stiffness_nm_rad"))
+    run.record("gravity_cable", _estimate(mge, 2e-5, "gravity_mge_nm"))
+    stiffness = protocol.measured_load_stiffness(run, position_rad=0.0)
+    assert stiffness is not None
+    assert stiffness.value == k
+    assert stiffness.standard_uncertainty == pytest.approx(math.hypot(1e-4, 1.2e-4 / math.sqrt(3)))
+    found = protocol.analyse(recordings, spec)
+    corrected = stiffness_corrected_inertia(found.inertia, stiffness=stiffness,
+                                            frequency_hz=spec.frequency_hz)
+    assert found.inertia.value / plant.inertia_kg_m2 - 1 < -0.03  # the spring's bias is real
+    assert corrected.value == pytest.approx(plant.inertia_kg_m2, rel=0.01)

@@ -298,6 +298,33 @@ def load_stiffness(
     )
 
 
+def cable_load_stiffness(*, cable_stiffness: Estimate, mge: Estimate | None) -> Estimate:
+    """``K = dL/dθ`` where gravity's phase was not measured (an azimuth, whose profile
+    declares no phase): ``k_cable``, gravity's ``−m·g·e·sin(θ + φ)`` somewhere within
+    ``±(|m·g·e| + u(m·g·e))``, a rectangular line (none when m·g·e was not measured
+    either: the profile declares no gravity).
+
+    Parameters
+    ----------
+    cable_stiffness : Estimate
+        k_cable (N·m/rad).
+    mge : Estimate or None
+        m·g·e (N·m), when measured.
+
+    Returns
+    -------
+    Estimate
+        ``load_stiffness_nm_rad`` (N·m/rad).
+    """
+    half = 0.0 if mge is None else abs(mge.value) + mge.standard_uncertainty
+    _, u, dof = combine_linear(
+        [1.0, 1.0], [cable_stiffness.value, 0.0],
+        [cable_stiffness.standard_uncertainty, half / math.sqrt(3)],
+        [cable_stiffness.dof, math.inf])
+    return Estimate(name="load_stiffness_nm_rad", value=cable_stiffness.value,
+                    standard_uncertainty=u, unit="N·m/rad", dof=dof)
+
+
 def eccentricity_mm(mge: Estimate, *, mass_kg: float) -> Estimate:
     """Centre-of-mass offset ``e = m·g·e / (m·g)``.
 

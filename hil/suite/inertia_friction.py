@@ -17,7 +17,7 @@ from hil.calibration import CalibrationRun
 from hil.details import RunDetails
 from hil.drives.base import Capability, DriveInfo
 from hil.identify.estimate import Component, Estimate
-from hil.identify.gravity_cable import CableLoop, load_stiffness
+from hil.identify.gravity_cable import CableLoop, cable_load_stiffness, load_stiffness
 from hil.identify.inertia_friction import (
     HARMONICS,
     InertiaFrictionResult,
@@ -59,9 +59,15 @@ LAG_DECLARED = ("current-loop time constant τ not measured: the profile's nomin
 UNRESOLVED_ANGLES = ((0.05, 0.0), (1.0, 0.5), (1.0, 1.0), (1.0, 2.0))
 CABLE = Need(protocol="gravity_cable", result="cable_hysteresis_nm",
              without="the cable's hysteresis loop left in T_c")
-STIFFNESS = tuple(Need(protocol="gravity_cable", result=name,
-                       without="J not corrected for the load's stiffness")
-                  for name in ("gravity_mge_nm", "gravity_phase_rad", "cable_stiffness_nm_rad"))
+STIFFNESS = (
+    Need(protocol="gravity_cable", result="gravity_mge_nm",
+         without="no gravity stiffness taken out of J (the profile declares no gravity)"),
+    Need(protocol="gravity_cable", result="gravity_phase_rad",
+         without="gravity's stiffness within ±(|m·g·e| + u), its phase unknown: a "
+                 "rectangular line of J"),
+    Need(protocol="gravity_cable", result="cable_stiffness_nm_rad",
+         without="J not corrected for the load's stiffness"),
+)
 #: what every sine analysis takes; the J/B/T_c protocol also drives a two-mass axis's load
 #: through the shaft the resonance protocol measured (:mod:`hil.suite.shaft_input`)
 SINE_NEEDS: tuple[Need, ...] = (LAG, CABLE, *STIFFNESS)
@@ -471,13 +477,16 @@ def measured_load_stiffness(calibration: CalibrationRun, *, position_rad: float)
     Returns
     -------
     Estimate or None
-        The load's stiffness (N·m/rad), or ``None`` unless m·g·e, its phase and k_cable
-        were all measured.
+        The load's stiffness (N·m/rad): gravity's and the cable's where m·g·e, its phase
+        and k_cable were measured, the cable's with gravity bounded where the phase was
+        not (:func:`hil.identify.gravity_cable.cable_load_stiffness`), ``None`` without
+        k_cable.
     """
-    found = calibration.results(*(need.result for need in STIFFNESS))
-    if found is None:
+    mge, phase, cable = (calibration.result(need.result) for need in STIFFNESS)
+    if cable is None:
         return None
-    mge, phase, cable = found
+    if mge is None or phase is None:
+        return cable_load_stiffness(cable_stiffness=cable, mge=mge)
     return load_stiffness(mge=mge, phase=phase, cable_stiffness=cable, position_rad=position_rad)
 
 
