@@ -279,9 +279,7 @@ class CalibrationRun:
         each run's U with the same, :func:`hil.suite.stop_rule.run_repeated`), at this
         unit's earlier results where the line follows one (:meth:`MethodBias.at`)."""
         bias = self.method_bias.line(method_of or name, path=acquisition, variant=variant)
-        if bias is not None and method_of is not None and not bias.relative:
-            return None
-        if bias is None:
+        if bias is None or (method_of is not None and not bias.relative):
             return None
         return bias.at({m.spec.name: m.estimate.value for m in self.measurements})
 
