@@ -30,7 +30,6 @@ from hil.details import RunDetails
 from hil.drives.base import Capability, DriveInfo
 from hil.identify.estimate import Estimate
 from hil.identify.inertia_elevation import HALF_TURN_RAD, scale_by_gain
-from hil.identify.inertia_friction import stiffness_corrected_inertia
 from hil.identify.position_torque import PositionTorque
 from hil.motion import Excitation
 from hil.profile import UnitProfile
@@ -177,7 +176,7 @@ def inertia_at_elevation(
         The protocol's spec.
     calibration : CalibrationRun
         The calibration in progress: earlier results the sine analysis takes out (see
-        :func:`hil.suite.inertia_friction.analyse_in_calibration`).
+        :func:`hil.suite.inertia_friction.inertia_at_earlier_inputs`).
     gain : tuple of (float, float) or None
         Shaft over reported torque and its standard uncertainty (see
         :func:`reported_torque_gain`); ``None`` leaves J in reported-torque units.
@@ -194,15 +193,8 @@ def inertia_at_elevation(
     IdentificationError
         The sine analysis fails (see :func:`hil.suite.inertia_friction.analyse`).
     """
-    analysed, _, applied = sine.analyse_in_calibration(recordings, spec.sine, calibration,
-                                                       position_torque=position_torque)
-    inertia = analysed.inertia
-    # the load's spring in the sines' quadrature, as the J/B/T_c protocol takes it out (an
-    # azimuth's cable: J read low by k_cable/ω², 0.26 % on the demo)
-    stiffness = sine.measured_load_stiffness(calibration, position_rad=applied.centre_rad)
-    if stiffness is not None:
-        inertia = stiffness_corrected_inertia(inertia, stiffness=stiffness,
-                                              frequency_hz=spec.sine.frequency_hz)
+    inertia = sine.inertia_at_earlier_inputs(recordings, spec.sine, calibration,
+                                             position_torque=position_torque)
     if gain is None:
         return inertia
     return scale_by_gain(inertia, gain=gain[0], gain_u=gain[1])

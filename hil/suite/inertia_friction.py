@@ -574,9 +574,7 @@ def analyse_in_calibration(
     IdentificationError
         As for :func:`analyse`.
     """
-    lag, lag_line = measured_current_loop_lag(calibration), LAG_MEASURED
-    if lag is None:
-        lag, lag_line = declared_current_loop_lag(calibration.profile), LAG_DECLARED
+    lag, lag_line = _lag(calibration)
     lag_s = 0.0 if lag is None else lag.value
     loop = measured_cable_loop(calibration)
     analysed = analyse(recordings, spec, current_loop_lag_s=lag_s, cable_loop=loop,
@@ -586,11 +584,8 @@ def analyse_in_calibration(
                                     position_torque=position_torque, lag_line=lag_line,
                                     shaft=shaft)
     centre_rad = float(np.mean([np.mean(r.position) for r in recordings]))
-    stiffness = measured_load_stiffness(calibration, position_rad=centre_rad)
-    if stiffness is not None:
-        estimates["inertia_kg_m2"] = stiffness_corrected_inertia(
-            estimates["inertia_kg_m2"], stiffness=stiffness, frequency_hz=spec.frequency_hz
-        )
+    estimates["inertia_kg_m2"], stiffness = _stiffness_taken_out(
+        estimates["inertia_kg_m2"], spec, calibration, centre_rad=centre_rad)
     return analysed, estimates, EarlierInputs(
         centre_rad=centre_rad,
         load_stiffness_nm_rad=None if stiffness is None else stiffness.value,
@@ -598,6 +593,40 @@ def analyse_in_calibration(
         position_torque_removed=_described(position_torque),
         shaft_modes="rigid" if shaft is None else shaft.described(),
     )
+
+
+def inertia_at_earlier_inputs(
+    recordings: list[Recording], spec: Spec, calibration: CalibrationRun, *,
+    position_torque: PositionTorque | None = None,
+) -> Estimate:
+    """J with the lag, the cable loop, cogging and K_t ripple and the load's stiffness
+    taken out at their measured values, without :func:`with_earlier_inputs`' re-analyses
+    (their budget lines): the inertias across elevation, one per elevation."""
+    lag = _lag(calibration)[0]
+    analysed = analyse(recordings, spec, current_loop_lag_s=0.0 if lag is None else lag.value,
+                       cable_loop=measured_cable_loop(calibration),
+                       position_torque=position_torque)
+    centre_rad = float(np.mean([np.mean(r.position) for r in recordings]))
+    return _stiffness_taken_out(analysed.inertia, spec, calibration, centre_rad=centre_rad)[0]
+
+
+def _lag(calibration: CalibrationRun) -> tuple[Estimate | None, str]:
+    """The current loop's τ the sines take out and its budget line's name."""
+    lag = measured_current_loop_lag(calibration)
+    if lag is not None:
+        return lag, LAG_MEASURED
+    return declared_current_loop_lag(calibration.profile), LAG_DECLARED
+
+
+def _stiffness_taken_out(inertia: Estimate, spec: Spec, calibration: CalibrationRun, *,
+                         centre_rad: float) -> tuple[Estimate, Estimate | None]:
+    """J corrected for the load's stiffness at the sines' centre, when known, and that
+    stiffness (:func:`measured_load_stiffness`)."""
+    stiffness = measured_load_stiffness(calibration, position_rad=centre_rad)
+    if stiffness is None:
+        return inertia, None
+    return stiffness_corrected_inertia(inertia, stiffness=stiffness,
+                                       frequency_hz=spec.frequency_hz), stiffness
 
 
 def _described(position_torque: PositionTorque | None) -> str:
