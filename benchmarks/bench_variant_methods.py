@@ -133,7 +133,6 @@ def _one_unit(profile: UnitProfile, plant: PlantParams, firmware: Firmware, rate
     return found
 
 
-
 def _truth(name: str, plant: PlantParams, firmware: Firmware,
            variant: Variant | None) -> float:
     """The value a result should read. τ: the lag the motion has behind the reported
@@ -212,7 +211,6 @@ def twin_lines(drawn: list[Unit]) -> dict[str, MethodBias]:
         lines[name] = MethodBias(name=name, relative=True, bias=bias, scatter=scatter,
                                  units=len(errors), gross_errors=gross)
     return lines
-
 
 
 def judge(drawn: list[Unit], line: Callable[[str], MethodBias | None]) -> list[Outcome]:

@@ -339,7 +339,7 @@ SINGLE_RUN_BOUND_U = 2.0
 # dead time of 0.3 of a period (tests/identify/test_lag_model.py); more blocks would keep
 # it. Not changed yet. Since session 30 τ + dead time is certified wherever the fit finds a
 # dead time, rejected or not: on the azimuth's 200–650 Hz band its U is the phases' alone
-# and wider than τ''s (k from 5 degrees of freedom where its χ²/ν > 1, eight frequencies
+# and wider than τ's (k from 5 degrees of freedom where its χ²/ν > 1, eight frequencies
 # since session 31; from 2 before), which may reach a limit too.
 
 
