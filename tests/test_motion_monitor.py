@@ -27,11 +27,17 @@ from hil.drives.emulated import canopen_emulator
 from hil.errors import LimitViolationError
 from hil.motion import Excitation, Limits, Mode
 from hil.profile import UnitProfile, load_profile
+from hil.recording import Recording
 from plant_sim.model import MotionGuard, Plant
 from plant_sim.params import PlantParams
 
 QUICK_STOP_DECEL_RAD_S2 = 20.0  # every backend's quick-stop ramp here (sim, both emulators)
 RUNAWAY_TORQUE_NM = 0.4  # inside the 0.5 N·m torque limit: only the motion can tell
+# the longest time from the row that trips to the drive's ramp, by backend: the simulator
+# stops in its next period; the CANopen emulator runs in lockstep with the host's SYNC
+# (1 kHz); the Modbus one on the wall clock, its quick stop sent before anything else
+# (two polls at 100 Hz)
+REACTION_S = {"sim": 0.005, "canopen-emulator": 0.01, "modbus-emulator": 0.02}
 
 
 @pytest.fixture(scope="module")
@@ -44,8 +50,15 @@ def _runaway(fs_hz: float, duration_s: float = 3.0) -> Excitation:
                       command=np.full(round(duration_s * fs_hz), RUNAWAY_TORQUE_NM))
 
 
+def _runaway_acceleration(recording: Recording) -> float:
+    """The speed's rise over the last tenth of a second before the trip, rad/s²."""
+    time_s, speed = recording.time_s, np.abs(recording.velocity)
+    earlier = int(np.searchsorted(time_s, time_s[-1] - 0.1))
+    return float((speed[-1] - speed[earlier]) / (time_s[-1] - time_s[earlier]))
+
+
 def _check_stopped(drive: Drive, limits: Limits, exc: LimitViolationError,
-                   excitation: Excitation) -> None:
+                   excitation: Excitation, reaction_s: float) -> None:
     """One line naming the limit and the time; the rows up to the trip kept, the last one
     outside the envelope and the ones before inside; the axis at rest within the distance
     the quick-stop ramp needs from where it tripped."""
@@ -64,8 +77,11 @@ def _check_stopped(drive: Drive, limits: Limits, exc: LimitViolationError,
     assert np.all(np.abs(recording.velocity[:-1]) <= envelope.velocity_rad_s)
     status = drive.status()
     assert abs(status.velocity_rad_s) < 0.05
-    # quick-stop distance from the trip, with room for the link's reaction (a few rows)
-    reach_rad = abs(last_velocity) ** 2 / (2 * QUICK_STOP_DECEL_RAD_S2) + 0.15
+    # the runaway goes on accelerating for the host's reaction, then ramps down
+    speed, acceleration = abs(last_velocity), _runaway_acceleration(recording)
+    top_speed = speed + acceleration * reaction_s
+    reach_rad = ((speed + top_speed) / 2 * reaction_s
+                 + top_speed**2 / (2 * QUICK_STOP_DECEL_RAD_S2))
     assert abs(status.position_rad - last_position) < reach_rad
     assert envelope.position_min_rad - 0.5 < status.position_rad < envelope.position_max_rad + 0.5
 
@@ -99,7 +115,7 @@ def test_sim_runaway_torque_is_stopped(profile: UnitProfile) -> None:
         excitation = _runaway(drive.info.max_sample_rate_hz)
         with pytest.raises(LimitViolationError) as caught:
             drive.run(excitation)
-        _check_stopped(drive, profile.limits, caught.value, excitation)
+        _check_stopped(drive, profile.limits, caught.value, excitation, REACTION_S["sim"])
         drive.enable()  # the next protocol can go on
         assert drive.status().state.value == "enabled"
 
@@ -109,18 +125,21 @@ def test_sim_runaway_torque_is_stopped(profile: UnitProfile) -> None:
 # parallel half: 0.72 rad from the trip for 0.63 allowed); the CANopen one runs in lockstep
 @pytest.fixture(params=["canopen-emulator",
                         pytest.param("modbus-emulator", marks=pytest.mark.realtime)])
-def field_drive(request: pytest.FixtureRequest, profile: UnitProfile) -> Iterator[Drive]:
+def field_backend(request: pytest.FixtureRequest,
+                profile: UnitProfile) -> Iterator[tuple[Drive, float]]:
     with open_drive(request.param, profile=profile, unit_serial="M-1") as drive:
-        yield drive
+        yield drive, REACTION_S[request.param]
 
 
-def test_field_backends_stop_a_runaway_torque(field_drive: Drive, profile: UnitProfile) -> None:
+def test_field_backends_stop_a_runaway_torque(field_backend: tuple[Drive, float],
+                                             profile: UnitProfile) -> None:
+    field_drive, reaction_s = field_backend
     field_drive.enable()
     fs = min(1000.0, field_drive.info.max_sample_rate_hz)
     excitation = _runaway(fs)
     with pytest.raises(LimitViolationError) as caught:
         field_drive.run(excitation)
-    _check_stopped(field_drive, profile.limits, caught.value, excitation)
+    _check_stopped(field_drive, profile.limits, caught.value, excitation, reaction_s)
 
 
 def test_the_cia402_drive_enforces_the_envelope_itself(

@@ -72,7 +72,13 @@ from hil.drives.modbus.regmap import (
 from hil.drives.modbus.state_machine import ModbusStateMachine
 from hil.drives.realtime import collector_held
 from hil.drives.station import ModbusStation
-from hil.errors import DriveCommunicationError, DriveError, DriveStateError, ProfileError
+from hil.errors import (
+    DriveCommunicationError,
+    DriveError,
+    DriveStateError,
+    LimitViolationError,
+    ProfileError,
+)
 from hil.motion import CompensationTable, Excitation, Limits, Mode, PositionHarmonic
 from hil.recording import Recording
 
@@ -351,8 +357,12 @@ class ModbusDrive(ClampedRotor, Drive):
                  excitation.duration_s, excitation.fs_hz)
         try:
             with collector_held():
-                poll(excitation, run, self.feedback, MotionEnvelope.of(self.limits),
-                     keepalive=keepalive)
+                try:
+                    poll(excitation, run, self.feedback, MotionEnvelope.of(self.limits),
+                         keepalive=keepalive)
+                except LimitViolationError:  # the axis runs away: stop it before all else
+                    states.send_quick_stop()
+                    raise
         except DriveError as exc:
             error = exc
         except KeyboardInterrupt as stop:  # a stop signal: quick stop, keep the rows so far

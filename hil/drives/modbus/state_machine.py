@@ -155,6 +155,14 @@ class ModbusStateMachine:
             log.error("%s: disable not confirmed: %s", self.link.where, exc)
         self.state = DriveState.DISABLED
 
+    def send_quick_stop(self) -> None:
+        """Set the quick-stop bit at once, unconfirmed: the motion monitor's trip, before
+        anything else is done (:meth:`quick_stop` then confirms)."""
+        try:
+            self._control("quick_stop")
+        except DriveError as exc:
+            log.error("%s: quick stop not sent at the trip: %s", self.link.where, exc)
+
     def quick_stop(self) -> None:
         """Set the quick-stop bit (reconnecting first if the link dropped), confirmed when
         the drive is no longer enabled and at rest; logs what it cannot confirm."""
