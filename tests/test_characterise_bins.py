@@ -80,6 +80,27 @@ def test_a_variant_that_misses_is_named_in_the_map_note() -> None:
     assert "note" not in validated["elevation"]["coulomb_nm"]
 
 
+def test_a_variant_that_holds_again_loses_its_old_note() -> None:
+    """Re-validated on a population where every variant holds, a result's figure from an
+    earlier population ("by variant: ... 81 % of 27") is dropped; a traced cause is kept."""
+    from hil.characterise.method_map import with_validation
+    from hil.characterise.summary import by_variant, summarise
+
+    rows = ([dataclasses.replace(r, unit="S" + r.unit, variant="static friction")
+             for r in _population(3, understated_above=None)]
+            + [dataclasses.replace(r, unit="L" + r.unit, variant="LuGre friction")
+               for r in _population(4, understated_above=None)])
+    stale = "by variant: LuGre friction 91 % of 23; static friction 81 % of 27"
+    document = {"population": "test", "results": {"elevation": {
+        "inertia_kg_m2": {"scale": "relative", "bias": 0.0, "scatter": 0.0, "units": 1,
+                          "note": stale},
+        "coulomb_nm": {"scale": "relative", "bias": 0.0, "scatter": 0.0, "units": 1,
+                       "note": f"traced: the sweep's ends | {stale}"}}}}
+    validated = with_validation(document, summarise(rows), by_variant(rows))["results"]
+    assert "note" not in validated["elevation"]["inertia_kg_m2"]
+    assert validated["elevation"]["coulomb_nm"]["note"] == "traced: the sweep's ends"
+
+
 def test_a_rare_gross_error_is_set_aside_from_the_line_but_common_ones_are_scatter() -> None:
     """One unit 30 u off in 150 would make every unit's line wide: it is left out of the
     fit and counted; at 6 % of the units such errors are the method's scatter."""

@@ -206,7 +206,8 @@ def with_validation(document: Mapping[str, Any], summaries: Iterable[Summary],
     """The map ``document`` with each result's coverage on this (out-of-sample)
     population: ``validated_coverage`` and ``validated_units``; where a drawn variant of
     the simulator misses the goal on its own, its coverage per variant as the ``note`` the
-    certificate prints (other notes are kept)."""
+    certificate prints; where none misses now, an earlier population's figure is dropped
+    (other notes are kept)."""
     results = {axis: {name: dict(entry) for name, entry in table.items()}
                for axis, table in document["results"].items()}
     for s in summaries:
@@ -220,13 +221,15 @@ def with_validation(document: Mapping[str, Any], summaries: Iterable[Summary],
             by_result.setdefault((s.axis, s.parameter), []).append((variant, s))
     for (axis, name), found in by_result.items():
         entry = results.get(axis, {}).get(name)
-        if entry is None or all(verdict(s) != "MISSED" for _, s in found):
+        if entry is None:
             continue
-        said = "; ".join(f"{v} {100 * s.coverage:.0f} % of {s.n}" for v, s in found)
-        note = f"by variant: {said}"
-        old = str(entry.get("note", "")).split(" | by variant: ")[0]
+        old = str(entry.pop("note", "")).split(" | by variant: ")[0]
         old = "" if old.startswith("by variant: ") else old
-        entry["note"] = f"{old} | {note}" if old else note
+        if any(verdict(s) == "MISSED" for _, s in found):
+            said = "; ".join(f"{v} {100 * s.coverage:.0f} % of {s.n}" for v, s in found)
+            old = f"{old} | by variant: {said}" if old else f"by variant: {said}"
+        if old:
+            entry["note"] = old
     return {**document, "results": results}
 
 
