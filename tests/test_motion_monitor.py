@@ -168,3 +168,45 @@ def test_the_cia402_drive_enforces_the_envelope_itself(
             assert abs(drive.status().velocity_rad_s) < 0.05
         finally:
             drive.close()
+
+
+def test_the_quick_stop_reaches_the_drive_before_the_rows_are_assembled(
+    profile: UnitProfile, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """At a trip the stop goes out first: building the recording (and the collector's
+    return after the timed loop, up to 0.1 s) would otherwise leave a real drive holding
+    the runaway's last torque. Each emulated drive is stopping when its rows are built."""
+    import hil.drives.cia402.acquire as can_acquire
+    import hil.drives.modbus.drive as modbus_drive
+    from hil.drives.emulated import modbus_emulator
+    from hil.drives.modbus.drive import ModbusDrive
+
+    seen: list[str] = []
+    with canopen_emulator(profile, seed=0) as (can_emulator, station):
+        build = can_acquire._stream_recording
+
+        def can_rows(*args: object, **kwargs: object) -> Recording:
+            seen.append(f"canopen {can_emulator.state}")
+            return build(*args, **kwargs)  # type: ignore[arg-type]
+
+        monkeypatch.setattr(can_acquire, "_stream_recording", can_rows)
+        drive = CanOpenDrive(station, limits=profile.limits)
+        try:
+            drive.enable(Mode.TORQUE)
+            with pytest.raises(LimitViolationError):
+                drive.run(_runaway(1000.0))
+        finally:
+            drive.close()
+    with modbus_emulator(profile, seed=0) as (modbus_emulator_, modbus_station):
+        rows = modbus_drive.to_recording
+
+        def modbus_rows(*args: object, **kwargs: object) -> Recording:
+            seen.append(f"modbus {'stopping' if modbus_emulator_.quick_stopping else 'running'}")
+            return rows(*args, **kwargs)  # type: ignore[arg-type]
+
+        monkeypatch.setattr(modbus_drive, "to_recording", modbus_rows)
+        with ModbusDrive(modbus_station, limits=profile.limits) as field_drive:
+            field_drive.enable()
+            with pytest.raises(LimitViolationError):
+                field_drive.run(_runaway(field_drive.info.max_sample_rate_hz))
+    assert seen == ["canopen QUICK STOP ACTIVE", "modbus stopping"]

@@ -22,6 +22,7 @@ from hil.drives.base import MotionEnvelope, Recorder
 from hil.drives.cia402.link import CanLink
 from hil.drives.cia402.protocol import (
     CW_ENABLE_OPERATION,
+    CW_QUICK_STOP,
     RPDO_FORMAT,
     SW_FAULT,
     TARGET_OBJECT,
@@ -219,11 +220,17 @@ def run_stream(link: CanLink, setup: RunSetup, excitation: Excitation) -> Acquir
         1 / setup.sync_period_s,
     )
     first = link.sync_index + 1
+    tripped: int | None = None
     try:
         with link.direct_receive(), collector_held(), link.aligned_to_sync():
             link.forget()
             first = link.sync_index + 1  # (a SYNC producer other than the host runs on)
-            done = _stream_loop(link, setup, excitation, raw, offset, cob, packer)
+            try:
+                done = _stream_loop(link, setup, excitation, raw, offset, cob, packer)
+            except LimitViolationError:  # the axis runs away: stop it before all else
+                tripped = link.sync_index  # the rows end here, not at the stop's SYNC
+                _send_quick_stop(link, mode)
+                raise
     except _FaultedError as fault:
         # 0x603F by SDO: only now that the Notifier receives again
         code = link.emcy[-1][0] if link.emcy else link.fault_code()
@@ -235,7 +242,7 @@ def run_stream(link: CanLink, setup: RunSetup, excitation: Excitation) -> Acquir
         done = link.sync_index - first + 1
     except DriveError as exc:
         error = exc
-        done = link.sync_index - first + 1
+        done = (link.sync_index if tripped is None else tripped) - first + 1
     except KeyboardInterrupt as exc:  # a stop signal: keep the rows answered so far
         stop = exc
         done = max(0, min(len(raw), link.sync_index - first + 1))
@@ -257,6 +264,16 @@ def run_stream(link: CanLink, setup: RunSetup, excitation: Excitation) -> Acquir
         spread.partial_recording = recording
         raise spread
     return Acquired(recording)
+
+
+def _send_quick_stop(link: CanLink, mode: Mode) -> None:
+    """The quick-stop controlword with a zero target, in the next SYNC's RPDO (the drive
+    would otherwise hold the last target until the state machine's confirmed stop)."""
+    link.controlword = CW_QUICK_STOP
+    try:
+        link.tick(*link.rpdo_payload(mode, CW_QUICK_STOP, 0))
+    except DriveError as exc:
+        log.error("node %d: quick stop not sent at the trip: %s", link.node_id, exc)
 
 
 def spread_refusal(link: CanLink, excitation: Excitation) -> DriveCommunicationError | None:
