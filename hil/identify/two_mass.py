@@ -41,6 +41,21 @@ class ShaftModes:
         """``r = J_l/J_m = (f_r/f_a)² − 1``."""
         return (self.resonance_hz / self.antiresonance_hz) ** 2 - 1.0
 
+    def with_total_inertia(self, ratio: float) -> ShaftModes | None:
+        """The modes when the axis's total inertia is ``ratio`` times the one they were
+        measured with, all of the change in the load (the shaft, its damping and the motor
+        the same: the load of a gimbal's azimuth changes with the elevation). ``None`` when
+        no load would be left on the shaft."""
+        before = self.load_to_motor_inertia
+        after = ratio * (1.0 + before) - 1.0
+        if not (before > 0.0 and after > 0.0):
+            return None
+        antiresonance = self.antiresonance_hz * math.sqrt(before / after)  # ω_a² = k/J_l
+        resonance = antiresonance * math.sqrt(1.0 + after)
+        # ζ_r = c·ω_r/(2k) for a shaft damping c
+        return ShaftModes(resonance_hz=resonance, antiresonance_hz=antiresonance,
+                          damping_ratio=self.damping_ratio * resonance / self.resonance_hz)
+
     def shifted(self, **changes: float) -> ShaftModes:
         """These modes with some figures moved (a budget line's re-analysis)."""
         return replace(self, **{name: getattr(self, name) + change

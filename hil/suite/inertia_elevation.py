@@ -31,12 +31,14 @@ from hil.drives.base import Capability, DriveInfo
 from hil.identify.estimate import Estimate
 from hil.identify.inertia_elevation import HALF_TURN_RAD, scale_by_gain
 from hil.identify.position_torque import PositionTorque
+from hil.identify.two_mass import ShaftModes
 from hil.motion import Excitation
 from hil.profile import UnitProfile
 from hil.recording import Recording
 from hil.suite import inertia_friction as sine
 from hil.suite.needs import Need
 from hil.suite.protocol import Position, Protocol
+from hil.suite.shaft_input import SHAFT, shaft_input
 from hil.suite.stop_rule import StopRule
 from hil.suite.travel import move_speed_rad_s
 
@@ -52,7 +54,7 @@ MEASUREMENTS = (
 #: and what the sine analysis takes (:data:`hil.suite.inertia_friction.SINE_NEEDS`)
 GAIN = Need(protocol="torque_constant", result="reported_torque_gain_error_pct",
             without="J in reported-torque units (no shaft-torque gain applied)")
-NEEDS: tuple[Need, ...] = (GAIN, *sine.SINE_NEEDS)
+NEEDS: tuple[Need, ...] = (GAIN, *sine.SINE_NEEDS, SHAFT)
 #: what the station must have beyond the drive contract
 REQUIRES: tuple[Capability, ...] = (Capability.ELEVATION_AXIS,)
 
@@ -195,9 +197,25 @@ def inertia_at_elevation(
     """
     inertia = sine.inertia_at_earlier_inputs(recordings, spec.sine, calibration,
                                              position_torque=position_torque)
+    shaft = shaft_here(calibration, inertia_kg_m2=inertia.value)
+    if shaft is not None:
+        inertia = sine.inertia_at_earlier_inputs(recordings, spec.sine, calibration,
+                                                 position_torque=position_torque, shaft=shaft)
     if gain is None:
         return inertia
     return scale_by_gain(inertia, gain=gain[0], gain_u=gain[1])
+
+
+def shaft_here(calibration: CalibrationRun, *, inertia_kg_m2: float) -> ShaftModes | None:
+    """A two-mass azimuth's shaft at this elevation: the resonance protocol's modes (measured
+    where the J/B/T_c sines ran, the elevation parked) with the load this elevation's rigid
+    J shows against the J/B/T_c protocol's (the sines at 2 Hz read the load's share
+    (f/f_a)² high: 0.1 % of J level on the demo). ``None``: rigid, or either not measured."""
+    measured = shaft_input(calibration)
+    parked = calibration.result(sine.MEASUREMENTS[0])  # J, in reported-torque units too
+    if measured is None or parked is None or not parked.value > 0:
+        return None
+    return measured.modes.with_total_inertia(inertia_kg_m2 / parked.value)
 
 
 def travel_of(profile: UnitProfile) -> tuple[float, float]:

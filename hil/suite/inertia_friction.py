@@ -598,14 +598,16 @@ def analyse_in_calibration(
 def inertia_at_earlier_inputs(
     recordings: list[Recording], spec: Spec, calibration: CalibrationRun, *,
     position_torque: PositionTorque | None = None,
+    shaft: ShaftModes | None = None,
 ) -> Estimate:
     """J with the lag, the cable loop, cogging and K_t ripple and the load's stiffness
-    taken out at their measured values, without :func:`with_earlier_inputs`' re-analyses
-    (their budget lines): the inertias across elevation, one per elevation."""
+    taken out at their measured values (and a two-mass axis's ``shaft``, given), without
+    :func:`with_earlier_inputs`' re-analyses (their budget lines): the inertias across
+    elevation, one per elevation."""
     lag = _lag(calibration)[0]
     analysed = analyse(recordings, spec, current_loop_lag_s=0.0 if lag is None else lag.value,
                        cable_loop=measured_cable_loop(calibration),
-                       position_torque=position_torque)
+                       position_torque=position_torque, shaft=shaft)
     centre_rad = float(np.mean([np.mean(r.position) for r in recordings]))
     return _stiffness_taken_out(analysed.inertia, spec, calibration, centre_rad=centre_rad)[0]
 
