@@ -10,7 +10,7 @@ up to then kept. The CiA 402 drive also gets the envelope as its own limits (0x6
 
 from __future__ import annotations
 
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 
 import numpy as np
 import pytest
@@ -182,14 +182,19 @@ def test_the_quick_stop_reaches_the_drive_before_the_rows_are_assembled(
     from hil.drives.modbus.drive import ModbusDrive
 
     seen: list[str] = []
+
+    def noting(module: object, name: str, state: Callable[[], str]) -> None:
+        """``module.name`` notes the emulated drive's ``state`` each time it is called."""
+        original = getattr(module, name)
+
+        def noted(*args: object, **kwargs: object) -> object:
+            seen.append(state())
+            return original(*args, **kwargs)
+
+        monkeypatch.setattr(module, name, noted)
+
     with canopen_emulator(profile, seed=0) as (can_emulator, station):
-        build = can_acquire._stream_recording
-
-        def can_rows(*args: object, **kwargs: object) -> Recording:
-            seen.append(f"canopen {can_emulator.state}")
-            return build(*args, **kwargs)  # type: ignore[arg-type]
-
-        monkeypatch.setattr(can_acquire, "_stream_recording", can_rows)
+        noting(can_acquire, "_stream_recording", lambda: f"canopen {can_emulator.state}")
         drive = CanOpenDrive(station, limits=profile.limits)
         try:
             drive.enable(Mode.TORQUE)
@@ -198,13 +203,8 @@ def test_the_quick_stop_reaches_the_drive_before_the_rows_are_assembled(
         finally:
             drive.close()
     with modbus_emulator(profile, seed=0) as (modbus_emulator_, modbus_station):
-        rows = modbus_drive.to_recording
-
-        def modbus_rows(*args: object, **kwargs: object) -> Recording:
-            seen.append(f"modbus {'stopping' if modbus_emulator_.quick_stopping else 'running'}")
-            return rows(*args, **kwargs)  # type: ignore[arg-type]
-
-        monkeypatch.setattr(modbus_drive, "to_recording", modbus_rows)
+        noting(modbus_drive, "to_recording", lambda: "modbus " + (
+            "stopping" if modbus_emulator_.quick_stopping else "running"))
         with ModbusDrive(modbus_station, limits=profile.limits) as field_drive:
             field_drive.enable()
             with pytest.raises(LimitViolationError):

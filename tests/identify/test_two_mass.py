@@ -15,6 +15,7 @@ import hil.suite.inertia_friction as protocol
 from hil.drives.sim import SimDrive
 from hil.identify.two_mass import ShaftModes, driven_acceleration
 from hil.profile import load_profile
+from hil.recording import Recording
 from plant_sim.params import PlantParams
 
 AZIMUTH = load_profile("demo_gimbal_azimuth")
@@ -101,6 +102,15 @@ def _two_mass_units() -> list[tuple[PlantParams, ShaftModes]]:
     return units
 
 
+def _sines(plant: PlantParams, seed: int) -> tuple[protocol.Spec, list[Recording]]:
+    """The demo azimuth's J/B/T_c sines run on ``plant``."""
+    with SimDrive(plant, firmware=AZIMUTH.firmware, limits=AZIMUTH.limits,
+                  fs_hz=AZIMUTH.sample_rate_hz, seed=seed) as drive:
+        drive.enable()
+        spec = protocol.Spec.from_profile(AZIMUTH, drive.info)
+        return spec, [drive.run(e) for e in protocol.excitation(spec)]
+
+
 def test_the_sines_drive_the_load_through_the_shaft() -> None:
     """Left rigid, the ringing after each friction reversal biases B (−3.7 % on the demo
     azimuth, −6…+6 % over these units, the sign set by the shaft); driven through the
@@ -110,11 +120,7 @@ def test_the_sines_drive_the_load_through_the_shaft() -> None:
     rigid_errors, driven_errors = [], []
     for seed, (plant, modes) in enumerate(_two_mass_units()):
         gain = 1 + plant.torque_constant_error_rel
-        with SimDrive(plant, firmware=AZIMUTH.firmware, limits=AZIMUTH.limits,
-                      fs_hz=AZIMUTH.sample_rate_hz, seed=seed) as drive:
-            drive.enable()
-            spec = protocol.Spec.from_profile(AZIMUTH, drive.info)
-            recordings = [drive.run(e) for e in protocol.excitation(spec)]
+        spec, recordings = _sines(plant, seed)
         rigid = protocol.analyse(recordings, spec, current_loop_lag_s=lag_s)
         driven = protocol.analyse(recordings, spec, current_loop_lag_s=lag_s, shaft=modes)
         viscous, coulomb = plant.viscous_nm_s_rad / gain, plant.coulomb_nm / gain
@@ -161,11 +167,7 @@ def test_each_elevations_sines_drive_that_elevations_load() -> None:
         1 + plant.torque_constant_error_rel)
     rigid_z, driven_z = [], []
     for seed in range(3):
-        with SimDrive(zenith, firmware=AZIMUTH.firmware, limits=AZIMUTH.limits,
-                      fs_hz=AZIMUTH.sample_rate_hz, seed=seed) as drive:
-            drive.enable()
-            spec = protocol.Spec.from_profile(AZIMUTH, drive.info)
-            recordings = [drive.run(e) for e in protocol.excitation(spec)]
+        spec, recordings = _sines(zenith, seed)
         rigid = protocol.analyse(recordings, spec, current_loop_lag_s=lag_s)
         shaft = measured.with_total_inertia(rigid.inertia.value / level_truth)
         driven = protocol.analyse(recordings, spec, current_loop_lag_s=lag_s, shaft=shaft)
