@@ -126,7 +126,7 @@ def test_sim_runaway_torque_is_stopped(profile: UnitProfile) -> None:
 @pytest.fixture(params=["canopen-emulator",
                         pytest.param("modbus-emulator", marks=pytest.mark.realtime)])
 def field_backend(request: pytest.FixtureRequest,
-                profile: UnitProfile) -> Iterator[tuple[Drive, float]]:
+                  profile: UnitProfile) -> Iterator[tuple[Drive, float]]:
     with open_drive(request.param, profile=profile, unit_serial="M-1") as drive:
         yield drive, REACTION_S[request.param]
 
