@@ -53,7 +53,9 @@ Per frequency the run is cut into blocks of whole periods (all of them: the bloc
 at most one period); the phase uncertainty is the scatter of the block phases, each weighed
 by its periods (Type A). τ and B/J are a weighted least-squares fit of the
 phases; the standard uncertainty of τ is from the fit's covariance, scaled by
-``√(χ²/ν)`` when the scatter about the model exceeds the block estimate.
+``√(χ²/ν)`` when the scatter about the model exceeds the block estimate. The weights are
+themselves estimates (``blocks − 1`` degrees of freedom each), so τ's degrees of freedom
+are drawn (:mod:`hil.identify.scatter_weights`), not the blocks' pooled count.
 """
 
 from __future__ import annotations
@@ -70,6 +72,7 @@ from scipy.optimize import least_squares
 from hil.errors import IdentificationError
 from hil.identify.estimate import Estimate
 from hil.identify.harmonic_fit import fit_harmonics, polynomial_columns
+from hil.identify.scatter_weights import coverage_dof, draw_fits
 from hil.recording import EVERY_CONTROL_PERIOD
 
 FloatArray = NDArray[np.float64]
@@ -478,6 +481,11 @@ def _mean_phase_u_rad(phases: FloatArray, block_periods: IntArray) -> float:
     return math.sqrt(one_period_variance / float(np.sum(block_periods)))
 
 
+def scatter_dof(points: Sequence[FrequencyPoint]) -> FloatArray:
+    """Each phase's u is from its blocks' scatter: ``blocks − 1`` degrees of freedom."""
+    return np.array([p.blocks - 1 for p in points], dtype=np.float64)
+
+
 def lag_phase_residual(
     points: Sequence[FrequencyPoint], *, fs_hz: float, mean_samples: int
 ) -> Callable[[FloatArray], FloatArray]:
@@ -525,8 +533,9 @@ def fit_current_loop_lag(
     -------
     CurrentLoopResult
         τ as ``current_loop_time_constant_ms`` (Estimate in ms; its uncertainty scaled by
-        ``√(χ²/ν)`` when above one, with ``ν`` degrees of freedom then, else those of the
-        block scatter), B/J, J from the magnitudes and χ²/ν.
+        ``√(χ²/ν)`` when above one; its degrees of freedom those whose Student-t covers
+        the drawn fits' error/u, :func:`hil.identify.scatter_weights.coverage_dof`), B/J,
+        J from the magnitudes and χ²/ν.
 
     Raises
     ------
@@ -556,13 +565,13 @@ def fit_current_loop_lag(
         raise IdentificationError("τ and B/J are not separable over these frequencies") from exc
     inflation = max(1.0, chi2_per_dof) if dof > 0 else 1.0
     u_ms = math.sqrt(float(covariance[0, 0]) * inflation)
-    blocks = sum(p.blocks for p in points)
+    drawn = draw_fits(jacobian, scatter_dof(points))
     estimate = Estimate(
         name="current_loop_time_constant_ms",
         value=float(fit.x[0]),
         standard_uncertainty=u_ms,
         unit="ms",
-        dof=float(dof) if chi2_per_dof > 1.0 else float(blocks - len(points)),
+        dof=coverage_dof(drawn, np.array([1.0, 0.0]), inflated=inflation > 1.0),
         cramer_rao_std=math.sqrt(float(covariance[0, 0])),
     )
     fitted = sampled_response(

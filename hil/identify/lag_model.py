@@ -31,13 +31,19 @@ import numpy as np
 from scipy.optimize import least_squares
 
 from hil.gum import rounded_pair
-from hil.identify.current_loop import CurrentLoopResult, FloatArray, lag_phase_residual
+from hil.identify.current_loop import (
+    CurrentLoopResult,
+    FloatArray,
+    lag_phase_residual,
+    scatter_dof,
+)
 from hil.identify.estimate import Estimate
+from hil.identify.scatter_weights import DRAWS, chi2_p_value, coverage_dof, draw_fits
 
 #: below this probability of a χ² as large, the first-order lag is rejected
 ADEQUACY_P = 0.01
 #: draws of the χ²'s null distribution (the p-value's own sd is ~0.0007 at 0.01)
-NULL_DRAWS = 20_000
+NULL_DRAWS = DRAWS
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -66,6 +72,9 @@ class LagModelCheck:
         fit determines sharply where it cannot split the two, and its standard uncertainty.
     low_frequency_lag_crb_ms : float or None
         That sum's standard deviation from the fit's weights alone (its Cramér–Rao bound).
+    low_frequency_lag_dof : float or None
+        Its degrees of freedom, drawn as the first-order τ's are
+        (:func:`hil.identify.scatter_weights.coverage_dof`).
     first_order_ms : float or None
         The first-order τ', the equivalent of τ and d over the band.
     """
@@ -81,6 +90,7 @@ class LagModelCheck:
     low_frequency_lag_ms: float | None = None
     low_frequency_lag_u_ms: float | None = None
     low_frequency_lag_crb_ms: float | None = None
+    low_frequency_lag_dof: float | None = None
     first_order_ms: float | None = None
 
     @property
@@ -146,6 +156,7 @@ def check_lag_model(result: CurrentLoopResult, *, fs_hz: float, hold_s: float | 
     chi2_per_dof = float(np.sum(fit.fun**2)) / (len(result.points) - 3)
     scale = max(1.0, chi2_per_dof)
     sum_variance = float(covariance[0, 0] + covariance[2, 2] + 2 * covariance[0, 2])
+    drawn = draw_fits(jacobian, scatter_dof(result.points))
     return LagModelCheck(
         chi2_per_dof=result.chi2_per_dof, dof=dof, p_value=p_value,
         dead_time_ms=float(fit.x[2]), dead_time_u_ms=math.sqrt(covariance[2, 2] * scale),
@@ -154,6 +165,7 @@ def check_lag_model(result: CurrentLoopResult, *, fs_hz: float, hold_s: float | 
         low_frequency_lag_ms=float(fit.x[0] + fit.x[2]),
         low_frequency_lag_u_ms=math.sqrt(sum_variance * scale),
         low_frequency_lag_crb_ms=math.sqrt(sum_variance),
+        low_frequency_lag_dof=coverage_dof(drawn, np.array([1.0, 0.0, 1.0]), inflated=scale > 1.0),
         first_order_ms=tau_ms,
     )
 
@@ -164,27 +176,14 @@ def null_p_value(result: CurrentLoopResult, *, fs_hz: float, hold_s: float | Non
 
     Each phase's weight is its block scatter's, an estimate with ``blocks − 1`` degrees of
     freedom, so each term of the χ² is an F(1, blocks − 1) rather than a χ²₁ (with 5 blocks
-    the 1 % point of one term is 21.2, not 6.6). The null is drawn: the phases' errors and
-    their variance estimates, fitted by the linearised model (``draws`` draws, a fixed
-    stream, so one recording always gets one answer).
+    the 1 % point of one term is 21.2, not 6.6). The null is drawn
+    (:func:`hil.identify.scatter_weights.draw_fits`).
     """
     rate_hz = fs_hz if hold_s is None else 1.0 / hold_s
     residual = lag_phase_residual(result.points, fs_hz=rate_hz, mean_samples=mean_samples)
     x = np.array([result.time_constant.value, result.viscous_over_inertia_1_s])
-    design = _jacobian(residual, x)
-    dof_each = np.array([p.blocks - 1 for p in result.points], dtype=np.float64)
-    rng = np.random.default_rng(0)
-    errors = rng.standard_normal((draws, len(dof_each)))
-    variance_ratio = rng.chisquare(dof_each, size=(draws, len(dof_each))) / dof_each
-    weights = 1.0 / variance_ratio
-    weighted_design = weights[:, :, None] * design[None, :, :]
-    normal = np.einsum("dik,il->dkl", weighted_design, design)
-    right = np.einsum("dik,di->dk", weighted_design, errors)
-    beta = np.linalg.solve(normal, right[:, :, None])[:, :, 0]
-    misfit = errors - np.einsum("ik,dk->di", design, beta)
-    statistic = np.sum(weights * misfit**2, axis=1)
-    observed = result.chi2_per_dof * (len(result.points) - 2)
-    return float((1 + np.count_nonzero(statistic >= observed)) / (1 + draws))
+    fits = draw_fits(_jacobian(residual, x), scatter_dof(result.points), draws=draws)
+    return chi2_p_value(fits, result.chi2_per_dof * (len(result.points) - 2))
 
 
 def _jacobian(residual: Callable[[FloatArray], FloatArray], x: FloatArray) -> FloatArray:
@@ -212,15 +211,14 @@ def certified(result: CurrentLoopResult, check: LagModelCheck) -> CurrentLoopRes
     -------
     CurrentLoopResult
         ``result`` itself, or with ``time_constant`` the sum, its u from the dead-time fit
-        (scaled by √(χ²/ν) above one, then with that fit's ν degrees of freedom).
+        (scaled by √(χ²/ν) above one) with its drawn degrees of freedom.
     """
     if (check.low_frequency_lag_ms is None or check.low_frequency_lag_u_ms is None
-            or check.dead_time_chi2_per_dof is None):
+            or check.low_frequency_lag_dof is None):
         return result
     first = result.time_constant
-    dof = (float(len(result.points) - 3) if check.dead_time_chi2_per_dof > 1.0
-           else first.dof)
     lag = Estimate(name=first.name, value=check.low_frequency_lag_ms,
-                   standard_uncertainty=check.low_frequency_lag_u_ms, unit=first.unit, dof=dof,
+                   standard_uncertainty=check.low_frequency_lag_u_ms, unit=first.unit,
+                   dof=check.low_frequency_lag_dof,
                    cramer_rao_std=check.low_frequency_lag_crb_ms)
     return replace(result, time_constant=lag)

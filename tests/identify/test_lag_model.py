@@ -13,7 +13,9 @@ import pytest
 
 from hil.drives.sim import SimDrive
 from hil.identify.current_loop import FrequencyPoint, fit_current_loop_lag, sampled_response
+from hil.identify.estimate import coverage_factor
 from hil.identify.lag_model import ADEQUACY_P, check_lag_model
+from hil.identify.scatter_weights import coverage_dof, draw_fits
 from hil.profile import load_profile
 from hil.suite import current_loop as protocol
 from plant_sim.firmware import Firmware
@@ -138,3 +140,30 @@ def test_a_first_order_lag_is_rejected_at_the_stated_rate(blocks: int) -> None:
     # binomial: at 1 %, 6 expected, ≥ 16 has probability < 1e-3; at 20 %, 120 ± 10
     assert np.count_nonzero(p_values < ADEQUACY_P) < 16
     assert 90 < np.count_nonzero(p_values < 0.2) < 150
+
+
+def test_tau_covers_at_its_stated_rate_in_each_branch_of_its_weights() -> None:
+    """Each phase weighs by its own 5 blocks' scatter. Fits whose misfit stayed below its
+    expectation (u as fitted) and fits whose u was widened by √(χ²/ν) each keep 95.45 %
+    within ±U: the pooled 20 degrees of freedom gave the first 90 % and ν = 3 the second
+    99 % over these draws."""
+    rng = np.random.default_rng(3)
+    within: dict[bool, list[bool]] = {True: [], False: []}
+    for _ in range(800):
+        result = fit_current_loop_lag(_first_order_points(rng, blocks=5), fs_hz=4000.0)
+        tau = result.time_constant
+        within[result.chi2_per_dof > 1.0].append(abs(tau.value - 0.3) <= tau.expanded_uncertainty)
+    for widened, hits in within.items():
+        n = len(hits)
+        sd = math.sqrt(0.9545 * 0.0455 / n)
+        assert n > 250, widened
+        assert abs(np.mean(hits) - 0.9545) < 3 * sd, (widened, n, np.mean(hits))
+
+
+def test_many_blocks_per_phase_make_tau_normal() -> None:
+    """With weights known all but exactly, τ's k is the normal's 2."""
+    design = np.array([[1.0, 0.2], [1.0, 0.5], [1.0, 1.0], [1.0, 1.5], [1.0, 2.0]])
+    drawn = draw_fits(design, np.full(5, 1e6))
+    assert coverage_factor(coverage_dof(drawn, np.array([1.0, 0.0]), inflated=False)) == 2.0
+    few = draw_fits(design, np.full(5, 4.0))
+    assert 2.0 < coverage_factor(coverage_dof(few, np.array([1.0, 0.0]), inflated=False)) < 3.0
