@@ -4,7 +4,9 @@ Each phase of the current-loop fit is weighted by the scatter of its own few blo
 estimate with ``blocks − 1`` degrees of freedom). A point whose scatter came out low by
 chance weighs too much, and the fit's ``t = error/u`` is heavier-tailed than the Student-t
 of the pooled degrees of freedom: over the demo azimuth's eight phases of 10 blocks each,
-``|t| > 2`` in 10 % of fits, not 5 %, and ``|t| > 4.8`` in 0.07 % (a normal: 2·10⁻⁶).
+with u as fitted ``|t| > 2`` in 10 % of fits, not 5 %, and ``|t| > 4.8`` in 0.07 % (a
+normal: 2·10⁻⁶). Widening u by ``√(χ²/ν)`` where that exceeds one takes much of the tail
+out of the fits it widens and leaves the others with less of it; each branch has its own.
 
 :func:`draw_fits` simulates that fit under its linearised model (the phases' errors and
 their variance estimates drawn, a fixed stream, so one recording always gets one answer);
