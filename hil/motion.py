@@ -33,6 +33,10 @@ class Limits:
     travel_max_rad: float
 
 
+#: ``Excitation.metadata[PURPOSE]`` of a move no protocol analyses
+PURPOSE, POSITIONING = "purpose", "positioning"
+
+
 @dataclass(frozen=True, slots=True, kw_only=True)
 class Excitation:
     """A sampled command trajectory: one sample per control period at ``fs_hz``.
@@ -65,6 +69,11 @@ class Excitation:
     @property
     def duration_s(self) -> float:
         return len(self.command) / self.fs_hz
+
+    @property
+    def positioning(self) -> bool:
+        """A move that only takes the axis somewhere: no protocol analyses its rows."""
+        return self.metadata.get(PURPOSE) == POSITIONING
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)

@@ -13,7 +13,7 @@ from hil.config import ConfigTable
 from hil.drives.base import DriveInfo
 from hil.errors import IdentificationError, ProfileError
 from hil.identify.moves import position_move, travel_shortfall_rad
-from hil.motion import Excitation, Mode
+from hil.motion import POSITIONING, PURPOSE, Excitation, Mode
 from hil.profile import UnitProfile
 from hil.recording import Recording
 from hil.suite.rate import needed_sample_rate_hz
@@ -53,7 +53,8 @@ def move_excitation(
     command = position_move(
         position_rad, target_rad, fs_hz=fs_hz, speed_rad_s=speed_rad_s, hold_s=hold_s
     )
-    return Excitation(name=name, mode=Mode.POSITION, fs_hz=fs_hz, command=command)
+    return Excitation(name=name, mode=Mode.POSITION, fs_hz=fs_hz, command=command,
+                      metadata={PURPOSE: POSITIONING})
 
 
 def runs_from_start(spec: TravelSpec, runs: Iterable[Excitation], *,

@@ -8,6 +8,8 @@ the drive's control-cycle clock, latched with the feedback it belongs to.
 
 from __future__ import annotations
 
+import dataclasses
+import logging
 import math
 import time
 from pathlib import Path
@@ -326,6 +328,27 @@ def test_a_master_behind_its_setpoint_lead_is_refused_in_one_line() -> None:
     assert "held for 60 ms of 5 s" in message
     assert "lead (3 periods)" in message
     assert "setpoint_lead_periods in bench.toml (to 8 for pauses like this one)" in message
+
+
+def test_a_positioning_move_behind_its_lead_is_not_refused(
+        caplog: pytest.LogCaptureFixture) -> None:
+    """A move only takes the axis somewhere: a host stall that held its setpoint delays its
+    arrival, and no protocol reads its rows, so it is logged, not refused; the same command
+    as an analysed excitation is refused."""
+    from hil.drives.modbus.acquire import PolledRun, setpoint_holds
+    from hil.suite.travel import move_excitation
+
+    station = ModbusStation(transport="tcp", register_map_path=REGMAP, source="bench.toml")
+    move = move_excitation("move_to_start", 0.0, 0.3, fs_hz=100.0, speed_rad_s=1.0, hold_s=0.1)
+    held = PolledRun(setpoint_held_s=0.01, longest_pause_s=0.04)  # one 40 ms stall
+    assert move.positioning
+    assert held.setpoint_held_s > 0.01 * move.duration_s
+    with caplog.at_level(logging.WARNING, logger="hil.drives.modbus.acquire"):
+        assert setpoint_holds(move, held, station, "drive") is None
+    assert "a positioning move, not refused" in caplog.text
+    analysed = dataclasses.replace(move, name="sines", metadata={})
+    assert not analysed.positioning
+    assert setpoint_holds(analysed, held, station, "drive") is not None
 
 
 def test_an_emulator_takes_the_station_files_settings(tmp_path: Path,
