@@ -32,6 +32,10 @@ from plant_sim.model import PlantTrace
 
 # the wall clock times its field-bus loops: run alone, not beside other tests (README)
 pytestmark = pytest.mark.realtime
+# tests whose subject is not the setpoint lead send 6 periods ahead: one 40–60 ms stall of
+# the host (seen on CI's VM; a stall injector refused a 1.5 s sine for 25 ms held at the
+# built-in 3) is then bridged, and the run is judged on what it tests
+STALL_PROOF = {"setpoint_lead_periods": 6}
 
 REGMAP = builtin_station("regmap_gimbal_hil_servo.toml")
 CONTROL_PERIOD_S = 1 / 4000.0  # the demo unit's drive loop
@@ -111,7 +115,7 @@ def _derivative_error(recording: Recording) -> float:
 def test_samples_are_timed_by_the_drive_clock(profile: UnitProfile) -> None:
     """Regression (issue 4): each time stamp is the time of the state stored with it."""
     with (
-        modbus_emulator(profile, seed=3) as (_, station),
+        modbus_emulator(profile, seed=3, station_changes=STALL_PROOF) as (_, station),
         ModbusDrive(station, limits=profile.limits) as drive,
     ):
         fs = drive.info.max_sample_rate_hz
@@ -203,7 +207,7 @@ def test_inertia_friction_over_modbus_within_tolerance(profile: UnitProfile) -> 
     loaded runner), wider than its tolerance; the full suite judges it with its U."""
     from hil.suite.inertia_friction import Spec, analyse, excitation
 
-    bench = {"max_poll_rate_hz": 100.0, "setpoint_lead_periods": 6}
+    bench = {"max_poll_rate_hz": 100.0, **STALL_PROOF}
     with (
         modbus_emulator(profile, seed=5, station_changes=bench) as (_, station),
         ModbusDrive(station, limits=profile.limits) as drive,
@@ -297,10 +301,8 @@ def test_torque_mean_is_the_mean_since_the_previous_row(profile: UnitProfile) ->
 def test_instantaneous_torque_on_request(profile: UnitProfile) -> None:
     """``torque_sample = "instantaneous"`` keeps the torque register (one control period)."""
     with (
-        modbus_emulator(profile, seed=4, station_changes={"torque_sample": "instantaneous"}) as (
-            _,
-            station,
-        ),
+        modbus_emulator(profile, seed=4, station_changes={"torque_sample": "instantaneous",
+                                                          **STALL_PROOF}) as (_, station),
         ModbusDrive(station, limits=profile.limits) as drive,
     ):
         fs = min(drive.info.max_sample_rate_hz, 100.0)
