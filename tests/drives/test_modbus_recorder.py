@@ -346,7 +346,7 @@ def _miss(axis: str, found: dict[str, Any], truth: float, loop: dict[str, Any],
 # and with four values one run in 6: over 28 runs by hand the recorder's error/u had RMS
 # 1.03 (elevation τ, one at 2.85) and 1.04 (azimuth τ), over 82 in session 34 0.89 (azimuth
 # τ, largest 2.45); U's 95 % is measured over populations (tests/test_coverage.py), not in
-# one run. CI once (stop 48) saw the azimuth's τ 2.4 U off (4.8 u, k 2 from the pooled 72
+# one run. CI once (stop 47) saw the azimuth's τ 2.4 U off (4.8 u, k 2 from the pooled 72
 # degrees of freedom): under the drawn fits a 10⁻⁴ event, not reproduced in 82 runs nor in
 # 1600 of the simulator; the message now carries the fit's phases to tell a tail from a fault.
 SINGLE_RUN_BOUND_U = 2.0
