@@ -17,6 +17,7 @@ import pytest
 from hil.cli import main
 from hil.config import builtin_fixture
 from tests.compare.firmware_variants import firmware_setting, with_firmware, write_profile
+from tests.helpers import modbus_bench_station
 
 # the wall clock times its field-bus loops: run alone, not beside other tests (README)
 pytestmark = [pytest.mark.slow, pytest.mark.realtime]
@@ -24,24 +25,12 @@ pytestmark = [pytest.mark.slow, pytest.mark.realtime]
 PROFILE = "demo_gimbal_elevation"
 
 
-def _bench_lead(station: Path, bench: Path) -> Path:
-    """The Modbus emulator's station sending its setpoints 6 periods ahead (60 ms at 100 Hz):
-    a host pause of 38–50 ms on CI's shared runner outlasts the built-in 3 and the run is
-    refused, rightly; comparing firmware is this file's business, pauses
-    ``tests/drives/test_modbus_timing.py``'s."""
-    text = station.read_text(encoding="utf-8")
-    assert "setpoint_lead_periods = 3 " in text
-    bench.parent.mkdir(parents=True, exist_ok=True)
-    bench.write_text(text.replace("setpoint_lead_periods = 3 ", "setpoint_lead_periods = 6 "),
-                     encoding="utf-8")
-    return bench
-
-
 def calibrate(document: dict[str, Any], out: Path, *, drive: str, only: str,
               seed: int = 0) -> Path:
     station = builtin_fixture(f"station_{drive.removesuffix('-emulator')}_emulator.toml")
-    if drive == "modbus-emulator":  # setpoints 6 periods ahead, as test_locked_rotor's bench
-        station = _bench_lead(station, out / "bench.toml")
+    if drive == "modbus-emulator":  # comparing firmware is this file's business, a host
+        # pause the timing tests': setpoints sent 6 periods ahead, as test_locked_rotor's
+        station = modbus_bench_station(out / "bench.toml")
     profile = write_profile(document, out / "profile.toml")
     done = subprocess.run(
         [sys.executable, "-m", "hil.cli", "calibrate", "--drive", drive, "--station",

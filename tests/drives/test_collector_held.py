@@ -19,6 +19,7 @@ from hil.drives.cia402.drive import CanOpenDrive
 from hil.drives.emulated import canopen_emulator, modbus_emulator
 from hil.drives.modbus.drive import ModbusDrive
 from hil.profile import UnitProfile
+from tests.helpers import BENCH_LEAD_PERIODS
 
 # the wall clock times its field-bus loops: run alone, not beside other tests (README)
 pytestmark = pytest.mark.realtime
@@ -68,7 +69,8 @@ def test_no_collection_runs_during_an_excitation(profile: UnitProfile, kind: str
     # the churning thread shares the GIL with the host and the in-process emulator: pauses
     # of up to 51 ms in 15 runs at 100 Hz (20-26 ms without it), beyond the Modbus station's
     # default lead of 3 periods; a lead of 6 bridges them (the subject here is the collector)
-    lead = {"station_changes": {"setpoint_lead_periods": 6}} if kind == "modbus" else {}
+    lead = ({"station_changes": {"setpoint_lead_periods": BENCH_LEAD_PERIODS}}
+            if kind == "modbus" else {})
     with (emulator(profile, seed=3, **lead) as (_, station),
           backend(station, limits=profile.limits) as drive):
         drive.enable()

@@ -25,6 +25,7 @@ from hil.drives.equipment import Equipment
 from hil.drives.station import load_station
 from hil.errors import DriveCommunicationError, DriveStateError, ProfileError
 from hil.profile import UnitProfile, load_profile
+from tests.helpers import modbus_bench_station
 
 PROFILE = builtin_fixture("demo_gimbal_elevation.toml")
 
@@ -67,11 +68,7 @@ def test_kt_over_the_modbus_emulator_agrees_with_the_simulator(tmp_path: Path) -
     50 ms on CI's shared runner (a dry run of session 20; 2 of 22 runs in session 19, in
     the moves between locked sweeps) stopped it before K_t, rightly. What a pause does to a
     run is ``tests/drives/test_modbus_timing.py``'s business."""
-    bench = tmp_path / "bench.toml"
-    text = builtin_fixture("station_modbus_emulator.toml").read_text(encoding="utf-8")
-    assert "setpoint_lead_periods = 3 " in text
-    bench.write_text(text.replace("setpoint_lead_periods = 3 ", "setpoint_lead_periods = 6 "),
-                     encoding="utf-8")
+    bench = modbus_bench_station(tmp_path / "bench.toml")
     check_agreement(kt_result(tmp_path, "modbus-emulator", "--station", str(bench)),
                     kt_result(tmp_path, "sim"))
 

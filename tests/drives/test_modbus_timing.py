@@ -29,13 +29,14 @@ from hil.motion import Excitation, Mode
 from hil.profile import UnitProfile
 from hil.recording import Recording
 from plant_sim.model import PlantTrace
+from tests.helpers import BENCH_LEAD_PERIODS
 
 # the wall clock times its field-bus loops: run alone, not beside other tests (README)
 pytestmark = pytest.mark.realtime
 # tests whose subject is not the setpoint lead send 6 periods ahead: one 40–60 ms stall of
 # the host (seen on CI's VM; a stall injector refused a 1.5 s sine for 25 ms held at the
 # built-in 3) is then bridged, and the run is judged on what it tests
-STALL_PROOF = {"setpoint_lead_periods": 6}
+STALL_PROOF = {"setpoint_lead_periods": BENCH_LEAD_PERIODS}
 
 REGMAP = builtin_station("regmap_gimbal_hil_servo.toml")
 CONTROL_PERIOD_S = 1 / 4000.0  # the demo unit's drive loop
