@@ -33,18 +33,7 @@ def certificate(tmp_path_factory: pytest.TempPathFactory) -> dict[str, object]:
     return document
 
 
-B_NOT_HELD = pytest.mark.xfail(strict=True, reason=(
-    "B reads 0.00638 for 0.00495 N·m·s/rad (+29 %, U 0.00109). Traced (benchmarks/"
-    "RESULTS.md, session 26): the 500 Hz rows sample the 4 kHz loop's torque at one instant, "
-    "its chatter aliases into the gravity sweep and the cable loop comes out 4-15 x less "
-    "determined (h 0.00063 ± 0.00052 N·m, s0 0.058 ± 0.17 rad for 0.001, 0.02): about 11 of "
-    "the 29 points, beyond the loop's linear budget line; with the true loop this run's sines "
-    "read +17.5 %, where fresh runs of this path average +7 % (sd 8 %) (issue 30)"))
-
-
-@pytest.mark.parametrize("name", ["inertia_kg_m2",
-                                  pytest.param("viscous_nm_s_rad", marks=B_NOT_HELD),
-                                  "coulomb_nm"])
+@pytest.mark.parametrize("name", ["inertia_kg_m2", "viscous_nm_s_rad", "coulomb_nm"])
 def test_j_b_and_coulomb_hold_the_emulated_truth(certificate: dict[str, object],
                                                  name: str) -> None:
     plant = load_profile(PROFILE).plant  # the truth: the test reads it, the harness does not

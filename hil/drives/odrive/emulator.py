@@ -101,6 +101,8 @@ class OdriveFaults:
     heartbeat_stops_after_s: float | None = None
     drop_torques_every: int = 0  # in closed loop, every n-th period's Get_Torques not sent
     silent_after_s: float | None = None
+    late_frames_every: int = 0  # every n-th period's messages go out late_frames_s late
+    late_frames_s: float = 0.0  # (the node or the bus busy: wall clock only)
 
 
 class OdriveEmulator:
@@ -372,6 +374,9 @@ class OdriveEmulator:
             self.periods += 1
             frames = self._due(self._steps_done - self.steps_per_period, self._steps_done)
             stamp_s = self._epoch_s + self._steps_done / self.fs_hz
+        every = self.faults.late_frames_every
+        if every and self.periods % every == 0:
+            time.sleep(self.faults.late_frames_s)
         for cmd, data in frames:
             self._send(cmd, data, stamp_s if self.pacing == "realtime" else None)
 

@@ -132,11 +132,22 @@ class OdriveLink:
     def command(self, cmd: int, data: bytes) -> None:
         """Send a setpoint (Set_Input_*): remembered as the hold :meth:`step` repeats."""
         self._last_command = (cmd, data)
-        self.send(cmd, data)
+        self._setpoint(cmd, data)
 
     def step(self) -> None:
         """Repeat the last setpoint (in lockstep: one feedback period of the emulator)."""
-        self.send(*self._last_command)
+        self._setpoint(*self._last_command)
+
+    def _setpoint(self, cmd: int, data: bytes) -> None:
+        """In lockstep a setpoint steps one period of the emulator, whose set is awaited
+        here: it is then the only one :meth:`lockstep_feedback` can take, and ``latest``,
+        however slowly the emulator ran (a set left untaken by a hold would otherwise be
+        taken for the next period's, or not, as the threads happened to run)."""
+        if self.lockstep:
+            self._sets.clear()
+        self.send(cmd, data)
+        if self.lockstep:
+            self._await_lockstep_set()
 
     def feed_while_idle(self) -> None:
         """On a station declaring the ODrive's watchdog (realtime): repeat the hold command
@@ -277,14 +288,21 @@ class OdriveLink:
             self._process(message)
 
     def lockstep_feedback(self) -> Feedback | None:
-        """Lockstep: the set of the period just stepped, or None when it was lost. Waits
-        briefly, then settles (:meth:`settle_lockstep`): a late set is still taken for its
-        own period, a lost one costs one round trip, not ``frame_timeout_s``."""
-        feedback = self.next_feedback(min(LOCKSTEP_WAIT_S, self.station.frame_timeout_s))
-        if feedback is None:
-            self.settle_lockstep()
-            feedback = self.next_feedback(0.0)
-        return feedback
+        """Lockstep: the set of the period the last setpoint stepped, or None when it was
+        lost (or already taken)."""
+        return self._sets.popleft() if self._sets else None
+
+    def _await_lockstep_set(self) -> None:
+        """Wait briefly for the set of the period just stepped, then settle
+        (:meth:`settle_lockstep`): a late set is still taken for its own period, a lost one
+        costs one round trip, not ``frame_timeout_s``."""
+        deadline = time.monotonic() + min(LOCKSTEP_WAIT_S, self.station.frame_timeout_s)
+        while not self._sets:
+            left = deadline - time.monotonic()
+            if left <= 0:
+                self.settle_lockstep()
+                return
+            self.pump(left)
 
     def settle_lockstep(self) -> None:
         """After a feedback set did not come in lockstep: ask the node for its version and
