@@ -48,7 +48,6 @@ from hil.identify.orders import (
     segment_amplitudes,
 )
 from hil.identify.quantisation import quantisation_step
-from hil.identify.regression import newey_west_covariance, newey_west_lags
 
 FloatArray = NDArray[np.float64]
 COMPENSATION_FORMAT = "gimbal-hil cogging compensation 1"
@@ -255,6 +254,74 @@ def _local_median(q: FloatArray, near: NDArray[np.bool_], free: NDArray[np.bool_
     return float(np.median(q[near] if np.count_nonzero(near) >= 10 else q[free]))
 
 
+def local_noise_variance(design: FloatArray, residual: FloatArray, theta: FloatArray,
+                         orders: list[int], *, scanned: tuple[int, int]) -> FloatArray:
+    """The residual's variance per sample as each fitted order sees it (N·m²), from its
+    own harmonics at the orders nearby.
+
+    The residual is not white (the velocity loop's chatter on the encoder's steps, its
+    lag, coloured torque noise), so neither its overall variance nor an autocorrelation-
+    consistent covariance (whose lag window smooths the spectrum towards zero frequency:
+    1.5 × too wide in variance over simulated elevation units) gives an order's error.
+    The residual's own component at a free order ``k`` (the columns ``cos kθ, sin kθ``
+    added to the fit) is ``eᵀP_k e ~ σ²(k)·χ²(2)`` about the local level ``σ²(k)``; the
+    median over the free orders within :data:`RIPPLE_FLOOR_WINDOW` of each fitted order
+    (or over every free one when fewer than 10), divided by ``2 ln 2``, is that order's
+    level. Orders within two of a fitted one (its leakage, the K_t ripple's sidebands) are
+    not free.
+
+    Parameters
+    ----------
+    design : ndarray, shape (n, p)
+        The fit's columns (smooth trend, then the fitted orders).
+    residual : ndarray, shape (n,)
+        Its residual.
+    theta : ndarray, shape (n,)
+        The position (rad).
+    orders : list of int
+        The fitted orders, in the design's order.
+    scanned : (int, int)
+        The order range the free orders are taken from.
+
+    Returns
+    -------
+    ndarray, shape (len(orders),)
+    """
+    ks = np.arange(scanned[0], scanned[1] + 1)
+    free = np.ones(ks.size, dtype=bool)
+    for k in orders:
+        free &= np.abs(ks - k) > 2
+    candidates = ks[free]
+    if candidates.size == 0:
+        return np.full(len(orders), float(residual @ residual) / max(len(residual) - 1, 1))
+    # cos kθ and sin kθ of the candidate orders, each from the one before by the angle-sum
+    # rule (no trig per order)
+    angle = np.asarray(theta, dtype=np.float64)
+    steps = {int(d): (np.cos(d * angle), np.sin(d * angle))
+             for d in np.unique(np.diff(candidates))}
+    cos = np.empty((candidates.size, len(angle)))
+    sin = np.empty_like(cos)
+    cos[0], sin[0] = np.cos(candidates[0] * angle), np.sin(candidates[0] * angle)
+    for j in range(1, candidates.size):
+        c_d, s_d = steps[int(candidates[j] - candidates[j - 1])]
+        cos[j] = cos[j - 1] * c_d - sin[j - 1] * s_d
+        sin[j] = sin[j - 1] * c_d + cos[j - 1] * s_d
+    cos, sin = cos.T, sin.T
+    # each pair's Gram with the fit's columns taken out: CᵀC − (XᵀC)ᵀ(XᵀX)⁻¹(XᵀC)
+    gram_inv = np.linalg.inv(design.T @ design)
+    xc, xs = design.T @ cos, design.T @ sin
+    c11 = np.einsum("ij,ij->j", cos, cos) - np.einsum("ij,ij->j", xc, gram_inv @ xc)
+    c12 = np.einsum("ij,ij->j", cos, sin) - np.einsum("ij,ij->j", xc, gram_inv @ xs)
+    c22 = np.einsum("ij,ij->j", sin, sin) - np.einsum("ij,ij->j", xs, gram_inv @ xs)
+    b1, b2 = residual @ cos, residual @ sin  # the residual is orthogonal to the design
+    det = c11 * c22 - c12**2
+    quadratic = (c22 * b1**2 - 2 * c12 * b1 * b2 + c11 * b2**2) / det  # eᵀP_k e
+    near_all = np.ones(candidates.size, dtype=bool)
+    levels = [_local_median(quadratic, np.abs(candidates - k) <= RIPPLE_FLOOR_WINDOW, near_all)
+              for k in orders]
+    return np.asarray(levels, dtype=np.float64) / (2 * math.log(2))
+
+
 def _ripple_peak(ripple: tuple[HarmonicEstimate, ...], *, detection_limit: float) -> Estimate:
     """``kt_ripple_peak_pct``: the largest significant ripple harmonic or, when none stands
     out of its noise, a value known only to lie between 0 and the detection limit
@@ -363,14 +430,14 @@ def identify_cogging(
         # dithered quantisation is in the residual already; never claim less than it
         sigma2 = max(float(residual @ residual) / dof, lsb**2 / 12)
         # the torque left after the fit is mostly the velocity loop's chatter on the
-        # encoder's steps, anti-correlated from sample to sample: an autocorrelation-
-        # consistent covariance (white: 4 × too wide over simulated units), never below
-        # what dithered quantisation alone leaves (LSB²/12 white)
-        cov = newey_west_covariance(design, residual, lags=newey_west_lags(len(residual)))
-        floor = lsb**2 / 12 * np.diag(np.linalg.inv(design.T @ design))
-        cov[np.diag_indices_from(cov)] = np.maximum(np.diag(cov), floor)
+        # encoder's steps, not white: each order's coefficients take the residual's own
+        # level at nearby orders (:func:`local_noise_variance`), never below what
+        # dithered quantisation alone leaves (LSB²/12 white)
+        cofactor = np.diag(np.linalg.inv(design.T @ design))[poly + 1:]
+        level = local_noise_variance(design, residual, theta, orders,
+                                     scanned=(min_order, max_order))
+        var = np.maximum(np.repeat(level, 2), lsb**2 / 12) * cofactor
         harmonic = coef[poly + 1:]
-        var = np.diag(cov)[poly + 1:]
         # position ripple about the trend, in the same θ-harmonic basis
         trend = np.polyfit(time_s, theta, 1)
         ripple_design = _design(theta, orders, 2, centre, scale)

@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from scipy.signal import lfilter
 
 from hil.errors import IdentificationError
 from hil.identify.cogging import (
@@ -84,6 +85,44 @@ def test_compensation_table_keeps_significant_harmonics_only() -> None:
     assert isinstance(cogging, list)
     assert 84 in [row["order"] for row in cogging]
     assert all(row["amplitude_nm"] > 3 * row["amplitude_u_nm"] for row in cogging)
+
+
+def coloured_pass(sign: float, level: float, *, rng: np.random.Generator, fs_hz: float,
+                  sigma_nm: float) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """:func:`synthetic_pass`'s torque at ``fs_hz`` with noise that is not white: a loop's
+    chatter (``w_t − 0.8·w_{t−1}``, little power at the orders' low frequencies) on a
+    slow wander (first-order, 1 s), as a velocity loop on encoder steps leaves it."""
+    n = round(2.4 / 0.4 * fs_hz)
+    t = np.arange(n) / fs_hz
+    theta = -1.2 + 0.4 * t if sign > 0 else 1.2 - 0.4 * t
+    cog = 0.0005 * np.sin(84 * theta + 0.3) + 0.0002 * np.sin(120 * theta - 1.0)
+    ripple = 0.01 * np.sin(42 * theta + 0.5)
+    white = rng.normal(0, sigma_nm, n + 1)
+    chatter = white[1:] - 0.8 * white[:-1]
+    wander = lfilter([1.0], [1.0, -math.exp(-1 / fs_hz)], rng.normal(0, 0.01 * sigma_nm, n))
+    torque = (level + 0.015 * np.cos(theta) + 0.004 * theta + cog) / (1 + ripple)
+    return t, theta, torque + chatter + wander
+
+
+def test_the_harmonics_uncertainty_follows_the_noise_at_their_own_orders() -> None:
+    """Over noise that is not white, each harmonic's stated u matches its error: the RMS of
+    error/u near 1 and ±2u holding the truth at about its rate, for the K_t ripple and
+    the cogging peak (an autocorrelation-consistent covariance read this noise's level at
+    zero frequency through its lag window: RMS of error/u about 0.5)."""
+    rng = np.random.default_rng(20261130)
+    ripple_z, cogging_z = [], []
+    for _ in range(120):
+        passes = [coloured_pass(sign, level, rng=rng, fs_hz=500.0, sigma_nm=0.001)
+                  for sign, level in ((1, 0.05), (-1, -0.05))]
+        result = identify_cogging(passes, inertia_kg_m2=0.0, min_order=10, max_order=200)
+        ripple, cogging = result.kt_ripple_peak, result.cogging_peak
+        ripple_z.append((ripple.value - 1.0) / ripple.standard_uncertainty)
+        cogging_z.append((cogging.value - 0.0005) / cogging.standard_uncertainty)
+    for name, z in (("ripple", np.array(ripple_z)), ("cogging", np.array(cogging_z))):
+        rms = float(np.sqrt(np.mean(z**2)))
+        held = float(np.mean(np.abs(z) <= 2))
+        assert 0.8 < rms < 1.25, (name, rms, held)
+        assert 0.88 <= held <= 0.99, (name, rms, held)  # 95.4 % ± 3 binomial SDs (120)
 
 
 def run_demo_plant(seed: int, cogging: tuple[Harmonic, ...],
