@@ -107,8 +107,8 @@ def coloured_pass(sign: float, level: float, *, rng: np.random.Generator, fs_hz:
 def test_the_harmonics_uncertainty_follows_the_noise_at_their_own_orders() -> None:
     """Over noise that is not white, each harmonic's stated u matches its error: the RMS of
     error/u near 1 and ±2u holding the truth at about its rate, for the K_t ripple and
-    the cogging peak (an autocorrelation-consistent covariance read this noise's level at
-    zero frequency through its lag window: RMS of error/u about 0.5)."""
+    the cogging peak (the Newey–West covariance used before read this noise's level near
+    zero frequency through its lag window: the ripple's RMS of error/u 0.72, ±2u 100 %)."""
     rng = np.random.default_rng(20261130)
     ripple_z, cogging_z = [], []
     for _ in range(120):
