@@ -254,10 +254,11 @@ def _local_median(q: FloatArray, near: NDArray[np.bool_], free: NDArray[np.bool_
     return float(np.median(q[near] if np.count_nonzero(near) >= 10 else q[free]))
 
 
-def local_noise_variance(design: FloatArray, residual: FloatArray, theta: FloatArray,
-                         orders: list[int], *, scanned: tuple[int, int]) -> FloatArray:
-    """The residual's variance per sample as each fitted order sees it (N·m²), from its
-    own harmonics at the orders nearby.
+def harmonic_variances(design: FloatArray, residual: FloatArray, theta: FloatArray,
+                       orders: list[int], *, scanned: tuple[int, int],
+                       floor: float) -> FloatArray:
+    """Variance of each fitted order's cos and sin coefficients (N·m²), from the
+    residual's own harmonics at the orders nearby.
 
     The residual is not white (the velocity loop's chatter on the encoder's steps, its
     lag, coloured torque noise), so neither its overall variance nor an autocorrelation-
@@ -268,7 +269,8 @@ def local_noise_variance(design: FloatArray, residual: FloatArray, theta: FloatA
     median over the free orders within :data:`RIPPLE_FLOOR_WINDOW` of each fitted order
     (or over every free one when fewer than 10), divided by ``2 ln 2``, is that order's
     level. Orders within two of a fitted one (its leakage, the K_t ripple's sidebands) are
-    not free.
+    not free. The level, never below ``floor``, times the coefficient's cofactor
+    ``[(XᵀX)⁻¹]_jj`` is its variance.
 
     Parameters
     ----------
@@ -282,18 +284,24 @@ def local_noise_variance(design: FloatArray, residual: FloatArray, theta: FloatA
         The fitted orders, in the design's order.
     scanned : (int, int)
         The order range the free orders are taken from.
+    floor : float
+        The least level per sample (N·m²): what dithered quantisation alone leaves.
 
     Returns
     -------
-    ndarray, shape (len(orders),)
+    ndarray, shape (2·len(orders),)
+        In the design's order of the harmonic columns (cos, sin of each order).
     """
+    gram_inv = np.linalg.inv(design.T @ design)
+    cofactor = np.diag(gram_inv)[design.shape[1] - 2 * len(orders):]
     ks = np.arange(scanned[0], scanned[1] + 1)
     free = np.ones(ks.size, dtype=bool)
     for k in orders:
         free &= np.abs(ks - k) > 2
     candidates = ks[free]
     if candidates.size == 0:
-        return np.full(len(orders), float(residual @ residual) / max(len(residual) - 1, 1))
+        overall = float(residual @ residual) / max(len(residual) - 1, 1)
+        return max(overall, floor) * cofactor
     # cos kθ and sin kθ of the candidate orders, each from the one before by the angle-sum
     # rule (no trig per order)
     angle = np.asarray(theta, dtype=np.float64)
@@ -308,7 +316,6 @@ def local_noise_variance(design: FloatArray, residual: FloatArray, theta: FloatA
         sin[j] = sin[j - 1] * c_d + cos[j - 1] * s_d
     cos, sin = cos.T, sin.T
     # each pair's Gram with the fit's columns taken out: CᵀC − (XᵀC)ᵀ(XᵀX)⁻¹(XᵀC)
-    gram_inv = np.linalg.inv(design.T @ design)
     xc, xs = design.T @ cos, design.T @ sin
     c11 = np.einsum("ij,ij->j", cos, cos) - np.einsum("ij,ij->j", xc, gram_inv @ xc)
     c12 = np.einsum("ij,ij->j", cos, sin) - np.einsum("ij,ij->j", xc, gram_inv @ xs)
@@ -316,10 +323,10 @@ def local_noise_variance(design: FloatArray, residual: FloatArray, theta: FloatA
     b1, b2 = residual @ cos, residual @ sin  # the residual is orthogonal to the design
     det = c11 * c22 - c12**2
     quadratic = (c22 * b1**2 - 2 * c12 * b1 * b2 + c11 * b2**2) / det  # eᵀP_k e
-    near_all = np.ones(candidates.size, dtype=bool)
-    levels = [_local_median(quadratic, np.abs(candidates - k) <= RIPPLE_FLOOR_WINDOW, near_all)
-              for k in orders]
-    return np.asarray(levels, dtype=np.float64) / (2 * math.log(2))
+    every = np.ones(candidates.size, dtype=bool)
+    levels = np.array([_local_median(quadratic, np.abs(candidates - k) <= RIPPLE_FLOOR_WINDOW,
+                                     every) for k in orders]) / (2 * math.log(2))
+    return np.maximum(np.repeat(levels, 2), floor) * cofactor
 
 
 def _ripple_peak(ripple: tuple[HarmonicEstimate, ...], *, detection_limit: float) -> Estimate:
@@ -431,12 +438,10 @@ def identify_cogging(
         sigma2 = max(float(residual @ residual) / dof, lsb**2 / 12)
         # the torque left after the fit is mostly the velocity loop's chatter on the
         # encoder's steps, not white: each order's coefficients take the residual's own
-        # level at nearby orders (:func:`local_noise_variance`), never below what
+        # level at nearby orders (:func:`harmonic_variances`), never below what
         # dithered quantisation alone leaves (LSB²/12 white)
-        cofactor = np.diag(np.linalg.inv(design.T @ design))[poly + 1:]
-        level = local_noise_variance(design, residual, theta, orders,
-                                     scanned=(min_order, max_order))
-        var = np.maximum(np.repeat(level, 2), lsb**2 / 12) * cofactor
+        var = harmonic_variances(design, residual, theta, orders,
+                                 scanned=(min_order, max_order), floor=lsb**2 / 12)
         harmonic = coef[poly + 1:]
         # position ripple about the trend, in the same θ-harmonic basis
         trend = np.polyfit(time_s, theta, 1)
